@@ -1,0 +1,36 @@
+//! Kitchen-R benchmark content shared by every other crate: the scene and object-catalogue
+//! schemas (read from `assets/`), canonical plan steps, the instruction dataset and the
+//! metrics (EM, MSE, SR, M, P).
+//!
+//! This crate is pure data and arithmetic. It must not do physics, rendering, networking or
+//! storage: `sim` steps the physics, `server` stores and serves, and both read content from here
+//! so that a scene file or a plan string means the same thing everywhere.
+
+pub mod assets;
+pub mod catalogue;
+pub mod error;
+pub mod plan;
+pub mod scene;
+
+pub use error::ContentError;
+
+#[cfg(test)]
+mod asset_tests {
+    use crate::catalogue::Catalogue;
+    use crate::scene::Scene;
+
+    /// Every committed scene must load and validate against the committed catalogue.
+    #[test]
+    fn committed_scenes_validate() {
+        let dir = crate::assets::assets_dir();
+        let cat = Catalogue::load(&dir.join("objects.toml")).unwrap();
+        let scenes = Scene::load_all(&dir.join("scenes"), &cat).unwrap();
+        assert!(!scenes.is_empty());
+        for s in &scenes {
+            for o in &s.key_objects {
+                let m = cat.model(&o.model).unwrap();
+                assert!(s.key_object_start(o, m.shape.half_height()).is_some());
+            }
+        }
+    }
+}

@@ -1,0 +1,324 @@
+//! The scene file schema (`assets/scenes/<id>.toml`).
+//!
+//! Coordinates: a right-handed world frame, z up, metres, origin at the south-west floor corner
+//! of the room, x east, y north; yaw in radians counter-clockwise from +x. Colours are sRGB in
+//! `[0, 1]`. Furniture is described by its outer box; how a kind is built out of parts (legs,
+//! shelf boards) is the simulator's business. Adding a scene is adding a file here.
+
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::ContentError;
+use crate::catalogue::{Catalogue, Role};
+
+/// sRGB colour, each channel in `[0, 1]`.
+pub type Rgb = [f32; 3];
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scene {
+    /// Stable identifier, also the file stem (`kitchen_a`).
+    pub id: String,
+    pub name: String,
+    /// What a planner is told about the scene, in English.
+    pub description: String,
+    pub room: Room,
+    #[serde(rename = "furniture")]
+    pub furniture: Vec<Furniture>,
+    #[serde(rename = "zone")]
+    pub zones: Vec<Zone>,
+    /// Where the key objects start.
+    #[serde(rename = "key_object", default)]
+    pub key_objects: Vec<KeyObject>,
+    /// Surfaces on which background objects may be scattered.
+    #[serde(rename = "background_area", default)]
+    pub background_areas: Vec<Area>,
+    /// Segments over whose union the robot's start position is drawn (paper, BASELINE VALIDATION
+    /// step 1); the robot faces `heading` there.
+    #[serde(rename = "start_segment")]
+    pub start_segments: Vec<Segment>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Room {
+    /// Inner floor size `[x, y]`; walls stand just outside it.
+    pub size: [f64; 2],
+    pub wall_height: f64,
+    pub wall_thickness: f64,
+    pub floor_color: Rgb,
+    pub wall_color: Rgb,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FurnitureKind {
+    Counter,
+    Table,
+    Shelf,
+    Sink,
+    Stove,
+    Fridge,
+    Cabinet,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Furniture {
+    pub id: String,
+    pub kind: FurnitureKind,
+    /// Footprint centre on the floor and yaw: `[x, y, yaw]`.
+    pub pose: [f64; 3],
+    /// Outer dimensions before scaling: `[along local x, along local y, height]`.
+    pub size: [f64; 3],
+    /// Uniform scale applied to `size` (the paper's per-asset scale).
+    #[serde(default = "one")]
+    pub scale: f64,
+    pub color: Rgb,
+    /// Shelves only: heights above the floor of the boards objects stand on.
+    #[serde(default)]
+    pub levels: Vec<f64>,
+}
+
+/// A coloured area objects are taken from or put on.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Zone {
+    /// Colour name used in plans: `move to the <color> zone`. Unique in the scene.
+    pub color: String,
+    /// Colour painted in the top-down image (never visible to the robot's policy).
+    pub rgb: Rgb,
+    /// The furniture the zone lies on.
+    pub furniture: String,
+    /// Zone centre in world `[x, y]`.
+    pub center: [f64; 2],
+    /// Extent along world x and y.
+    pub size: [f64; 2],
+    /// Height of the supporting surface above the floor.
+    pub height: f64,
+    /// Where the base centre stops to work at this zone: `[x, y, yaw]`.
+    pub approach: [f64; 3],
+}
+
+/// A key object's starting place.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct KeyObject {
+    /// Catalogue model id (`cup`).
+    pub model: String,
+    /// Colour variant from the catalogue (`red`), if any.
+    #[serde(default)]
+    pub variant: Option<String>,
+    /// Zone the object starts in.
+    pub zone: String,
+    /// Offset of the object's centre from the zone centre, world axes.
+    #[serde(default)]
+    pub offset: [f64; 2],
+    #[serde(default)]
+    pub yaw: f64,
+}
+
+impl KeyObject {
+    /// The name plans use: `red cup`, or `bowl` when there is no variant.
+    pub fn name(&self) -> String {
+        match &self.variant {
+            Some(v) => format!("{v} {}", self.model),
+            None => self.model.clone(),
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Area {
+    pub center: [f64; 2],
+    pub size: [f64; 2],
+    pub height: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Segment {
+    pub from: [f64; 2],
+    pub to: [f64; 2],
+    pub heading: f64,
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+impl Furniture {
+    /// Outer dimensions after scaling.
+    pub fn scaled_size(&self) -> [f64; 3] {
+        self.size.map(|s| s * self.scale)
+    }
+
+    /// Heights objects can stand on: the top, plus shelf boards.
+    pub fn surfaces(&self) -> Vec<f64> {
+        let mut s: Vec<f64> = self.levels.iter().map(|l| l * self.scale).collect();
+        s.push(self.scaled_size()[2]);
+        s
+    }
+
+    /// Whether world point `p` lies over the footprint (with `margin` metres of slack).
+    pub fn covers(&self, p: [f64; 2], margin: f64) -> bool {
+        let [cx, cy, yaw] = self.pose;
+        let (dx, dy) = (p[0] - cx, p[1] - cy);
+        let (s, c) = yaw.sin_cos();
+        let (lx, ly) = (c * dx + s * dy, -s * dx + c * dy);
+        let [sx, sy, _] = self.scaled_size();
+        lx.abs() <= sx / 2.0 + margin && ly.abs() <= sy / 2.0 + margin
+    }
+}
+
+impl Scene {
+    /// Read and validate one scene file against the catalogue.
+    pub fn load(path: &Path, catalogue: &Catalogue) -> Result<Scene, ContentError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ContentError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let scene: Scene = toml::from_str(&text).map_err(|e| ContentError::Parse {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        scene
+            .validate(catalogue)
+            .map_err(|message| ContentError::Invalid {
+                path: path.to_path_buf(),
+                message,
+            })?;
+        Ok(scene)
+    }
+
+    /// Every `*.toml` in `dir`, sorted by id.
+    pub fn load_all(dir: &Path, catalogue: &Catalogue) -> Result<Vec<Scene>, ContentError> {
+        let io = |source| ContentError::Io {
+            path: dir.to_path_buf(),
+            source,
+        };
+        let mut paths: Vec<PathBuf> = std::fs::read_dir(dir)
+            .map_err(io)?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+            .collect();
+        paths.sort();
+        let mut scenes = paths
+            .iter()
+            .map(|p| Scene::load(p, catalogue))
+            .collect::<Result<Vec<_>, _>>()?;
+        scenes.sort_by(|a, b| a.id.cmp(&b.id));
+        Ok(scenes)
+    }
+
+    pub fn zone(&self, color: &str) -> Option<&Zone> {
+        self.zones.iter().find(|z| z.color == color)
+    }
+
+    pub fn furniture(&self, id: &str) -> Option<&Furniture> {
+        self.furniture.iter().find(|f| f.id == id)
+    }
+
+    pub fn key_object(&self, name: &str) -> Option<&KeyObject> {
+        self.key_objects.iter().find(|o| o.name() == name)
+    }
+
+    /// World position of a key object's centre at the start, given its model's half height.
+    pub fn key_object_start(&self, obj: &KeyObject, half_height: f64) -> Option<[f64; 3]> {
+        let z = self.zone(&obj.zone)?;
+        Some([
+            z.center[0] + obj.offset[0],
+            z.center[1] + obj.offset[1],
+            z.height + half_height,
+        ])
+    }
+
+    /// Check references and geometry; the message says what to fix.
+    pub fn validate(&self, catalogue: &Catalogue) -> Result<(), String> {
+        let [rx, ry] = self.room.size;
+        let inside = |p: [f64; 2]| p[0] > 0.0 && p[0] < rx && p[1] > 0.0 && p[1] < ry;
+        unique(self.furniture.iter().map(|f| f.id.clone()), "furniture id")?;
+        unique(self.zones.iter().map(|z| z.color.clone()), "zone colour")?;
+        unique(self.key_objects.iter().map(|o| o.name()), "key object name")?;
+        for f in &self.furniture {
+            if !inside([f.pose[0], f.pose[1]]) || f.size.iter().any(|s| *s <= 0.0) || f.scale <= 0.0 {
+                return Err(format!(
+                    "furniture {:?}: pose outside the room or non-positive size",
+                    f.id
+                ));
+            }
+        }
+        for z in &self.zones {
+            let f = self
+                .furniture(&z.furniture)
+                .ok_or_else(|| format!("zone {:?} lies on unknown furniture {:?}", z.color, z.furniture))?;
+            if !f.covers(z.center, 0.0) {
+                return Err(format!(
+                    "zone {:?}: centre is not over furniture {:?}",
+                    z.color, f.id
+                ));
+            }
+            if !f.surfaces().iter().any(|h| (h - z.height).abs() < 1e-6) {
+                return Err(format!(
+                    "zone {:?}: height {} is neither the top nor a shelf level of {:?} ({:?})",
+                    z.color,
+                    z.height,
+                    f.id,
+                    f.surfaces()
+                ));
+            }
+            let a = [z.approach[0], z.approach[1]];
+            if !inside(a) || self.furniture.iter().any(|f| f.covers(a, 0.0)) {
+                return Err(format!(
+                    "zone {:?}: approach point {a:?} is not on free floor",
+                    z.color
+                ));
+            }
+        }
+        for o in &self.key_objects {
+            let model = catalogue
+                .model(&o.model)
+                .ok_or_else(|| format!("key object {:?}: unknown catalogue model", o.name()))?;
+            if model.role != Role::Key {
+                return Err(format!(
+                    "key object {:?}: model {:?} is not a key object",
+                    o.name(),
+                    o.model
+                ));
+            }
+            if let Some(v) = &o.variant
+                && !model.variants.contains_key(v)
+            {
+                return Err(format!(
+                    "key object {:?}: model has no colour variant {v:?}",
+                    o.name()
+                ));
+            }
+            if self.zone(&o.zone).is_none() {
+                return Err(format!("key object {:?}: unknown zone {:?}", o.name(), o.zone));
+            }
+        }
+        if self.start_segments.is_empty() {
+            return Err("at least one start_segment is needed".into());
+        }
+        for s in &self.start_segments {
+            if !inside(s.from) || !inside(s.to) {
+                return Err(format!("start segment {:?}..{:?} leaves the room", s.from, s.to));
+            }
+        }
+        Ok(())
+    }
+}
+
+fn unique(items: impl Iterator<Item = String>, what: &str) -> Result<(), String> {
+    let mut seen = BTreeSet::new();
+    for i in items {
+        if !seen.insert(i.clone()) {
+            return Err(format!("duplicate {what} {i:?}"));
+        }
+    }
+    Ok(())
+}

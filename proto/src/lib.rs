@@ -1,0 +1,1 @@
+//! Wire contracts (protobuf/gRPC) of Kitchen-R and their conversions to domain types.

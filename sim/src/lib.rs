@@ -1,0 +1,1 @@
+//! The kitchen twin: scene loading, physics, robot, sensors, success checks and monitors. No networking.
