@@ -8,6 +8,7 @@
 
 pub mod assets;
 pub mod catalogue;
+pub mod dataset;
 pub mod error;
 pub mod plan;
 pub mod scene;
