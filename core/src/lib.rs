@@ -10,6 +10,8 @@ pub mod assets;
 pub mod catalogue;
 pub mod dataset;
 pub mod error;
+pub mod layout;
+pub mod metrics;
 pub mod plan;
 pub mod scene;
 
@@ -27,7 +29,9 @@ mod asset_tests {
         let cat = Catalogue::load(&dir.join("objects.toml")).unwrap();
         let scenes = Scene::load_all(&dir.join("scenes"), &cat).unwrap();
         assert!(!scenes.is_empty());
+        assert!(scenes.len() >= 3, "the benchmark ships at least three kitchens");
         for s in &scenes {
+            s.check_layout().unwrap_or_else(|e| panic!("{}: {e}", s.id));
             for o in &s.key_objects {
                 let m = cat.model(&o.model).unwrap();
                 assert!(s.key_object_start(o, m.shape.half_height()).is_some());
