@@ -11,7 +11,6 @@ pub mod catalogue;
 pub mod dataset;
 pub mod error;
 pub mod layout;
-pub mod metrics;
 pub mod plan;
 pub mod scene;
 
