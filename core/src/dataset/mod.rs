@@ -7,10 +7,23 @@
 //!   and never served.
 //! - `manifest.json`: [`Manifest`] (seed, counts, generator version).
 //!
-//! Ids are `dev-NNNN` and `test-NNNN`. The generator (`generate`) is deterministic: the same seed
-//! gives byte-identical files.
+//! Ids are `dev-NNNN` and `test-NNNN`. The generator ([`generate()`]) is deterministic: the same
+//! seed gives byte-identical files ([`write`]); `assets/dataset/` holds the output for
+//! [`COMMITTED_SEED`], and a test regenerates it byte for byte.
+//!
+//! Submodules: [`templates`] (the template file), [`symbolic`] (the executability rule and place
+//! targets, also usable to check any plan against a scene), `generate` and `rng` (the generator).
 
 use std::path::Path;
+
+mod generate;
+mod rng;
+pub mod symbolic;
+pub mod templates;
+#[cfg(test)]
+mod tests;
+
+pub use generate::{COMMITTED_SEED, GENERATOR_VERSION, generate, write};
 
 use serde::{Deserialize, Serialize};
 

@@ -1,0 +1,169 @@
+//! The dataset generator: seed + `assets/` → 563 instructions, and writing them to disk.
+//!
+//! Process (paper, Language Instructions): for each instruction a template is taken from a
+//! seeded round-robin over all 58 (so every template is used 9 or 10 times, and the dev split,
+//! being the first 163, holds every template), a scene is drawn, then objects and zones of that
+//! scene are substituted. A substitution is kept only if its plan runs symbolically from the
+//! scene's initial placement ([`super::symbolic`]) and its text is new in that scene; otherwise
+//! another scene and substitution are drawn. Only vectors and `BTreeMap`s are iterated and all
+//! randomness comes from one [`SplitMix64`], so the same seed gives the same bytes.
+
+use std::collections::BTreeSet;
+use std::path::Path;
+
+use super::rng::SplitMix64;
+use super::symbolic::plan_targets;
+use super::templates::{Binding, Template, load_templates, start_zone_var};
+use super::{DEV_INSTRUCTIONS, Dataset, Instruction, Manifest, PublicInstruction, TOTAL_INSTRUCTIONS};
+use crate::ContentError;
+use crate::catalogue::Catalogue;
+use crate::scene::Scene;
+
+/// Bumped whenever the same seed would give different files.
+pub const GENERATOR_VERSION: u32 = 1;
+/// The seed of the committed `assets/dataset/`.
+pub const COMMITTED_SEED: u64 = 20241;
+/// Substitutions tried per instruction before the template is declared unusable.
+const ATTEMPTS: usize = 600;
+/// Substitutions tried in the drawn scene before the next scene is tried.
+const SCENE_ATTEMPTS: usize = 100;
+
+/// Generate the whole dataset from the scenes, catalogue and templates under `assets`.
+pub fn generate(seed: u64, assets: &Path) -> Result<Dataset, ContentError> {
+    let catalogue = Catalogue::load(&assets.join("objects.toml"))?;
+    let scenes = Scene::load_all(&assets.join("scenes"), &catalogue)?;
+    let templates_path = assets.join("templates.toml");
+    let templates = load_templates(&templates_path)?;
+    if scenes.is_empty() {
+        return Err(ContentError::Invalid {
+            path: assets.join("scenes"),
+            message: "no scenes".into(),
+        });
+    }
+    let mut rng = SplitMix64::new(seed);
+    let mut order = Vec::with_capacity(TOTAL_INSTRUCTIONS + templates.len());
+    while order.len() < TOTAL_INSTRUCTIONS {
+        let mut round: Vec<usize> = (0..templates.len()).collect();
+        rng.shuffle(&mut round);
+        order.extend(round);
+    }
+    let mut used_texts: BTreeSet<(String, String)> = BTreeSet::new();
+    let mut all = Vec::with_capacity(TOTAL_INSTRUCTIONS);
+    for (k, &t) in order.iter().take(TOTAL_INSTRUCTIONS).enumerate() {
+        let template = &templates[t];
+        // The scene is drawn first and kept for a while, so that scenes whose zones are
+        // crowded are not under-represented; a template that cannot run there moves on.
+        let first = rng.below(scenes.len());
+        let found = (0..ATTEMPTS).find_map(|n| {
+            let scene = &scenes[(first + n / SCENE_ATTEMPTS) % scenes.len()];
+            let inst = instantiate(template, scene, &catalogue, &mut rng)?;
+            used_texts
+                .insert((scene.id.clone(), inst.instruction.clone()))
+                .then_some(inst)
+        });
+        let mut inst = found.ok_or_else(|| ContentError::Invalid {
+            path: templates_path.clone(),
+            message: format!(
+                "template {:?} found no new executable substitution in {ATTEMPTS} tries",
+                template.id
+            ),
+        })?;
+        inst.id = if k < DEV_INSTRUCTIONS {
+            format!("dev-{:04}", k + 1)
+        } else {
+            format!("test-{:04}", k + 1 - DEV_INSTRUCTIONS)
+        };
+        all.push(inst);
+    }
+    let test = all.split_off(DEV_INSTRUCTIONS);
+    Ok(Dataset {
+        manifest: Manifest {
+            seed,
+            generator_version: GENERATOR_VERSION,
+            templates: templates.len(),
+            dev: all.len(),
+            test: test.len(),
+        },
+        dev: all,
+        test,
+    })
+}
+
+/// One random substitution of `template` in `scene`, or `None` if it does not execute.
+fn instantiate(
+    template: &Template,
+    scene: &Scene,
+    catalogue: &Catalogue,
+    rng: &mut SplitMix64,
+) -> Option<Instruction> {
+    let mut binding = Binding::new();
+    let mut objects: Vec<usize> = (0..scene.key_objects.len()).collect();
+    rng.shuffle(&mut objects);
+    let object_vars = template.object_vars();
+    if object_vars.len() > objects.len() {
+        return None;
+    }
+    for (var, &i) in object_vars.iter().zip(&objects) {
+        let o = &scene.key_objects[i];
+        binding.insert(var.to_string(), o.name());
+        binding.insert(start_zone_var(var), o.zone.clone());
+    }
+    let mut zones: Vec<&str> = scene.zones.iter().map(|z| z.color.as_str()).collect();
+    rng.shuffle(&mut zones);
+    let zone_vars = template.free_zone_vars();
+    if zone_vars.len() > zones.len() {
+        return None;
+    }
+    for (var, zone) in zone_vars.iter().zip(&zones) {
+        binding.insert(var.to_string(), zone.to_string());
+    }
+    let steps = (template.patterns().ok()?.iter())
+        .map(|p| p.instantiate(&binding))
+        .collect::<Option<Vec<_>>>()?;
+    let place_targets = plan_targets(scene, catalogue, &steps, rng).ok()?;
+    let phrasing = rng.choose(&template.instructions)?;
+    Some(Instruction {
+        id: String::new(),
+        scene: scene.id.clone(),
+        instruction: super::templates::fill(phrasing, &binding)?,
+        plan: steps.iter().map(ToString::to_string).collect(),
+        template: template.id.clone(),
+        place_targets,
+    })
+}
+
+/// Write `dev.jsonl`, `test.jsonl`, `test_ground_truth.jsonl` and `manifest.json` into `out_dir`
+/// (created if missing), in the layout [`Dataset::load`] reads.
+pub fn write(dataset: &Dataset, out_dir: &Path) -> Result<(), ContentError> {
+    let io = |path: &Path| {
+        let path = path.to_path_buf();
+        move |source| ContentError::Io { path, source }
+    };
+    std::fs::create_dir_all(out_dir).map_err(io(out_dir))?;
+    let public: Vec<PublicInstruction> = dataset.test.iter().map(PublicInstruction::from).collect();
+    let files = [
+        ("dev.jsonl", jsonl(&dataset.dev)),
+        ("test.jsonl", jsonl(&public)),
+        ("test_ground_truth.jsonl", jsonl(&dataset.test)),
+        ("manifest.json", manifest_json(&dataset.manifest)),
+    ];
+    for (name, text) in files {
+        let path = out_dir.join(name);
+        std::fs::write(&path, text).map_err(io(&path))?;
+    }
+    Ok(())
+}
+
+/// One compact JSON record per line, `\n`-terminated.
+fn jsonl<T: serde::Serialize>(records: &[T]) -> String {
+    let mut out = String::new();
+    for r in records {
+        out.push_str(&serde_json::to_string(r).expect("dataset records serialise"));
+        out.push('\n');
+    }
+    out
+}
+
+fn manifest_json(m: &Manifest) -> String {
+    serde_json::to_string_pretty(m).expect("manifest serialises") + "\n"
+}

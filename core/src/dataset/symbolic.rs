@@ -1,0 +1,236 @@
+//! Symbolic execution of a plan against a scene's initial object placement, and the geometry of
+//! place targets.
+//!
+//! This is the executability rule of the benchmark (paper, Language Instructions: "every
+//! generated instruction is executable within its corresponding scene"): `move to` drives to a
+//! zone other than the current one; `pick` needs an empty gripper and the robot at the object's
+//! zone; `place` puts the held object into the zone the robot is at, never straight after
+//! picking it (a no-op). A place target is a free spot in that zone: the object's footprint keeps
+//! [`ZONE_MARGIN`] from the zone edge and [`OBJECT_GAP`] from every other object there.
+
+use crate::catalogue::Catalogue;
+use crate::plan::{Step, parse_plan};
+use crate::scene::{Scene, Zone};
+
+use super::rng::SplitMix64;
+use super::templates::PLAN_LEN;
+
+/// Distance an object's footprint keeps from its zone's edge.
+pub const ZONE_MARGIN: f64 = 0.03;
+/// Free gap between the footprints of two objects in one zone.
+pub const OBJECT_GAP: f64 = 0.02;
+/// Random spots tried before a zone counts as full.
+const SPOT_TRIES: usize = 96;
+
+/// Footprint of an object already in a zone: centre and bounding-circle radius.
+pub type Footprint = ([f64; 2], f64);
+
+/// Chooses a place spot: given the zone, the placed object's radius and the other footprints.
+pub type SpotChooser<'a> = dyn FnMut(&Zone, f64, &[Footprint]) -> Result<[f64; 2], String> + 'a;
+
+/// A key object during symbolic execution.
+#[derive(Debug, Clone)]
+struct Obj {
+    name: String,
+    radius: f64,
+    half_height: f64,
+    zone: String,
+    xy: [f64; 2],
+}
+
+/// Robot, gripper and object state while a plan runs.
+#[derive(Debug, Clone)]
+pub struct SymbolicWorld<'s> {
+    scene: &'s Scene,
+    robot_at: Option<String>,
+    held: Option<usize>,
+    just_picked: bool,
+    objects: Vec<Obj>,
+}
+
+/// Round to whole millimetres so targets print short and compare exactly.
+pub fn mm(v: f64) -> f64 {
+    (v * 1000.0).round() / 1000.0
+}
+
+/// Whether a footprint of `radius` centred at `xy` lies inside `zone` with [`ZONE_MARGIN`].
+pub fn fits_in_zone(zone: &Zone, radius: f64, xy: [f64; 2]) -> bool {
+    (0..2).all(|i| (xy[i] - zone.center[i]).abs() <= zone.size[i] / 2.0 - ZONE_MARGIN - radius + 1e-9)
+}
+
+impl<'s> SymbolicWorld<'s> {
+    /// The scene at its start: robot nowhere in particular, gripper empty.
+    pub fn new(scene: &'s Scene, catalogue: &Catalogue) -> Result<SymbolicWorld<'s>, String> {
+        let mut objects = Vec::new();
+        for o in &scene.key_objects {
+            let m = catalogue
+                .model(&o.model)
+                .ok_or_else(|| format!("unknown model {:?}", o.model))?;
+            let z = scene
+                .zone(&o.zone)
+                .ok_or_else(|| format!("unknown zone {:?}", o.zone))?;
+            objects.push(Obj {
+                name: o.name(),
+                radius: m.shape.footprint_radius(),
+                half_height: m.shape.half_height(),
+                zone: o.zone.clone(),
+                xy: [z.center[0] + o.offset[0], z.center[1] + o.offset[1]],
+            });
+        }
+        Ok(SymbolicWorld {
+            scene,
+            robot_at: None,
+            held: None,
+            just_picked: false,
+            objects,
+        })
+    }
+
+    /// Apply one step. For a `place`, `spot` chooses where the object's centre goes, given the
+    /// zone, the object's footprint radius and the other objects' footprints in that zone; the
+    /// returned value is then the world target `[x, y, z]`.
+    pub fn step(&mut self, step: &Step, spot: &mut SpotChooser<'_>) -> Result<Option<[f64; 3]>, String> {
+        let picked_before = std::mem::replace(&mut self.just_picked, false);
+        match step {
+            Step::MoveTo { zone } => {
+                self.scene
+                    .zone(zone)
+                    .ok_or_else(|| format!("no {zone} zone in the scene"))?;
+                if self.robot_at.as_deref() == Some(zone) {
+                    return Err(format!("`{step}` while already at the {zone} zone"));
+                }
+                self.robot_at = Some(zone.clone());
+                Ok(None)
+            }
+            Step::Pick { object } => {
+                let i = self.find(object)?;
+                if let Some(h) = self.held {
+                    return Err(format!("`{step}` while holding the {}", self.objects[h].name));
+                }
+                if self.robot_at.as_deref() != Some(&self.objects[i].zone) {
+                    return Err(format!("`{step}` away from the {} zone", self.objects[i].zone));
+                }
+                self.held = Some(i);
+                self.just_picked = true;
+                Ok(None)
+            }
+            Step::Place { object } => {
+                let i = self.find(object)?;
+                if self.held != Some(i) {
+                    return Err(format!("`{step}` without holding it"));
+                }
+                if picked_before {
+                    return Err(format!("`{step}` right after picking it up"));
+                }
+                let zone_name = self.robot_at.clone().ok_or("place before any move")?;
+                let zone = self.scene.zone(&zone_name).ok_or("robot at an unknown zone")?;
+                let others: Vec<Footprint> = (self.objects.iter().enumerate())
+                    .filter(|(j, o)| *j != i && o.zone == zone_name)
+                    .map(|(_, o)| (o.xy, o.radius))
+                    .collect();
+                let xy = spot(zone, self.objects[i].radius, &others)?;
+                let o = &mut self.objects[i];
+                (o.zone, o.xy) = (zone_name, xy);
+                self.held = None;
+                Ok(Some([xy[0], xy[1], mm(zone.height + o.half_height)]))
+            }
+        }
+    }
+
+    fn find(&self, name: &str) -> Result<usize, String> {
+        (self.objects.iter().position(|o| o.name == name)).ok_or_else(|| format!("no {name} in the scene"))
+    }
+}
+
+/// Whether `xy` is a legal spot: inside the zone and clear of `others`.
+pub fn spot_is_free(zone: &Zone, radius: f64, others: &[Footprint], xy: [f64; 2]) -> bool {
+    fits_in_zone(zone, radius, xy)
+        && others
+            .iter()
+            .all(|(p, r)| (p[0] - xy[0]).hypot(p[1] - xy[1]) >= r + radius + OBJECT_GAP - 1e-9)
+}
+
+/// A random free spot on the millimetre grid, or an error when the zone looks full.
+pub fn random_spot(
+    rng: &mut SplitMix64,
+    zone: &Zone,
+    radius: f64,
+    others: &[Footprint],
+) -> Result<[f64; 2], String> {
+    let half = |i: usize| ((zone.size[i] / 2.0 - ZONE_MARGIN - radius) * 1000.0).floor() as i64;
+    let (hx, hy) = (half(0), half(1));
+    if hx < 0 || hy < 0 {
+        return Err(format!("the object does not fit in the {} zone", zone.color));
+    }
+    for _ in 0..SPOT_TRIES {
+        let xy = [
+            mm(zone.center[0] + rng.symmetric(hx) as f64 / 1000.0),
+            mm(zone.center[1] + rng.symmetric(hy) as f64 / 1000.0),
+        ];
+        if spot_is_free(zone, radius, others, xy) {
+            return Ok(xy);
+        }
+    }
+    Err(format!("no free spot left in the {} zone", zone.color))
+}
+
+/// Run `plan` from the scene's start, choosing place spots with `rng`; the place targets.
+pub fn plan_targets(
+    scene: &Scene,
+    catalogue: &Catalogue,
+    plan: &[Step],
+    rng: &mut SplitMix64,
+) -> Result<Vec<[f64; 3]>, String> {
+    let mut world = SymbolicWorld::new(scene, catalogue)?;
+    let mut spot = |z: &Zone, r: f64, others: &[Footprint]| random_spot(rng, z, r, others);
+    let mut targets = Vec::new();
+    for s in plan {
+        targets.extend(world.step(s, &mut spot)?);
+    }
+    Ok(targets)
+}
+
+/// Check a ground-truth plan and its place targets against a scene: every step canonical, 4 to 8
+/// steps, executable from the start, and each target a free spot in the zone it is placed in at
+/// the right height.
+pub fn check_plan(
+    scene: &Scene,
+    catalogue: &Catalogue,
+    plan: &[String],
+    targets: &[[f64; 3]],
+) -> Result<(), String> {
+    let steps = parse_plan(plan).map_err(|e| e.to_string())?;
+    if steps.iter().zip(plan).any(|(s, p)| s.to_string() != *p) {
+        return Err("a step is not in canonical form".into());
+    }
+    if !PLAN_LEN.contains(&steps.len()) {
+        return Err(format!("{} steps, expected 4 to 8", steps.len()));
+    }
+    let mut world = SymbolicWorld::new(scene, catalogue)?;
+    let mut next = targets.iter();
+    let mut spot = |z: &Zone, r: f64, others: &[Footprint]| {
+        let t = next.next().ok_or("fewer place targets than place steps")?;
+        let xy = [t[0], t[1]];
+        spot_is_free(z, r, others, xy)
+            .then_some(xy)
+            .ok_or_else(|| format!("target {t:?} is not a free spot in the {} zone", z.color))
+    };
+    let mut produced = Vec::new();
+    for s in &steps {
+        produced.extend(world.step(s, &mut spot)?);
+    }
+    if produced.len() != targets.len() {
+        return Err("more place targets than place steps".into());
+    }
+    match produced
+        .iter()
+        .zip(targets)
+        .find(|(p, t)| (p[2] - t[2]).abs() > 1e-9)
+    {
+        Some((p, t)) => Err(format!(
+            "target {t:?} has the wrong height (expected z = {})",
+            p[2]
+        )),
+        None => Ok(()),
+    }
+}
