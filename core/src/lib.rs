@@ -1,10 +1,12 @@
 //! Kitchen-R benchmark content shared by every other crate: the scene and object-catalogue
-//! schemas (read from `assets/`), canonical plan steps, the instruction dataset and the
+//! schemas (read from `assets/`), the navigability rules of scene layouts, canonical plan steps,
+//! the instruction templates and deterministic dataset generator, top-down scene images, and the
 //! metrics (EM, MSE, SR, M, P).
 //!
-//! This crate is pure data and arithmetic. It must not do physics, rendering, networking or
-//! storage: `sim` steps the physics, `server` stores and serves, and both read content from here
-//! so that a scene file or a plan string means the same thing everywhere.
+//! This crate is pure data and arithmetic. It must not do physics, camera rendering, networking
+//! or storage (the top-down image is a flat map painted from the scene file, not a camera view):
+//! `sim` steps the physics, `server` stores and serves, and both read content from here so that a
+//! scene file or a plan string means the same thing everywhere.
 
 pub mod assets;
 pub mod catalogue;
@@ -13,6 +15,7 @@ pub mod error;
 pub mod layout;
 pub mod plan;
 pub mod scene;
+pub mod topdown;
 
 pub use error::ContentError;
 

@@ -145,9 +145,12 @@ impl<'s> SymbolicWorld<'s> {
 /// Whether `xy` is a legal spot: inside the zone and clear of `others`.
 pub fn spot_is_free(zone: &Zone, radius: f64, others: &[Footprint], xy: [f64; 2]) -> bool {
     fits_in_zone(zone, radius, xy)
-        && others
-            .iter()
-            .all(|(p, r)| (p[0] - xy[0]).hypot(p[1] - xy[1]) >= r + radius + OBJECT_GAP - 1e-9)
+        && others.iter().all(|(p, r)| {
+            // Squares, not `hypot`: only correctly rounded operations, so the generated
+            // dataset is the same on every platform.
+            let (dx, dy, min) = (p[0] - xy[0], p[1] - xy[1], r + radius + OBJECT_GAP - 1e-9);
+            dx * dx + dy * dy >= min * min
+        })
 }
 
 /// A random free spot on the millimetre grid, or an error when the zone looks full.
