@@ -1,4 +1,7 @@
-//! `kitchen-r sim …` and `kitchen-r bench sim`: the kitchen twin's tools.
+//! `kitchen-r sim …` and `kitchen-r bench sim`: the kitchen twin's tools. Argument parsing only;
+//! the work is in `kitchen_r_sim`.
+
+use std::path::PathBuf;
 
 use clap::{Args, Subcommand};
 
@@ -9,7 +12,21 @@ pub struct SimArgs {
 }
 
 #[derive(Subcommand, Debug)]
-pub enum SimCommand {}
+pub enum SimCommand {
+    /// Write every camera's RGB and depth (from the start and each zone's approach point) and a
+    /// top-down view of a scene as PNG.
+    Render {
+        /// Scene id (file stem under assets/scenes).
+        #[arg(long)]
+        scene: String,
+        /// Output directory (created if missing).
+        #[arg(long)]
+        out: PathBuf,
+        /// Seed for the robot start and background objects.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+    },
+}
 
 #[derive(Args, Debug)]
 pub struct BenchArgs {
@@ -18,12 +35,57 @@ pub struct BenchArgs {
 }
 
 #[derive(Subcommand, Debug)]
-pub enum BenchCommand {}
+pub enum BenchCommand {
+    /// Simulator figures: physics step, observation time, real-time factor.
+    Sim {
+        /// Print one JSON object instead of text.
+        #[arg(long)]
+        json: bool,
+        /// Control steps to run.
+        #[arg(long, default_value_t = 600)]
+        steps: u32,
+        /// Observe every this many control steps (the policy query rate).
+        #[arg(long, default_value_t = 8)]
+        query_every: u32,
+    },
+}
 
 pub fn sim(args: SimArgs) -> anyhow::Result<()> {
-    match args.command {}
+    match args.command {
+        SimCommand::Render { scene, out, seed } => {
+            for path in kitchen_r_sim::render::render_scene(&scene, &out, seed)? {
+                println!("{}", path.display());
+            }
+            Ok(())
+        }
+    }
 }
 
 pub fn bench(args: BenchArgs) -> anyhow::Result<()> {
-    match args.command {}
+    match args.command {
+        BenchCommand::Sim {
+            json,
+            steps,
+            query_every,
+        } => {
+            let r = kitchen_r_sim::bench::run(steps.max(1), query_every.max(1))?;
+            if json {
+                println!("{}", r.to_json());
+            } else {
+                println!("scene                 {}", r.scene);
+                println!("physics_step_us       {:.1}", r.physics_step_us);
+                println!("control_step_us       {:.1}", r.control_step_us);
+                println!(
+                    "observation_ms        {:.2} ({} cameras, {} px)",
+                    r.observation_ms, r.cameras, r.camera_pixels
+                );
+                println!("rays_per_second       {:.0}", r.rays_per_second);
+                println!(
+                    "realtime_factor       {:.1} (observe every {} steps)",
+                    r.realtime_factor, r.query_every
+                );
+            }
+            Ok(())
+        }
+    }
 }

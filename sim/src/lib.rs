@@ -1,1 +1,36 @@
-//! The kitchen twin: scene loading, physics, robot, sensors, success checks and monitors. No networking.
+//! The kitchen twin: scene loading, rapier3d physics, the mobile manipulator (differential-drive
+//! base, 6-DoF arm under an RMPflow-style controller, parallel gripper), cameras and LiDAR by ray
+//! casting, success checks and monitors, and seeded episode configurations. No networking.
+//!
+//! Conventions: world frame z up, metres, x east, y north, yaw counter-clockwise. Robot base frame
+//! at the base's centre on the floor, x forward, y left, z up. An [`Action`] is
+//! `(v, ω, x, y, z, qw, qx, qy, qz, g)`: base velocities, the TCP target pose in the base frame and
+//! the gripper command (0 closed, 1 open), applied for one 0.1 s control step of fixed physics
+//! substeps. See `assets/robot.toml` for the arm and TCP frames.
+
+pub mod bench;
+pub mod config;
+pub mod convert;
+pub mod episode;
+pub mod error;
+pub mod furniture;
+pub mod generator;
+pub mod material;
+pub mod preflight;
+pub mod render;
+pub mod robot;
+pub mod sensors;
+pub mod sim;
+pub mod snapshot;
+pub mod task;
+pub mod types;
+pub mod world;
+
+pub use config::{SensorsConfig, SimConfig};
+pub use episode::{EpisodeConfig, ObjectPlacement};
+pub use error::SimError;
+pub use generator::EpisodeParams;
+pub use sim::{Assets, Sim};
+pub use snapshot::Snapshot;
+pub use task::{TaskTarget, task_target};
+pub use types::{Action, Observation, StepInfo};

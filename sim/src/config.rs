@@ -1,0 +1,281 @@
+//! Simulator and sensor configuration (`configs/sim.toml`, `configs/sensors.toml`).
+//!
+//! Every key has a default here, so a missing file or section means "the defaults"; the files in
+//! `configs/` document each key.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{SimError, read_toml};
+use crate::robot::rmp::RmpParams;
+
+/// Environment variable that overrides the configs directory.
+pub const CONFIGS_ENV: &str = "KITCHEN_R_CONFIGS";
+
+/// The configs directory: `KITCHEN_R_CONFIGS`, `./configs`, or the workspace's `configs/`.
+pub fn configs_dir() -> PathBuf {
+    if let Some(dir) = std::env::var_os(CONFIGS_ENV) {
+        return PathBuf::from(dir);
+    }
+    let local = PathBuf::from("configs");
+    if local.join("sim.toml").is_file() {
+        return local;
+    }
+    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../configs"))
+}
+
+/// `configs/sim.toml`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(default, deny_unknown_fields)]
+pub struct SimConfig {
+    pub physics: PhysicsConfig,
+    pub rmp: RmpParams,
+    pub success: SuccessConfig,
+    pub monitors: MonitorConfig,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PhysicsConfig {
+    /// Control period: one action per control step (s).
+    pub control_dt: f64,
+    /// Physics substeps per control step.
+    pub substeps: u32,
+    /// Solver iterations per substep.
+    pub solver_iterations: u32,
+    pub gravity: f64,
+}
+
+impl Default for PhysicsConfig {
+    fn default() -> Self {
+        PhysicsConfig {
+            control_dt: 0.1,
+            substeps: 10,
+            solver_iterations: 4,
+            gravity: -9.81,
+        }
+    }
+}
+
+impl PhysicsConfig {
+    pub fn dt(&self) -> f64 {
+        self.control_dt / f64::from(self.substeps)
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SuccessConfig {
+    /// Navigation: base centre within this distance of the target (m).
+    pub navigation_tolerance: f64,
+    /// Manipulation: object centre within this distance of its target (m).
+    pub manipulation_tolerance: f64,
+    /// A pick counts once the held object's bottom is this far above its support (m).
+    pub lift_clearance: f64,
+}
+
+impl Default for SuccessConfig {
+    fn default() -> Self {
+        SuccessConfig {
+            navigation_tolerance: 0.10,
+            manipulation_tolerance: 0.05,
+            lift_clearance: 0.03,
+        }
+    }
+}
+
+/// Monitoring Module thresholds.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct MonitorConfig {
+    /// Per-action sim-time limits (s).
+    pub move_time_limit: f64,
+    pub pick_time_limit: f64,
+    pub place_time_limit: f64,
+    /// A key object whose centre is lower than this above the floor has fallen (m).
+    pub floor_height: f64,
+    /// At the end of a pick the TCP must be this close to the object's grasp point (m).
+    pub pick_gripper_distance: f64,
+    /// After a place the object's centre must be this close to the goal (m).
+    pub place_goal_distance: f64,
+    /// After a move the base centre must lie inside this circle around the goal (m).
+    pub move_goal_radius: f64,
+}
+
+impl Default for MonitorConfig {
+    fn default() -> Self {
+        MonitorConfig {
+            move_time_limit: 120.0,
+            pick_time_limit: 120.0,
+            place_time_limit: 120.0,
+            floor_height: 0.15,
+            pick_gripper_distance: 0.06,
+            place_goal_distance: 0.05,
+            move_goal_radius: 0.10,
+        }
+    }
+}
+
+impl SimConfig {
+    pub fn load(path: &Path) -> Result<SimConfig, SimError> {
+        let c: SimConfig = read_toml(path)?;
+        c.validate()?;
+        Ok(c)
+    }
+
+    /// `configs/sim.toml` when present, else the defaults.
+    pub fn load_default() -> Result<SimConfig, SimError> {
+        let path = configs_dir().join("sim.toml");
+        if path.is_file() {
+            SimConfig::load(&path)
+        } else {
+            Ok(SimConfig::default())
+        }
+    }
+
+    pub fn validate(&self) -> Result<(), SimError> {
+        let p = &self.physics;
+        if p.control_dt.is_nan() || p.control_dt <= 0.0 || p.substeps == 0 || p.solver_iterations == 0 {
+            return Err(SimError::Config(
+                "physics: control_dt > 0, substeps >= 1, solver_iterations >= 1".into(),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// `configs/sensors.toml`: cameras and LiDAR.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SensorsConfig {
+    #[serde(rename = "camera")]
+    pub cameras: Vec<CameraConfig>,
+    pub lidar: Option<LidarConfig>,
+    pub light: LightConfig,
+}
+
+/// What a sensor is rigidly attached to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Mount {
+    /// The robot base frame.
+    Base,
+    /// The gripper's TCP frame.
+    Gripper,
+    /// The world frame (a fixed camera).
+    World,
+}
+
+/// A pinhole camera looking along its local +x (y left, z up), like a robot link frame.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraConfig {
+    pub name: String,
+    pub mount: Mount,
+    /// Position in the mount frame (m).
+    pub position: [f64; 3],
+    /// Roll, pitch, yaw in the mount frame (rad); positive pitch looks down.
+    pub rpy: [f64; 3],
+    pub width: u32,
+    pub height: u32,
+    /// Horizontal field of view (degrees).
+    pub fov_deg: f64,
+    /// Depth beyond this reads 0 (no return), metres.
+    pub max_depth: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LidarConfig {
+    pub mount: Mount,
+    pub position: [f64; 3],
+    /// Beams per revolution.
+    pub beams: u32,
+    /// Elevation of each channel (degrees); `[0.0]` is a planar scanner.
+    pub channels_deg: Vec<f64>,
+    pub min_range: f64,
+    pub max_range: f64,
+}
+
+/// Simple lighting for the RGB images: ambient plus one directional light (Lambert).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LightConfig {
+    /// Direction towards the light, world frame.
+    pub direction: [f64; 3],
+    pub ambient: f64,
+    pub diffuse: f64,
+}
+
+impl Default for LightConfig {
+    fn default() -> Self {
+        LightConfig {
+            direction: [0.35, 0.25, 1.0],
+            ambient: 0.45,
+            diffuse: 0.6,
+        }
+    }
+}
+
+impl Default for SensorsConfig {
+    fn default() -> Self {
+        let cam = |name: &str, mount, position, rpy| CameraConfig {
+            name: name.into(),
+            mount,
+            position,
+            rpy,
+            width: 128,
+            height: 128,
+            fov_deg: 80.0,
+            max_depth: 10.0,
+        };
+        SensorsConfig {
+            cameras: vec![
+                cam("base", Mount::Base, [0.0, 0.0, 1.35], [0.0, 0.55, 0.0]),
+                cam("gripper", Mount::Gripper, [-0.10, 0.0, 0.06], [0.0, 0.35, 0.0]),
+            ],
+            lidar: Some(LidarConfig {
+                mount: Mount::Base,
+                position: [0.0, 0.0, 0.36],
+                beams: 360,
+                channels_deg: vec![0.0],
+                min_range: 0.05,
+                max_range: 8.0,
+            }),
+            light: LightConfig::default(),
+        }
+    }
+}
+
+impl SensorsConfig {
+    pub fn load(path: &Path) -> Result<SensorsConfig, SimError> {
+        let c: SensorsConfig = read_toml(path)?;
+        c.validate()?;
+        Ok(c)
+    }
+
+    /// `configs/sensors.toml` when present, else the defaults.
+    pub fn load_default() -> Result<SensorsConfig, SimError> {
+        let path = configs_dir().join("sensors.toml");
+        if path.is_file() {
+            SensorsConfig::load(&path)
+        } else {
+            Ok(SensorsConfig::default())
+        }
+    }
+
+    pub fn validate(&self) -> Result<(), SimError> {
+        for c in &self.cameras {
+            if c.width == 0 || c.height == 0 || !(c.fov_deg > 0.0 && c.fov_deg < 179.0) {
+                return Err(SimError::Config(format!("camera {:?}: bad size or fov", c.name)));
+            }
+        }
+        if let Some(l) = &self.lidar
+            && (l.beams == 0 || l.channels_deg.is_empty() || l.max_range <= l.min_range)
+        {
+            return Err(SimError::Config("lidar: beams, channels and ranges".into()));
+        }
+        Ok(())
+    }
+}

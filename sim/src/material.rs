@@ -1,0 +1,168 @@
+//! Render materials and the tags that tie a collider back to what it is.
+//!
+//! A collider's `user_data` packs its material index (bits 0..32), what it belongs to
+//! ([`Owner`], bits 32..40) and that owner's index (bits 40..72). The renderer reads the material,
+//! contact reporting and success checks read the owner.
+
+use rapier3d::prelude::{Group, InteractionGroups, InteractionTestMode};
+use serde::{Deserialize, Serialize};
+
+/// Surface pattern, evaluated at the world hit point.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum Pattern {
+    Plain,
+    /// Square tiles of this size with alternating brightness (floors).
+    Tiles {
+        size: f32,
+        contrast: f32,
+    },
+    /// Horizontal bands of this height (walls, wood grain).
+    Stripes {
+        size: f32,
+        contrast: f32,
+    },
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Material {
+    /// sRGB in [0, 1].
+    pub color: [f32; 3],
+    pub pattern: Pattern,
+}
+
+impl Material {
+    pub fn plain(color: [f32; 3]) -> Material {
+        Material {
+            color,
+            pattern: Pattern::Plain,
+        }
+    }
+
+    /// Albedo at world point `p`.
+    pub fn albedo(&self, p: [f32; 3]) -> [f32; 3] {
+        let k = match self.pattern {
+            Pattern::Plain => 1.0,
+            Pattern::Tiles { size, contrast } => {
+                let (i, j) = ((p[0] / size).floor() as i64, (p[1] / size).floor() as i64);
+                let grout = (p[0] / size).fract().abs() < 0.03 || (p[1] / size).fract().abs() < 0.03;
+                if grout {
+                    1.0 - 2.0 * contrast
+                } else if (i + j) % 2 == 0 {
+                    1.0
+                } else {
+                    1.0 - contrast
+                }
+            }
+            Pattern::Stripes { size, contrast } => {
+                if ((p[2] / size).floor() as i64) % 2 == 0 {
+                    1.0
+                } else {
+                    1.0 - contrast
+                }
+            }
+        };
+        self.color.map(|c| (c * k).clamp(0.0, 1.0))
+    }
+}
+
+/// What a collider belongs to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Owner {
+    /// Walls, floor, furniture.
+    Static,
+    /// Key object by index in the episode's object list.
+    KeyObject,
+    Background,
+    /// Robot part by index (see `robot::parts`).
+    Robot,
+    /// Purely visual detail (handles, seams): never collides.
+    Decoration,
+}
+
+impl Owner {
+    fn code(self) -> u128 {
+        match self {
+            Owner::Static => 0,
+            Owner::KeyObject => 1,
+            Owner::Background => 2,
+            Owner::Robot => 3,
+            Owner::Decoration => 4,
+        }
+    }
+
+    fn from_code(c: u128) -> Owner {
+        match c {
+            1 => Owner::KeyObject,
+            2 => Owner::Background,
+            3 => Owner::Robot,
+            4 => Owner::Decoration,
+            _ => Owner::Static,
+        }
+    }
+
+    /// Collision groups: key objects ignore the fingers (a grasp attaches them instead of
+    /// squeezing), robot parts ignore each other, decorations ignore everything.
+    pub fn groups(self, finger: bool) -> InteractionGroups {
+        let (member, filter) = match (self, finger) {
+            (Owner::Robot, true) => (FINGER, STATIC | BACKGROUND),
+            (Owner::Robot, false) => (ROBOT, STATIC | KEY | BACKGROUND),
+            (Owner::Static, _) => (STATIC, Group::ALL),
+            (Owner::KeyObject, _) => (KEY, STATIC | KEY | BACKGROUND | ROBOT),
+            (Owner::Background, _) => (BACKGROUND, Group::ALL),
+            (Owner::Decoration, _) => (DECORATION, Group::NONE),
+        };
+        InteractionGroups::new(member, filter, InteractionTestMode::And)
+    }
+}
+
+const STATIC: Group = Group::GROUP_1;
+const KEY: Group = Group::GROUP_2;
+const BACKGROUND: Group = Group::GROUP_3;
+const ROBOT: Group = Group::GROUP_4;
+const FINGER: Group = Group::GROUP_5;
+const DECORATION: Group = Group::GROUP_6;
+
+/// Packed collider tag.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Tag {
+    pub material: u32,
+    pub owner: Owner,
+    pub index: u32,
+}
+
+impl Tag {
+    pub fn pack(self) -> u128 {
+        u128::from(self.material) | (self.owner.code() << 32) | (u128::from(self.index) << 40)
+    }
+
+    pub fn unpack(v: u128) -> Tag {
+        Tag {
+            material: (v & 0xffff_ffff) as u32,
+            owner: Owner::from_code((v >> 32) & 0xff),
+            index: ((v >> 40) & 0xffff_ffff) as u32,
+        }
+    }
+}
+
+/// The material table of one world.
+#[derive(Debug, Clone, Default)]
+pub struct Materials {
+    pub list: Vec<Material>,
+}
+
+impl Materials {
+    pub fn add(&mut self, m: Material) -> u32 {
+        if let Some(i) = self.list.iter().position(|x| *x == m) {
+            return i as u32;
+        }
+        self.list.push(m);
+        (self.list.len() - 1) as u32
+    }
+}
+
+/// Blend two colours: `t = 0` gives `a`.
+pub fn mix(a: [f32; 3], b: [f32; 3], t: f32) -> [f32; 3] {
+    [0, 1, 2].map(|i| a[i] * (1.0 - t) + b[i] * t)
+}

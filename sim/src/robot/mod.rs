@@ -1,0 +1,319 @@
+//! The robot in the physics world: a velocity-driven differential-drive base, the arm's links
+//! placed from the RMP controller's integrated joint targets, and the parallel gripper.
+//!
+//! The base is a dynamic body with roll, pitch and height locked whose planar velocity is set
+//! every substep to the (acceleration- and speed-limited) command, so the contact solver stops it
+//! at walls and furniture and lets it push loose objects. The arm links are kinematic bodies that
+//! follow the joint position targets exactly (an ideal position-controlled articulation); they push
+//! loose objects with unbounded force, and a link that penetrates fixed furniture or a wall reverts
+//! the joint targets to the last collision-free configuration, so the arm is stopped there.
+
+pub mod desc;
+pub mod kinematics;
+pub mod rmp;
+
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use rapier3d::prelude::*;
+
+use crate::convert::{iso_to_pose, planar, pose_to_iso, vec_to_glam, yaw_of};
+use crate::material::{Material, Materials, Owner, Tag};
+use desc::RobotDesc;
+use kinematics::{ArmModel, DOF, JointVec};
+use rmp::{ArmState, RmpParams};
+
+/// Names of the robot parts, indexed by the collider tag's `index`.
+pub const PART_NAMES: [&str; 10] = [
+    "base",
+    "waist",
+    "shoulder",
+    "elbow",
+    "forearm_roll",
+    "wrist_angle",
+    "wrist_rotate",
+    "palm",
+    "left_finger",
+    "right_finger",
+];
+const PALM: u32 = 7;
+const FINGERS: [u32; 2] = [8, 9];
+
+/// A link penetrating fixed geometry deeper than this stops the arm (m).
+const STOP_PENETRATION: f32 = 0.003;
+
+/// Handles of the robot's bodies in the world.
+#[derive(Debug, Clone)]
+pub struct RobotBodies {
+    pub base: RigidBodyHandle,
+    pub links: [RigidBodyHandle; DOF],
+    pub fingers: [ColliderHandle; 2],
+    pub arm_colliders: Vec<ColliderHandle>,
+}
+
+/// Controller state that is not in the physics world (part of snapshots and state hashes).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RobotState {
+    pub arm: ArmState,
+    /// Last collision-free joint targets.
+    pub safe_q: JointVec,
+    /// Commanded, rate-limited base velocities.
+    pub v: f64,
+    pub omega: f64,
+    /// Current finger gap (m).
+    pub opening: f64,
+    /// Set when the arm was stopped by fixed geometry in the last substep.
+    pub arm_blocked: bool,
+}
+
+/// The robot model plus its handles.
+#[derive(Debug, Clone)]
+pub struct Robot {
+    pub desc: RobotDesc,
+    pub arm: ArmModel,
+    pub home: JointVec,
+    pub bodies: RobotBodies,
+}
+
+fn collider(shape: SharedShape, part: u32, material: u32, finger: bool) -> ColliderBuilder {
+    ColliderBuilder::new(shape)
+        .friction(if part == 0 { 0.0 } else { 0.8 })
+        .collision_groups(Owner::Robot.groups(finger))
+        .active_collision_types(ActiveCollisionTypes::default() | ActiveCollisionTypes::KINEMATIC_FIXED)
+        .user_data(
+            Tag {
+                material,
+                owner: Owner::Robot,
+                index: part,
+            }
+            .pack(),
+        )
+}
+
+impl Robot {
+    /// Insert the robot at planar pose `[x, y, yaw]` with the arm at home.
+    pub fn spawn(
+        world: &mut PhysicsWorld,
+        mats: &mut Materials,
+        desc: &RobotDesc,
+        start: [f64; 3],
+    ) -> (Robot, RobotState) {
+        let arm = ArmModel::new(desc);
+        let home = JointVec::from_column_slice(&desc.arm.home);
+        let b = &desc.base;
+        let base_iso = planar(start[0], start[1], 0.0, start[2]);
+        let base = world.insert_body(
+            RigidBodyBuilder::dynamic()
+                .pose(iso_to_pose(&base_iso))
+                .locked_axes(
+                    LockedAxes::TRANSLATION_LOCKED_Z
+                        | LockedAxes::ROTATION_LOCKED_X
+                        | LockedAxes::ROTATION_LOCKED_Y,
+                )
+                .gravity_scale(0.0)
+                .can_sleep(false),
+        );
+        let body_mat = mats.add(Material::plain(b.color));
+        let half_h = (b.height - b.clearance) / 2.0;
+        let upright = UnitQuaternion::from_euler_angles(std::f64::consts::FRAC_PI_2, 0.0, 0.0);
+        let cyl = Isometry3::from_parts(Translation3::new(0.0, 0.0, b.clearance + half_h), upright);
+        let co = collider(
+            SharedShape::cylinder(half_h as f32, b.body_radius as f32),
+            0,
+            body_mat,
+            false,
+        )
+        .position(iso_to_pose(&cyl))
+        .mass(b.mass as f32 * 0.9);
+        world.insert_collider(co, Some(base));
+        let cs = b.column_size.map(|v| v as f32 / 2.0);
+        let co = collider(SharedShape::cuboid(cs[0], cs[1], cs[2]), 0, body_mat, false)
+            .translation(vec_to_glam(&Vector3::from(b.column_center)))
+            .mass(b.mass as f32 * 0.1);
+        world.insert_collider(co, Some(base));
+
+        let state = RobotState {
+            arm: ArmState {
+                q: home,
+                qd: JointVec::zeros(),
+            },
+            safe_q: home,
+            v: 0.0,
+            omega: 0.0,
+            opening: desc.gripper.max_opening,
+            arm_blocked: false,
+        };
+        let fk = arm.forward(&home);
+        let arm_mat = mats.add(Material::plain(desc.arm.color));
+        let grip_mat = mats.add(Material::plain(desc.gripper.color));
+        let mut arm_colliders = Vec::new();
+        let mut fingers = [ColliderHandle::invalid(); 2];
+        let links = std::array::from_fn(|i| {
+            let pose = base_iso * fk.joints[i];
+            let h = world.insert_body(RigidBodyBuilder::kinematic_position_based().pose(iso_to_pose(&pose)));
+            let end = if i + 1 < DOF {
+                arm.origins[i + 1]
+            } else {
+                Vector3::x() * (desc.gripper.tcp_offset - desc.gripper.palm_back)
+            };
+            let r = desc.arm.joints[i].link_radius as f32;
+            let shape = SharedShape::capsule(vec_to_glam(&Vector3::zeros()), vec_to_glam(&end), r);
+            arm_colliders.push(world.insert_collider(collider(shape, i as u32 + 1, arm_mat, false), Some(h)));
+            if i == DOF - 1 {
+                let g = &desc.gripper;
+                let ps = g.palm_size.map(|v| v as f32 / 2.0);
+                let palm = collider(SharedShape::cuboid(ps[0], ps[1], ps[2]), PALM, grip_mat, false)
+                    .translation(vec_to_glam(&Vector3::new(g.tcp_offset - g.palm_back, 0.0, 0.0)));
+                arm_colliders.push(world.insert_collider(palm, Some(h)));
+                for (k, part) in FINGERS.iter().enumerate() {
+                    let fs = [g.finger_length, g.finger_thickness, g.finger_height].map(|v| v as f32 / 2.0);
+                    let co = collider(SharedShape::cuboid(fs[0], fs[1], fs[2]), *part, grip_mat, true);
+                    fingers[k] = world.insert_collider(co, Some(h));
+                    arm_colliders.push(fingers[k]);
+                }
+            }
+            h
+        });
+        let robot = Robot {
+            desc: desc.clone(),
+            arm,
+            home,
+            bodies: RobotBodies {
+                base,
+                links,
+                fingers,
+                arm_colliders,
+            },
+        };
+        robot.place_fingers(world, state.opening);
+        (robot, state)
+    }
+
+    /// Base pose in the world (from the physics body).
+    pub fn base_iso(&self, world: &PhysicsWorld) -> Isometry3<f64> {
+        pose_to_iso(world.bodies[self.bodies.base].position())
+    }
+
+    /// `[x, y, yaw]` of the base centre.
+    pub fn base_pose(&self, world: &PhysicsWorld) -> [f64; 3] {
+        let iso = self.base_iso(world);
+        [iso.translation.x, iso.translation.y, yaw_of(&iso.rotation)]
+    }
+
+    /// Measured planar base velocities `(v, omega)`.
+    pub fn base_velocity(&self, world: &PhysicsWorld) -> (f64, f64) {
+        let body = &world.bodies[self.bodies.base];
+        let iso = self.base_iso(world);
+        let fwd = iso.rotation * Vector3::x();
+        let lv = body.linvel();
+        (
+            fwd.x * f64::from(lv.x) + fwd.y * f64::from(lv.y),
+            f64::from(body.angvel().z),
+        )
+    }
+
+    fn place_fingers(&self, world: &mut PhysicsWorld, opening: f64) {
+        let g = &self.desc.gripper;
+        let tcp = self.desc.gripper.tcp_offset;
+        for (k, s) in [1.0, -1.0].into_iter().enumerate() {
+            let y = s * (opening / 2.0 + g.finger_thickness / 2.0);
+            let p = Isometry3::translation(tcp, y, 0.0);
+            if let Some(c) = world.colliders.get_mut(self.bodies.fingers[k]) {
+                c.set_position_wrt_parent(iso_to_pose(&p));
+            }
+        }
+    }
+
+    /// One physics substep's worth of commands: base velocities, arm targets, finger gap.
+    pub fn command(
+        &self,
+        world: &mut PhysicsWorld,
+        state: &mut RobotState,
+        params: &RmpParams,
+        cmd: &RobotCommand,
+        dt: f64,
+    ) {
+        let b = &self.desc.base;
+        let step = |cur: f64, want: f64, acc: f64, max: f64| {
+            let want = want.clamp(-max, max);
+            cur + (want - cur).clamp(-acc * dt, acc * dt)
+        };
+        state.v = step(state.v, cmd.v, b.acc_v, b.max_v);
+        state.omega = step(state.omega, cmd.omega, b.acc_omega, b.max_omega);
+        let iso = self.base_iso(world);
+        let fwd = iso.rotation * Vector3::x();
+        let body = &mut world.bodies[self.bodies.base];
+        body.set_linvel(vec_to_glam(&(fwd * state.v)), true);
+        body.set_angvel(vec_to_glam(&Vector3::new(0.0, 0.0, state.omega)), true);
+
+        if !state.arm_blocked {
+            state.safe_q = state.arm.q;
+        }
+        let qdd = rmp::resolve(&self.arm, params, &state.arm, &self.home, &cmd.ee_target);
+        state.arm = rmp::integrate(&self.arm, &state.arm, &qdd, dt);
+        let g = &self.desc.gripper;
+        let want = cmd.opening.clamp(0.0, 1.0) * g.max_opening;
+        let want = want.max(cmd.min_opening);
+        state.opening += (want - state.opening).clamp(-g.opening_speed * dt, g.opening_speed * dt);
+
+        // Links go where the base will be at the end of this substep.
+        let (yaw, x, y) = (yaw_of(&iso.rotation), iso.translation.x, iso.translation.y);
+        let next = planar(
+            x + fwd.x * state.v * dt,
+            y + fwd.y * state.v * dt,
+            0.0,
+            yaw + state.omega * dt,
+        );
+        self.place_links(world, &next, &state.arm.q);
+        self.place_fingers(world, state.opening);
+    }
+
+    fn place_links(&self, world: &mut PhysicsWorld, base: &Isometry3<f64>, q: &JointVec) {
+        let fk = self.arm.forward(q);
+        for (i, h) in self.bodies.links.iter().enumerate() {
+            world.bodies[*h].set_next_kinematic_position(iso_to_pose(&(base * fk.joints[i])));
+        }
+    }
+
+    /// After a substep: if a link dug into fixed geometry, fall back to the last safe targets.
+    pub fn enforce_obstacles(&self, world: &PhysicsWorld, state: &mut RobotState) {
+        let blocked = self.bodies.arm_colliders.iter().any(|c| {
+            world.narrow_phase.contact_pairs_with(*c).any(|pair| {
+                let other = if pair.collider1 == *c {
+                    pair.collider2
+                } else {
+                    pair.collider1
+                };
+                let is_static = world
+                    .colliders
+                    .get(other)
+                    .is_some_and(|o| Tag::unpack(o.user_data).owner == Owner::Static);
+                is_static
+                    && pair
+                        .find_deepest_contact()
+                        .is_some_and(|(_, ct)| ct.dist < -STOP_PENETRATION)
+            })
+        });
+        state.arm_blocked = blocked;
+        if blocked {
+            state.arm.q = state.safe_q;
+            state.arm.qd = JointVec::zeros();
+        }
+    }
+
+    /// TCP pose in the world.
+    pub fn tcp_world(&self, world: &PhysicsWorld, state: &RobotState) -> Isometry3<f64> {
+        self.base_iso(world) * self.arm.forward(&state.arm.q).tcp
+    }
+}
+
+/// What the robot is told to do during one substep.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RobotCommand {
+    pub v: f64,
+    pub omega: f64,
+    /// TCP target in the base frame.
+    pub ee_target: Isometry3<f64>,
+    /// Gripper command in [0, 1].
+    pub opening: f64,
+    /// The fingers stop at this gap (m): the width of a held object.
+    pub min_opening: f64,
+}

@@ -1,0 +1,9 @@
+//! Sensors: RGB-D cameras, LiDAR and odometry, configured in `configs/sensors.toml` and rendered
+//! only when an observation is requested. `png` writes images for people to look at.
+
+pub mod camera;
+pub mod lidar;
+pub mod png;
+
+pub use camera::CameraImage;
+pub use lidar::PointCloud;

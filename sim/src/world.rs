@@ -1,0 +1,208 @@
+//! Scene → rapier world: floor, walls and furniture as one fixed body of boxes, key and
+//! background objects as dynamic bodies with the catalogue's mass and friction. Everything comes
+//! from the scene file and the catalogue, so a new scene or object model is a data change only.
+
+use std::f64::consts::{FRAC_PI_2, TAU};
+
+use kitchen_r_core::catalogue::{ObjectModel, Shape};
+use kitchen_r_core::scene::Scene;
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use rapier3d::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::convert::{iso_to_pose, planar};
+use crate::furniture;
+use crate::material::{Material, Materials, Owner, Pattern, Tag};
+
+/// Friction of furniture and walls.
+const STATIC_FRICTION: f32 = 0.8;
+
+/// Floor and wall looks of one episode (the scene's colours unless randomised).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Style {
+    pub floor_color: [f32; 3],
+    pub wall_color: [f32; 3],
+    /// Floor tile size (m).
+    pub floor_tile: f32,
+}
+
+impl Style {
+    pub fn of(scene: &Scene) -> Style {
+        Style {
+            floor_color: scene.room.floor_color,
+            wall_color: scene.room.wall_color,
+            floor_tile: 0.3,
+        }
+    }
+}
+
+/// Insert a collider for a box of half extents `half` at `pose`, tagged.
+fn add_box(
+    world: &mut PhysicsWorld,
+    body: RigidBodyHandle,
+    pose: Isometry3<f64>,
+    half: [f64; 3],
+    material: u32,
+    owner: Owner,
+) {
+    let h = half.map(|v| v as f32);
+    let co = ColliderBuilder::cuboid(h[0], h[1], h[2])
+        .position(iso_to_pose(&pose))
+        .friction(STATIC_FRICTION)
+        .collision_groups(owner.groups(false))
+        .user_data(
+            Tag {
+                material,
+                owner,
+                index: 0,
+            }
+            .pack(),
+        );
+    world.insert_collider(co, Some(body));
+}
+
+/// Floor, walls and furniture as one fixed body.
+pub fn build_static(world: &mut PhysicsWorld, mats: &mut Materials, scene: &Scene, style: &Style) {
+    let body = world.insert_body(RigidBodyBuilder::fixed());
+    let [rx, ry] = scene.room.size;
+    let (t, wh) = (scene.room.wall_thickness, scene.room.wall_height);
+    let floor = mats.add(Material {
+        color: style.floor_color,
+        pattern: Pattern::Tiles {
+            size: style.floor_tile,
+            contrast: 0.12,
+        },
+    });
+    let floor_pose = planar(rx / 2.0, ry / 2.0, -0.05, 0.0);
+    add_box(
+        world,
+        body,
+        floor_pose,
+        [rx / 2.0 + t, ry / 2.0 + t, 0.05],
+        floor,
+        Owner::Static,
+    );
+    let wall = mats.add(Material {
+        color: style.wall_color,
+        pattern: Pattern::Stripes {
+            size: 1.2,
+            contrast: 0.06,
+        },
+    });
+    let walls = [
+        ([rx / 2.0, -t / 2.0], [rx / 2.0 + t, t / 2.0]),
+        ([rx / 2.0, ry + t / 2.0], [rx / 2.0 + t, t / 2.0]),
+        ([-t / 2.0, ry / 2.0], [t / 2.0, ry / 2.0 + t]),
+        ([rx + t / 2.0, ry / 2.0], [t / 2.0, ry / 2.0 + t]),
+    ];
+    for (c, h) in walls {
+        add_box(
+            world,
+            body,
+            planar(c[0], c[1], wh / 2.0, 0.0),
+            [h[0], h[1], wh / 2.0],
+            wall,
+            Owner::Static,
+        );
+    }
+    for f in &scene.furniture {
+        let base = planar(f.pose[0], f.pose[1], 0.0, f.pose[2]);
+        for p in furniture::parts(scene, f) {
+            let pose = base * Translation3::from(Vector3::from(p.center));
+            let owner = if p.decoration {
+                Owner::Decoration
+            } else {
+                Owner::Static
+            };
+            add_box(
+                world,
+                body,
+                pose,
+                p.half,
+                mats.add(Material::plain(p.color)),
+                owner,
+            );
+        }
+    }
+}
+
+/// Collision/render pieces of an object model relative to its centre (bounding-box centre).
+pub fn object_shapes(shape: &Shape) -> Vec<(Isometry3<f64>, SharedShape)> {
+    // parry's cylinders stand along y; ours along z.
+    let upright = UnitQuaternion::from_euler_angles(FRAC_PI_2, 0.0, 0.0);
+    match *shape {
+        Shape::Sphere { radius } => vec![(Isometry3::identity(), SharedShape::ball(radius as f32))],
+        Shape::Cylinder { radius, height } => vec![(
+            Isometry3::from_parts(Translation3::identity(), upright),
+            SharedShape::cylinder((height / 2.0) as f32, radius as f32),
+        )],
+        Shape::Cuboid { size } => {
+            vec![(
+                Isometry3::identity(),
+                SharedShape::cuboid(size[0] as f32 / 2.0, size[1] as f32 / 2.0, size[2] as f32 / 2.0),
+            )]
+        }
+        Shape::Bowl {
+            radius,
+            height,
+            thickness,
+        } => {
+            let mut v = vec![(
+                Isometry3::from_parts(
+                    Translation3::new(0.0, 0.0, -height / 2.0 + thickness / 2.0),
+                    upright,
+                ),
+                SharedShape::cylinder((thickness / 2.0) as f32, (radius - thickness) as f32),
+            )];
+            // The rim: a ring of thin wall boxes, slightly overlapping so the wall is closed.
+            let n = 12;
+            let chord = 2.0 * radius * (std::f64::consts::PI / f64::from(n)).tan() * 1.05;
+            for i in 0..n {
+                let a = TAU * f64::from(i) / f64::from(n);
+                let r = radius - thickness / 2.0;
+                let pose = planar(r * a.cos(), r * a.sin(), thickness / 2.0, a);
+                let half = [thickness / 2.0, chord / 2.0, (height - thickness) / 2.0].map(|x| x as f32);
+                v.push((pose, SharedShape::cuboid(half[0], half[1], half[2])));
+            }
+            v
+        }
+    }
+}
+
+/// Spawn one object as a dynamic body; its colliders carry `owner` and `index`.
+pub fn spawn_object(
+    world: &mut PhysicsWorld,
+    mats: &mut Materials,
+    model: &ObjectModel,
+    color: [f32; 3],
+    pose: Isometry3<f64>,
+    owner: Owner,
+    index: u32,
+) -> RigidBodyHandle {
+    let body = world.insert_body(
+        RigidBodyBuilder::dynamic()
+            .pose(iso_to_pose(&pose))
+            .angular_damping(0.2)
+            .user_data(index as u128),
+    );
+    let material = mats.add(Material::plain(color));
+    let shapes = object_shapes(&model.shape);
+    let mass = (model.mass / shapes.len() as f64) as f32;
+    for (p, s) in shapes {
+        let co = ColliderBuilder::new(s)
+            .position(iso_to_pose(&p))
+            .mass(mass)
+            .friction(model.friction as f32)
+            .collision_groups(owner.groups(false))
+            .user_data(
+                Tag {
+                    material,
+                    owner,
+                    index,
+                }
+                .pack(),
+            );
+        world.insert_collider(co, Some(body));
+    }
+    body
+}

@@ -1,0 +1,86 @@
+//! The arm under the RMP controller in the world, and grasping.
+
+mod common;
+
+use common::*;
+
+#[test]
+fn arm_reaches_a_reachable_target_within_a_centimetre_and_three_degrees() {
+    let a = assets();
+    let ep = episode(&a, [2.0, 2.7, 0.0], Vec::new());
+    let mut s = sim(&ep, blind());
+    let target = [0.55, 0.1, 1.0];
+    let mut info = None;
+    for _ in 0..60 {
+        info = Some(s.step(&hold(target, 1.0), false).unwrap().1);
+    }
+    let e = info.unwrap().ee_pose;
+    let d = ((e[0] - target[0]).powi(2) + (e[1] - target[1]).powi(2) + (e[2] - target[2]).powi(2)).sqrt();
+    assert!(d < 0.01, "position error {d}");
+    let dot = (e[3] * DOWN[0] + e[4] * DOWN[1] + e[5] * DOWN[2] + e[6] * DOWN[3])
+        .abs()
+        .min(1.0);
+    let angle = 2.0 * dot.acos();
+    assert!(angle < 3f64.to_radians(), "orientation error {angle} rad");
+}
+
+#[test]
+fn unreachable_target_keeps_the_arm_finite_and_within_limits() {
+    let a = assets();
+    let ep = episode(&a, [2.0, 2.7, 0.0], Vec::new());
+    let mut s = sim(&ep, blind());
+    for _ in 0..80 {
+        let (_, info) = s.step(&hold([2.5, -1.0, 3.0], 1.0), false).unwrap();
+        for (q, j) in info.joints.iter().zip(&a.robot.arm.joints) {
+            assert!(
+                q.is_finite() && *q >= j.limits[0] - 1e-9 && *q <= j.limits[1] + 1e-9,
+                "{} at {q}",
+                j.name
+            );
+        }
+    }
+}
+
+#[test]
+fn grasp_holds_through_a_base_rotation_and_release_drops_onto_the_counter() {
+    let a = assets();
+    // The blue zone's approach point, facing the counter; a cup 0.65 m ahead on the counter top.
+    let ep = episode(
+        &a,
+        [1.5, 2.95, std::f64::consts::FRAC_PI_2],
+        vec![cup_at(1.5, 3.6, 0.9)],
+    );
+    let mut s = sim(&ep, blind());
+    let run = |s: &mut kitchen_r_sim::Sim, act: kitchen_r_sim::Action, n: usize| {
+        let mut last = None;
+        for _ in 0..n {
+            last = Some(s.step(&act, false).unwrap().1);
+        }
+        last.unwrap()
+    };
+    run(&mut s, hold([0.65, 0.0, 1.12], 1.0), 40);
+    run(&mut s, hold([0.65, 0.0, 0.97], 1.0), 30);
+    let info = run(&mut s, hold([0.65, 0.0, 0.97], 0.0), 10);
+    assert_eq!(info.held_object.as_deref(), Some("red cup"));
+    run(&mut s, hold([0.65, 0.0, 1.12], 0.0), 20);
+    let turn = kitchen_r_sim::Action::new(0.0, 0.4, [0.65, 0.0, 1.12], DOWN, 0.0);
+    let info = run(&mut s, turn, 10);
+    assert_eq!(
+        info.held_object.as_deref(),
+        Some("red cup"),
+        "dropped during the rotation"
+    );
+    let info = run(&mut s, hold([0.65, 0.0, 1.12], 0.0), 10);
+    let cup = s.object_poses()[0].1.translation.vector;
+    let tcp = info.ee_world;
+    assert!(
+        (cup.x - tcp[0]).hypot(cup.y - tcp[1]) < 0.02,
+        "cup left the gripper"
+    );
+    run(&mut s, hold([0.65, 0.0, 0.99], 0.0), 20);
+    let info = run(&mut s, hold([0.65, 0.0, 0.99], 1.0), 30);
+    assert!(info.held_object.is_none());
+    let cup = s.object_poses()[0].1.translation.vector;
+    assert!((cup.z - 0.95).abs() < 0.01, "cup centre at z {}", cup.z);
+    assert!(cup.y > 3.4 && cup.y < 4.0, "cup is not on the counter: {cup:?}");
+}
