@@ -10,6 +10,8 @@
 
 use std::collections::VecDeque;
 
+use crate::catalogue::Catalogue;
+use crate::dataset::symbolic::{OBJECT_GAP, fits_in_zone};
 use crate::scene::{Furniture, Scene};
 
 /// Base radius of the mobile ALOHA robot, metres.
@@ -90,6 +92,61 @@ impl Scene {
                 return Err(format!(
                     "zone {:?}: approach point unreachable from the start",
                     z.color
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Check what stands on the surfaces: every key object's footprint lies inside its zone
+    /// with the zone margin and keeps [`OBJECT_GAP`] from its neighbours (the rule place targets
+    /// follow too, see [`crate::dataset::symbolic`]), and every background area lies on one
+    /// surface without touching a zone, so scattered clutter never blocks a pick or a place.
+    pub fn check_contents(&self, catalogue: &Catalogue) -> Result<(), String> {
+        let mut placed: Vec<(String, [f64; 2], f64)> = Vec::new();
+        for o in &self.key_objects {
+            let m = catalogue.model(&o.model).ok_or("unknown model")?;
+            let z = self.zone(&o.zone).ok_or("unknown zone")?;
+            let (p, r) = (
+                [z.center[0] + o.offset[0], z.center[1] + o.offset[1]],
+                m.shape.footprint_radius(),
+            );
+            if !fits_in_zone(z, r, p) {
+                return Err(format!(
+                    "key object {:?} sticks out of the {} zone",
+                    o.name(),
+                    z.color
+                ));
+            }
+            for (other, q, rq) in &placed {
+                let (dx, dy) = (p[0] - q[0], p[1] - q[1]);
+                if (dx * dx + dy * dy).sqrt() < r + rq + OBJECT_GAP - 1e-9 {
+                    return Err(format!("key objects {:?} and {other:?} overlap", o.name()));
+                }
+            }
+            placed.push((o.name(), p, r));
+        }
+        for a in &self.background_areas {
+            let [hx, hy] = [a.size[0] / 2.0, a.size[1] / 2.0];
+            let corners = [(-hx, -hy), (-hx, hy), (hx, -hy), (hx, hy)]
+                .map(|(dx, dy)| [a.center[0] + dx, a.center[1] + dy]);
+            let on_surface = self.furniture.iter().any(|f| {
+                corners.iter().all(|c| f.covers(*c, 1e-9))
+                    && f.surfaces().iter().any(|h| (h - a.height).abs() < 1e-6)
+            });
+            if !on_surface {
+                return Err(format!(
+                    "background area at {:?} does not lie on one surface",
+                    a.center
+                ));
+            }
+            let overlaps = |z: &crate::scene::Zone| {
+                (0..2).all(|i| (a.center[i] - z.center[i]).abs() < (a.size[i] + z.size[i]) / 2.0)
+            };
+            if let Some(z) = self.zones.iter().find(|z| overlaps(z)) {
+                return Err(format!(
+                    "background area at {:?} overlaps the {} zone",
+                    a.center, z.color
                 ));
             }
         }
@@ -257,6 +314,18 @@ mod tests {
         let table = s.furniture.iter_mut().find(|f| f.id == "table").unwrap();
         table.pose[0] = 1.3;
         assert!(s.check_layout().is_err());
+    }
+
+    #[test]
+    fn crowded_objects_and_cluttered_zones_are_refused() {
+        let cat = Catalogue::load(&crate::assets::assets_dir().join("objects.toml")).unwrap();
+        let mut s = kitchen_a();
+        s.check_contents(&cat).unwrap();
+        s.key_objects[1].offset = [0.1, 0.0];
+        assert!(s.check_contents(&cat).unwrap_err().contains("overlap"));
+        let mut s = kitchen_a();
+        s.background_areas[0].center = s.zones[0].center;
+        assert!(s.check_contents(&cat).unwrap_err().contains("zone"));
     }
 
     #[test]

@@ -34,6 +34,7 @@ mod asset_tests {
         assert!(scenes.len() >= 3, "the benchmark ships at least three kitchens");
         for s in &scenes {
             s.check_layout().unwrap_or_else(|e| panic!("{}: {e}", s.id));
+            s.check_contents(&cat).unwrap_or_else(|e| panic!("{}: {e}", s.id));
             for o in &s.key_objects {
                 let m = cat.model(&o.model).unwrap();
                 assert!(s.key_object_start(o, m.shape.half_height()).is_some());
