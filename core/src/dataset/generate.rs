@@ -20,7 +20,7 @@ use crate::catalogue::Catalogue;
 use crate::scene::Scene;
 
 /// Bumped whenever the same seed would give different files.
-pub const GENERATOR_VERSION: u32 = 1;
+pub const GENERATOR_VERSION: u32 = 2;
 /// The seed of the committed `assets/dataset/`.
 pub const COMMITTED_SEED: u64 = 20241;
 /// Substitutions tried per instruction before the template is declared unusable.

@@ -4,8 +4,8 @@
 //! This is the executability rule of the benchmark (paper, Language Instructions: "every
 //! generated instruction is executable within its corresponding scene"): `move to` drives to a
 //! zone other than the current one; `pick` needs an empty gripper and the robot at the object's
-//! zone; `place` puts the held object into the zone the robot is at, never straight after
-//! picking it (a no-op). A place target is a free spot in that zone: the object's footprint keeps
+//! zone; `place` puts the held object into the zone the robot is at, never into the zone it
+//! was picked up from (that would be a no-op, or a detour the instruction cannot express). A place target is a free spot in that zone: the object's footprint keeps
 //! [`ZONE_MARGIN`] from the zone edge and [`OBJECT_GAP`] from every other object there.
 
 use crate::catalogue::Catalogue;
@@ -44,7 +44,8 @@ pub struct SymbolicWorld<'s> {
     scene: &'s Scene,
     robot_at: Option<String>,
     held: Option<usize>,
-    just_picked: bool,
+    /// Zone the held object was picked up from.
+    picked_from: Option<String>,
     objects: Vec<Obj>,
 }
 
@@ -81,7 +82,7 @@ impl<'s> SymbolicWorld<'s> {
             scene,
             robot_at: None,
             held: None,
-            just_picked: false,
+            picked_from: None,
             objects,
         })
     }
@@ -90,7 +91,6 @@ impl<'s> SymbolicWorld<'s> {
     /// zone, the object's footprint radius and the other objects' footprints in that zone; the
     /// returned value is then the world target `[x, y, z]`.
     pub fn step(&mut self, step: &Step, spot: &mut SpotChooser<'_>) -> Result<Option<[f64; 3]>, String> {
-        let picked_before = std::mem::replace(&mut self.just_picked, false);
         match step {
             Step::MoveTo { zone } => {
                 self.scene
@@ -111,7 +111,7 @@ impl<'s> SymbolicWorld<'s> {
                     return Err(format!("`{step}` away from the {} zone", self.objects[i].zone));
                 }
                 self.held = Some(i);
-                self.just_picked = true;
+                self.picked_from = Some(self.objects[i].zone.clone());
                 Ok(None)
             }
             Step::Place { object } => {
@@ -119,10 +119,12 @@ impl<'s> SymbolicWorld<'s> {
                 if self.held != Some(i) {
                     return Err(format!("`{step}` without holding it"));
                 }
-                if picked_before {
-                    return Err(format!("`{step}` right after picking it up"));
-                }
                 let zone_name = self.robot_at.clone().ok_or("place before any move")?;
+                if self.picked_from.take().as_ref() == Some(&zone_name) {
+                    return Err(format!(
+                        "`{step}` back into the {zone_name} zone it was picked from"
+                    ));
+                }
                 let zone = self.scene.zone(&zone_name).ok_or("robot at an unknown zone")?;
                 let others: Vec<Footprint> = (self.objects.iter().enumerate())
                     .filter(|(j, o)| *j != i && o.zone == zone_name)

@@ -135,7 +135,8 @@ fn check_plan_rejects_broken_plans() {
     // The plate sits in the middle of the green zone; the cup goes beside it.
     let good_target = [3.18, 3.6, 0.95];
     check_plan(&scene, &cat, &ok, &[good_target]).unwrap();
-    // Picking where the object is not, placing nothing held, moving in place, off-zone target.
+    // Picking where the object is not, placing nothing held, moving in place, placing back where
+    // it was picked up, off-zone, crowded or misplaced targets.
     for (bad, targets) in [
         (
             plan(&[
@@ -163,6 +164,16 @@ fn check_plan_rejects_broken_plans() {
                 "move to the green zone",
             ]),
             vec![],
+        ),
+        (
+            plan(&[
+                "move to the red zone",
+                "pick the red cup",
+                "move to the green zone",
+                "move to the red zone",
+                "place the red cup",
+            ]),
+            vec![[2.38, 1.8, 0.8]],
         ),
         (ok.clone(), vec![[3.5, 3.6, 0.95]]),
         (ok.clone(), vec![[3.0, 3.6, 0.95]]),
