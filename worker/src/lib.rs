@@ -1,1 +1,8 @@
-//! Simulation worker: leases episode jobs from the server, runs them on `sim`, calls policies over gRPC.
+//! Simulation worker: runs episodes on the kitchen twin, talks to policies and the server, and
+//! records expert trajectories.
+//!
+//! It owns everything that turns simulator output into artefacts (trajectory files) and, in
+//! later issues, job leasing and policy calls. It must not score submissions or touch the
+//! database: results go back to the server, which owns scoring and storage.
+
+pub mod record;

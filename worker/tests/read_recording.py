@@ -1,0 +1,60 @@
+"""Reads a Kitchen-R recording with the reference readers and prints a JSON summary.
+
+Usage: read_recording.py FILE.mcap FILE.hdf5
+MCAP: decoded with `mcap` + `mcap-ros2-support` (the ROS 2 CDR decoder Foxglove's tooling uses).
+HDF5: read with h5py in the ALOHA/ACT layout.
+"""
+import json
+import sys
+
+import h5py
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+
+
+def read_mcap(path):
+    counts, first = {}, {}
+    with open(path, "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        profile = reader.get_header().profile
+        meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+        for schema, channel, message, ros_msg in reader.iter_decoded_messages():
+            counts[channel.topic] = counts.get(channel.topic, 0) + 1
+            if channel.topic in first:
+                continue
+            if schema.name == "sensor_msgs/msg/Image":
+                first[channel.topic] = {
+                    "width": ros_msg.width, "height": ros_msg.height,
+                    "encoding": ros_msg.encoding, "bytes": len(ros_msg.data),
+                    "frame_id": ros_msg.header.frame_id,
+                }
+            elif schema.name == "sensor_msgs/msg/PointCloud2":
+                first[channel.topic] = {"width": ros_msg.width, "fields": [f.name for f in ros_msg.fields],
+                                        "bytes": len(ros_msg.data)}
+            elif schema.name == "nav_msgs/msg/Odometry":
+                p = ros_msg.pose.pose.position
+                first[channel.topic] = {"x": p.x, "y": p.y, "child": ros_msg.child_frame_id}
+            elif schema.name == "std_msgs/msg/Float64MultiArray":
+                first[channel.topic] = {"data": list(ros_msg.data)}
+            elif schema.name == "tf2_msgs/msg/TFMessage":
+                first[channel.topic] = {"children": [t.child_frame_id for t in ros_msg.transforms]}
+            elif schema.name == "geometry_msgs/msg/Twist":
+                first[channel.topic] = {"v": ros_msg.linear.x, "w": ros_msg.angular.z}
+    return {"profile": profile, "counts": counts, "first": first, "metadata": meta}
+
+
+def read_hdf5(path):
+    out = {"shapes": {}, "attrs": {}}
+    with h5py.File(path, "r") as f:
+        def visit(name, obj):
+            if isinstance(obj, h5py.Dataset):
+                out["shapes"][name] = list(obj.shape)
+        f.visititems(visit)
+        for k, v in f.attrs.items():
+            out["attrs"][k] = v.decode() if isinstance(v, bytes) else (v.item() if hasattr(v, "item") else v)
+        out["action0"] = f["action"][0].tolist()
+    return out
+
+
+if __name__ == "__main__":
+    print(json.dumps({"mcap": read_mcap(sys.argv[1]), "hdf5": read_hdf5(sys.argv[2])}))
