@@ -46,7 +46,12 @@ pub fn wobble_action(k: u32) -> Action {
             0.15 * (0.4 * t).cos(),
             0.95 + 0.1 * (0.3 * t).sin(),
         ],
-        [std::f64::consts::FRAC_1_SQRT_2, 0.0, std::f64::consts::FRAC_1_SQRT_2, 0.0],
+        [
+            std::f64::consts::FRAC_1_SQRT_2,
+            0.0,
+            std::f64::consts::FRAC_1_SQRT_2,
+            0.0,
+        ],
         if (k / 20).is_multiple_of(2) { 1.0 } else { 0.0 },
     )
 }

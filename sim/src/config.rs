@@ -233,7 +233,7 @@ impl Default for SensorsConfig {
         SensorsConfig {
             cameras: vec![
                 cam("base", Mount::Base, [0.0, 0.0, 1.35], [0.0, 0.55, 0.0]),
-                cam("gripper", Mount::Gripper, [-0.10, 0.0, 0.06], [0.0, 0.35, 0.0]),
+                cam("gripper", Mount::Gripper, [-0.06, 0.0, 0.07], [0.0, 0.45, 0.0]),
             ],
             lidar: Some(LidarConfig {
                 mount: Mount::Base,

@@ -115,6 +115,12 @@ impl Owner {
         };
         InteractionGroups::new(member, filter, InteractionTestMode::And)
     }
+
+    /// A held key object touches neither the robot's links nor its fingers (the grasp joint holds
+    /// it), only the scene and other objects.
+    pub fn held_groups(self) -> InteractionGroups {
+        InteractionGroups::new(KEY, STATIC | KEY | BACKGROUND, InteractionTestMode::And)
+    }
 }
 
 const STATIC: Group = Group::GROUP_1;

@@ -15,6 +15,7 @@ use crate::generator::{EpisodeParams, draw_background, draw_start};
 use crate::sensors::camera::{CameraImage, Projection, RenderCtx};
 use crate::sensors::png::{write_depth, write_rgb};
 use crate::sim::{Assets, Sim};
+use crate::types::Action;
 use crate::world::Style;
 
 /// Depth that maps to black in depth PNGs (m).
@@ -85,12 +86,52 @@ pub fn render_scene(scene_id: &str, out: &Path, seed: u64) -> Result<Vec<PathBuf
     // From every zone's approach point, as a policy would see the work surface.
     for z in &scene.zones {
         ep.robot_start = z.approach;
-        let obs = sim.reset(&ep)?;
+        sim.reset(&ep)?;
+        // Hold the gripper 0.2 m above the zone centre, pointing down, as before a grasp.
+        let reach = (z.center[0] - z.approach[0]).hypot(z.center[1] - z.approach[1]);
+        let down = [
+            std::f64::consts::FRAC_1_SQRT_2,
+            0.0,
+            std::f64::consts::FRAC_1_SQRT_2,
+            0.0,
+        ];
+        let pregrasp = Action::new(0.0, 0.0, [reach, 0.0, z.height + 0.2], down, 1.0);
+        for _ in 0..40 {
+            sim.step(&pregrasp, false)?;
+        }
+        let obs = sim.observe();
         for img in &obs.images {
             write_pair(img, out, &format!("zone_{}", z.color), &mut written)?;
         }
     }
+    let sheet = out.join("contact_sheet.png");
+    contact_sheet(&written, &sheet)?;
+    written.push(sheet);
     Ok(written)
+}
+
+/// Every camera RGB image written so far, three times enlarged, tiled four to a row.
+fn contact_sheet(files: &[PathBuf], path: &Path) -> Result<(), SimError> {
+    let err = |p: &Path, e: image::ImageError| SimError::Image {
+        path: p.to_path_buf(),
+        message: e.to_string(),
+    };
+    let tiles = files
+        .iter()
+        .filter(|p| p.to_string_lossy().ends_with("_rgb.png"))
+        .map(|p| image::open(p).map_err(|e| err(p, e)))
+        .collect::<Result<Vec<_>, _>>()?;
+    let Some(first) = tiles.first() else { return Ok(()) };
+    let (w, h) = (first.width() * 3, first.height() * 3);
+    let cols = 4u32;
+    let rows = (tiles.len() as u32).div_ceil(cols);
+    let mut sheet = image::RgbImage::new(w * cols, h * rows);
+    for (i, t) in tiles.iter().enumerate() {
+        let big = image::imageops::resize(&t.to_rgb8(), w, h, image::imageops::FilterType::Nearest);
+        let (x, y) = ((i as u32 % cols) * w, (i as u32 / cols) * h);
+        image::imageops::replace(&mut sheet, &big, i64::from(x), i64::from(y));
+    }
+    sheet.save(path).map_err(|e| err(path, e))
 }
 
 /// Orthographic view from above, north up, zones tinted with their top-down colours.

@@ -63,9 +63,36 @@ pub struct ObjectBody {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Held {
     pub object: usize,
-    pub joint: ImpulseJointHandle,
     /// Finger gap when the grasp closed (m).
     pub width: f64,
+    /// Object pose in the TCP frame at the grasp.
+    pub offset: Isometry3<f64>,
+}
+
+/// Make `body` a carried (kinematic, robot-ignoring, furniture-reporting) object, or release it
+/// back to physics.
+fn set_carried(world: &mut PhysicsWorld, body: RigidBodyHandle, carried: bool) {
+    let (kind, groups, types) = if carried {
+        (
+            RigidBodyType::KinematicPositionBased,
+            Owner::KeyObject.held_groups(),
+            ActiveCollisionTypes::default() | ActiveCollisionTypes::KINEMATIC_FIXED,
+        )
+    } else {
+        (
+            RigidBodyType::Dynamic,
+            Owner::KeyObject.groups(false),
+            ActiveCollisionTypes::default(),
+        )
+    };
+    world.bodies[body].set_body_type(kind, true);
+    let handles: Vec<ColliderHandle> = world.bodies[body].colliders().to_vec();
+    for c in handles {
+        if let Some(co) = world.colliders.get_mut(c) {
+            co.set_collision_groups(groups);
+            co.set_active_collision_types(types);
+        }
+    }
 }
 
 /// Everything that changes while stepping (what a snapshot holds besides the physics sets).
@@ -179,7 +206,7 @@ impl Sim {
         let mut blocked = false;
         for _ in 0..self.config.physics.substeps {
             cmd.min_opening = self.dynamic.held.map_or(0.0, |h| h.width);
-            self.robot.command(
+            let next_base = self.robot.command(
                 &mut self.world,
                 &mut self.dynamic.robot,
                 &self.config.rmp,
@@ -187,8 +214,11 @@ impl Sim {
                 dt,
             );
             self.update_grasp(action.gripper());
+            self.carry(&next_base);
             self.world.step();
-            self.robot.enforce_obstacles(&self.world, &mut self.dynamic.robot);
+            let carried = self.dynamic.held.map(|h| self.objects[h.object].body);
+            self.robot
+                .enforce_obstacles(&self.world, &mut self.dynamic.robot, carried);
             blocked |= self.dynamic.robot.arm_blocked;
             self.dynamic.substeps += 1;
         }
@@ -207,7 +237,7 @@ impl Sim {
         let grip = &self.robot.desc.gripper;
         if let Some(h) = self.dynamic.held {
             if g > grip.release_threshold {
-                self.world.remove_impulse_joint(h.joint);
+                set_carried(&mut self.world, self.objects[h.object].body, false);
                 self.dynamic.held = None;
             }
             return;
@@ -228,20 +258,27 @@ impl Sim {
             inside(pose * Point3::from(o.grasp_offset)) || inside(pose * Point3::origin())
         });
         if let Some(i) = found {
-            let link = self.robot.bodies.links[5];
-            let link_pose = pose_to_iso(self.world.bodies[link].position());
-            let obj_pose = pose_to_iso(self.world.bodies[self.objects[i].body].position());
-            let joint = FixedJointBuilder::new()
-                .local_frame1(iso_to_pose(&(link_pose.inverse() * obj_pose)))
-                .local_frame2(iso_to_pose(&Isometry3::identity()))
-                .contacts_enabled(false);
-            let handle = self.world.insert_impulse_joint(link, self.objects[i].body, joint);
+            let body = self.objects[i].body;
+            let obj_pose = pose_to_iso(self.world.bodies[body].position());
+            let offset = tcp.inverse() * obj_pose;
+            // Rigid attachment: the object becomes a kinematic body carried at its grasp offset from
+            // the TCP (a fixed joint to the ideal position-controlled wrist). rapier's islands reject
+            // joints anchored on kinematic links, and a joint to the base would lag the wrist.
+            set_carried(&mut self.world, body, true);
             self.dynamic.held = Some(Held {
                 object: i,
-                joint: handle,
                 width: opening,
+                offset,
             });
         }
+    }
+
+    /// Move the held object with the TCP to where the links go this substep.
+    fn carry(&mut self, next_base: &Isometry3<f64>) {
+        let Some(h) = self.dynamic.held else { return };
+        let pose = next_base * self.robot.arm.forward(&self.dynamic.robot.arm.q).tcp * h.offset;
+        let body = self.objects[h.object].body;
+        self.world.bodies[body].set_next_kinematic_position(iso_to_pose(&pose));
     }
 
     /// Start judging plan step `index` of the episode as the current task.

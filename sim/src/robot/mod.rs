@@ -148,7 +148,11 @@ impl Robot {
         let mut fingers = [ColliderHandle::invalid(); 2];
         let links = std::array::from_fn(|i| {
             let pose = base_iso * fk.joints[i];
-            let h = world.insert_body(RigidBodyBuilder::kinematic_position_based().pose(iso_to_pose(&pose)));
+            let h = world.insert_body(
+                RigidBodyBuilder::kinematic_position_based()
+                    .pose(iso_to_pose(&pose))
+                    .can_sleep(false),
+            );
             let end = if i + 1 < DOF {
                 arm.origins[i + 1]
             } else {
@@ -222,7 +226,8 @@ impl Robot {
         }
     }
 
-    /// One physics substep's worth of commands: base velocities, arm targets, finger gap.
+    /// One physics substep's worth of commands: base velocities, arm targets, finger gap. Returns
+    /// the base pose predicted for the end of the substep (where the links were placed).
     pub fn command(
         &self,
         world: &mut PhysicsWorld,
@@ -230,7 +235,7 @@ impl Robot {
         params: &RmpParams,
         cmd: &RobotCommand,
         dt: f64,
-    ) {
+    ) -> Isometry3<f64> {
         let b = &self.desc.base;
         let step = |cur: f64, want: f64, acc: f64, max: f64| {
             let want = want.clamp(-max, max);
@@ -264,6 +269,7 @@ impl Robot {
         );
         self.place_links(world, &next, &state.arm.q);
         self.place_fingers(world, state.opening);
+        next
     }
 
     fn place_links(&self, world: &mut PhysicsWorld, base: &Isometry3<f64>, q: &JointVec) {
@@ -273,25 +279,39 @@ impl Robot {
         }
     }
 
-    /// After a substep: if a link dug into fixed geometry, fall back to the last safe targets.
-    pub fn enforce_obstacles(&self, world: &PhysicsWorld, state: &mut RobotState) {
-        let blocked = self.bodies.arm_colliders.iter().any(|c| {
-            world.narrow_phase.contact_pairs_with(*c).any(|pair| {
-                let other = if pair.collider1 == *c {
-                    pair.collider2
-                } else {
-                    pair.collider1
-                };
-                let is_static = world
-                    .colliders
-                    .get(other)
-                    .is_some_and(|o| Tag::unpack(o.user_data).owner == Owner::Static);
-                is_static
-                    && pair
-                        .find_deepest_contact()
-                        .is_some_and(|(_, ct)| ct.dist < -STOP_PENETRATION)
-            })
-        });
+    /// After a substep: if a link (or the carried object) dug into fixed geometry, fall back to the
+    /// last safe joint targets.
+    pub fn enforce_obstacles(
+        &self,
+        world: &PhysicsWorld,
+        state: &mut RobotState,
+        carried: Option<RigidBodyHandle>,
+    ) {
+        let carried_colliders = carried
+            .and_then(|b| world.bodies.get(b))
+            .map_or(&[][..], |b| b.colliders());
+        let blocked = self
+            .bodies
+            .arm_colliders
+            .iter()
+            .chain(carried_colliders)
+            .any(|c| {
+                world.narrow_phase.contact_pairs_with(*c).any(|pair| {
+                    let other = if pair.collider1 == *c {
+                        pair.collider2
+                    } else {
+                        pair.collider1
+                    };
+                    let is_static = world
+                        .colliders
+                        .get(other)
+                        .is_some_and(|o| Tag::unpack(o.user_data).owner == Owner::Static);
+                    is_static
+                        && pair
+                            .find_deepest_contact()
+                            .is_some_and(|(_, ct)| ct.dist < -STOP_PENETRATION)
+                })
+            });
         state.arm_blocked = blocked;
         if blocked {
             state.arm.q = state.safe_q;
