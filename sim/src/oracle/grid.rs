@@ -147,7 +147,12 @@ impl OccupancyGrid {
 
     /// Free after inflation: the whole cell keeps clearance R.
     pub fn is_free(&self, c: Cell) -> bool {
-        self.clearance(c) >= self.params.robot_radius
+        self.is_free_for(c, self.params.robot_radius)
+    }
+
+    /// Free for a robot of radius `radius` (the grid keeps exact clearances, so any radius works).
+    pub fn is_free_for(&self, c: Cell, radius: f64) -> bool {
+        self.clearance(c) >= radius
     }
 
     /// Touched by a wall or footprint before inflation.
@@ -158,7 +163,12 @@ impl OccupancyGrid {
     /// True when every cell the segment `a`–`b` touches (corners included) is free. Segments
     /// leaving the grid are blocked.
     pub fn line_of_sight(&self, a: P2, b: P2) -> bool {
-        self.for_each_touched_cell(a, b, |c| self.is_free(c))
+        self.line_of_sight_for(a, b, self.params.robot_radius)
+    }
+
+    /// [`OccupancyGrid::line_of_sight`] for a robot of radius `radius`.
+    pub fn line_of_sight_for(&self, a: P2, b: P2, radius: f64) -> bool {
+        self.for_each_touched_cell(a, b, |c| self.is_free_for(c, radius))
     }
 
     /// Calls `visit` on a superset of the cells the segment touches, in no particular order,

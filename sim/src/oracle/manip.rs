@@ -113,9 +113,11 @@ pub fn top_down(yaw: f64) -> UnitQuaternion<f64> {
 
 impl Default for ManipParams {
     /// `home`/`carry`: the tool centre point of `assets/robot.toml`'s home joint configuration
-    /// (about 0.34 m ahead of the base centre, 0.81 m up), pointing straight down.
+    /// (0.24 m ahead of the base centre, 0.12 m right, 0.81 m up, tool 0.07 rad short of
+    /// straight down), rounded to straight down. The runner should pass the arm's actual pose
+    /// through [`PhasePlan::starting_from`] when it differs.
     fn default() -> Self {
-        let stow = Isometry3::from_parts(Translation3::new(0.34, 0.0, 0.81), top_down(0.0));
+        let stow = Isometry3::from_parts(Translation3::new(0.24, -0.12, 0.81), top_down(0.0));
         ManipParams {
             home: stow,
             carry: stow,

@@ -17,6 +17,24 @@ pub(crate) fn scenes() -> Vec<Scene> {
     scenes
 }
 
+/// Where a navigation task may begin: five points along each start segment (with its heading)
+/// and every zone's approach pose (the robot moves on from one zone to the next).
+pub(crate) fn start_poses(scene: &Scene) -> Vec<[f64; 3]> {
+    let mut out = Vec::new();
+    for s in &scene.start_segments {
+        for k in 0..=4 {
+            let t = k as f64 / 4.0;
+            let p = [
+                s.from[0] + t * (s.to[0] - s.from[0]),
+                s.from[1] + t * (s.to[1] - s.from[1]),
+            ];
+            out.push([p[0], p[1], s.heading]);
+        }
+    }
+    out.extend(scene.zones.iter().map(|z| z.approach));
+    out
+}
+
 /// Clearance computed independently of `geometry`: distance to each footprint in its own frame.
 fn naive_clearance(scene: &Scene, p: P2) -> f64 {
     let [rx, ry] = scene.room.size;
@@ -75,7 +93,11 @@ impl Rng {
 
 #[test]
 fn theta_star_keeps_clearance_and_is_no_longer_than_grid_astar() {
-    let params = PlannerParams::default();
+    // The length bound holds for the plain planner (no extra margin) against A* on the same grid.
+    let params = PlannerParams {
+        clearance_margin: 0.0,
+        ..PlannerParams::default()
+    };
     for scene in scenes() {
         let grid = OccupancyGrid::from_scene(&scene, GridParams::default()).unwrap();
         let r = grid.params().robot_radius;
@@ -118,17 +140,7 @@ fn every_zone_is_reachable_from_every_start_segment_and_every_other_zone() {
     let params = PlannerParams::default();
     for scene in scenes() {
         let grid = OccupancyGrid::from_scene(&scene, GridParams::default()).unwrap();
-        let mut starts: Vec<P2> = Vec::new();
-        for s in &scene.start_segments {
-            for k in 0..=4 {
-                let t = k as f64 / 4.0;
-                starts.push([
-                    s.from[0] + t * (s.to[0] - s.from[0]),
-                    s.from[1] + t * (s.to[1] - s.from[1]),
-                ]);
-            }
-        }
-        starts.extend(scene.zones.iter().map(|z| [z.approach[0], z.approach[1]]));
+        let starts: Vec<P2> = start_poses(&scene).iter().map(|p| [p[0], p[1]]).collect();
         for &a in &starts {
             for z in &scene.zones {
                 let goal = [z.approach[0], z.approach[1]];
