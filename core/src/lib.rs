@@ -11,6 +11,7 @@
 pub mod assets;
 pub mod catalogue;
 pub mod dataset;
+pub mod describe;
 pub mod error;
 pub mod layout;
 pub mod plan;
