@@ -26,6 +26,8 @@ pub mod manip;
 pub mod theta_star;
 
 #[cfg(test)]
+mod arm_tests;
+#[cfg(test)]
 mod follow_tests;
 #[cfg(test)]
 mod manip_tests;

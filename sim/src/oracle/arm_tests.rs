@@ -1,0 +1,83 @@
+//! The manipulation expert against the robot description (`assets/robot.toml`): its default stow
+//! pose is where the arm's home configuration puts the tool, and every pick and place it plans in
+//! the committed scenes lies within the arm's reach from the zone's approach pose.
+
+use kitchen_r_core::assets::assets_dir;
+use kitchen_r_core::catalogue::Catalogue;
+use nalgebra::{Isometry3, Vector3};
+
+use super::manip::{ManipParams, Phase, PhaseTarget, PickPlan, PlacePlan};
+use super::nav_tests::scenes;
+use crate::robot::desc::RobotDesc;
+use crate::robot::kinematics::{ArmModel, JointVec};
+
+#[test]
+fn default_stow_pose_is_the_home_configuration_tool_pose() {
+    let desc = RobotDesc::load_default().unwrap();
+    let arm = ArmModel::new(&desc);
+    let tcp = arm.forward(&JointVec::from_column_slice(&desc.arm.home)).tcp;
+    let home = ManipParams::default().home;
+    let d = (tcp.translation.vector - home.translation.vector).norm();
+    assert!(
+        d < 0.01,
+        "home TCP {:?} is {d} m from the default stow pose",
+        tcp.translation
+    );
+    assert!(tcp.rotation.angle_to(&home.rotation) < 0.1);
+}
+
+/// Contact phases must be reachable; hover phases (approach heights above the grasp point) may
+/// overreach a little, the arm then stretching toward them as far as it can.
+const HOVER_OVERREACH: f64 = 0.05;
+
+#[test]
+fn every_pick_and_place_target_is_within_the_arms_reach() {
+    let desc = RobotDesc::load_default().unwrap();
+    let arm = ArmModel::new(&desc);
+    let shoulder = arm.mount + arm.origins[1];
+    // Shoulder to wrist-angle joint with the elbow straightened (within its limits for this arm);
+    // the wrist joint sits `wrist_back` behind the TCP along the approach axis.
+    let reach = arm.origins[2].norm() + (arm.origins[3] + arm.origins[4]).norm();
+    let wrist_back = arm.origins[5].norm() + arm.tcp_offset;
+    let cat = Catalogue::load(&assets_dir().join("objects.toml")).unwrap();
+    let params = ManipParams::default();
+    let mut failures = Vec::new();
+    let mut check = |what: String, targets: &[PhaseTarget]| {
+        for t in targets {
+            let approach = t.ee_in_base.rotation * Vector3::x();
+            let need = (t.ee_in_base.translation.vector - approach * wrist_back - shoulder).norm();
+            let hover = matches!(
+                t.phase,
+                Phase::PreGrasp | Phase::Lift | Phase::Transport | Phase::Retreat
+            );
+            if need > reach + if hover { HOVER_OVERREACH } else { 0.0 } {
+                failures.push(format!("{what}: {:?} needs {need:.3} m > {reach:.3} m", t.phase));
+            }
+        }
+    };
+    for scene in scenes() {
+        for obj in &scene.key_objects {
+            let model = cat.model(&obj.model).unwrap();
+            let zone = scene.zone(&obj.zone).unwrap();
+            let c = scene.key_object_start(obj, model.shape.half_height()).unwrap();
+            let pose = Isometry3::new(Vector3::from(c), Vector3::z() * obj.yaw);
+            let pick = PickPlan::new(&pose, model, zone.approach, &params);
+            check(format!("{} pick {}", scene.id, obj.name()), pick.plan.targets());
+            for other in &scene.zones {
+                let centre = [
+                    other.center[0],
+                    other.center[1],
+                    other.height + model.shape.half_height(),
+                ];
+                let target =
+                    PlacePlan::target_keeping_grip(centre, pick.object_yaw_in_base(), other.approach);
+                let place = PlacePlan::new(&target, model, other.approach, &params);
+                check(
+                    format!("{} place {} at {}", scene.id, obj.name(), other.color),
+                    place.plan.targets(),
+                );
+            }
+        }
+    }
+    assert!(failures.is_empty(), "out of reach:\n{}", failures.join("\n"));
+}
