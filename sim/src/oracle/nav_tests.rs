@@ -139,30 +139,31 @@ fn theta_star_keeps_clearance_and_is_no_longer_than_grid_astar() {
 fn every_zone_is_reachable_from_every_start_segment_and_every_other_zone() {
     let params = PlannerParams::default();
     for scene in scenes() {
-        let grid = OccupancyGrid::from_scene(&scene, GridParams::default()).unwrap();
-        let starts: Vec<P2> = start_poses(&scene).iter().map(|p| [p[0], p[1]]).collect();
-        for &a in &starts {
-            for z in &scene.zones {
-                let goal = [z.approach[0], z.approach[1]];
-                if dist(a, goal) == 0.0 {
-                    continue;
+        // The default resolution and a coarse one (the resolution is a config value).
+        for resolution in [0.05, 0.1] {
+            let grid = OccupancyGrid::from_scene(
+                &scene,
+                GridParams {
+                    resolution,
+                    ..GridParams::default()
+                },
+            )
+            .unwrap();
+            for a in start_poses(&scene).iter().map(|p| [p[0], p[1]]) {
+                for z in &scene.zones {
+                    let goal = [z.approach[0], z.approach[1]];
+                    if dist(a, goal) == 0.0 {
+                        continue;
+                    }
+                    let what = format!("{} at {resolution} m: {a:?} to zone {}", scene.id, z.color);
+                    let path = theta_star(&grid, a, goal, &params).unwrap_or_else(|e| panic!("{what}: {e}"));
+                    assert_eq!(path.waypoints.last(), Some(&goal), "{what}");
+                    assert!(!path.start_snapped && !path.goal_snapped, "{what}");
+                    assert!(
+                        path_clearance(&scene, &path) >= grid.params().robot_radius - 1e-9,
+                        "{what}"
+                    );
                 }
-                let path = theta_star(&grid, a, goal, &params)
-                    .unwrap_or_else(|e| panic!("{}: {a:?} to zone {}: {e}", scene.id, z.color));
-                assert_eq!(
-                    path.waypoints.last(),
-                    Some(&goal),
-                    "{}: zone {}",
-                    scene.id,
-                    z.color
-                );
-                assert!(
-                    !path.start_snapped && !path.goal_snapped,
-                    "{}: {a:?} to {}",
-                    scene.id,
-                    z.color
-                );
-                assert!(path_clearance(&scene, &path) >= grid.params().robot_radius - 1e-9);
             }
         }
     }

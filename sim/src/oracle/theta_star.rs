@@ -7,12 +7,18 @@
 //! and by the triangle inequality never returns a longer path than A* over the same grid.
 //!
 //! The returned polyline **excludes the start** and ends at the goal: it is the list of
-//! waypoints the follower drives to. The exact start and goal points are used instead of their
-//! cell centres whenever the segment to them is clear, so a robot standing on a free cell gets a
-//! path that keeps clearance R from where it actually is. A start or goal on a cell that is not
-//! free is snapped to the nearest free cell centre within [`PlannerParams::snap_radius`]
-//! (reported in [`PlannedPath`]); the snapped goal is then joined to the requested goal only
-//! when that last short segment itself keeps clearance R.
+//! waypoints the follower drives to. The search runs between the cells of the start and goal; a
+//! start or goal whose cell is not free is first moved to the nearest free cell centre within
+//! [`PlannerParams::snap_radius`] ([`PlanError::StartBlocked`] / [`PlanError::GoalBlocked`] when
+//! there is none). The exact start and goal are then joined to their cell centres whenever that
+//! short segment keeps clearance R (always so on a free cell, whose whole square keeps R), so a
+//! robot gets a path that keeps clearance R from where it actually stands to exactly where it is
+//! sent; when they cannot be joined the path starts or ends at the cell centre and
+//! [`PlannedPath`] says so.
+//!
+//! With [`PlannerParams::clearance_margin`] > 0 the planner first plans as if the robot were that
+//! much wider (the exact endpoints must then be joinable at R) and falls back to plain R. The
+//! paper's follower cuts corners, so this margin is what keeps the *driven* path clear.
 //!
 //! Everything is indexed by cell (vectors, a binary heap keyed by `(f, −g, index)`), so ties break
 //! the same way on every run and platform.
