@@ -5,7 +5,8 @@
 //! being the first 163, holds every template), a scene is drawn, then objects and zones of that
 //! scene are substituted. A substitution is kept only if its plan runs symbolically from the
 //! scene's initial placement ([`super::symbolic`]) and its text is new in that scene; otherwise
-//! another scene and substitution are drawn. Only vectors and `BTreeMap`s are iterated and all
+//! another scene and substitution are drawn. Scenes that break the navigation conventions
+//! ([`crate::layout`]) are refused up front, so a new scene is a data change the generator vets. Only vectors and `BTreeMap`s are iterated and all
 //! randomness comes from one [`SplitMix64`], so the same seed gives the same bytes.
 
 use std::collections::BTreeSet;
@@ -39,6 +40,15 @@ pub fn generate(seed: u64, assets: &Path) -> Result<Dataset, ContentError> {
             path: assets.join("scenes"),
             message: "no scenes".into(),
         });
+    }
+    // Instructions must be executable by the oracle too, not only symbolically.
+    for s in &scenes {
+        s.check_layout()
+            .and_then(|()| s.check_contents(&catalogue))
+            .map_err(|message| ContentError::Invalid {
+                path: assets.join("scenes").join(format!("{}.toml", s.id)),
+                message,
+            })?;
     }
     let mut rng = SplitMix64::new(seed);
     let mut order = Vec::with_capacity(TOTAL_INSTRUCTIONS + templates.len());
