@@ -6,8 +6,9 @@
 //! scene are substituted. A substitution is kept only if its plan runs symbolically from the
 //! scene's initial placement ([`super::symbolic`]) and its text is new in that scene; otherwise
 //! another scene and substitution are drawn. Scenes that break the navigation conventions
-//! ([`crate::layout`]) are refused up front, so a new scene is a data change the generator vets. Only vectors and `BTreeMap`s are iterated and all
-//! randomness comes from one [`SplitMix64`], so the same seed gives the same bytes.
+//! ([`crate::layout`]) are refused up front, so a new scene is a data change the generator
+//! vets. Only vectors and `BTreeMap`s are iterated and all randomness comes from one
+//! [`SplitMix64`], so the same seed gives the same bytes.
 
 use std::collections::BTreeSet;
 use std::path::Path;
