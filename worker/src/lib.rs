@@ -5,4 +5,6 @@
 //! later issues, job leasing and policy calls. It must not score submissions or touch the
 //! database: results go back to the server, which owns scoring and storage.
 
+pub mod policy;
 pub mod record;
+pub mod runner;

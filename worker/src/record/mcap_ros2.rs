@@ -177,13 +177,7 @@ impl McapRecorder {
         let cmd = msg::twist(f.action[0], f.action[1]);
         self.publish("/cmd_vel", "geometry_msgs/Twist", t, &cmd, rate.as_deref_mut())?;
         let action = msg::float64_array("v,w,x,y,z,qw,qx,qy,qz,g", &f.action);
-        self.publish(
-            "/action",
-            "std_msgs/Float64MultiArray",
-            t,
-            &action,
-            rate,
-        )?;
+        self.publish("/action", "std_msgs/Float64MultiArray", t, &action, rate)?;
         Ok(())
     }
 
