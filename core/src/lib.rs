@@ -14,6 +14,7 @@ pub mod dataset;
 pub mod describe;
 pub mod error;
 pub mod layout;
+pub mod metrics;
 pub mod plan;
 pub mod scene;
 pub mod topdown;

@@ -1,1 +1,38 @@
-//! Wire contracts (protobuf/gRPC) of Kitchen-R and their conversions to domain types.
+//! Wire contracts (protobuf/gRPC) of Kitchen-R, generated at build time from `proto/kitchen_r/**`.
+//!
+//! This crate owns the `.proto` files and nothing else: no business rules, no I/O. The three
+//! packages are
+//! - [`policy::v1`]: what a participant's policy server implements (control track);
+//! - [`worker::v1`]: how simulation workers lease jobs from the server and report results;
+//! - [`submission::v1`]: the participant API (plans, policies, submissions, leaderboard), the
+//!   gRPC twin of the HTTP API.
+//!
+//! Generated code carries the `.proto` comments as docs; read the `.proto` files for the field
+//! by field contract.
+
+/// Encoded `FileDescriptorSet` of all three packages, for gRPC server reflection.
+pub const FILE_DESCRIPTOR_SET: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/kitchen_r_descriptor.bin"));
+
+/// The policy protocol version this build speaks (see `policy.proto`).
+pub const POLICY_PROTOCOL_VERSION: u32 = 1;
+
+pub mod policy {
+    pub mod v1 {
+        #![allow(clippy::all, missing_docs)]
+        tonic::include_proto!("kitchen_r.policy.v1");
+    }
+}
+
+pub mod worker {
+    pub mod v1 {
+        #![allow(clippy::all, missing_docs)]
+        tonic::include_proto!("kitchen_r.worker.v1");
+    }
+}
+
+pub mod submission {
+    pub mod v1 {
+        #![allow(clippy::all, missing_docs)]
+        tonic::include_proto!("kitchen_r.submission.v1");
+    }
+}

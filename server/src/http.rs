@@ -1,0 +1,185 @@
+//! The HTTP adapter (axum): routes of DESIGN.md "The public interface" for the planning track.
+//!
+//! Handlers only extract, call one service function and shape the answer; every rule is in
+//! [`crate::service`]. Errors are always JSON (`{"error", "code", ...}`), including bad query
+//! parameters and unknown routes.
+
+use std::collections::HashMap;
+
+use axum::Router;
+use axum::body::Body;
+use axum::extract::{Path, Query, State};
+use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
+use axum::response::{Html, IntoResponse, Response};
+use axum::routing::{get, post};
+use bytes::Bytes;
+use kitchen_r_core::dataset::Split;
+use serde_json::json;
+use tokio_stream::StreamExt;
+
+use crate::error::ServiceError;
+use crate::leaderboard::{Format, Track};
+use crate::service::AppState;
+
+type Params = Query<HashMap<String, String>>;
+
+pub fn router(state: AppState) -> Router {
+    Router::new()
+        .route("/", get(index))
+        .route("/healthz", get(healthz))
+        .route("/api/v1/teams", post(create_team))
+        .route("/api/v1/dataset/{split}", get(dataset))
+        .route("/api/v1/scenes", get(scenes))
+        .route("/api/v1/scenes/{id}", get(scene))
+        .route("/api/v1/scenes/{id}/topdown.png", get(topdown))
+        .route("/api/v1/submissions/plans", post(submit_plans))
+        .route("/api/v1/submissions/{id}", get(submission))
+        .route("/api/v1/leaderboard", get(leaderboard))
+        .route("/api/v1/admin/rescore", post(rescore))
+        .fallback(|| async { ServiceError::not_found("route") })
+        .with_state(state)
+}
+
+fn bearer(headers: &HeaderMap) -> Option<&str> {
+    let value = headers.get(header::AUTHORIZATION)?.to_str().ok()?;
+    let token = value
+        .strip_prefix("Bearer ")
+        .or_else(|| value.strip_prefix("bearer "))?;
+    Some(token.trim()).filter(|t| !t.is_empty())
+}
+
+fn split_param(value: Option<&String>, default: Option<Split>) -> Result<Split, ServiceError> {
+    match (value.map(String::as_str), default) {
+        (None | Some(""), Some(d)) => Ok(d),
+        (None | Some(""), None) => Err(ServiceError::BadRequest(
+            "the `split` query parameter is required: `dev` or `test`".into(),
+        )),
+        (Some(s), _) => s.parse().map_err(ServiceError::BadRequest),
+    }
+}
+
+fn typed(content_type: &'static str, body: Bytes) -> Response {
+    (
+        [(header::CONTENT_TYPE, HeaderValue::from_static(content_type))],
+        body,
+    )
+        .into_response()
+}
+
+async fn healthz() -> impl IntoResponse {
+    axum::Json(json!({ "status": "ok" }))
+}
+
+async fn index(State(s): State<AppState>, Query(q): Params) -> Result<Response, ServiceError> {
+    let split = split_param(q.get("split"), Some(Split::Test))?;
+    let body = s
+        .leaderboard_rendered(Track::Planning, split, Format::Html)
+        .await?;
+    Ok(Html(body).into_response())
+}
+
+async fn create_team(
+    State(s): State<AppState>,
+    headers: HeaderMap,
+    body: Bytes,
+) -> Result<Response, ServiceError> {
+    let admin = bearer(&headers);
+    s.require_admin(admin)?;
+    let req: serde_json::Value = serde_json::from_slice(&body)
+        .map_err(|e| ServiceError::BadRequest(format!("expected {{\"name\": \"...\"}}: {e}")))?;
+    let name = req
+        .get("name")
+        .and_then(|n| n.as_str())
+        .ok_or_else(|| ServiceError::BadRequest("expected {\"name\": \"...\"}".into()))?;
+    let team = s.create_team(admin, name).await?;
+    Ok((StatusCode::CREATED, axum::Json(team)).into_response())
+}
+
+async fn dataset(State(s): State<AppState>, Path(split): Path<String>) -> Result<Response, ServiceError> {
+    let split: Split = split.parse().map_err(ServiceError::BadRequest)?;
+    Ok(typed("application/x-ndjson", s.content().public_jsonl(split)))
+}
+
+async fn scenes(State(s): State<AppState>) -> impl IntoResponse {
+    axum::Json(s.content().scene_summaries())
+}
+
+async fn scene(State(s): State<AppState>, Path(id): Path<String>) -> Result<Response, ServiceError> {
+    let scene = s
+        .content()
+        .scene(&id)
+        .ok_or_else(|| ServiceError::not_found(format!("scene {id:?}")))?;
+    Ok(axum::Json(scene).into_response())
+}
+
+async fn topdown(State(s): State<AppState>, Path(id): Path<String>) -> Result<Response, ServiceError> {
+    let scene = id.clone();
+    let png = tokio::task::spawn_blocking(move || s.content().topdown_png(&scene))
+        .await
+        .map_err(anyhow::Error::from)?
+        .ok_or_else(|| ServiceError::not_found(format!("scene {id:?}")))?;
+    Ok(typed("image/png", png))
+}
+
+/// Reads at most `max_body_bytes + 1` bytes, so an oversized upload is refused without being
+/// held in memory whole, and the service can still say on which line the limit was crossed.
+async fn read_limited(body: Body, limit: usize) -> Result<Vec<u8>, ServiceError> {
+    let mut stream = body.into_data_stream();
+    let mut buf = Vec::new();
+    while let Some(chunk) = stream.next().await {
+        let chunk = chunk.map_err(|e| ServiceError::BadRequest(format!("cannot read the body: {e}")))?;
+        let room = limit + 1 - buf.len();
+        buf.extend_from_slice(&chunk[..chunk.len().min(room)]);
+        if buf.len() > limit {
+            break;
+        }
+    }
+    Ok(buf)
+}
+
+async fn submit_plans(
+    State(s): State<AppState>,
+    Query(q): Params,
+    headers: HeaderMap,
+    body: Body,
+) -> Result<Response, ServiceError> {
+    let token = bearer(&headers);
+    // Refuse bad credentials and parameters before reading a possibly large body.
+    s.authenticate(token).await?;
+    let split = split_param(q.get("split"), None)?;
+    let body = read_limited(body, s.config().max_body_bytes).await?;
+    let done = s.submit_plans(token, split, &body).await?;
+    Ok((StatusCode::CREATED, axum::Json(done)).into_response())
+}
+
+async fn submission(
+    State(s): State<AppState>,
+    Path(id): Path<String>,
+    headers: HeaderMap,
+) -> Result<Response, ServiceError> {
+    let id: i64 = id
+        .parse()
+        .map_err(|_| ServiceError::not_found(format!("submission {id:?}")))?;
+    Ok(axum::Json(s.get_submission(bearer(&headers), id).await?).into_response())
+}
+
+async fn leaderboard(State(s): State<AppState>, Query(q): Params) -> Result<Response, ServiceError> {
+    let track: Track = q.get("track").map_or("", String::as_str).parse()?;
+    let split = split_param(q.get("split"), Some(Split::Test))?;
+    let (format, content_type) = match q.get("format").map(String::as_str) {
+        None | Some("" | "json") => (Format::Json, "application/json"),
+        Some("csv") => (Format::Csv, "text/csv; charset=utf-8"),
+        Some("html") => (Format::Html, "text/html; charset=utf-8"),
+        Some(other) => {
+            return Err(ServiceError::BadRequest(format!(
+                "unknown format {other:?} (expected json, csv or html)"
+            )));
+        }
+    };
+    let body = s.leaderboard_rendered(track, split, format).await?;
+    Ok(typed(content_type, body))
+}
+
+async fn rescore(State(s): State<AppState>, headers: HeaderMap) -> Result<Response, ServiceError> {
+    Ok(axum::Json(s.rescore_all(bearer(&headers)).await?).into_response())
+}

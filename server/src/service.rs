@@ -1,0 +1,395 @@
+//! The service layer: every rule of the server (authentication, quotas, validation, scoring,
+//! leaderboard order) lives here, once. The HTTP and gRPC adapters only translate requests and
+//! answers; they call these functions and nothing below them.
+
+use std::sync::Arc;
+
+use kitchen_r_core::dataset::Split;
+use serde::Serialize;
+use sha2::{Digest, Sha256};
+use sqlx::sqlite::SqlitePool;
+
+use crate::config::{Config, PlanLimits};
+use crate::content::Content;
+use crate::error::ServiceError;
+use crate::leaderboard::LeaderboardCache;
+use crate::plans::{self, InstructionScore};
+use crate::store::{self, NewRun, Team};
+
+/// Version of the planning scorer; part of every scoring run's `scorer_version`.
+pub const PLANNING_SCORER: &str = "planning-em/1";
+
+const DAY_MS: i64 = 86_400_000;
+
+/// Shared state of the server: a cheap `Clone` handle that every adapter holds.
+#[derive(Clone)]
+pub struct AppState {
+    inner: Arc<Inner>,
+}
+
+struct Inner {
+    pool: SqlitePool,
+    config: Config,
+    content: Content,
+    admin_hash: String,
+    /// Serialises quota check + insert so two concurrent uploads cannot both take the last slot.
+    submit_lock: tokio::sync::Mutex<()>,
+    leaderboard: LeaderboardCache,
+}
+
+impl std::fmt::Debug for AppState {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("AppState").finish_non_exhaustive()
+    }
+}
+
+/// A new team and its token (shown once: only its hash is stored).
+#[derive(Debug, Clone, Serialize)]
+pub struct NewTeam {
+    pub id: i64,
+    pub name: String,
+    pub token: String,
+}
+
+/// The answer to an accepted plan file.
+#[derive(Debug, Clone, Serialize)]
+pub struct Submitted {
+    pub id: i64,
+    pub split: Split,
+    pub scores: Scores,
+    pub warnings: Vec<String>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Scores {
+    pub em: Option<f64>,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct SubmissionView {
+    pub id: i64,
+    pub team: String,
+    pub split: String,
+    pub kind: String,
+    pub created_at: String,
+    pub runs: i64,
+    pub latest_run: Option<RunView>,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct RunView {
+    pub id: i64,
+    pub scorer_version: String,
+    pub created_at: String,
+    pub scores: Scores,
+    pub instructions: Vec<InstructionView>,
+}
+
+/// Per-instruction result; never carries ground truth.
+#[derive(Debug, Clone, Serialize)]
+pub struct InstructionView {
+    pub id: String,
+    pub present: bool,
+    pub correct_steps: usize,
+    pub total_steps: usize,
+    pub em: f64,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct RescoreReport {
+    pub rescored: usize,
+    pub failed: Vec<RescoreFailure>,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct RescoreFailure {
+    pub id: i64,
+    pub error: String,
+}
+
+impl AppState {
+    pub fn new(pool: SqlitePool, config: Config, content: Content, admin_token: &str) -> AppState {
+        AppState {
+            inner: Arc::new(Inner {
+                pool,
+                config,
+                content,
+                admin_hash: hash_token(admin_token),
+                submit_lock: tokio::sync::Mutex::new(()),
+                leaderboard: LeaderboardCache::default(),
+            }),
+        }
+    }
+
+    pub fn config(&self) -> &Config {
+        &self.inner.config
+    }
+
+    pub fn content(&self) -> &Content {
+        &self.inner.content
+    }
+
+    pub fn pool(&self) -> &SqlitePool {
+        &self.inner.pool
+    }
+
+    pub(crate) fn leaderboard_cache(&self) -> &LeaderboardCache {
+        &self.inner.leaderboard
+    }
+
+    fn is_admin(&self, token: &str) -> bool {
+        hash_token(token) == self.inner.admin_hash
+    }
+
+    /// The team a bearer token belongs to.
+    pub async fn authenticate(&self, token: Option<&str>) -> Result<Team, ServiceError> {
+        let token = token.ok_or(ServiceError::MissingToken)?;
+        store::team_by_token_hash(self.pool(), &hash_token(token))
+            .await?
+            .ok_or(ServiceError::BadToken)
+    }
+
+    pub fn require_admin(&self, token: Option<&str>) -> Result<(), ServiceError> {
+        match token {
+            None => Err(ServiceError::MissingToken),
+            Some(t) if self.is_admin(t) => Ok(()),
+            Some(_) => Err(ServiceError::NotAdmin),
+        }
+    }
+
+    /// Organiser: make a team and its token.
+    pub async fn create_team(&self, admin: Option<&str>, name: &str) -> Result<NewTeam, ServiceError> {
+        self.require_admin(admin)?;
+        let name = validate_team_name(name)?;
+        let token = new_token();
+        let id = store::insert_team(self.pool(), &name, &hash_token(&token), now_ms())
+            .await?
+            .ok_or_else(|| ServiceError::Conflict(format!("a team named {name:?} already exists")))?;
+        tracing::info!(team = id, name = %name, "team created");
+        Ok(NewTeam { id, name, token })
+    }
+
+    /// Validate, score and store a plan file for the token's team.
+    pub async fn submit_plans(
+        &self,
+        token: Option<&str>,
+        split: Split,
+        body: &[u8],
+    ) -> Result<Submitted, ServiceError> {
+        let team = self.authenticate(token).await?;
+        let limit = self.config().max_body_bytes;
+        if body.len() > limit {
+            let line = plans::line_at(body, limit);
+            return Err(plans::PlanFileError::TooLarge { limit, line }.into());
+        }
+        let gt = self.content().ground_truth(split);
+        let file = plans::parse(body, split, gt.len(), &self.content().index, &self.config().plans)?;
+        let score = plans::score(&file, gt);
+        // `parse` accepted it, so it is UTF-8.
+        let text = String::from_utf8_lossy(body);
+        let scorer = self.scorer_version();
+        let run = NewRun {
+            scorer_version: &scorer,
+            em: score.em,
+            instructions: &score.instructions,
+        };
+        let id = {
+            let _guard = self.inner.submit_lock.lock().await;
+            let now = now_ms();
+            self.check_quota(&team, split, now).await?;
+            store::insert_plan_submission(self.pool(), team.id, split, &text, now, &run)
+                .await?
+                .0
+        };
+        self.inner.leaderboard.invalidate();
+        tracing::info!(submission = id, team = %team.name, %split, em = score.em, "plans submitted");
+        Ok(Submitted {
+            id,
+            split,
+            scores: Scores { em: Some(score.em) },
+            warnings: plans::warnings(&score),
+        })
+    }
+
+    async fn check_quota(&self, team: &Team, split: Split, now: i64) -> Result<(), ServiceError> {
+        let q = self.config().quota;
+        let limit = match split {
+            Split::Dev => q.dev_per_day,
+            Split::Test => q.test_per_day,
+        };
+        if limit == 0 {
+            return Ok(());
+        }
+        let day_start = now - now.rem_euclid(DAY_MS);
+        let used = store::count_submissions_since(self.pool(), team.id, split, day_start).await?;
+        if used < i64::from(limit) {
+            return Ok(());
+        }
+        let reset = day_start + DAY_MS;
+        Err(ServiceError::Quota {
+            split: split.as_str(),
+            limit,
+            resets_at: rfc3339(reset),
+            retry_after_s: (reset - now + 999) / 1000,
+        })
+    }
+
+    /// A submission with its latest run, for its own team or the organiser.
+    pub async fn get_submission(&self, token: Option<&str>, id: i64) -> Result<SubmissionView, ServiceError> {
+        let viewer = match token {
+            Some(t) if self.is_admin(t) => None,
+            _ => Some(self.authenticate(token).await?),
+        };
+        let sub = store::submission(self.pool(), id)
+            .await?
+            .filter(|s| viewer.as_ref().is_none_or(|t| t.id == s.team_id))
+            .ok_or_else(|| ServiceError::not_found(format!("submission {id}")))?;
+        let latest_run = match store::latest_run(self.pool(), id).await? {
+            None => None,
+            Some(run) => {
+                let instructions = store::instruction_results(self.pool(), run.id).await?;
+                Some(RunView {
+                    id: run.id,
+                    scorer_version: run.scorer_version,
+                    created_at: rfc3339(run.created_at),
+                    scores: Scores { em: run.em },
+                    instructions: instructions.iter().map(instruction_view).collect(),
+                })
+            }
+        };
+        Ok(SubmissionView {
+            id: sub.id,
+            team: sub.team,
+            split: sub.split,
+            kind: sub.kind,
+            created_at: rfc3339(sub.created_at),
+            runs: sub.runs,
+            latest_run,
+        })
+    }
+
+    /// Organiser: a new scoring run for every plan submission.
+    pub async fn rescore_all(&self, admin: Option<&str>) -> Result<RescoreReport, ServiceError> {
+        self.require_admin(admin)?;
+        let scorer = self.scorer_version();
+        let mut report = RescoreReport {
+            rescored: 0,
+            failed: Vec::new(),
+        };
+        for id in store::plan_submission_ids(self.pool()).await? {
+            match self.rescore_one(id, &scorer).await {
+                Ok(()) => report.rescored += 1,
+                Err(ServiceError::PlanFile(e)) => report.failed.push(RescoreFailure {
+                    id,
+                    error: e.to_string(),
+                }),
+                Err(e) => return Err(e),
+            }
+        }
+        self.inner.leaderboard.invalidate();
+        tracing::info!(
+            rescored = report.rescored,
+            failed = report.failed.len(),
+            "rescore done"
+        );
+        Ok(report)
+    }
+
+    async fn rescore_one(&self, id: i64, scorer: &str) -> Result<(), ServiceError> {
+        let (split, body) = store::submission_body(self.pool(), id).await?;
+        let split: Split = split.parse().map_err(|e: String| anyhow::anyhow!(e))?;
+        let gt = self.content().ground_truth(split);
+        // Stored files were accepted under the limits of their day; only the ids must still exist.
+        let file = plans::parse(
+            body.as_bytes(),
+            split,
+            gt.len(),
+            &self.content().index,
+            &PlanLimits::UNLIMITED,
+        )?;
+        let score = plans::score(&file, gt);
+        let run = NewRun {
+            scorer_version: scorer,
+            em: score.em,
+            instructions: &score.instructions,
+        };
+        store::insert_run(self.pool(), id, now_ms(), &run).await?;
+        Ok(())
+    }
+
+    fn scorer_version(&self) -> String {
+        format!("{PLANNING_SCORER}+{}", self.content().dataset_tag())
+    }
+}
+
+fn instruction_view(i: &InstructionScore) -> InstructionView {
+    InstructionView {
+        id: i.id.clone(),
+        present: i.present,
+        correct_steps: i.correct,
+        total_steps: i.total,
+        em: i.em(),
+    }
+}
+
+/// Team names: 1 to 64 characters of letters, digits, space, `-`, `_`, `.`; trimmed.
+fn validate_team_name(name: &str) -> Result<String, ServiceError> {
+    let name = name.trim();
+    let ok_char = |c: char| c.is_alphanumeric() || matches!(c, ' ' | '-' | '_' | '.');
+    if name.is_empty() || name.chars().count() > 64 || !name.chars().all(ok_char) {
+        return Err(ServiceError::BadRequest(format!(
+            "team name {name:?} must be 1 to 64 letters, digits, spaces, '-', '_' or '.'"
+        )));
+    }
+    Ok(name.to_string())
+}
+
+/// A fresh bearer token: 32 random bytes, hex, with a prefix that makes leaks greppable.
+pub fn new_token() -> String {
+    let bytes: [u8; 32] = rand::random();
+    format!("kr_{}", hex::encode(bytes))
+}
+
+pub fn hash_token(token: &str) -> String {
+    hex::encode(Sha256::digest(token.as_bytes()))
+}
+
+pub fn now_ms() -> i64 {
+    (time::OffsetDateTime::now_utc().unix_timestamp_nanos() / 1_000_000) as i64
+}
+
+/// Unix milliseconds as RFC 3339 UTC.
+pub fn rfc3339(ms: i64) -> String {
+    time::OffsetDateTime::from_unix_timestamp_nanos(i128::from(ms) * 1_000_000)
+        .ok()
+        .and_then(|t| t.format(&time::format_description::well_known::Rfc3339).ok())
+        .unwrap_or_default()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn team_names_are_checked() {
+        assert_eq!(validate_team_name("  Team Rocket-2 ").unwrap(), "Team Rocket-2");
+        for bad in ["", "   ", "a<b>", "x\ny", &"n".repeat(65)] {
+            assert!(validate_team_name(bad).is_err(), "{bad:?}");
+        }
+    }
+
+    #[test]
+    fn tokens_are_random_and_hashes_stable() {
+        let (a, b) = (new_token(), new_token());
+        assert_ne!(a, b);
+        assert_eq!(a.len(), 3 + 64);
+        assert_eq!(hash_token("x"), hash_token("x"));
+        assert_ne!(hash_token(&a), hash_token(&b));
+    }
+
+    #[test]
+    fn times_format_as_rfc3339_utc() {
+        assert_eq!(rfc3339(0), "1970-01-01T00:00:00Z");
+        assert_eq!(rfc3339(86_400_000 + 1500), "1970-01-02T00:00:01.5Z");
+    }
+}

@@ -1,0 +1,296 @@
+//! SQLite persistence: every SQL statement of the server lives here.
+//!
+//! Policy: submissions are written once and never updated; scores are appended as scoring runs
+//! (a rescore is a new run on the same submission). A submission and its first run are inserted
+//! in one transaction, so a crash never leaves an unscored submission or an orphan run.
+//! Times are Unix milliseconds (UTC) in INTEGER columns.
+
+use std::path::Path;
+use std::str::FromStr;
+use std::time::Duration;
+
+use anyhow::Context;
+use kitchen_r_core::dataset::Split;
+use sqlx::sqlite::{
+    SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions, SqliteSynchronous,
+};
+use sqlx::{QueryBuilder, Row, Sqlite};
+
+use crate::plans::InstructionScore;
+
+/// Open (creating file and directory if missing) and migrate the database.
+pub async fn connect(url: &str) -> anyhow::Result<SqlitePool> {
+    let opts = SqliteConnectOptions::from_str(url)
+        .with_context(|| format!("bad database URL {url:?}"))?
+        .create_if_missing(true)
+        .journal_mode(SqliteJournalMode::Wal)
+        .synchronous(SqliteSynchronous::Normal)
+        .busy_timeout(Duration::from_secs(5))
+        .foreign_keys(true);
+    if let Some(dir) = Path::new(opts.get_filename()).parent()
+        && !dir.as_os_str().is_empty()
+    {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    }
+    let pool = SqlitePoolOptions::new()
+        .max_connections(4)
+        .connect_with(opts)
+        .await
+        .with_context(|| format!("cannot open database {url}"))?;
+    sqlx::migrate!("../migrations")
+        .run(&pool)
+        .await
+        .context("applying migrations")?;
+    Ok(pool)
+}
+
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Team {
+    pub id: i64,
+    pub name: String,
+}
+
+/// Insert a team; `None` when the name is taken.
+pub async fn insert_team(
+    pool: &SqlitePool,
+    name: &str,
+    token_hash: &str,
+    now: i64,
+) -> sqlx::Result<Option<i64>> {
+    let res = sqlx::query("INSERT INTO teams (name, token_hash, created_at) VALUES (?, ?, ?) ON CONFLICT (name) DO NOTHING RETURNING id")
+        .bind(name)
+        .bind(token_hash)
+        .bind(now)
+        .fetch_optional(pool)
+        .await?;
+    Ok(res.map(|r| r.get(0)))
+}
+
+pub async fn team_by_token_hash(pool: &SqlitePool, token_hash: &str) -> sqlx::Result<Option<Team>> {
+    let row = sqlx::query("SELECT id, name FROM teams WHERE token_hash = ?")
+        .bind(token_hash)
+        .fetch_optional(pool)
+        .await?;
+    Ok(row.map(|r| Team {
+        id: r.get(0),
+        name: r.get(1),
+    }))
+}
+
+/// A team's submissions to `split` received at or after `since` (ms).
+pub async fn count_submissions_since(
+    pool: &SqlitePool,
+    team: i64,
+    split: Split,
+    since: i64,
+) -> sqlx::Result<i64> {
+    sqlx::query_scalar("SELECT COUNT(*) FROM submissions WHERE team_id = ? AND split = ? AND created_at >= ?")
+        .bind(team)
+        .bind(split.as_str())
+        .bind(since)
+        .fetch_one(pool)
+        .await
+}
+
+/// The scores of one run, as stored.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NewRun<'a> {
+    pub scorer_version: &'a str,
+    pub em: f64,
+    pub instructions: &'a [InstructionScore],
+}
+
+/// Insert an immutable plan submission and its first scoring run in one transaction.
+/// Returns `(submission id, run id, created_at)`.
+pub async fn insert_plan_submission(
+    pool: &SqlitePool,
+    team: i64,
+    split: Split,
+    body: &str,
+    now: i64,
+    run: &NewRun<'_>,
+) -> sqlx::Result<(i64, i64)> {
+    let mut tx = pool.begin().await?;
+    let sub: i64 = sqlx::query_scalar(
+        "INSERT INTO submissions (team_id, split, kind, body, created_at) VALUES (?, ?, 'plans', ?, ?) RETURNING id",
+    )
+    .bind(team)
+    .bind(split.as_str())
+    .bind(body)
+    .bind(now)
+    .fetch_one(&mut *tx)
+    .await?;
+    let run_id = insert_run_in(&mut tx, sub, now, run).await?;
+    tx.commit().await?;
+    Ok((sub, run_id))
+}
+
+/// Append a scoring run to an existing submission.
+pub async fn insert_run(pool: &SqlitePool, submission: i64, now: i64, run: &NewRun<'_>) -> sqlx::Result<i64> {
+    let mut tx = pool.begin().await?;
+    let id = insert_run_in(&mut tx, submission, now, run).await?;
+    tx.commit().await?;
+    Ok(id)
+}
+
+async fn insert_run_in(
+    tx: &mut sqlx::Transaction<'_, Sqlite>,
+    submission: i64,
+    now: i64,
+    run: &NewRun<'_>,
+) -> sqlx::Result<i64> {
+    let scores = serde_json::json!({ "em": run.em }).to_string();
+    let run_id: i64 = sqlx::query_scalar(
+        "INSERT INTO scoring_runs (submission_id, scorer_version, created_at, em, scores) VALUES (?, ?, ?, ?, ?) RETURNING id",
+    )
+    .bind(submission)
+    .bind(run.scorer_version)
+    .bind(now)
+    .bind(run.em)
+    .bind(scores)
+    .fetch_one(&mut **tx)
+    .await?;
+    // 5 parameters a row; 400 rows stay far below SQLite's parameter limit.
+    for chunk in run.instructions.chunks(400) {
+        let mut q = QueryBuilder::<Sqlite>::new(
+            "INSERT INTO instruction_results (run_id, instruction_id, present, correct_steps, total_steps) ",
+        );
+        q.push_values(chunk, |mut b, i| {
+            b.push_bind(run_id)
+                .push_bind(i.id.clone())
+                .push_bind(i.present)
+                .push_bind(i.correct as i64)
+                .push_bind(i.total as i64);
+        });
+        q.build().execute(&mut **tx).await?;
+    }
+    Ok(run_id)
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct SubmissionRow {
+    pub id: i64,
+    pub team_id: i64,
+    pub team: String,
+    pub split: String,
+    pub kind: String,
+    pub created_at: i64,
+    pub runs: i64,
+}
+
+pub async fn submission(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<SubmissionRow>> {
+    let row = sqlx::query(
+        "SELECT s.id, s.team_id, t.name, s.split, s.kind, s.created_at,
+                (SELECT COUNT(*) FROM scoring_runs r WHERE r.submission_id = s.id)
+         FROM submissions s JOIN teams t ON t.id = s.team_id WHERE s.id = ?",
+    )
+    .bind(id)
+    .fetch_optional(pool)
+    .await?;
+    Ok(row.map(|r| SubmissionRow {
+        id: r.get(0),
+        team_id: r.get(1),
+        team: r.get(2),
+        split: r.get(3),
+        kind: r.get(4),
+        created_at: r.get(5),
+        runs: r.get(6),
+    }))
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunRow {
+    pub id: i64,
+    pub scorer_version: String,
+    pub created_at: i64,
+    pub em: Option<f64>,
+}
+
+pub async fn latest_run(pool: &SqlitePool, submission: i64) -> sqlx::Result<Option<RunRow>> {
+    let row = sqlx::query(
+        "SELECT id, scorer_version, created_at, em FROM scoring_runs WHERE submission_id = ? ORDER BY id DESC LIMIT 1",
+    )
+    .bind(submission)
+    .fetch_optional(pool)
+    .await?;
+    Ok(row.map(|r| RunRow {
+        id: r.get(0),
+        scorer_version: r.get(1),
+        created_at: r.get(2),
+        em: r.get(3),
+    }))
+}
+
+pub async fn instruction_results(pool: &SqlitePool, run: i64) -> sqlx::Result<Vec<InstructionScore>> {
+    let rows = sqlx::query(
+        "SELECT instruction_id, present, correct_steps, total_steps FROM instruction_results WHERE run_id = ? ORDER BY instruction_id",
+    )
+    .bind(run)
+    .fetch_all(pool)
+    .await?;
+    Ok(rows
+        .into_iter()
+        .map(|r| InstructionScore {
+            id: r.get(0),
+            present: r.get(1),
+            correct: r.get::<i64, _>(2) as usize,
+            total: r.get::<i64, _>(3) as usize,
+        })
+        .collect())
+}
+
+/// Ids of every plan submission, oldest first (for rescoring).
+pub async fn plan_submission_ids(pool: &SqlitePool) -> sqlx::Result<Vec<i64>> {
+    sqlx::query_scalar("SELECT id FROM submissions WHERE kind = 'plans' ORDER BY id")
+        .fetch_all(pool)
+        .await
+}
+
+/// `(split, body)` of one submission.
+pub async fn submission_body(pool: &SqlitePool, id: i64) -> sqlx::Result<(String, String)> {
+    let r = sqlx::query("SELECT split, body FROM submissions WHERE id = ?")
+        .bind(id)
+        .fetch_one(pool)
+        .await?;
+    Ok((r.get(0), r.get(1)))
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct LeaderboardRow {
+    pub team: String,
+    pub submission_id: i64,
+    pub em: Option<f64>,
+    pub submitted_at: i64,
+}
+
+/// Planning track: each team's best plan submission to `split` by its latest run's EM; ties go
+/// to the earlier submission, then the lower id. Unscored entries sort last.
+pub async fn planning_leaderboard(pool: &SqlitePool, split: Split) -> sqlx::Result<Vec<LeaderboardRow>> {
+    let rows = sqlx::query(
+        "WITH latest AS (
+            SELECT r.submission_id, r.em FROM scoring_runs r
+            WHERE r.id = (SELECT MAX(id) FROM scoring_runs WHERE submission_id = r.submission_id)
+         ), ranked AS (
+            SELECT s.id, s.team_id, s.created_at, l.em,
+                   ROW_NUMBER() OVER (PARTITION BY s.team_id
+                       ORDER BY l.em IS NULL, l.em DESC, s.created_at, s.id) AS rn
+            FROM submissions s LEFT JOIN latest l ON l.submission_id = s.id
+            WHERE s.split = ? AND s.kind = 'plans'
+         )
+         SELECT t.name, k.id, k.em, k.created_at FROM ranked k JOIN teams t ON t.id = k.team_id
+         WHERE k.rn = 1
+         ORDER BY k.em IS NULL, k.em DESC, k.created_at, k.id",
+    )
+    .bind(split.as_str())
+    .fetch_all(pool)
+    .await?;
+    Ok(rows
+        .into_iter()
+        .map(|r| LeaderboardRow {
+            team: r.get(0),
+            submission_id: r.get(1),
+            em: r.get(2),
+            submitted_at: r.get(3),
+        })
+        .collect())
+}
