@@ -7,6 +7,8 @@
 //! - [`manip`]: the 10-phase pick-and-place state machine, emitting end-effector targets in the
 //!   base frame and the gripper opening, raised-cosine blended between phase targets.
 //!
+//! - [`action`]: packs them into the 10-value action with a sign-stable quaternion.
+//!
 //! Together they produce the same 10-value action `(v, ω, x, y, z, qw, qx, qy, qz, g)` a
 //! participant's policy produces. The oracle is **privileged**: it reads the scene geometry, the
 //! true object poses and odometry straight from the twin, none of which a participant's policy
@@ -19,6 +21,7 @@
 //! counter-clockwise from +x. Base frame: origin at the base's geometric centre at floor level,
 //! x forward, y left, z up. Poses on the floor are `[x, y, yaw]`.
 
+pub mod action;
 pub mod follow;
 pub mod geometry;
 pub mod grid;
