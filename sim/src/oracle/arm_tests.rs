@@ -1,13 +1,19 @@
-//! The manipulation expert against the robot description (`assets/robot.toml`): its default stow
-//! pose is where the arm's home configuration puts the tool, and every pick and place it plans in
-//! the committed scenes lies within the arm's reach from the zone's approach pose.
+//! The oracle against the robot description (`assets/robot.toml`): its default stow pose is where
+//! the arm's home configuration puts the tool, every pick and place it plans in the committed
+//! scenes lies within the arm's reach from the zone's approach pose, and the path follower still
+//! arrives when the base only follows its commands within the description's speed and
+//! acceleration limits.
 
 use kitchen_r_core::assets::assets_dir;
 use kitchen_r_core::catalogue::Catalogue;
 use nalgebra::{Isometry3, Vector3};
 
+use super::follow::{FollowParams, Pose2};
+use super::follow_tests::{check_arrival, drive, unicycle};
+use super::geometry::dist;
+use super::grid::{GridParams, OccupancyGrid};
 use super::manip::{ManipParams, Phase, PhaseTarget, PickPlan, PlacePlan};
-use super::nav_tests::scenes;
+use super::nav_tests::{scenes, start_poses};
 use crate::robot::desc::RobotDesc;
 use crate::robot::kinematics::{ArmModel, JointVec};
 
@@ -80,4 +86,37 @@ fn every_pick_and_place_target_is_within_the_arms_reach() {
         }
     }
     assert!(failures.is_empty(), "out of reach:\n{}", failures.join("\n"));
+}
+
+#[test]
+fn follower_arrives_under_the_base_speed_and_acceleration_limits() {
+    let base = RobotDesc::load_default().unwrap().base;
+    let params = FollowParams::default();
+    let dt = params.dt;
+    let slew = |actual: f64, cmd: f64, max: f64, acc: f64| {
+        actual + (cmd.clamp(-max, max) - actual).clamp(-acc * dt, acc * dt)
+    };
+    for scene in scenes() {
+        let grid = OccupancyGrid::from_scene(&scene, GridParams::default()).unwrap();
+        for start in start_poses(&scene) {
+            for zone in &scene.zones {
+                if dist([start[0], start[1]], [zone.approach[0], zone.approach[1]]) == 0.0 {
+                    continue;
+                }
+                // The base reaches the commanded speeds only as fast as its limits allow.
+                let (mut v_now, mut w_now) = (0.0, 0.0);
+                let mut plant = |p: Pose2, v: f64, w: f64| {
+                    v_now = slew(v_now, v, base.max_v, base.acc_v);
+                    w_now = slew(w_now, w, base.max_omega, base.acc_omega);
+                    unicycle(p, v_now, w_now, dt)
+                };
+                let run = drive(&grid, start, zone.approach, params, &mut plant);
+                check_arrival(
+                    &format!("{} zone {} from {start:?}", scene.id, zone.color),
+                    zone.approach,
+                    run,
+                );
+            }
+        }
+    }
 }
