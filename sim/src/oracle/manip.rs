@@ -112,12 +112,13 @@ pub fn top_down(yaw: f64) -> UnitQuaternion<f64> {
 }
 
 impl Default for ManipParams {
-    /// `home`/`carry`: the tool centre point of `assets/robot.toml`'s home joint configuration
-    /// (0.24 m ahead of the base centre, 0.12 m right, 0.81 m up, tool 0.07 rad short of
-    /// straight down), rounded to straight down. The runner should pass the arm's actual pose
-    /// through [`PhasePlan::starting_from`] when it differs.
+    /// `home` = `carry`: tool straight down above the arm's side of the base (0.30 m ahead of the
+    /// base centre, 0.12 m right) at 1.10 m, higher than any counter, so the straight blends to
+    /// and from it keep the hand and a held object above the surfaces they cross. The arm's reset
+    /// configuration puts the tool lower (0.24, −0.12, 0.81); the oracle commands `home` while it
+    /// drives, so the arm is there by the first pick (else use [`PhasePlan::starting_from`]).
     fn default() -> Self {
-        let stow = Isometry3::from_parts(Translation3::new(0.24, -0.12, 0.81), top_down(0.0));
+        let stow = Isometry3::from_parts(Translation3::new(0.30, -0.12, 1.10), top_down(0.0));
         ManipParams {
             home: stow,
             carry: stow,

@@ -8,6 +8,7 @@ use kitchen_r_core::catalogue::{Catalogue, ObjectModel};
 use nalgebra::{Isometry3, Vector3};
 
 use super::manip::{ManipParams, Phase, PhasePlan, PickPlan, PlacePlan, alpha, base_isometry};
+use super::nav_tests::scenes;
 
 fn catalogue() -> Catalogue {
     Catalogue::load(&assets_dir().join("objects.toml")).unwrap()
@@ -227,6 +228,82 @@ fn placing_with_the_grip_kept_puts_the_centre_on_the_target() {
             let want = target.translation.vector + Vector3::z() * p.release_height;
             let err = (released.translation.vector - want).norm();
             assert!(err < 1e-9, "{}: centre lands {err} m off", model.id);
+        }
+    }
+}
+
+/// Lowest point of the held object while the tool is at `tool` (world), for a grip `held`.
+fn bottom(tool: &Isometry3<f64>, held: &Isometry3<f64>, model: &ObjectModel) -> (Isometry3<f64>, f64) {
+    let obj = tool * held;
+    (obj, obj.translation.vector.z - model.shape.half_height())
+}
+
+#[test]
+fn neither_the_hand_nor_a_held_object_dips_below_the_surface_it_crosses() {
+    let cat = catalogue();
+    let p = ManipParams::default();
+    for scene in scenes() {
+        for obj in &scene.key_objects {
+            let model = cat.model(&obj.model).unwrap();
+            let zone = scene.zone(&obj.zone).unwrap();
+            let c = scene.key_object_start(obj, model.shape.half_height()).unwrap();
+            let pose = Isometry3::new(Vector3::from(c), Vector3::z() * obj.yaw);
+            let pick = PickPlan::new(&pose, model, zone.approach, &p);
+            let base = base_isometry(zone.approach);
+            let held = (base * pick.plan.targets()[2].ee_in_base).inverse() * pose;
+            // (what, plan, base pose, zone of the surface, from when to check)
+            let mut checks = Vec::new();
+            let from_lift = pick.plan.targets()[..3].iter().map(|t| t.duration).sum::<f64>();
+            checks.push((format!("pick {}", obj.name()), pick.plan.clone(), zone, from_lift));
+            for other in &scene.zones {
+                let centre = [
+                    other.center[0],
+                    other.center[1],
+                    other.height + model.shape.half_height(),
+                ];
+                let target =
+                    PlacePlan::target_keeping_grip(centre, pick.object_yaw_in_base(), other.approach);
+                let place = PlacePlan::new(&target, model, other.approach, &p);
+                let what = format!("place {} at {}", obj.name(), other.color);
+                checks.push((what, place.plan, other, 0.0));
+            }
+            for (what, plan, z, from) in checks {
+                let (f, surface) = (scene.furniture(&z.furniture).unwrap(), z.height);
+                let base = base_isometry(z.approach);
+                // Until the object is let go: the lift and carry of a pick, the transport and
+                // lowering of a place.
+                let until = if from > 0.0 {
+                    plan.duration()
+                } else {
+                    plan.targets()[..2].iter().map(|t| t.duration).sum()
+                };
+                let mut t = 0.0;
+                while t <= plan.duration() {
+                    let tool = base * plan.target_at(t).0;
+                    if (from..=until).contains(&t) {
+                        let (object, low) = bottom(&tool, &held, model);
+                        let xy = [object.translation.vector.x, object.translation.vector.y];
+                        let over = f.covers(xy, model.shape.footprint_radius());
+                        assert!(
+                            !over || low >= surface - 1e-6,
+                            "{} {what}: object at {low:.3} < {surface}",
+                            scene.id
+                        );
+                    } else {
+                        // Empty-handed moves (to the pre-grasp, back home): the fingertips, at
+                        // the tool centre point, stay above the surface too.
+                        let xy = [tool.translation.vector.x, tool.translation.vector.y];
+                        let low = tool.translation.vector.z;
+                        let over = f.covers(xy, 0.05);
+                        assert!(
+                            !over || low >= surface - 1e-6,
+                            "{} {what}: tool at {low:.3} < {surface}",
+                            scene.id
+                        );
+                    }
+                    t += 0.05;
+                }
+            }
         }
     }
 }
