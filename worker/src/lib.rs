@@ -5,6 +5,8 @@
 //! later issues, job leasing and policy calls. It must not score submissions or touch the
 //! database: results go back to the server, which owns scoring and storage.
 
+pub mod eval;
+pub mod oracle;
 pub mod policy;
 pub mod record;
 pub mod runner;

@@ -36,6 +36,8 @@ pub struct Privileged {
     /// Key objects: name, catalogue model and world pose `[x, y, z, qw, qx, qy, qz]`.
     pub objects: Vec<PrivilegedObject>,
     pub held: Option<String>,
+    /// Tool centre point pose in the base frame `[x, y, z, qw, qx, qy, qz]`.
+    pub ee_pose: [f64; 7],
     /// What the current task must achieve.
     pub target: TaskTarget,
 }

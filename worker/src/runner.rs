@@ -115,6 +115,11 @@ pub fn privileged(sim: &Sim, target: TaskTarget) -> Privileged {
             })
             .collect(),
         held: sim.held_object().map(str::to_string),
+        ee_pose: {
+            let ee = sim.ee_pose();
+            let (t, q) = (ee.translation.vector, ee.rotation);
+            [t.x, t.y, t.z, q.w, q.i, q.j, q.k]
+        },
         target,
     }
 }
