@@ -1,5 +1,16 @@
 #!/usr/bin/env bash
-# The one test command (README): every unit, integration and end-to-end test of the workspace.
+# The one test command (README): every unit, property and end-to-end test of the workspace.
+# It does its own set-up on a fresh machine: the Python readers some end-to-end tests use
+# (mcap + mcap-ros2-support, h5py, grpcio) come from PyPI.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-cargo test --workspace --locked
+if ! python3 - <<'PY' 2>/dev/null
+import importlib.util, sys
+mods = ["mcap", "mcap_ros2", "h5py", "numpy"]
+sys.exit(0 if all(importlib.util.find_spec(m) for m in mods) else 1)
+PY
+then
+  echo "== installing the Python test readers (scripts/test-requirements.txt)"
+  python3 -m pip install --quiet --disable-pip-version-check -r scripts/test-requirements.txt
+fi
+cargo test --workspace --locked "$@"

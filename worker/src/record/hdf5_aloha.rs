@@ -19,8 +19,7 @@
 
 use std::path::Path;
 
-use hdf5::types::VarLenUnicode;
-use ndarray::{Array1, Array2, Array3, Array4};
+use rust_hdf5::{H5File, H5Group, H5Type};
 
 use super::{EpisodeMeta, Frame, RecordError, TaskSpan};
 
@@ -77,86 +76,70 @@ impl Hdf5Recorder {
 
     /// Write the file at `path` (replacing it).
     pub fn finish(self, path: &Path, tasks: &[TaskSpan]) -> Result<(), RecordError> {
-        let file = hdf5::File::create(path)?;
-        let str_attr = |name: &str, value: &str| -> Result<(), RecordError> {
-            let v: VarLenUnicode = value.parse().unwrap_or_default();
-            file.new_attr::<VarLenUnicode>().create(name)?.write_scalar(&v)?;
-            Ok(())
-        };
-        str_attr("episode_id", &self.meta.episode_id)?;
-        str_attr("scene", &self.meta.scene)?;
-        str_attr("instruction", &self.meta.instruction)?;
-        str_attr(
-            "plan",
-            &serde_json::to_string(&self.meta.plan).unwrap_or_default(),
-        )?;
-        str_attr("tasks", &serde_json::to_string(tasks).unwrap_or_default())?;
-        file.new_attr::<u8>().create("sim")?.write_scalar(&1u8)?;
-        file.new_attr::<u8>().create("compress")?.write_scalar(&0u8)?;
-        file.new_attr::<u64>()
-            .create("seed")?
-            .write_scalar(&self.meta.seed)?;
+        let file = H5File::create(path)?;
+        let root = file.root_group();
+        root.set_attr_string("episode_id", &self.meta.episode_id)?;
+        root.set_attr_string("scene", &self.meta.scene)?;
+        root.set_attr_string("instruction", &self.meta.instruction)?;
+        root.set_attr_string("plan", &json(&self.meta.plan))?;
+        root.set_attr_string("tasks", &json(tasks))?;
+        root.set_attr_numeric("sim", &1u8)?;
+        root.set_attr_numeric("compress", &0u8)?;
+        root.set_attr_numeric("seed", &self.meta.seed)?;
 
         let t = self.frames.len();
-        let obs = file.create_group("observations")?;
+        let obs = root.create_group("observations")?;
         let images = obs.create_group("images")?;
         let depth = obs.create_group("depth")?;
         if let Some(first) = self.frames.first() {
             for (ci, cam) in first.cameras.iter().enumerate() {
                 let (h, w) = (cam.height as usize, cam.width as usize);
-                let mut rgb = Array4::<u8>::zeros((t, h, w, 3));
-                let mut d = Array3::<f32>::zeros((t, h, w));
-                for (fi, f) in self.frames.iter().enumerate() {
-                    let c = &f.cameras[ci];
-                    rgb.index_axis_mut(ndarray::Axis(0), fi)
-                        .as_slice_mut()
-                        .expect("standard layout")
-                        .copy_from_slice(&c.rgb);
-                    d.index_axis_mut(ndarray::Axis(0), fi)
-                        .as_slice_mut()
-                        .expect("standard layout")
-                        .copy_from_slice(&c.depth);
-                }
-                images
-                    .new_dataset_builder()
-                    .with_data(&rgb)
-                    .chunk((1, h, w, 3))
-                    .create(cam.name.as_str())?;
-                depth
-                    .new_dataset_builder()
-                    .with_data(&d)
-                    .chunk((1, h, w))
-                    .create(cam.name.as_str())?;
+                let rgb: Vec<u8> = self
+                    .frames
+                    .iter()
+                    .flat_map(|f| f.cameras[ci].rgb.iter().copied())
+                    .collect();
+                let d: Vec<f32> = self
+                    .frames
+                    .iter()
+                    .flat_map(|f| f.cameras[ci].depth.iter().copied())
+                    .collect();
+                write(&images, &cam.name, &[t, h, w, 3], &rgb)?;
+                write(&depth, &cam.name, &[t, h, w], &d)?;
             }
         }
-        let rows = |get: &dyn Fn(&Frame) -> Vec<f64>| -> Array2<f64> {
+        let rows = |get: &dyn Fn(&Frame) -> Vec<f64>| -> (Vec<f64>, usize) {
             let cols = self.frames.first().map(|f| get(f).len()).unwrap_or(0);
-            let flat: Vec<f64> = self.frames.iter().flat_map(get).collect();
-            Array2::from_shape_vec((t, cols), flat).expect("rows of equal length")
+            (self.frames.iter().flat_map(get).collect(), cols)
         };
-        let write2 = |g: &hdf5::Group, name: &str, a: Array2<f64>| -> Result<(), RecordError> {
-            g.new_dataset_builder().with_data(&a).create(name)?;
-            Ok(())
-        };
-        write2(&obs, "qpos", rows(&|f| f.qpos.clone()))?;
-        write2(&obs, "qvel", rows(&|f| f.qvel.clone()))?;
-        write2(&obs, "base_pose", rows(&|f| f.base_pose.to_vec()))?;
-        write2(&obs, "ee_pose", rows(&|f| f.ee_pose.to_vec()))?;
-        write2(&file, "action", rows(&|f| f.action.to_vec()))?;
-        write2(&file, "base_action", rows(&|f| f.action[..2].to_vec()))?;
-        let task_index: Array1<i32> = self.frames.iter().map(|f| f.task as i32).collect();
-        file.new_dataset_builder()
-            .with_data(&task_index)
-            .create("task_index")?;
-        let starts: Array1<i64> = tasks.iter().map(|s| s.start as i64).collect();
-        let ends: Array1<i64> = tasks.iter().map(|s| s.end as i64).collect();
-        let ok: Array1<u8> = tasks.iter().map(|s| s.success as u8).collect();
-        file.new_dataset_builder()
-            .with_data(&starts)
-            .create("task_start")?;
-        file.new_dataset_builder().with_data(&ends).create("task_end")?;
-        file.new_dataset_builder().with_data(&ok).create("task_success")?;
+        let table =
+            |g: &H5Group, name: &str, (data, cols): (Vec<f64>, usize)| write(g, name, &[t, cols], &data);
+        table(&obs, "qpos", rows(&|f| f.qpos.clone()))?;
+        table(&obs, "qvel", rows(&|f| f.qvel.clone()))?;
+        table(&obs, "base_pose", rows(&|f| f.base_pose.to_vec()))?;
+        table(&obs, "ee_pose", rows(&|f| f.ee_pose.to_vec()))?;
+        table(&root, "action", rows(&|f| f.action.to_vec()))?;
+        table(&root, "base_action", rows(&|f| f.action[..2].to_vec()))?;
+        let task_index: Vec<i32> = self.frames.iter().map(|f| f.task as i32).collect();
+        write(&root, "task_index", &[t], &task_index)?;
+        let k = tasks.len();
+        let starts: Vec<i64> = tasks.iter().map(|s| s.start as i64).collect();
+        let ends: Vec<i64> = tasks.iter().map(|s| s.end as i64).collect();
+        let ok: Vec<u8> = tasks.iter().map(|s| s.success as u8).collect();
+        write(&root, "task_start", &[k], &starts)?;
+        write(&root, "task_end", &[k], &ends)?;
+        write(&root, "task_success", &[k], &ok)?;
         file.close()?;
         Ok(())
     }
+}
+
+fn json<T: serde::Serialize + ?Sized>(v: &T) -> String {
+    serde_json::to_string(v).unwrap_or_default()
+}
+
+/// A dataset of `shape` holding `data` in row-major order.
+fn write<T: H5Type>(g: &H5Group, name: &str, shape: &[usize], data: &[T]) -> Result<(), RecordError> {
+    g.new_dataset::<T>().shape(shape).create(name)?.write_raw(data)?;
+    Ok(())
 }

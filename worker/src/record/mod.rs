@@ -93,7 +93,7 @@ pub enum RecordError {
     #[error("MCAP error: {0}")]
     Mcap(#[from] mcap::McapError),
     #[error("HDF5 error: {0}")]
-    Hdf5(#[from] hdf5::Error),
+    Hdf5(#[from] rust_hdf5::Hdf5Error),
     #[error("inconsistent frame {index}: {message}")]
     Frame { index: usize, message: String },
 }
