@@ -22,6 +22,8 @@ pub struct BenchReport {
     pub control_step_us: f64,
     /// Mean wall time of one observation: every configured camera plus LiDAR (ms).
     pub observation_ms: f64,
+    /// Of which the LiDAR scan (ms).
+    pub lidar_ms: f64,
     pub cameras: usize,
     pub camera_pixels: u64,
     /// Camera rays per second while observing.
@@ -83,6 +85,17 @@ pub fn run(steps: u32, query_every: u32) -> Result<BenchReport, SimError> {
         std::hint::black_box(sim.observe());
     }
     let observation_ms = t0.elapsed().as_secs_f64() * 1e3 / f64::from(n_obs);
+    let lidar_ms = match &sim.sensors.lidar {
+        Some(l) => {
+            let pose = sim.robot.base_iso(&sim.world);
+            let t0 = Instant::now();
+            for _ in 0..n_obs {
+                std::hint::black_box(crate::sensors::lidar::scan(&sim.world, l, &pose));
+            }
+            t0.elapsed().as_secs_f64() * 1e3 / f64::from(n_obs)
+        }
+        None => 0.0,
+    };
     let pixels: u64 = sim
         .sensors
         .cameras
@@ -101,9 +114,10 @@ pub fn run(steps: u32, query_every: u32) -> Result<BenchReport, SimError> {
         physics_step_us: control_step_us / f64::from(substeps),
         control_step_us,
         observation_ms,
+        lidar_ms,
         cameras: sim.sensors.cameras.len(),
         camera_pixels: pixels,
-        rays_per_second: pixels as f64 / (observation_ms / 1e3),
+        rays_per_second: pixels as f64 / ((observation_ms - lidar_ms).max(1e-6) / 1e3),
         realtime_factor: sim.time() / wall,
         query_every,
         control_steps: steps,

@@ -6,9 +6,11 @@ use nalgebra::{Isometry3, Vector3};
 use rapier3d::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use super::tiles::{Hit, TileGrid};
 use crate::config::{CameraConfig, LightConfig};
 use crate::convert::vec_to_glam;
 use crate::material::{Material, Tag};
+use rapier3d::math::Vector;
 
 /// Colour of rays that leave the room (there is no ceiling).
 const SKY: [f32; 3] = [0.80, 0.85, 0.92];
@@ -42,28 +44,17 @@ pub struct RenderCtx<'a> {
 }
 
 impl RenderCtx<'_> {
-    /// Cast one ray; `dir` need not be unit length and the returned distance is in units of it.
+    /// Shade a hit: material albedo at the hit point under ambient plus Lambert light.
     #[inline]
-    pub fn trace(
-        &self,
-        qp: &QueryPipeline<'_>,
-        origin: rapier3d::math::Vector,
-        dir: rapier3d::math::Vector,
-        max: f32,
-        light: rapier3d::math::Vector,
-    ) -> Option<(f32, [f32; 3])> {
-        let ray = Ray::new(origin, dir);
-        let (h, hit) = qp.cast_ray_and_get_normal(&ray, max, true)?;
-        let co = &self.world.colliders[h];
-        let p = origin + dir * hit.time_of_impact;
-        let m = &self.materials[Tag::unpack(co.user_data).material as usize];
+    fn shade(&self, hit: &Hit, origin: Vector, dir: Vector, light: Vector) -> [f32; 3] {
+        let p = origin + dir * hit.t;
+        let m = &self.materials[Tag::unpack(hit.user_data).material as usize];
         let mut n = hit.normal;
         if n.dot(dir) > 0.0 {
             n = -n;
         }
         let shade = self.light.ambient as f32 + self.light.diffuse as f32 * n.dot(light).max(0.0);
-        let albedo = m.albedo([p.x, p.y, p.z]);
-        Some((hit.time_of_impact, albedo.map(|c| c * shade)))
+        m.albedo([p.x, p.y, p.z]).map(|c| c * shade)
     }
 
     /// Render an image of `width`×`height` from `pose` (looking along its +x, y left, z up).
@@ -76,7 +67,7 @@ impl RenderCtx<'_> {
         height: u32,
         max_depth: f64,
     ) -> CameraImage {
-        let qp = self.world.query_pipeline();
+        let grid = TileGrid::new(self.world, pose, projection, width as usize, height as usize);
         let l = Vector3::from(self.light.direction).normalize();
         let light = vec_to_glam(&l);
         let (w, h) = (width as usize, height as usize);
@@ -87,21 +78,22 @@ impl RenderCtx<'_> {
         let az = vec_to_glam(&(pose.rotation * Vector3::z()));
         let eye = vec_to_glam(&pose.translation.vector);
         let (cx, cy) = (w as f32 / 2.0, h as f32 / 2.0);
+        let inv_f = match projection {
+            Projection::Pinhole { fov } => (fov as f32 / 2.0).tan() / cx,
+            Projection::Ortho { .. } => 0.0,
+        };
         for v in 0..h {
             for u in 0..w {
                 let (du, dv) = (cx - (u as f32 + 0.5), cy - (v as f32 + 0.5));
                 let (origin, dir) = match projection {
-                    Projection::Pinhole { fov } => {
-                        let f = cx / (fov as f32 / 2.0).tan();
-                        (eye, ax + ay * (du / f) + az * (dv / f))
-                    }
+                    Projection::Pinhole { .. } => (eye, ax + ay * (du * inv_f) + az * (dv * inv_f)),
                     Projection::Ortho { scale } => (eye + (ay * du + az * dv) * scale as f32, ax),
                 };
                 let i = v * w + u;
-                let color = match self.trace(&qp, origin, dir, max_depth as f32, light) {
-                    Some((t, c)) => {
-                        depth[i] = t;
-                        c
+                let color = match grid.cast(u, v, origin, dir, max_depth as f32) {
+                    Some(hit) => {
+                        depth[i] = hit.t;
+                        self.shade(&hit, origin, dir, light)
                     }
                     None => SKY,
                 };

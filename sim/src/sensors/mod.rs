@@ -4,6 +4,7 @@
 pub mod camera;
 pub mod lidar;
 pub mod png;
+pub mod tiles;
 
 pub use camera::CameraImage;
 pub use lidar::PointCloud;
