@@ -1,8 +1,13 @@
 //! The `kitchen-r` binary: parses arguments and calls into the crates. Nothing else lives here.
 //!
-//! Each area's subcommands live in their own module (`sim_cmd` for the twin's tools); `main`
-//! only dispatches.
+//! Each area's subcommands live in their own module (`serve_cmd` for the server, `client_cmd`
+//! for the participant and organiser commands that talk to a server over HTTP, `sim_cmd` for
+//! the twin's tools); `main` only dispatches. Without a subcommand the binary serves, so
+//! `cargo run --release` starts the server.
 
+mod client_cmd;
+mod dataset_cmd;
+mod serve_cmd;
 mod sim_cmd;
 
 use clap::{Parser, Subcommand};
@@ -15,11 +20,23 @@ use clap::{Parser, Subcommand};
 )]
 struct Cli {
     #[command(subcommand)]
-    command: Command,
+    command: Option<Command>,
 }
 
 #[derive(Subcommand, Debug)]
 enum Command {
+    /// Run the evaluation server (HTTP + gRPC on SQLite). The default command.
+    Serve(serve_cmd::ServeArgs),
+    /// Organiser: manage teams.
+    Team(client_cmd::TeamArgs),
+    /// Upload a submission and print its scores.
+    Submit(client_cmd::SubmitArgs),
+    /// Print the ranking.
+    Leaderboard(client_cmd::LeaderboardArgs),
+    /// Organiser: add a new scoring run to every submission.
+    Rescore(client_cmd::RescoreArgs),
+    /// Benchmark content: regenerate the instruction dataset.
+    Dataset(dataset_cmd::DatasetArgs),
     /// Kitchen twin tools (render what the robot sees).
     Sim(sim_cmd::SimArgs),
     /// Performance figures.
@@ -29,7 +46,14 @@ enum Command {
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     match cli.command {
-        Command::Sim(args) => sim_cmd::sim(args),
-        Command::Bench(args) => sim_cmd::bench(args),
+        None => serve_cmd::serve(serve_cmd::ServeArgs::default()),
+        Some(Command::Serve(args)) => serve_cmd::serve(args),
+        Some(Command::Team(args)) => client_cmd::team(args),
+        Some(Command::Submit(args)) => client_cmd::submit(args),
+        Some(Command::Leaderboard(args)) => client_cmd::leaderboard(args),
+        Some(Command::Rescore(args)) => client_cmd::rescore(args),
+        Some(Command::Dataset(args)) => dataset_cmd::dataset(args),
+        Some(Command::Sim(args)) => sim_cmd::sim(args),
+        Some(Command::Bench(args)) => sim_cmd::bench(args),
     }
 }

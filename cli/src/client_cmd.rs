@@ -1,0 +1,264 @@
+//! Client commands (`team create`, `submit plans`, `leaderboard`, `rescore`): thin HTTP calls to
+//! a running server's `/api/v1`. Output is for people (tables, one-line summaries) unless a
+//! machine format is asked for; a refused request exits non-zero with the server's own message.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, bail};
+use clap::{Args, Subcommand, ValueEnum};
+use serde_json::Value;
+
+#[derive(Args, Debug)]
+pub struct ServerArgs {
+    /// Server base URL.
+    #[arg(long, env = "KITCHEN_R_SERVER", default_value = "http://127.0.0.1:8080")]
+    server: String,
+}
+
+#[derive(Args, Debug)]
+pub struct TeamArgs {
+    #[command(subcommand)]
+    command: TeamCommand,
+}
+
+#[derive(Subcommand, Debug)]
+enum TeamCommand {
+    /// Make a team and print its token (shown once).
+    Create {
+        /// Team name: 1 to 64 letters, digits, spaces, '-', '_' or '.'.
+        name: String,
+        #[command(flatten)]
+        server: ServerArgs,
+        /// Organiser token.
+        #[arg(long, env = "KITCHEN_R_ADMIN_TOKEN", hide_env_values = true)]
+        admin_token: String,
+    },
+}
+
+#[derive(Args, Debug)]
+pub struct SubmitArgs {
+    #[command(subcommand)]
+    command: SubmitCommand,
+}
+
+#[derive(Subcommand, Debug)]
+enum SubmitCommand {
+    /// Upload a plan file (JSON Lines: {"id": "...", "plan": ["...", ...]} per line).
+    Plans {
+        /// The plan file.
+        file: PathBuf,
+        /// Which split the plans are for.
+        #[arg(long, value_parser = ["dev", "test"])]
+        split: String,
+        #[command(flatten)]
+        server: ServerArgs,
+        /// Team token.
+        #[arg(long, env = "KITCHEN_R_TOKEN", hide_env_values = true)]
+        token: String,
+        /// Print the server's JSON answer instead of a summary.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum OutputFormat {
+    Table,
+    Json,
+    Csv,
+}
+
+#[derive(Args, Debug)]
+pub struct LeaderboardArgs {
+    /// Track to rank.
+    #[arg(long, default_value = "planning", value_parser = ["planning", "control", "integrated"])]
+    track: String,
+    /// Split to rank.
+    #[arg(long, default_value = "test", value_parser = ["dev", "test"])]
+    split: String,
+    /// Output format.
+    #[arg(long, value_enum, default_value_t = OutputFormat::Table)]
+    format: OutputFormat,
+    #[command(flatten)]
+    server: ServerArgs,
+}
+
+#[derive(Args, Debug)]
+pub struct RescoreArgs {
+    /// Rescore every submission (required: rescoring is never implicit).
+    #[arg(long, required = true)]
+    all: bool,
+    #[command(flatten)]
+    server: ServerArgs,
+    /// Organiser token.
+    #[arg(long, env = "KITCHEN_R_ADMIN_TOKEN", hide_env_values = true)]
+    admin_token: String,
+}
+
+fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("starting the async runtime")
+}
+
+fn url(server: &ServerArgs, path: &str) -> String {
+    format!("{}{path}", server.server.trim_end_matches('/'))
+}
+
+/// Send, and turn a non-2xx answer into an error carrying the server's message.
+async fn send(req: reqwest::RequestBuilder) -> anyhow::Result<reqwest::Response> {
+    let resp = req.send().await.context("cannot reach the server")?;
+    if resp.status().is_success() {
+        return Ok(resp);
+    }
+    let status = resp.status();
+    let text = resp.text().await.unwrap_or_default();
+    let msg = serde_json::from_str::<Value>(&text)
+        .ok()
+        .and_then(|v| v.get("error").and_then(Value::as_str).map(str::to_string))
+        .unwrap_or(text);
+    bail!("{msg} (HTTP {})", status.as_u16())
+}
+
+async fn json(req: reqwest::RequestBuilder) -> anyhow::Result<Value> {
+    send(req)
+        .await?
+        .json()
+        .await
+        .context("the server's answer is not JSON")
+}
+
+pub fn team(args: TeamArgs) -> anyhow::Result<()> {
+    let TeamCommand::Create {
+        name,
+        server,
+        admin_token,
+    } = args.command;
+    runtime()?.block_on(async {
+        let req = reqwest::Client::new()
+            .post(url(&server, "/api/v1/teams"))
+            .bearer_auth(admin_token)
+            .json(&serde_json::json!({ "name": name }));
+        let v = json(req).await?;
+        println!(
+            "team {} created (id {})",
+            v["name"].as_str().unwrap_or("?"),
+            v["id"]
+        );
+        println!("token: {}", v["token"].as_str().unwrap_or("?"));
+        println!("keep it: it is shown only once; participants pass it as --token or KITCHEN_R_TOKEN");
+        Ok(())
+    })
+}
+
+pub fn submit(args: SubmitArgs) -> anyhow::Result<()> {
+    let SubmitCommand::Plans {
+        file,
+        split,
+        server,
+        token,
+        json: raw,
+    } = args.command;
+    let body = std::fs::read(&file).with_context(|| format!("cannot read {}", file.display()))?;
+    runtime()?.block_on(async {
+        let req = reqwest::Client::new()
+            .post(url(&server, &format!("/api/v1/submissions/plans?split={split}")))
+            .bearer_auth(token)
+            .header(reqwest::header::CONTENT_TYPE, "application/x-ndjson")
+            .body(body);
+        let v = json(req).await?;
+        if raw {
+            println!("{v}");
+            return Ok(());
+        }
+        let em = v["scores"]["em"].as_f64().unwrap_or(f64::NAN);
+        println!("submission {} ({split}): EM = {em:.6}", v["id"]);
+        for w in v["warnings"].as_array().into_iter().flatten() {
+            println!("warning: {}", w.as_str().unwrap_or_default());
+        }
+        Ok(())
+    })
+}
+
+pub fn leaderboard(args: LeaderboardArgs) -> anyhow::Result<()> {
+    let format = if args.format == OutputFormat::Csv {
+        "csv"
+    } else {
+        "json"
+    };
+    let path = format!(
+        "/api/v1/leaderboard?track={}&split={}&format={format}",
+        args.track, args.split
+    );
+    runtime()?.block_on(async {
+        let resp = send(reqwest::Client::new().get(url(&args.server, &path))).await?;
+        let text = resp.text().await?;
+        match args.format {
+            OutputFormat::Csv | OutputFormat::Json => print!("{text}"),
+            OutputFormat::Table => print_table(&serde_json::from_str(&text)?),
+        }
+        if args.format == OutputFormat::Json {
+            println!();
+        }
+        Ok(())
+    })
+}
+
+fn print_table(board: &Value) {
+    println!(
+        "{} track, {} split",
+        board["track"].as_str().unwrap_or("?"),
+        board["split"].as_str().unwrap_or("?")
+    );
+    let rows = board["rows"].as_array().cloned().unwrap_or_default();
+    if rows.is_empty() {
+        println!("no submissions yet");
+        return;
+    }
+    let width = rows
+        .iter()
+        .filter_map(|r| r["team"].as_str().map(|t| t.chars().count()))
+        .max()
+        .unwrap_or(4)
+        .max(4);
+    println!(
+        "{:>4}  {:<width$}  {:>8}  {:>10}  submitted (UTC)",
+        "rank", "team", "EM", "submission"
+    );
+    for r in rows {
+        let em = r["scores"]["em"]
+            .as_f64()
+            .map_or("-".into(), |v| format!("{v:.4}"));
+        println!(
+            "{:>4}  {:<width$}  {:>8}  {:>10}  {}",
+            r["rank"],
+            r["team"].as_str().unwrap_or("?"),
+            em,
+            r["submission_id"],
+            r["submitted_at"].as_str().unwrap_or("?")
+        );
+    }
+}
+
+pub fn rescore(args: RescoreArgs) -> anyhow::Result<()> {
+    runtime()?.block_on(async {
+        let req = reqwest::Client::new()
+            .post(url(&args.server, "/api/v1/admin/rescore"))
+            .bearer_auth(&args.admin_token);
+        let v = json(req).await?;
+        println!("rescored {} submissions", v["rescored"]);
+        let failed = v["failed"].as_array().cloned().unwrap_or_default();
+        for f in &failed {
+            println!(
+                "failed: submission {}: {}",
+                f["id"],
+                f["error"].as_str().unwrap_or("?")
+            );
+        }
+        if !failed.is_empty() {
+            bail!("{} submissions could not be rescored", failed.len());
+        }
+        Ok(())
+    })
+}

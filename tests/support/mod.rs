@@ -1,0 +1,258 @@
+//! Shared harness of the end-to-end tests: a hand-made benchmark fixture in a temporary
+//! directory and the real `kitchen-r` binary started on it on 127.0.0.1:0.
+//!
+//! The fixture is small and hand-made so expected scores can be computed by hand; its scenes and
+//! catalogue are the committed ones, so it validates against the real schemas.
+
+#![allow(dead_code)]
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
+use std::time::Duration;
+
+use serde_json::{Value, json};
+
+pub const ADMIN: &str = "test-admin-token-0123456789";
+/// How long a server may take to print its readiness line (a debug build migrating a new DB).
+const STARTUP: Duration = Duration::from_secs(60);
+
+pub fn bin() -> &'static str {
+    env!("CARGO_BIN_EXE_kitchen-r")
+}
+
+/// Dev ground truth of the fixture: (id, plan).
+pub fn dev_plans() -> Vec<(&'static str, Vec<&'static str>)> {
+    vec![
+        (
+            "dev-0001",
+            vec![
+                "move to the blue zone",
+                "pick the bowl",
+                "move to the red zone",
+                "place the bowl",
+            ],
+        ),
+        (
+            "dev-0002",
+            vec![
+                "move to the green zone",
+                "pick the cup",
+                "move to the red zone",
+                "place the cup",
+                "move to the blue zone",
+            ],
+        ),
+        (
+            "dev-0003",
+            vec![
+                "move to the red zone",
+                "pick the apple",
+                "move to the green zone",
+                "place the apple",
+                "move to the blue zone",
+                "pick the plate",
+                "move to the red zone",
+                "place the plate",
+            ],
+        ),
+    ]
+}
+
+pub fn test_plans() -> Vec<(&'static str, Vec<&'static str>)> {
+    vec![
+        (
+            "test-0001",
+            vec![
+                "move to the red zone",
+                "pick the fork",
+                "move to the blue zone",
+                "place the fork",
+            ],
+        ),
+        (
+            "test-0002",
+            vec![
+                "move to the green zone",
+                "pick the bowl",
+                "move to the red zone",
+                "place the bowl",
+            ],
+        ),
+    ]
+}
+
+fn instruction(id: &str, plan: &[&str]) -> Value {
+    json!({
+        "id": id,
+        "scene": "kitchen_a",
+        "instruction": format!("instruction {id}"),
+        "plan": plan,
+        "template": "t01",
+        "place_targets": [],
+    })
+}
+
+fn jsonl(items: &[(&str, Vec<&str>)]) -> String {
+    items
+        .iter()
+        .map(|(id, plan)| instruction(id, plan).to_string() + "\n")
+        .collect()
+}
+
+/// A plan file line.
+pub fn line(id: &str, plan: &[&str]) -> String {
+    json!({ "id": id, "plan": plan }).to_string()
+}
+
+/// A temporary benchmark: assets (committed scenes and catalogue, fixture dataset) and a config.
+pub struct Fixture {
+    pub dir: tempfile::TempDir,
+}
+
+impl Fixture {
+    /// `config` is appended to the generated server.toml (e.g. `[quota]` settings).
+    pub fn new(config: &str) -> Fixture {
+        let dir = tempfile::tempdir().unwrap();
+        let repo_assets = Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets");
+        let assets = dir.path().join("assets");
+        std::fs::create_dir_all(assets.join("scenes")).unwrap();
+        std::fs::create_dir_all(assets.join("dataset")).unwrap();
+        std::fs::copy(repo_assets.join("objects.toml"), assets.join("objects.toml")).unwrap();
+        std::fs::copy(
+            repo_assets.join("scenes/kitchen_a.toml"),
+            assets.join("scenes/kitchen_a.toml"),
+        )
+        .unwrap();
+        let ds = assets.join("dataset");
+        std::fs::write(ds.join("dev.jsonl"), jsonl(&dev_plans())).unwrap();
+        std::fs::write(ds.join("test_ground_truth.jsonl"), jsonl(&test_plans())).unwrap();
+        let manifest = json!({"seed": 7, "generator_version": 1, "templates": 1, "dev": 3, "test": 2});
+        std::fs::write(ds.join("manifest.json"), manifest.to_string()).unwrap();
+        let db = dir.path().join("db/kitchen-r.db");
+        let toml = format!(
+            "http = \"127.0.0.1:0\"\ngrpc = \"127.0.0.1:0\"\ndb = \"sqlite://{}\"\nassets = \"{}\"\n{config}\n",
+            db.display(),
+            assets.display()
+        );
+        std::fs::write(dir.path().join("server.toml"), toml).unwrap();
+        Fixture { dir }
+    }
+
+    pub fn config_path(&self) -> PathBuf {
+        self.dir.path().join("server.toml")
+    }
+
+    /// Start `kitchen-r serve` on this fixture.
+    pub fn serve(&self) -> Server {
+        Server::start(&self.config_path(), self.dir.path())
+    }
+}
+
+/// A running server process, killed when dropped.
+pub struct Server {
+    child: Child,
+    pub http: String,
+    pub grpc: String,
+}
+
+impl Server {
+    fn start(config: &Path, cwd: &Path) -> Server {
+        let mut child = Command::new(bin())
+            .args(["serve", "--config"])
+            .arg(config)
+            .current_dir(cwd)
+            .env("KITCHEN_R_ADMIN_TOKEN", ADMIN)
+            .env("RUST_LOG", "warn")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("spawn kitchen-r serve");
+        let stdout = child.stdout.take().unwrap();
+        let (tx, rx) = mpsc::channel();
+        std::thread::spawn(move || {
+            for l in BufReader::new(stdout).lines().map_while(Result::ok) {
+                if l.starts_with("listening ") {
+                    let _ = tx.send(l);
+                }
+            }
+        });
+        let ready = rx
+            .recv_timeout(STARTUP)
+            .expect("server printed no readiness line");
+        let field = |k: &str| {
+            ready
+                .split_whitespace()
+                .find_map(|w| w.strip_prefix(k))
+                .unwrap()
+                .to_string()
+        };
+        Server {
+            child,
+            http: format!("http://{}", field("http=")),
+            grpc: format!("http://{}", field("grpc=")),
+        }
+    }
+
+    pub fn url(&self, path: &str) -> String {
+        format!("{}{path}", self.http)
+    }
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// A blocking HTTP client for the tests (bounded timeouts so a hung server fails the test).
+pub fn client() -> reqwest::Client {
+    reqwest::Client::builder()
+        .timeout(Duration::from_secs(30))
+        .build()
+        .unwrap()
+}
+
+/// Create a team and return its token.
+pub async fn team(server: &Server, name: &str) -> String {
+    let r = client()
+        .post(server.url("/api/v1/teams"))
+        .bearer_auth(ADMIN)
+        .json(&json!({ "name": name }))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 201);
+    let v: Value = r.json().await.unwrap();
+    v["token"].as_str().unwrap().to_string()
+}
+
+/// POST a plan file; returns (status, JSON body).
+pub async fn submit(
+    server: &Server,
+    token: Option<&str>,
+    split: &str,
+    body: impl Into<String>,
+) -> (u16, Value) {
+    let mut req = client()
+        .post(server.url(&format!("/api/v1/submissions/plans?split={split}")))
+        .body(body.into());
+    if let Some(t) = token {
+        req = req.bearer_auth(t);
+    }
+    let r = req.send().await.unwrap();
+    let status = r.status().as_u16();
+    (status, r.json().await.unwrap())
+}
+
+pub async fn get_json(server: &Server, path: &str, token: Option<&str>) -> (u16, Value) {
+    let mut req = client().get(server.url(path));
+    if let Some(t) = token {
+        req = req.bearer_auth(t);
+    }
+    let r = req.send().await.unwrap();
+    let status = r.status().as_u16();
+    (status, r.json().await.unwrap())
+}
