@@ -7,7 +7,7 @@
 //! than the next candidate's box. The hits are the same as the query pipeline's.
 
 use nalgebra::{Isometry3, Vector3};
-use rapier3d::math::{Pose, Vector};
+use rapier3d::math::{Pose, Vec3A, Vector};
 use rapier3d::prelude::*;
 
 use super::camera::Projection;
@@ -21,7 +21,9 @@ struct Prim<'a> {
     shape: &'a dyn Shape,
     kind: Kind,
     user_data: u128,
-    aabb: Aabb,
+    /// World bounding box, SIMD-friendly.
+    mins: Vec3A,
+    maxs: Vec3A,
     /// Euclidean distance from the eye to the bounding box.
     near: f32,
 }
@@ -29,6 +31,8 @@ struct Prim<'a> {
 /// Shapes with a closed-form intersection here; anything else uses parry's generic ray cast.
 #[derive(Clone, Copy)]
 enum Kind {
+    /// A box whose world bounding box is the box itself: the slab test is the exact hit.
+    AlignedBox,
     Cuboid(Vector),
     Capsule(Vector, Vector, f32),
     Other,
@@ -36,12 +40,25 @@ enum Kind {
 
 /// Entry and exit parameters of a ray through an axis-aligned box, if it crosses `[0, max]`.
 #[inline]
-fn slab(origin: Vector, inv_dir: Vector, mins: Vector, maxs: Vector, max: f32) -> Option<(f32, f32)> {
+fn slab(origin: Vec3A, inv_dir: Vec3A, mins: Vec3A, maxs: Vec3A, max: f32) -> Option<(f32, f32)> {
     let t1 = (mins - origin) * inv_dir;
     let t2 = (maxs - origin) * inv_dir;
     let near = t1.min(t2).max_element().max(0.0);
     let far = t1.max(t2).min_element().min(max);
     (near <= far).then_some((near, far))
+}
+
+/// Outward normal of the face an axis-aligned box is entered through.
+#[inline]
+fn aligned_normal(origin: Vec3A, inv_dir: Vec3A, mins: Vec3A, maxs: Vec3A, dir: Vector) -> Vector {
+    let tmin = ((mins - origin) * inv_dir).min((maxs - origin) * inv_dir);
+    if tmin.x >= tmin.y && tmin.x >= tmin.z {
+        Vector::X * -dir.x.signum()
+    } else if tmin.y >= tmin.z {
+        Vector::Y * -dir.y.signum()
+    } else {
+        Vector::Z * -dir.z.signum()
+    }
 }
 
 /// Ray against a box of half extents `h` centred at the origin: parameter and outward normal.
@@ -164,8 +181,14 @@ impl<'a> TileGrid<'a> {
             };
             let idx = prims.len() as u32;
             let shape = co.shape();
+            let r = co.position().rotation;
+            let aligned = r.x.abs() < 1e-6 && r.y.abs() < 1e-6 && r.z.abs() < 1e-6;
             let kind = if let Some(c) = shape.as_cuboid() {
-                Kind::Cuboid(c.half_extents)
+                if aligned {
+                    Kind::AlignedBox
+                } else {
+                    Kind::Cuboid(c.half_extents)
+                }
             } else if let Some(c) = shape.as_capsule() {
                 Kind::Capsule(c.segment.a, c.segment.b, c.radius)
             } else {
@@ -176,7 +199,8 @@ impl<'a> TileGrid<'a> {
                 shape,
                 kind,
                 user_data: co.user_data,
-                aabb,
+                mins: Vec3A::from(aabb.mins),
+                maxs: Vec3A::from(aabb.maxs),
                 near: box_distance(eye, &aabb),
             });
             let clamp_x = |u: f64| (u.max(0.0) as usize / TILE).min(tiles_x - 1);
@@ -204,7 +228,8 @@ impl<'a> TileGrid<'a> {
     pub fn cast(&self, u: usize, v: usize, origin: Vector, dir: Vector, max: f32) -> Option<Hit> {
         let list = &self.lists[(v / TILE) * self.tiles_x + u / TILE];
         let len = dir.length();
-        let inv_dir = dir.recip();
+        let inv_dir = Vec3A::from(dir.recip());
+        let origin_a = Vec3A::from(origin);
         let mut best: Option<Hit> = None;
         let mut best_t = max;
         for &i in list {
@@ -212,7 +237,19 @@ impl<'a> TileGrid<'a> {
             if p.near > best_t * len {
                 break;
             }
-            if slab(origin, inv_dir, p.aabb.mins, p.aabb.maxs, best_t).is_none() {
+            let Some((entry, _)) = slab(origin_a, inv_dir, p.mins, p.maxs, best_t) else {
+                continue;
+            };
+            if let Kind::AlignedBox = p.kind {
+                if entry < best_t {
+                    best_t = entry;
+                    let n = aligned_normal(origin_a, inv_dir, p.mins, p.maxs, dir);
+                    best = Some(Hit {
+                        t: entry,
+                        normal: n,
+                        user_data: p.user_data,
+                    });
+                }
                 continue;
             }
             let (o, d) = (
@@ -220,6 +257,7 @@ impl<'a> TileGrid<'a> {
                 p.pose.inverse_transform_vector(dir),
             );
             let hit = match p.kind {
+                Kind::AlignedBox => None,
                 Kind::Cuboid(h) => ray_cuboid(o, d, h, best_t),
                 Kind::Capsule(a, b, r) => ray_capsule(o, d, a, b, r, best_t),
                 Kind::Other => p
