@@ -122,13 +122,16 @@ async fn scores_persist_across_restart_and_rescore_adds_a_run() {
     }
 }
 
+/// (token, split, body, status, error code, line).
+type Case<'a> = (Option<&'a str>, &'a str, String, u16, &'a str, Option<u64>);
+
 #[tokio::test]
 async fn bad_inputs_are_refused_with_line_numbers_and_store_nothing() {
     let fx = Fixture::new("max_body_bytes = 2048\n[quota]\ntest_per_day = 1\n");
     let server = fx.serve();
     let token = team(&server, "beta").await;
     let ok = line("dev-0001", &["move to the blue zone"]);
-    let cases: Vec<(Option<&str>, &str, String, u16, &str, Option<u64>)> = vec![
+    let cases: Vec<Case> = vec![
         (
             Some(&token),
             "dev",
