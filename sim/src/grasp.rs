@@ -1,35 +1,35 @@
 //! Grasping: an object whose grasp point (or centre) lies between the closing fingers is
-//! attached rigidly to the TCP; opening the gripper releases it to physics.
+//! carried rigidly at its grasp offset from the TCP; opening the gripper releases it to physics.
 
-use nalgebra::{Isometry3, Point3};
+use nalgebra::{Isometry3, Point3, Vector3};
 use rapier3d::prelude::*;
 
-use crate::convert::{iso_to_pose, pose_to_iso};
+use crate::convert::{pose_to_iso, vec_to_glam};
 use crate::material::Owner;
 use crate::sim::{Held, Sim};
 
-/// Make `body` a carried (kinematic, robot-ignoring, furniture-reporting) object, or release it
-/// back to physics.
+/// Speed limits of the grasp servo (m/s, rad/s): a snagged object is not flung.
+const MAX_CARRY_SPEED: f64 = 2.0;
+const MAX_CARRY_SPIN: f64 = 20.0;
+/// A held object this far from its place in the hand has slipped out (m).
+const SLIP_DISTANCE: f64 = 0.05;
+
+/// Make `body` a carried object (weightless, ignoring the robot's links) or release it.
+///
+/// A carried object stays a dynamic body: every substep its velocity is set to bring it to its
+/// grasp offset from the TCP (a stiff fixed-joint servo, like the links themselves), so furniture
+/// still stops it and releasing it needs nothing but restoring gravity.
 fn set_carried(world: &mut PhysicsWorld, body: RigidBodyHandle, carried: bool) {
-    let (kind, groups, types) = if carried {
-        (
-            RigidBodyType::KinematicPositionBased,
-            Owner::KeyObject.held_groups(),
-            ActiveCollisionTypes::default() | ActiveCollisionTypes::KINEMATIC_FIXED,
-        )
+    let groups = if carried {
+        Owner::KeyObject.held_groups()
     } else {
-        (
-            RigidBodyType::Dynamic,
-            Owner::KeyObject.groups(false),
-            ActiveCollisionTypes::default(),
-        )
+        Owner::KeyObject.groups(false)
     };
-    world.bodies[body].set_body_type(kind, true);
+    world.bodies[body].set_gravity_scale(if carried { 0.0 } else { 1.0 }, true);
     let handles: Vec<ColliderHandle> = world.bodies[body].colliders().to_vec();
     for c in handles {
         if let Some(co) = world.colliders.get_mut(c) {
             co.set_collision_groups(groups);
-            co.set_active_collision_types(types);
         }
     }
 }
@@ -64,9 +64,7 @@ impl Sim {
             let body = self.objects[i].body;
             let obj_pose = pose_to_iso(self.world.bodies[body].position());
             let offset = tcp.inverse() * obj_pose;
-            // Rigid attachment: the object becomes a kinematic body carried at its grasp offset from
-            // the TCP (a fixed joint to the ideal position-controlled wrist). rapier's islands reject
-            // joints anchored on kinematic links, and a joint to the base would lag the wrist.
+            // Rigid attachment at the grasp offset from the TCP (see `set_carried`).
             set_carried(&mut self.world, body, true);
             self.dynamic.held = Some(Held {
                 object: i,
@@ -76,11 +74,27 @@ impl Sim {
         }
     }
 
-    /// Move the held object with the TCP to where the links go this substep.
-    pub(crate) fn carry(&mut self, next_base: &Isometry3<f64>) {
+    /// Servo the held object to its place in the hand at the end of this substep; drop it when
+    /// something holds it back too far.
+    pub(crate) fn carry(&mut self, next_base: &Isometry3<f64>, dt: f64) {
         let Some(h) = self.dynamic.held else { return };
-        let pose = next_base * self.robot.arm.forward(&self.dynamic.robot.arm.q).tcp * h.offset;
+        let target = next_base * self.robot.arm.forward(&self.dynamic.robot.arm.q).tcp * h.offset;
         let body = self.objects[h.object].body;
-        self.world.bodies[body].set_next_kinematic_position(iso_to_pose(&pose));
+        let now = pose_to_iso(self.world.bodies[body].position());
+        let dp = target.translation.vector - now.translation.vector;
+        if dp.norm() > SLIP_DISTANCE {
+            set_carried(&mut self.world, body, false);
+            self.dynamic.held = None;
+            return;
+        }
+        let cap = |v: Vector3<f64>, max: f64| if v.norm() > max { v * (max / v.norm()) } else { v };
+        let v = cap(dp / dt, MAX_CARRY_SPEED);
+        let w = cap(
+            (target.rotation * now.rotation.inverse()).scaled_axis() / dt,
+            MAX_CARRY_SPIN,
+        );
+        let rb = &mut self.world.bodies[body];
+        rb.set_linvel(vec_to_glam(&v), true);
+        rb.set_angvel(vec_to_glam(&w), true);
     }
 }

@@ -122,7 +122,16 @@ impl Sim {
 
     /// Every touching pair between a robot collider and anything else.
     pub fn contacts(&self) -> Vec<Contact> {
-        let mut out = Vec::new();
+        let mut out: Vec<Contact> = self
+            .dynamic
+            .static_touches
+            .iter()
+            .map(|(part, depth)| Contact {
+                robot_part: PART_NAMES.get(*part as usize).copied().unwrap_or("robot").into(),
+                other: "scene".into(),
+                depth: *depth,
+            })
+            .collect();
         for pair in self.world.contact_pairs() {
             let (Some(a), Some(b)) = (
                 self.world.colliders.get(pair.collider1),

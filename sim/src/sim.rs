@@ -77,6 +77,8 @@ pub(crate) struct Dynamic {
     pub substeps: u64,
     pub steps: u64,
     pub task: Option<Task>,
+    /// Robot parts touching fixed geometry after the last substep: `(part, depth)`.
+    pub static_touches: Vec<(u32, f64)>,
 }
 
 /// The kitchen twin.
@@ -187,11 +189,9 @@ impl Sim {
                 dt,
             );
             self.update_grasp(action.gripper());
-            self.carry(&next_base);
+            self.carry(&next_base, dt);
             self.world.step();
-            let carried = self.dynamic.held.map(|h| self.objects[h.object].body);
-            self.robot
-                .enforce_obstacles(&self.world, &mut self.dynamic.robot, carried);
+            self.dynamic.static_touches = self.robot.enforce_obstacles(&self.world, &mut self.dynamic.robot);
             blocked |= self.dynamic.robot.arm_blocked;
             self.dynamic.substeps += 1;
         }
@@ -242,14 +242,13 @@ fn build(assets: &Assets, config: &SimConfig, ep: &EpisodeConfig) -> Result<Buil
     }
     let (robot, state) = Robot::spawn(&mut world, &mut materials, &assets.robot, ep.robot_start);
     crate::preflight::check(&world, &objects)?;
-    // Fill the broad phase so sensors can see the world before the first step.
-    world.detect_collisions(&(), &());
     let dynamic = Dynamic {
         robot: state,
         held: None,
         substeps: 0,
         steps: 0,
         task: None,
+        static_touches: Vec::new(),
     };
     Ok((world, materials, robot, objects, dynamic))
 }

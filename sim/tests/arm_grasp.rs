@@ -84,3 +84,29 @@ fn grasp_holds_through_a_base_rotation_and_release_drops_onto_the_counter() {
     assert!((cup.z - 0.95).abs() < 0.01, "cup centre at z {}", cup.z);
     assert!(cup.y > 3.4 && cup.y < 4.0, "cup is not on the counter: {cup:?}");
 }
+
+#[test]
+fn fixed_furniture_stops_the_arm() {
+    let a = assets();
+    let ep = episode(&a, [1.5, 2.95, std::f64::consts::FRAC_PI_2], Vec::new());
+    let mut s = sim(&ep, blind());
+    let home = s.ee_pose().translation.vector;
+    assert!(home.z > 0.9, "home TCP at {home:?} is below the counter top");
+    for _ in 0..40 {
+        s.step(&hold([0.65, 0.0, 1.05], 1.0), false).unwrap();
+    }
+    // Then a target 10 cm inside the counter top (surface at 0.9 m).
+    let (mut blocked, mut touched, mut lowest) = (false, false, f64::INFINITY);
+    for _ in 0..40 {
+        let (_, info) = s.step(&hold([0.65, 0.0, 0.80], 1.0), false).unwrap();
+        blocked |= info.arm_blocked;
+        touched |= info.contacts.iter().any(|c| c.other == "scene");
+        lowest = lowest.min(info.ee_world[2]);
+    }
+    assert!(
+        blocked && touched,
+        "blocked {blocked}, contact reported {touched}"
+    );
+    // The fingertips reach 2.5 cm below the TCP; they may only graze the top.
+    assert!(lowest > 0.9 + 0.025 - 0.01, "TCP went down to {lowest}");
+}

@@ -3,10 +3,12 @@
 //!
 //! The base is a dynamic body with roll, pitch and height locked whose planar velocity is set
 //! every substep to the (acceleration- and speed-limited) command, so the contact solver stops it
-//! at walls and furniture and lets it push loose objects. The arm links are kinematic bodies that
-//! follow the joint position targets exactly (an ideal position-controlled articulation); they push
-//! loose objects with unbounded force, and a link that penetrates fixed furniture or a wall reverts
-//! the joint targets to the last collision-free configuration, so the arm is stopped there.
+//! at walls and furniture and lets it push loose objects. The arm links are weightless dynamic
+//! bodies whose velocities are set every substep to reach their poses from the joint position
+//! targets (an ideal position-controlled articulation). A higher dominance group lets them push
+//! loose objects like a stiff arm while fixed geometry still stops them; a link that digs into
+//! fixed furniture or a wall also reverts the joint targets to the last collision-free
+//! configuration, so the controller does not wind up against it.
 
 pub mod desc;
 pub mod kinematics;
@@ -37,8 +39,12 @@ pub const PART_NAMES: [&str; 10] = [
 const PALM: u32 = 7;
 const FINGERS: [u32; 2] = [8, 9];
 
+/// Arm links outrank objects in contacts (they move them like an ideal position-controlled arm)
+/// and are outranked by fixed geometry (which stops them).
+const LINK_DOMINANCE: i8 = 10;
+
 /// A link penetrating fixed geometry deeper than this stops the arm (m).
-const STOP_PENETRATION: f32 = 0.003;
+const STOP_PENETRATION: f64 = 0.003;
 
 /// Handles of the robot's bodies in the world.
 #[derive(Debug, Clone)]
@@ -46,14 +52,15 @@ pub struct RobotBodies {
     pub base: RigidBodyHandle,
     pub links: [RigidBodyHandle; DOF],
     pub fingers: [ColliderHandle; 2],
-    pub arm_colliders: Vec<ColliderHandle>,
+    /// Every arm collider with the index of the link it belongs to.
+    pub arm_colliders: Vec<(ColliderHandle, usize)>,
 }
 
 /// Controller state that is not in the physics world (part of snapshots and state hashes).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RobotState {
     pub arm: ArmState,
-    /// Last collision-free joint targets.
+    /// Last joint targets known to be collision-free.
     pub safe_q: JointVec,
     /// Commanded, rate-limited base velocities.
     pub v: f64,
@@ -77,7 +84,6 @@ fn collider(shape: SharedShape, part: u32, material: u32, finger: bool) -> Colli
     ColliderBuilder::new(shape)
         .friction(if part == 0 { 0.0 } else { 0.8 })
         .collision_groups(Owner::Robot.groups(finger))
-        .active_collision_types(ActiveCollisionTypes::default() | ActiveCollisionTypes::KINEMATIC_FIXED)
         .user_data(
             Tag {
                 material,
@@ -149,8 +155,10 @@ impl Robot {
         let links = std::array::from_fn(|i| {
             let pose = base_iso * fk.joints[i];
             let h = world.insert_body(
-                RigidBodyBuilder::kinematic_position_based()
+                RigidBodyBuilder::dynamic()
                     .pose(iso_to_pose(&pose))
+                    .gravity_scale(0.0)
+                    .dominance_group(LINK_DOMINANCE)
                     .can_sleep(false),
             );
             let end = if i + 1 < DOF {
@@ -160,18 +168,21 @@ impl Robot {
             };
             let r = desc.arm.joints[i].link_radius as f32;
             let shape = SharedShape::capsule(vec_to_glam(&Vector3::zeros()), vec_to_glam(&end), r);
-            arm_colliders.push(world.insert_collider(collider(shape, i as u32 + 1, arm_mat, false), Some(h)));
+            arm_colliders.push((
+                world.insert_collider(collider(shape, i as u32 + 1, arm_mat, false), Some(h)),
+                i,
+            ));
             if i == DOF - 1 {
                 let g = &desc.gripper;
                 let ps = g.palm_size.map(|v| v as f32 / 2.0);
                 let palm = collider(SharedShape::cuboid(ps[0], ps[1], ps[2]), PALM, grip_mat, false)
                     .translation(vec_to_glam(&Vector3::new(g.tcp_offset - g.palm_back, 0.0, 0.0)));
-                arm_colliders.push(world.insert_collider(palm, Some(h)));
+                arm_colliders.push((world.insert_collider(palm, Some(h)), i));
                 for (k, part) in FINGERS.iter().enumerate() {
                     let fs = [g.finger_length, g.finger_thickness, g.finger_height].map(|v| v as f32 / 2.0);
                     let co = collider(SharedShape::cuboid(fs[0], fs[1], fs[2]), *part, grip_mat, true);
                     fingers[k] = world.insert_collider(co, Some(h));
-                    arm_colliders.push(fingers[k]);
+                    arm_colliders.push((fingers[k], i));
                 }
             }
             h
@@ -249,9 +260,6 @@ impl Robot {
         body.set_linvel(vec_to_glam(&(fwd * state.v)), true);
         body.set_angvel(vec_to_glam(&Vector3::new(0.0, 0.0, state.omega)), true);
 
-        if !state.arm_blocked {
-            state.safe_q = state.arm.q;
-        }
         let qdd = rmp::resolve(&self.arm, params, &state.arm, &self.home, &cmd.ee_target);
         state.arm = rmp::integrate(&self.arm, &state.arm, &qdd, dt);
         let g = &self.desc.gripper;
@@ -267,56 +275,65 @@ impl Robot {
             0.0,
             yaw + state.omega * dt,
         );
-        self.place_links(world, &next, &state.arm.q);
+        self.place_links(world, &next, &state.arm.q, dt);
         self.place_fingers(world, state.opening);
         next
     }
 
-    fn place_links(&self, world: &mut PhysicsWorld, base: &Isometry3<f64>, q: &JointVec) {
+    /// Servo every link to its pose from the joint targets at the end of the substep.
+    fn place_links(&self, world: &mut PhysicsWorld, base: &Isometry3<f64>, q: &JointVec, dt: f64) {
         let fk = self.arm.forward(q);
         for (i, h) in self.bodies.links.iter().enumerate() {
-            world.bodies[*h].set_next_kinematic_position(iso_to_pose(&(base * fk.joints[i])));
+            let target = base * fk.joints[i];
+            let body = &mut world.bodies[*h];
+            let now = pose_to_iso(body.position());
+            let v = (target.translation.vector - now.translation.vector) / dt;
+            let w = (target.rotation * now.rotation.inverse()).scaled_axis() / dt;
+            body.set_linvel(vec_to_glam(&v), true);
+            body.set_angvel(vec_to_glam(&w), true);
         }
     }
 
-    /// After a substep: if a link (or the carried object) dug into fixed geometry, fall back to the
-    /// last safe joint targets.
-    pub fn enforce_obstacles(
-        &self,
-        world: &PhysicsWorld,
-        state: &mut RobotState,
-        carried: Option<RigidBodyHandle>,
-    ) {
-        let carried_colliders = carried
-            .and_then(|b| world.bodies.get(b))
-            .map_or(&[][..], |b| b.colliders());
-        let blocked = self
-            .bodies
-            .arm_colliders
-            .iter()
-            .chain(carried_colliders)
-            .any(|c| {
-                world.narrow_phase.contact_pairs_with(*c).any(|pair| {
-                    let other = if pair.collider1 == *c {
-                        pair.collider2
-                    } else {
-                        pair.collider1
-                    };
-                    let is_static = world
-                        .colliders
-                        .get(other)
-                        .is_some_and(|o| Tag::unpack(o.user_data).owner == Owner::Static);
-                    is_static
-                        && pair
-                            .find_deepest_contact()
-                            .is_some_and(|(_, ct)| ct.dist < -STOP_PENETRATION)
-                })
-            });
+    /// After a substep: every robot part touching fixed geometry as `(part, depth)`; a part that
+    /// dug in deeper than a few millimetres sends the arm back to its last safe joint targets.
+    ///
+    /// A shape query rather than the narrow phase's pairs, so the depth is that of the targets just
+    /// placed and a grazing touch is still reported.
+    pub fn enforce_obstacles(&self, world: &PhysicsWorld, state: &mut RobotState) -> Vec<(u32, f64)> {
+        let statics = |_: ColliderHandle, c: &Collider| Tag::unpack(c.user_data).owner == Owner::Static;
+        let filter = QueryFilter::only_fixed().predicate(&statics);
+        let dispatcher = world.narrow_phase.query_dispatcher();
+        let mut touches = Vec::new();
+        // Check where the joint targets put each collider (the dynamic links themselves are held
+        // at the surface by the solver, the targets are what must not wind into it).
+        let base = self.base_iso(world);
+        let fk = self.arm.forward(&state.arm.q);
+        for (h, link) in &self.bodies.arm_colliders {
+            let co = &world.colliders[*h];
+            let local = co
+                .position_wrt_parent()
+                .map_or(Isometry3::identity(), pose_to_iso);
+            let pose = iso_to_pose(&(base * fk.joints[*link] * local));
+            let part = Tag::unpack(co.user_data).index;
+            for (_, other) in world.intersect_shape(pose, co.shape(), filter) {
+                let pos12 = pose.inv_mul(other.position());
+                let depth = dispatcher
+                    .contact(&pos12, co.shape(), other.shape(), 0.0)
+                    .ok()
+                    .flatten()
+                    .map_or(0.0, |c| -c.dist);
+                touches.push((part, f64::from(depth.max(0.0))));
+            }
+        }
+        let blocked = touches.iter().any(|(_, d)| *d > STOP_PENETRATION);
         state.arm_blocked = blocked;
         if blocked {
             state.arm.q = state.safe_q;
             state.arm.qd = JointVec::zeros();
+        } else {
+            state.safe_q = state.arm.q;
         }
+        touches
     }
 
     /// TCP pose in the world.

@@ -1,12 +1,14 @@
-//! LiDAR: a planar or multi-channel scanner by ray casting, ignoring the robot's own parts.
+//! LiDAR: a planar or multi-channel scanner by ray casting (the cameras' exact per-shape casts,
+//! on one near-to-far list), ignoring the robot's own parts.
 
 use nalgebra::{Isometry3, Vector3};
 use rapier3d::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use super::tiles::TileGrid;
 use crate::config::LidarConfig;
 use crate::convert::vec_to_glam;
-use crate::material::Owner;
+use crate::material::{Owner, Tag};
 
 /// Points in the sensor frame (x forward, y left, z up), metres.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -16,12 +18,11 @@ pub struct PointCloud {
 
 /// Scan from `sensor` (world pose of the sensor frame).
 pub fn scan(world: &PhysicsWorld, cfg: &LidarConfig, sensor: &Isometry3<f64>) -> PointCloud {
-    let not_robot = |_h: ColliderHandle, c: &Collider| {
-        let owner = crate::material::Tag::unpack(c.user_data).owner;
-        owner != Owner::Robot && owner != Owner::Decoration
-    };
-    let qp = world.query_pipeline_with_filter(QueryFilter::new().predicate(&not_robot));
     let origin = vec_to_glam(&sensor.translation.vector);
+    let grid = TileGrid::unbinned(world, origin, |c| {
+        let owner = Tag::unpack(c.user_data).owner;
+        owner != Owner::Robot && owner != Owner::Decoration
+    });
     let mut points = Vec::with_capacity(cfg.beams as usize * cfg.channels_deg.len());
     for elev in &cfg.channels_deg {
         let (se, ce) = elev.to_radians().sin_cos();
@@ -29,10 +30,10 @@ pub fn scan(world: &PhysicsWorld, cfg: &LidarConfig, sensor: &Isometry3<f64>) ->
             let az = std::f64::consts::TAU * f64::from(b) / f64::from(cfg.beams);
             let local = Vector3::new(ce * az.cos(), ce * az.sin(), se);
             let dir = vec_to_glam(&(sensor.rotation * local));
-            if let Some((_, t)) = qp.cast_ray(&Ray::new(origin, dir), cfg.max_range as f32, true)
-                && f64::from(t) >= cfg.min_range
+            if let Some(hit) = grid.cast(0, 0, origin, dir, cfg.max_range as f32)
+                && f64::from(hit.t) >= cfg.min_range
             {
-                let p = local * f64::from(t);
+                let p = local * f64::from(hit.t);
                 points.push([p.x as f32, p.y as f32, p.z as f32]);
             }
         }

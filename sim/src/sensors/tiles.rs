@@ -137,6 +137,35 @@ fn ray_capsule(ro: Vector, rd: Vector, a: Vector, b: Vector, r: f32, max: f32) -
     best
 }
 
+impl<'a> Prim<'a> {
+    fn of(co: &'a Collider, eye: Vector) -> Prim<'a> {
+        let aabb = co.compute_aabb();
+        let shape = co.shape();
+        let r = co.position().rotation;
+        let aligned = r.x.abs() < 1e-6 && r.y.abs() < 1e-6 && r.z.abs() < 1e-6;
+        let kind = if let Some(c) = shape.as_cuboid() {
+            if aligned {
+                Kind::AlignedBox
+            } else {
+                Kind::Cuboid(c.half_extents)
+            }
+        } else if let Some(c) = shape.as_capsule() {
+            Kind::Capsule(c.segment.a, c.segment.b, c.radius)
+        } else {
+            Kind::Other
+        };
+        Prim {
+            pose: *co.position(),
+            shape,
+            kind,
+            user_data: co.user_data,
+            mins: Vec3A::from(aabb.mins),
+            maxs: Vec3A::from(aabb.maxs),
+            near: box_distance(eye, &aabb),
+        }
+    }
+}
+
 /// A hit: ray parameter (units of the ray direction), world normal, collider user data.
 pub struct Hit {
     pub t: f32,
@@ -180,29 +209,7 @@ impl<'a> TileGrid<'a> {
                 continue;
             };
             let idx = prims.len() as u32;
-            let shape = co.shape();
-            let r = co.position().rotation;
-            let aligned = r.x.abs() < 1e-6 && r.y.abs() < 1e-6 && r.z.abs() < 1e-6;
-            let kind = if let Some(c) = shape.as_cuboid() {
-                if aligned {
-                    Kind::AlignedBox
-                } else {
-                    Kind::Cuboid(c.half_extents)
-                }
-            } else if let Some(c) = shape.as_capsule() {
-                Kind::Capsule(c.segment.a, c.segment.b, c.radius)
-            } else {
-                Kind::Other
-            };
-            prims.push(Prim {
-                pose: *co.position(),
-                shape,
-                kind,
-                user_data: co.user_data,
-                mins: Vec3A::from(aabb.mins),
-                maxs: Vec3A::from(aabb.maxs),
-                near: box_distance(eye, &aabb),
-            });
+            prims.push(Prim::of(co, eye));
             let clamp_x = |u: f64| (u.max(0.0) as usize / TILE).min(tiles_x - 1);
             let clamp_y = |v: f64| (v.max(0.0) as usize / TILE).min(tiles_y - 1);
             if u1 < 0.0 || v1 < 0.0 || u0 > w as f64 || v0 > h as f64 {
@@ -221,6 +228,24 @@ impl<'a> TileGrid<'a> {
             prims,
             lists,
             tiles_x,
+        }
+    }
+
+    /// One list of every collider `keep` accepts, nearest to `eye` first: for scans in all
+    /// directions (LiDAR), cast with pixel `(0, 0)`.
+    pub fn unbinned(world: &'a PhysicsWorld, eye: Vector, keep: impl Fn(&Collider) -> bool) -> Self {
+        let mut prims = Vec::new();
+        for (_, co) in world.colliders.iter() {
+            if co.is_enabled() && keep(co) {
+                prims.push(Prim::of(co, eye));
+            }
+        }
+        let mut list: Vec<u32> = (0..prims.len() as u32).collect();
+        list.sort_by(|a, b| prims[*a as usize].near.total_cmp(&prims[*b as usize].near));
+        TileGrid {
+            prims,
+            lists: vec![list],
+            tiles_x: 1,
         }
     }
 
