@@ -35,6 +35,8 @@ enum Kind {
     AlignedBox,
     Cuboid(Vector),
     Capsule(Vector, Vector, f32),
+    /// Half height along local y, radius (parry's cylinder axis).
+    Cylinder(f32, f32),
     Other,
 }
 
@@ -85,6 +87,45 @@ fn ray_cuboid(o: Vector, d: Vector, h: Vector, max: f32) -> Option<(f32, Vector)
         Vector::Z * -d.z.signum()
     };
     Some((near, axis))
+}
+
+/// Ray against a solid cylinder about local y (half height `hh`, radius `r`): side, then caps.
+#[inline]
+fn ray_cylinder(o: Vector, d: Vector, hh: f32, r: f32, max: f32) -> Option<(f32, Vector)> {
+    let (a, b, c) = (
+        d.x * d.x + d.z * d.z,
+        o.x * d.x + o.z * d.z,
+        o.x * o.x + o.z * o.z - r * r,
+    );
+    if c <= 0.0 && o.y.abs() <= hh {
+        return Some((0.0, -d.normalize_or_zero()));
+    }
+    let mut best: Option<(f32, Vector)> = None;
+    let mut offer = |t: f32, n: Vector| {
+        if t >= 0.0 && t <= max && best.is_none_or(|b| t < b.0) {
+            best = Some((t, n));
+        }
+    };
+    if a > 1e-12 {
+        let disc = b * b - a * c;
+        if disc >= 0.0 {
+            let t = (-b - disc.sqrt()) / a;
+            let p = o + d * t;
+            if p.y.abs() <= hh {
+                offer(t, Vector::new(p.x, 0.0, p.z).normalize_or_zero());
+            }
+        }
+    }
+    if d.y.abs() > 1e-12 {
+        for s in [-1.0f32, 1.0] {
+            let t = (s * hh - o.y) / d.y;
+            let p = o + d * t;
+            if p.x * p.x + p.z * p.z <= r * r {
+                offer(t, Vector::Y * s);
+            }
+        }
+    }
+    best
 }
 
 /// Ray against the capsule of segment `a`–`b` and radius `r` (closed form, after I. Quilez).
@@ -151,6 +192,8 @@ impl<'a> Prim<'a> {
             }
         } else if let Some(c) = shape.as_capsule() {
             Kind::Capsule(c.segment.a, c.segment.b, c.radius)
+        } else if let Some(c) = shape.as_cylinder() {
+            Kind::Cylinder(c.half_height, c.radius)
         } else {
             Kind::Other
         };
@@ -285,6 +328,7 @@ impl<'a> TileGrid<'a> {
                 Kind::AlignedBox => None,
                 Kind::Cuboid(h) => ray_cuboid(o, d, h, best_t),
                 Kind::Capsule(a, b, r) => ray_capsule(o, d, a, b, r, best_t),
+                Kind::Cylinder(hh, r) => ray_cylinder(o, d, hh, r, best_t),
                 Kind::Other => p
                     .shape
                     .cast_local_ray_and_get_normal(&Ray::new(o, d), best_t, true)
