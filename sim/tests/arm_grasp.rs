@@ -110,3 +110,49 @@ fn fixed_furniture_stops_the_arm() {
     // The fingertips reach 2.5 cm below the TCP; they may only graze the top.
     assert!(lowest > 0.9 + 0.025 - 0.01, "TCP went down to {lowest}");
 }
+
+#[test]
+fn the_arm_pushes_a_loose_object() {
+    let a = assets();
+    // A cup on the counter 0.6 m ahead, 0.15 m to the left; the palm sweeps through it sideways
+    // (the fingers pass key objects by design: grasps attach them instead).
+    let ep = episode(
+        &a,
+        [1.5, 2.95, std::f64::consts::FRAC_PI_2],
+        vec![cup_at(1.35, 3.55, 0.9)],
+    );
+    let mut s = sim(&ep, blind());
+    let before = s.object_poses()[0].1.translation.vector;
+    for _ in 0..40 {
+        s.step(&hold([0.6, -0.05, 1.1], 1.0), false).unwrap();
+    }
+    for _ in 0..20 {
+        s.step(&hold([0.6, -0.05, 0.935], 1.0), false).unwrap();
+    }
+    let mut touched = false;
+    for _ in 0..40 {
+        let (_, info) = s.step(&hold([0.6, 0.3, 0.935], 1.0), false).unwrap();
+        touched |= info.contacts.iter().any(|c| c.other == "red cup");
+    }
+    let after = s.object_poses()[0].1.translation.vector;
+    assert!(touched, "no arm contact with the cup was reported");
+    assert!(
+        (after - before).norm() > 0.02,
+        "the cup did not move: {before:?} -> {after:?}"
+    );
+}
+
+#[test]
+fn a_key_object_on_the_floor_trips_its_monitor() {
+    let a = assets();
+    let mut cup = cup_at(2.0, 1.0, 0.0);
+    cup.name = "red cup".into();
+    let ep = episode(&a, [1.5, 2.7, 0.0], vec![cup]);
+    let mut s = sim(&ep, blind());
+    let home = s.ee_pose().translation.vector;
+    let (_, info) = s.step(&hold([home.x, home.y, home.z], 1.0), false).unwrap();
+    assert!(info.monitors.iter().any(|m| matches!(
+        m,
+        kitchen_r_sim::task::MonitorTrip::ObjectOnFloor { object } if object == "red cup"
+    )));
+}
