@@ -1,0 +1,64 @@
+//! `kitchen-r check-policy ENDPOINT`: the conformance probe a participant runs against their
+//! own policy server before registering it; one PASS/FAIL/SKIP line per check and a non-zero
+//! exit status when any check fails.
+//!
+//! It runs on the participant's side, so every address range is allowed here; the server
+//! applies its `[policy.allowed_networks]` rules when the endpoint is registered.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::Args;
+use kitchen_r_sim::SensorsConfig;
+use kitchen_r_worker::remote::check::{self, Verdict};
+use kitchen_r_worker::remote::{AllowedNetworks, Credentials, RemoteConfig, SimCamera};
+
+#[derive(Args, Debug)]
+pub struct CheckPolicyArgs {
+    /// The policy server, `http://HOST:PORT` or `https://HOST:PORT`.
+    pub endpoint: String,
+    /// Bearer token the policy server expects (sent as `authorization: Bearer <T>`).
+    #[arg(long, env = "KITCHEN_R_POLICY_TOKEN", value_name = "T")]
+    pub token: Option<String>,
+    /// PEM file of the CA that signed the server's certificate (https endpoints, private CA).
+    #[arg(long, value_name = "FILE")]
+    pub ca: Option<PathBuf>,
+    /// Per-call deadline in seconds, as the workers apply it.
+    #[arg(long, value_name = "S", default_value_t = 10.0)]
+    pub deadline: f64,
+    /// Seconds the server may take to start answering.
+    #[arg(long, value_name = "S", default_value_t = 30.0)]
+    pub startup_deadline: f64,
+}
+
+pub fn check_policy(args: CheckPolicyArgs) -> anyhow::Result<()> {
+    let sensors = SensorsConfig::load_default().context("loading configs/sensors.toml")?;
+    let ca_pem = match &args.ca {
+        Some(p) => Some(std::fs::read(p).with_context(|| format!("reading {}", p.display()))?),
+        None => None,
+    };
+    let creds = Credentials {
+        token: args.token,
+        ca_pem,
+    };
+    let cfg = RemoteConfig {
+        call_deadline_s: args.deadline,
+        startup_deadline_s: args.startup_deadline,
+        allowed_networks: AllowedNetworks::ALL,
+        ..RemoteConfig::default()
+    };
+    let report = check::check_policy(&args.endpoint, &creds, &cfg, &SimCamera::from_sensors(&sensors));
+    for c in &report.checks {
+        println!("{c}");
+    }
+    let failed = report
+        .checks
+        .iter()
+        .filter(|c| c.verdict == Verdict::Fail)
+        .count();
+    if failed > 0 {
+        anyhow::bail!("{failed} of {} checks failed", report.checks.len());
+    }
+    println!("all checks passed");
+    Ok(())
+}

@@ -1,0 +1,64 @@
+//! `kitchen-r policy oracle --listen ADDR`: the organisers' reference oracle served over the
+//! participant contract (`kitchen_r.policy.v1.Policy` + `grpc.health.v1`), so a reference run
+//! goes through exactly the transport a participant's policy does.
+//!
+//! The oracle drives from privileged world state, which only organiser-created reference runs
+//! send: an Act without `Observation.privileged` is answered FAILED_PRECONDITION.
+
+use std::io::Write;
+use std::sync::Arc;
+
+use anyhow::Context;
+use clap::{Args, Subcommand};
+use kitchen_r_sim::Assets;
+use kitchen_r_worker::oracle::OraclePolicy;
+use kitchen_r_worker::policy::Policy;
+use kitchen_r_worker::remote::server::{PolicyFactory, ServeOptions, serve_policy};
+
+#[derive(Args, Debug)]
+pub struct PolicyArgs {
+    #[command(subcommand)]
+    pub command: PolicyCommand,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum PolicyCommand {
+    /// Serve the privileged oracle expert over gRPC (reference runs only).
+    Oracle(OracleArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct OracleArgs {
+    /// Listen address; port 0 picks a free port (printed in the `listening grpc=...` line).
+    #[arg(long, value_name = "ADDR", default_value = "127.0.0.1:50061")]
+    pub listen: String,
+}
+
+pub fn policy(args: PolicyArgs) -> anyhow::Result<()> {
+    match args.command {
+        PolicyCommand::Oracle(a) => oracle(a),
+    }
+}
+
+fn oracle(args: OracleArgs) -> anyhow::Result<()> {
+    let assets = Arc::new(Assets::load_default().context("loading the benchmark assets")?);
+    let factory: PolicyFactory = Arc::new(move || Box::new(OraclePolicy::new(&assets)) as Box<dyn Policy>);
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .context("starting the runtime")?;
+    rt.block_on(async move {
+        let listener = tokio::net::TcpListener::bind(&args.listen)
+            .await
+            .with_context(|| format!("binding {}", args.listen))?;
+        // Tests and scripts wait for this exact line.
+        println!("listening grpc={}", listener.local_addr()?);
+        std::io::stdout().flush()?;
+        let shutdown = async {
+            let _ = tokio::signal::ctrl_c().await;
+        };
+        serve_policy(listener, factory, ServeOptions::default(), shutdown)
+            .await
+            .context("serving the oracle policy")
+    })
+}

@@ -1,0 +1,169 @@
+#!/usr/bin/env python3
+"""Kitchen-R participant policy server (starter kit).
+
+Serves `kitchen_r.policy.v1.Policy` (GetSpec, Reset, Act) and the standard `grpc.health.v1`
+health service. The policy here is trivial but valid: it stands still with the gripper open,
+holding the hand at a fixed pose in front of the base. Replace `StarterPolicy.decide` with
+your model.
+
+Python stubs are generated from the repository's `proto/` at start-up (into `_gen/` beside
+this file) with grpcio-tools; nothing generated is committed. The one-liner it runs is:
+
+    python -m grpc_tools.protoc -I ../proto --python_out=_gen --grpc_python_out=_gen \
+        ../proto/kitchen_r/policy/v1/policy.proto
+
+Run:  python policy_server.py --listen 0.0.0.0:50051 [--token SECRET]
+It prints `listening grpc=HOST:PORT` once it accepts calls.
+"""
+
+import argparse
+import logging
+import os
+import sys
+import threading
+from concurrent import futures
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+PROTO_FILE = "kitchen_r/policy/v1/policy.proto"
+PROTOCOL_VERSION = 1
+HORIZON = 16
+ACTION_DIM = 10
+# Largest observation accepted: the worker may send images up to 1024x1024 (plus depth).
+MAX_MESSAGE_BYTES = 64 * 1024 * 1024
+
+
+def proto_dir(explicit):
+    """The directory holding kitchen_r/policy/v1/policy.proto."""
+    for d in [explicit, os.environ.get("KITCHEN_R_PROTO"), HERE.parent / "proto", HERE / "proto"]:
+        if d and (Path(d) / PROTO_FILE).is_file():
+            return Path(d)
+    sys.exit(f"cannot find {PROTO_FILE}: pass --proto-dir or copy the repository's proto/ beside this file")
+
+
+def load_stubs(proto):
+    """Generate (when stale) and import the message and service stubs."""
+    from grpc_tools import protoc
+
+    out = HERE / "_gen"
+    src = proto / PROTO_FILE
+    pb2 = out / "kitchen_r/policy/v1/policy_pb2.py"
+    if not pb2.is_file() or pb2.stat().st_mtime < src.stat().st_mtime:
+        out.mkdir(exist_ok=True)
+        args = ["protoc", f"-I{proto}", f"--python_out={out}", f"--grpc_python_out={out}", str(src)]
+        if protoc.main(args) != 0:
+            sys.exit("grpc_tools.protoc failed on " + str(src))
+    sys.path.insert(0, str(out))
+    from kitchen_r.policy.v1 import policy_pb2, policy_pb2_grpc
+
+    return policy_pb2, policy_pb2_grpc
+
+
+class StarterPolicy:
+    """Stand still, gripper open, hand at a fixed pose in the base frame.
+
+    An action is (v, omega, x, y, z, qw, qx, qy, qz, g): base forward velocity (m/s) and yaw
+    rate (rad/s), the end-effector target in the base frame (metres, unit quaternion) and the
+    gripper command in [0, 1] (1 = open). A chunk is 16 of them.
+    """
+
+    HOLD = [0.0, 0.0, 0.35, 0.0, 0.95, 0.0, 1.0, 0.0, 0.0, 1.0]
+
+    def __init__(self):
+        self.sub_task = {}
+        self.lock = threading.Lock()
+
+    def reset(self, episode_id, task_index, sub_task):
+        with self.lock:
+            self.sub_task[episode_id] = sub_task
+
+    def decide(self, obs):
+        """Return HORIZON actions of ACTION_DIM values for one observation.
+
+        `obs.images[i]` has `camera`, `width`, `height`, `encoding` and `data` (RAW_RGB8:
+        width*height*3 bytes, row-major from the top-left pixel); `obs.robot` has odometry, arm
+        joints and the gripper; `obs.sub_task` is the sentence to carry out.
+        """
+        return [list(self.HOLD) for _ in range(HORIZON)]
+
+
+def make_servicer(pb2, pb2_grpc, policy, token):
+    import grpc
+
+    class Servicer(pb2_grpc.PolicyServicer):
+        def _authorise(self, context):
+            if token is None:
+                return
+            got = dict(context.invocation_metadata()).get("authorization")
+            if got != f"Bearer {token}":
+                context.abort(grpc.StatusCode.UNAUTHENTICATED, "missing or wrong bearer token")
+
+        def GetSpec(self, request, context):
+            self._authorise(context)
+            if request.protocol_version != PROTOCOL_VERSION:
+                logging.warning("worker speaks protocol %d, this server %d", request.protocol_version, PROTOCOL_VERSION)
+            cams = [
+                pb2.CameraRequest(name=n, width=128, height=128, encoding=pb2.IMAGE_ENCODING_RAW_RGB8, depth=False)
+                for n in ("base", "gripper")
+            ]
+            return pb2.PolicySpec(
+                protocol_version=PROTOCOL_VERSION,
+                cameras=cams,
+                horizon=HORIZON,
+                action_dim=ACTION_DIM,
+                max_concurrency=4,
+                name="starter-kit stand-still 0.1",
+            )
+
+        def Reset(self, request, context):
+            self._authorise(context)
+            policy.reset(request.episode_id, request.task_index, request.sub_task)
+            return pb2.ResetResponse()
+
+        def Act(self, request, context):
+            self._authorise(context)
+            chunk = policy.decide(request)
+            if len(chunk) != HORIZON or any(len(a) != ACTION_DIM for a in chunk):
+                context.abort(grpc.StatusCode.INTERNAL, "policy produced a chunk of the wrong shape")
+            return pb2.ActionChunk(values=[v for a in chunk for v in a])
+
+    return Servicer()
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--listen", default="127.0.0.1:50051", help="HOST:PORT; port 0 picks a free port")
+    ap.add_argument("--token", default=os.environ.get("POLICY_TOKEN"), help="require this bearer token")
+    ap.add_argument("--proto-dir", default=None, help="directory with kitchen_r/policy/v1/policy.proto")
+    ap.add_argument("--threads", type=int, default=8)
+    args = ap.parse_args()
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(message)s")
+
+    import grpc
+    from grpc_health.v1 import health, health_pb2, health_pb2_grpc
+
+    pb2, pb2_grpc = load_stubs(proto_dir(args.proto_dir))
+    opts = [
+        ("grpc.max_receive_message_length", MAX_MESSAGE_BYTES),
+        ("grpc.max_send_message_length", MAX_MESSAGE_BYTES),
+    ]
+    server = grpc.server(futures.ThreadPoolExecutor(max_workers=args.threads), options=opts)
+    pb2_grpc.add_PolicyServicer_to_server(make_servicer(pb2, pb2_grpc, StarterPolicy(), args.token), server)
+    h = health.HealthServicer()
+    for name in ("", "kitchen_r.policy.v1.Policy"):
+        h.set(name, health_pb2.HealthCheckResponse.SERVING)
+    health_pb2_grpc.add_HealthServicer_to_server(h, server)
+    port = server.add_insecure_port(args.listen)
+    if port == 0:
+        sys.exit(f"cannot listen on {args.listen}")
+    server.start()
+    host = args.listen.rsplit(":", 1)[0]
+    print(f"listening grpc={host}:{port}", flush=True)
+    try:
+        server.wait_for_termination()
+    except KeyboardInterrupt:
+        server.stop(grace=1.0)
+
+
+if __name__ == "__main__":
+    main()
