@@ -119,3 +119,28 @@ fn serve_refuses_an_invalid_configuration() {
     assert!(!out.status.success());
     assert!(stderr(&out).contains("test_per_dai"), "{}", stderr(&out));
 }
+
+#[test]
+fn dataset_generate_reproduces_the_committed_files() {
+    let out = tempfile::tempdir().unwrap();
+    let seed = kitchen_r_core::dataset::COMMITTED_SEED.to_string();
+    let status = Command::new(bin())
+        .args(["dataset", "generate", "--seed", &seed, "--out"])
+        .arg(out.path())
+        .output()
+        .unwrap();
+    assert!(status.status.success(), "{}", stderr(&status));
+    let committed = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/dataset");
+    for f in [
+        "dev.jsonl",
+        "test.jsonl",
+        "test_ground_truth.jsonl",
+        "manifest.json",
+    ] {
+        let (a, b) = (
+            std::fs::read(out.path().join(f)).unwrap(),
+            std::fs::read(committed.join(f)).unwrap(),
+        );
+        assert!(a == b, "{f} differs from the committed file");
+    }
+}

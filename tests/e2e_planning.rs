@@ -364,9 +364,17 @@ async fn leaderboard_orders_by_em_then_time_and_hides_test_ground_truth() {
 
     // Another team's submission is not visible; the organiser sees everything.
     assert_eq!(get_json(&server, "/api/v1/submissions/1", Some(&a)).await.0, 404);
+    let (status, sub) = get_json(&server, "/api/v1/submissions/1", Some(ADMIN)).await;
+    assert_eq!(status, 200);
+    // Test split: per-instruction EM, but not the hidden plans' lengths.
+    let first = &sub["latest_run"]["instructions"][0];
     assert_eq!(
-        get_json(&server, "/api/v1/submissions/1", Some(ADMIN)).await.0,
-        200
+        (first["id"].as_str(), first["em"].as_f64()),
+        (Some("test-0001"), Some(1.0))
+    );
+    assert!(
+        first.get("total_steps").is_none() && first.get("correct_steps").is_none(),
+        "{first}"
     );
     let (_, scenes) = get_json(&server, "/api/v1/scenes", None).await;
     assert_eq!(scenes[0]["id"], "kitchen_a");

@@ -70,8 +70,8 @@ fn submission(v: SubmissionView) -> pb::Submission {
                 .map(|i| pb::InstructionResult {
                     id: i.id,
                     present: i.present,
-                    correct_steps: i.correct_steps as u32,
-                    total_steps: i.total_steps as u32,
+                    correct_steps: i.correct_steps.unwrap_or(0) as u32,
+                    total_steps: i.total_steps.unwrap_or(0) as u32,
                     em: i.em,
                 })
                 .collect(),

@@ -85,13 +85,16 @@ pub struct RunView {
     pub instructions: Vec<InstructionView>,
 }
 
-/// Per-instruction result; never carries ground truth.
+/// Per-instruction result; never carries ground truth. For the test split the step counts are
+/// left out too, since the length of a hidden plan is part of its ground truth.
 #[derive(Debug, Clone, Serialize)]
 pub struct InstructionView {
     pub id: String,
     pub present: bool,
-    pub correct_steps: usize,
-    pub total_steps: usize,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub correct_steps: Option<usize>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub total_steps: Option<usize>,
     pub em: f64,
 }
 
@@ -253,7 +256,10 @@ impl AppState {
                     scorer_version: run.scorer_version,
                     created_at: rfc3339(run.created_at),
                     scores: Scores { em: run.em },
-                    instructions: instructions.iter().map(instruction_view).collect(),
+                    instructions: instructions
+                        .iter()
+                        .map(|i| instruction_view(i, sub.split == Split::Test.as_str()))
+                        .collect(),
                 })
             }
         };
@@ -322,12 +328,12 @@ impl AppState {
     }
 }
 
-fn instruction_view(i: &InstructionScore) -> InstructionView {
+fn instruction_view(i: &InstructionScore, hidden: bool) -> InstructionView {
     InstructionView {
         id: i.id.clone(),
         present: i.present,
-        correct_steps: i.correct,
-        total_steps: i.total,
+        correct_steps: (!hidden).then_some(i.correct),
+        total_steps: (!hidden).then_some(i.total),
         em: i.em(),
     }
 }
