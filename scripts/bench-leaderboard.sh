@@ -10,7 +10,8 @@
 # loopback for a bounded time.
 #
 # Usage: scripts/bench-leaderboard.sh [DURATION_S=10] [CONNECTIONS=32]
-# Needs: wrk (apt-get install -y wrk), python3. Honours CARGO_TARGET_DIR.
+# Needs: wrk (apt-get install -y wrk), python3, curl. Honours CARGO_TARGET_DIR; KITCHEN_R_BIN=path
+# uses an already built binary instead of building the release one.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 DURATION="${1:-10}"
@@ -19,8 +20,11 @@ SUBMISSIONS=10000
 TEAMS=100
 
 command -v wrk >/dev/null || { echo "wrk is not installed (apt-get install -y wrk)" >&2; exit 1; }
-cargo build --release --locked -p kitchen-r >&2
-BIN="${CARGO_TARGET_DIR:-target}/release/kitchen-r"
+BIN="${KITCHEN_R_BIN:-}"
+if [ -z "$BIN" ]; then
+  cargo build --release --locked -p kitchen-r >&2
+  BIN="${CARGO_TARGET_DIR:-target}/release/kitchen-r"
+fi
 TMP="$(mktemp -d)"
 SERVER_PID=""
 cleanup() {
@@ -68,6 +72,6 @@ print(f"seeded {teams} teams and {subs} submissions", file=sys.stderr)
 PY
 start
 URL="http://$HTTP/api/v1/leaderboard?track=planning&split=test"
-curl -fsS "$URL" | python3 -c 'import json,sys; b=json.load(sys.stdin); print(f"leaderboard rows: {len(b[\"rows\"])}", file=sys.stderr)'
+curl -fsS "$URL" | python3 -c 'import json,sys; print("leaderboard rows:", len(json.load(sys.stdin)["rows"]), file=sys.stderr)'
 echo "wrk -t2 -c$CONNECTIONS -d${DURATION}s --latency $URL"
 wrk -t2 -c"$CONNECTIONS" -d"${DURATION}s" --latency "$URL"
