@@ -55,6 +55,8 @@ pub enum EvalError {
     Sim(#[from] SimError),
     #[error("{0}")]
     Run(#[from] RunError),
+    #[error("eval config: {0}")]
+    Config(String),
     #[error("an evaluation thread panicked")]
     Panicked,
 }
@@ -83,6 +85,66 @@ impl Default for EvalOptions {
             jobs: 1,
             ground_truth: None,
             run: RunOptions::default(),
+        }
+    }
+}
+
+/// `configs/eval.toml`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct EvalConfig {
+    /// Sim seconds each plan step may take (the paper: 120).
+    pub task_time_limit: f64,
+    /// Actions of each chunk executed before the policy is asked again.
+    pub execute: usize,
+    /// Default run seed.
+    pub seed: u64,
+}
+
+impl Default for EvalConfig {
+    fn default() -> Self {
+        let r = RunOptions::default();
+        EvalConfig {
+            task_time_limit: r.task_time_limit,
+            execute: r.execute,
+            seed: 0,
+        }
+    }
+}
+
+impl EvalConfig {
+    pub fn load(path: &std::path::Path) -> Result<EvalConfig, EvalError> {
+        let bad = |m: String| EvalError::Config(format!("{}: {m}", path.display()));
+        let text = std::fs::read_to_string(path).map_err(|e| bad(e.to_string()))?;
+        let c: EvalConfig = toml::from_str(&text).map_err(|e| bad(e.to_string()))?;
+        if c.task_time_limit.is_nan()
+            || c.task_time_limit <= 0.0
+            || c.execute == 0
+            || c.execute > crate::policy::HORIZON
+        {
+            return Err(bad(format!(
+                "task_time_limit > 0 and execute in 1..={}",
+                crate::policy::HORIZON
+            )));
+        }
+        Ok(c)
+    }
+
+    /// `configs/eval.toml` when present, else the defaults.
+    pub fn load_default() -> Result<EvalConfig, EvalError> {
+        let path = kitchen_r_sim::config::configs_dir().join("eval.toml");
+        if path.is_file() {
+            EvalConfig::load(&path)
+        } else {
+            Ok(EvalConfig::default())
+        }
+    }
+
+    pub fn run_options(&self) -> RunOptions {
+        RunOptions {
+            task_time_limit: self.task_time_limit,
+            execute: self.execute,
+            ..RunOptions::default()
         }
     }
 }
@@ -126,16 +188,18 @@ pub fn task_kinds(step: &str) -> &'static [&'static str] {
 pub fn instructions(split: Split, ground_truth: Option<&PathBuf>) -> Result<Vec<Instruction>, EvalError> {
     match (split, ground_truth) {
         (_, Some(path)) => Ok(read_jsonl(path)?),
-        (Split::Dev, None) => Ok(read_jsonl(&kitchen_r_core::assets::assets_dir().join("dataset/dev.jsonl"))?),
+        (Split::Dev, None) => Ok(read_jsonl(
+            &kitchen_r_core::assets::assets_dir().join("dataset/dev.jsonl"),
+        )?),
         (Split::Test, None) => Err(EvalError::NoGroundTruth),
     }
 }
 
 /// The seed of an instruction's episode: stable per (run seed, instruction id).
 pub fn instruction_seed(seed: u64, id: &str) -> u64 {
-    let fnv = id
-        .bytes()
-        .fold(0xcbf2_9ce4_8422_2325u64, |h, b| (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3));
+    let fnv = id.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
+    });
     splitmix(seed ^ fnv)
 }
 
@@ -153,7 +217,13 @@ pub fn episode_configs(
         .map(|ins| {
             let scene = assets.scene(&ins.scene)?;
             let s = instruction_seed(seed, &ins.id);
-            Ok(EpisodeConfig::from_instruction(ins, scene, &assets.catalogue, &params, s)?)
+            Ok(EpisodeConfig::from_instruction(
+                ins,
+                scene,
+                &assets.catalogue,
+                &params,
+                s,
+            )?)
         })
         .collect()
 }

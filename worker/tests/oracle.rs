@@ -5,7 +5,10 @@ use kitchen_r_worker::eval::{EvalOptions, EvalReport, evaluate};
 
 #[test]
 fn oracle_completes_at_least_98_percent_of_dev_tasks() {
-    let n = std::env::var("ORACLE_EPISODES").ok().and_then(|v| v.parse().ok()).unwrap_or(50);
+    let n = std::env::var("ORACLE_EPISODES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(50);
     let opts = EvalOptions {
         episodes: Some(n),
         jobs: std::thread::available_parallelism().map_or(1, |n| n.get()),
@@ -16,16 +19,31 @@ fn oracle_completes_at_least_98_percent_of_dev_tasks() {
         .episodes
         .iter()
         .flat_map(|e| {
-            e.tasks
-                .iter()
-                .filter(|t| !t.success)
-                .map(move |t| format!("{} task {} {:?}: {}", e.episode_id, t.index, t.step, t.failure.clone().unwrap_or_default()))
+            e.tasks.iter().filter(|t| !t.success).map(move |t| {
+                format!(
+                    "{} task {} {:?}: {}",
+                    e.episode_id,
+                    t.index,
+                    t.step,
+                    t.failure.clone().unwrap_or_default()
+                )
+            })
         })
         .collect();
-    eprintln!("oracle SR {:.4} over {} tasks of {} episodes", report.overall.sr, report.overall.tasks, report.episodes.len());
+    eprintln!(
+        "oracle SR {:.4} over {} tasks of {} episodes",
+        report.overall.sr,
+        report.overall.tasks,
+        report.episodes.len()
+    );
     for f in &failures {
         eprintln!("failed: {f}");
     }
     assert!(report.episodes.len() >= n);
-    assert!(report.overall.sr >= 0.98, "oracle SR {:.3}; failures:\n{}", report.overall.sr, failures.join("\n"));
+    assert!(
+        report.overall.sr >= 0.98,
+        "oracle SR {:.3}; failures:\n{}",
+        report.overall.sr,
+        failures.join("\n")
+    );
 }

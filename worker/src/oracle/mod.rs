@@ -13,6 +13,7 @@
 //! driver used for trajectory collection and for the expert trajectories MSE compares against.
 
 pub mod arm;
+pub mod headroom;
 pub mod task;
 
 use std::collections::HashMap;
@@ -34,6 +35,9 @@ use task::{Goal, Now, TaskCtl, World};
 
 /// Name the oracle announces and `--policy builtin:oracle` selects.
 pub const ORACLE_NAME: &str = "builtin:oracle";
+/// Extra clearance the planner tries first (it falls back to the plain robot radius): the
+/// follower cuts corners by up to ~0.15 m, and the twin ejects a base driven into furniture.
+const CLEARANCE_MARGIN: f64 = 0.2;
 /// The base squares up on the last move's goal only when it stands this close to it, m.
 const SETTLE_RANGE: f64 = 0.5;
 
@@ -86,16 +90,19 @@ impl OraclePolicy {
         }
     }
 
+    fn scene(&self, id: &str) -> Result<&Scene, PolicyError> {
+        self.scenes
+            .iter()
+            .find(|s| s.id == id)
+            .ok_or_else(|| PolicyError::Call(format!("oracle: unknown scene {id:?}")))
+    }
+
     /// The scene's occupancy grid, inflated by the base's footprint radius; built once per scene.
     fn grid(&mut self, scene: &str) -> Result<Arc<OccupancyGrid>, PolicyError> {
         if let Some(g) = self.grids.get(scene) {
             return Ok(g.clone());
         }
-        let s = self
-            .scenes
-            .iter()
-            .find(|s| s.id == scene)
-            .ok_or_else(|| PolicyError::Call(format!("oracle: unknown scene {scene:?}")))?;
+        let s = self.scene(scene)?;
         let params = GridParams {
             robot_radius: self.base.radius,
             ..GridParams::default()
@@ -112,11 +119,18 @@ impl OraclePolicy {
         let goal = match p.target {
             TaskTarget::Base { x, y, yaw } => {
                 let grid = self.grid(&p.scene)?;
-                let path = theta_star(&grid, here, [x, y], &PlannerParams::default())
+                let params = PlannerParams {
+                    clearance_margin: CLEARANCE_MARGIN,
+                    ..PlannerParams::default()
+                };
+                let path = theta_star(&grid, here, [x, y], &params)
                     .map_err(|e| PolicyError::Call(format!("oracle: no path: {e}")))?;
                 self.last_goal = Some([x, y, yaw]);
-                let follower = PathFollower::new(path.waypoints, yaw, FollowParams::default());
-                Goal::Move { goal: [x, y, yaw], follower }
+                let follower = Box::new(PathFollower::new(path.waypoints, yaw, FollowParams::default()));
+                Goal::Move {
+                    goal: [x, y, yaw],
+                    follower,
+                }
             }
             TaskTarget::Pick { .. } => Goal::Pick,
             TaskTarget::Place { target, .. } => Goal::Place { target },
@@ -124,7 +138,18 @@ impl OraclePolicy {
         let approach = self
             .last_goal
             .filter(|g| (g[0] - here[0]).hypot(g[1] - here[1]) < SETTLE_RANGE);
-        Ok(TaskCtl::new(goal, tool, holding, approach))
+        let scene = self.scene(&p.scene)?;
+        let tool_world = kitchen_r_sim::oracle::manip::base_isometry(p.base_pose) * tool;
+        let t = tool_world.translation;
+        // The board that matters is the first one above the hand.
+        let here_max = headroom::max_tool_z(scene, [t.x, t.y], t.z);
+        let work = match p.target {
+            TaskTarget::Pick { object } => p.objects.get(object).map(|o| [o.pose[0], o.pose[1], o.pose[2]]),
+            TaskTarget::Place { target, .. } => Some(target),
+            TaskTarget::Base { .. } => None,
+        };
+        let target_max = work.and_then(|w| headroom::max_tool_z(scene, [w[0], w[1]], w[2]));
+        Ok(TaskCtl::new(goal, tool, holding, approach, here_max, target_max))
     }
 
     fn world(&self, p: &Privileged) -> World {

@@ -45,9 +45,14 @@ pub struct World {
 
 #[derive(Debug, Clone)]
 pub enum Goal {
-    Move { goal: [f64; 3], follower: PathFollower },
+    Move {
+        goal: [f64; 3],
+        follower: Box<PathFollower>,
+    },
     Pick,
-    Place { target: [f64; 3] },
+    Place {
+        target: [f64; 3],
+    },
 }
 
 /// Where the arm is in its sequence.
@@ -56,7 +61,9 @@ enum Stage {
     /// Prelude motion, with the time spent on it.
     Arm(ArmPath, f64),
     /// Square the base up on the approach pose (manipulation only).
-    Settle { positioned: bool },
+    Settle {
+        positioned: bool,
+    },
     /// Driving (moves only).
     Drive,
     /// The pick-and-place machine and the time into it.
@@ -74,16 +81,26 @@ pub struct TaskCtl {
     tool: Isometry3<f64>,
     gripper: f64,
     params: ManipParams,
+    /// Highest tool height over the work (under a shelf board).
+    ceiling: Option<f64>,
 }
 
 impl TaskCtl {
-    /// `tool`: the current tool pose (base frame); `holding`: an object is in the gripper.
-    pub fn new(goal: Goal, tool: Isometry3<f64>, holding: bool, approach: Option<[f64; 3]>) -> TaskCtl {
+    /// `tool`: the current tool pose (base frame); `holding`: an object is in the gripper;
+    /// `here_max` / `target_max`: the highest the tool may be where it is and where the task
+    /// works (under a shelf board, see [`super::headroom`]).
+    pub fn new(
+        goal: Goal,
+        tool: Isometry3<f64>,
+        holding: bool,
+        approach: Option<[f64; 3]>,
+        here_max: Option<f64>,
+        target_max: Option<f64>,
+    ) -> TaskCtl {
         let params = ManipParams::default();
         let stow = if holding { params.carry } else { params.home };
-        // Moves stow the tool before driving; manipulation only lifts it clear.
-        let to = matches!(goal, Goal::Move { .. }).then_some(stow);
-        let arm = ArmPath::clear_then(tool, to, stow.translation.z);
+        let is_move = matches!(goal, Goal::Move { .. });
+        let arm = ArmPath::prelude(tool, stow, here_max, target_max, is_move);
         TaskCtl {
             goal,
             stage: Stage::Arm(arm, 0.0),
@@ -91,12 +108,15 @@ impl TaskCtl {
             tool,
             gripper: if holding { 0.0 } else { 1.0 },
             params,
+            ceiling: target_max,
         }
     }
 
     /// Whether the pick-and-place machine ran to its end.
     pub fn manipulation_finished(&self) -> bool {
-        matches!(&self.stage, Stage::Manip(p, t) if *t >= p.duration())
+        let capped = self.ceiling.is_some();
+        matches!(&self.stage, Stage::Manip(p, t)
+            if *t >= p.duration() - if capped { p.targets().last().map_or(0.0, |l| l.duration) } else { 0.0 } - 1e-9)
     }
 
     /// Start the machine over from the current tool pose (a pick that closed on nothing).
@@ -122,7 +142,9 @@ impl TaskCtl {
                     break;
                 }
                 Stage::Drive => {
-                    let Goal::Move { follower, .. } = &mut self.goal else { unreachable!() };
+                    let Goal::Move { follower, .. } = &mut self.goal else {
+                        unreachable!()
+                    };
                     let (fv, fw, _) = follower.step(now.base);
                     (v, w) = (fv, fw);
                     break;
@@ -141,6 +163,12 @@ impl TaskCtl {
                 }
                 Stage::Manip(plan, t) => {
                     *t += DT;
+                    if self.ceiling.is_some() {
+                        // The last phase (carry or home) heads for the stow pose on a slant that
+                        // would catch the board; the next task's prelude pulls back level.
+                        let last = plan.targets().last().map_or(0.0, |p| p.duration);
+                        *t = t.min(plan.duration() - last);
+                    }
                     let (tool, g, _) = plan.target_at(*t);
                     (self.tool, self.gripper) = (tool, g);
                     break;
@@ -153,7 +181,18 @@ impl TaskCtl {
 
     fn plan(&self, now: &Now, world: &World) -> Option<PhasePlan> {
         let model = world.model.as_ref()?;
-        let p = &self.params;
+        let mut params = self.params.clone();
+        if let Some(m) = self.ceiling {
+            let surface_grasp = match self.goal {
+                Goal::Place { target } => target[2] + model.grasp_offset[2],
+                _ => world.object?.translation.z + model.grasp_offset[2],
+            };
+            let room = (m - surface_grasp).max(0.0);
+            params.approach_height = params.approach_height.min(room);
+            params.lift_height = params.lift_height.min(room);
+            params.retreat_height = params.retreat_height.min(room);
+        }
+        let p = &params;
         match self.goal {
             Goal::Move { .. } => None,
             Goal::Pick => {

@@ -1,0 +1,156 @@
+//! Trajectory collection end to end: the oracle drives dev episodes closed-loop, every control
+//! step lands in MCAP and HDF5 files the reference Python readers open, a rerun resumes, and an
+//! episode that trips a monitor is discarded with its reason counted.
+
+use std::path::Path;
+use std::process::Command;
+
+use kitchen_r_sim::SensorsConfig;
+use kitchen_r_worker::collect::{CollectConfig, CollectOptions, ManifestEntry, collect};
+
+/// Small cameras keep the test quick; the layout is what is checked, not the pixels.
+fn small_sensors() -> SensorsConfig {
+    let mut s = SensorsConfig::default();
+    for c in &mut s.cameras {
+        (c.width, c.height) = (32, 24);
+    }
+    s
+}
+
+fn options(out: &Path, episodes: usize, formats: &str) -> CollectOptions {
+    CollectOptions {
+        episodes,
+        out: out.to_path_buf(),
+        formats: formats.parse().unwrap(),
+        jobs: 2,
+        seed: 3,
+        config: CollectConfig::default(),
+        sensors: Some(small_sensors()),
+        progress: false,
+    }
+}
+
+fn manifest(out: &Path) -> Vec<ManifestEntry> {
+    let text = std::fs::read_to_string(out.join("manifest.jsonl")).unwrap();
+    text.lines().map(|l| serde_json::from_str(l).unwrap()).collect()
+}
+
+fn python() -> bool {
+    let ok = Command::new("python3")
+        .args(["-c", "import mcap, mcap_ros2, h5py"])
+        .status()
+        .is_ok_and(|s| s.success());
+    if !ok && std::env::var("CI").is_ok_and(|v| v == "true") {
+        panic!("CI must have python3 with mcap, mcap-ros2-support and h5py");
+    }
+    if !ok {
+        eprintln!("skipping the read-back: python3 with mcap, mcap-ros2-support, h5py not installed");
+    }
+    ok
+}
+
+#[test]
+fn two_collected_episodes_read_back_in_the_reference_readers() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = collect(&options(dir.path(), 2, "mcap,hdf5")).unwrap();
+    assert_eq!((s.kept, s.skipped), (2, 0), "{s:?}");
+    assert!(s.discarded.is_empty(), "{:?}", s.discarded);
+    let entries = manifest(dir.path());
+    assert_eq!(entries.len(), 2);
+    let leftovers: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().ends_with(".partial"))
+        .collect();
+    assert!(leftovers.is_empty());
+    if !python() {
+        return;
+    }
+    for e in &entries {
+        let stem = dir.path().join(&e.episode_id);
+        let out = Command::new("python3")
+            .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/read_recording.py"))
+            .arg(stem.with_extension("mcap"))
+            .arg(stem.with_extension("hdf5"))
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        let (m, h) = (&v["mcap"], &v["hdf5"]);
+        let t = e.frames as u64;
+        assert!(
+            t > 100,
+            "an episode of {t} frames is too short to have done its plan"
+        );
+        for topic in [
+            "/camera/base/image_raw",
+            "/camera/base/depth",
+            "/camera/gripper/image_raw",
+            "/camera/gripper/depth",
+            "/lidar/points",
+            "/odom",
+            "/tf",
+            "/cmd_vel",
+            "/action",
+        ] {
+            assert_eq!(m["counts"][topic].as_u64(), Some(t), "{topic}");
+        }
+        assert_eq!(
+            m["first"]["/camera/gripper/image_raw"]["bytes"].as_u64(),
+            Some(32 * 24 * 3)
+        );
+        assert_eq!(m["first"]["/lidar/points"]["width"].as_u64(), Some(360));
+        let shape = |k: &str| h["shapes"][k].clone();
+        assert_eq!(
+            shape("observations/images/base"),
+            serde_json::json!([t, 24, 32, 3])
+        );
+        assert_eq!(
+            shape("observations/depth/gripper"),
+            serde_json::json!([t, 24, 32])
+        );
+        assert_eq!(shape("observations/qpos"), serde_json::json!([t, 7]));
+        assert_eq!(shape("action"), serde_json::json!([t, 10]));
+        let plan: Vec<String> = serde_json::from_str(h["attrs"]["plan"].as_str().unwrap()).unwrap();
+        assert_eq!(shape("task_start"), serde_json::json!([plan.len()]));
+    }
+}
+
+#[test]
+fn a_rerun_skips_finished_episodes() {
+    let dir = tempfile::tempdir().unwrap();
+    let first = collect(&options(dir.path(), 1, "mcap")).unwrap();
+    assert_eq!(first.kept, 1, "{first:?}");
+    let again = collect(&options(dir.path(), 1, "mcap")).unwrap();
+    assert_eq!((again.kept, again.skipped), (0, 1));
+    assert_eq!(
+        manifest(dir.path()).len(),
+        1,
+        "a skipped episode adds no manifest line"
+    );
+}
+
+#[test]
+fn an_episode_that_trips_a_monitor_is_discarded_with_its_reason() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut opts = options(dir.path(), 1, "mcap,hdf5");
+    opts.config.monitors.move_time_limit = 1.0;
+    let s = collect(&opts).unwrap();
+    assert_eq!(s.kept, 0);
+    assert_eq!(s.discarded.get("time_limit"), Some(&1), "{s:?}");
+    let e = &manifest(dir.path())[0];
+    assert!(
+        !e.kept && e.reason.as_deref().is_some_and(|r| r.contains("1 s limit")),
+        "{e:?}"
+    );
+    let files: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name())
+        .collect();
+    assert_eq!(
+        files,
+        vec![std::ffi::OsString::from("manifest.jsonl")],
+        "discarded files are removed"
+    );
+}
