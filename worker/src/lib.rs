@@ -12,4 +12,5 @@ pub mod eval;
 pub mod oracle;
 pub mod policy;
 pub mod record;
+pub mod remote;
 pub mod runner;

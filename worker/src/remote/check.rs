@@ -78,7 +78,7 @@ impl Report {
     fn skip_rest(&mut self, from: usize, because: &str) {
         for name in &NAMES[from..] {
             self.checks.push(Check {
-                name: *name,
+                name,
                 verdict: Verdict::Skip,
                 detail: format!("not run: {because}"),
             });
@@ -133,7 +133,7 @@ async fn probe(
     // Reachable: anything answered (even an error status), within the startup deadline.
     let started = Instant::now();
     let mut health = conn.health().await;
-    while health.as_ref().is_err_and(|s| is_unreachable(s)) && started.elapsed() < cfg.startup_deadline() {
+    while health.as_ref().is_err_and(is_unreachable) && started.elapsed() < cfg.startup_deadline() {
         tokio::time::sleep(std::time::Duration::from_millis(100)).await;
         health = conn.health().await;
     }
