@@ -6,8 +6,8 @@ health service. The policy here is trivial but valid: it stands still with the g
 holding the hand at a fixed pose in front of the base. Replace `StarterPolicy.decide` with
 your model.
 
-Python stubs are generated from the repository's `proto/` at start-up (into `_gen/` beside
-this file) with grpcio-tools; nothing generated is committed. The one-liner it runs is:
+Python stubs are generated from the repository's `proto/` at start-up (into a temporary
+directory) with grpcio-tools; nothing generated is committed. By hand it is one line:
 
     python -m grpc_tools.protoc -I ../proto --python_out=_gen --grpc_python_out=_gen \
         ../proto/kitchen_r/policy/v1/policy.proto
@@ -17,9 +17,13 @@ It prints `listening grpc=HOST:PORT` once it accepts calls.
 """
 
 import argparse
+import atexit
 import logging
 import os
+import shutil
+import signal
 import sys
+import tempfile
 import threading
 from concurrent import futures
 from pathlib import Path
@@ -42,17 +46,18 @@ def proto_dir(explicit):
 
 
 def load_stubs(proto):
-    """Generate (when stale) and import the message and service stubs."""
+    """Generate the message and service stubs into a fresh temporary directory and import them.
+
+    A directory per process, so servers started side by side never read each other's
+    half-written files, and a stub is never older than the proto it came from.
+    """
     from grpc_tools import protoc
 
-    out = HERE / "_gen"
-    src = proto / PROTO_FILE
-    pb2 = out / "kitchen_r/policy/v1/policy_pb2.py"
-    if not pb2.is_file() or pb2.stat().st_mtime < src.stat().st_mtime:
-        out.mkdir(exist_ok=True)
-        args = ["protoc", f"-I{proto}", f"--python_out={out}", f"--grpc_python_out={out}", str(src)]
-        if protoc.main(args) != 0:
-            sys.exit("grpc_tools.protoc failed on " + str(src))
+    out = Path(tempfile.mkdtemp(prefix="kitchen_r_stubs_"))
+    atexit.register(shutil.rmtree, out, ignore_errors=True)
+    args = ["protoc", f"-I{proto}", f"--python_out={out}", f"--grpc_python_out={out}", str(proto / PROTO_FILE)]
+    if protoc.main(args) != 0:
+        sys.exit(f"grpc_tools.protoc failed on {proto / PROTO_FILE}")
     sys.path.insert(0, str(out))
     from kitchen_r.policy.v1 import policy_pb2, policy_pb2_grpc
 
@@ -157,6 +162,8 @@ def main():
     if port == 0:
         sys.exit(f"cannot listen on {args.listen}")
     server.start()
+    # Stop cleanly on SIGTERM too (containers, `kill`), so the stub directory is removed.
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
     host = args.listen.rsplit(":", 1)[0]
     print(f"listening grpc={host}:{port}", flush=True)
     try:
