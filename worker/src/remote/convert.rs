@@ -337,3 +337,107 @@ pub fn chunk_to_wire(chunk: &[[f64; ACTION_DIM]]) -> pb::ActionChunk {
         values_f64: flat,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frame() -> Observation {
+        let img = CameraImage {
+            name: "base".into(),
+            width: 128,
+            height: 128,
+            rgb: (0..128 * 128 * 3).map(|i| (i % 256) as u8).collect(),
+            depth: (0..128 * 128)
+                .map(|i| if i % 2 == 0 { 0.0 } else { 2.0 })
+                .collect(),
+        };
+        Observation {
+            time: 1.5,
+            images: vec![img],
+            lidar: None,
+            odometry: Odometry {
+                pose: [1.0, 2.0, 0.5],
+                velocity: [0.1, 0.2],
+            },
+            joints: [0.1; 6],
+            gripper: 0.7,
+            task: None,
+        }
+    }
+
+    #[test]
+    fn jpeg_resized_with_depth_round_trips() {
+        let obs = frame();
+        let plan = CameraPlan {
+            name: "base".into(),
+            width: 64,
+            height: 32,
+            encoding: pb::ImageEncoding::Jpeg,
+            depth: true,
+        };
+        let input = PolicyInput {
+            episode_id: "e",
+            step: 3,
+            task_index: 1,
+            sub_task: "pick the bowl",
+            observation: &obs,
+            privileged: None,
+        };
+        let wire = observation(&input, std::slice::from_ref(&plan)).unwrap();
+        assert_eq!(&wire.images[0].data[..2], &[0xFF, 0xD8], "a JPEG file");
+        let d = &wire.depth[0].data;
+        assert_eq!(d.len(), 64 * 32 * 4);
+        assert_eq!(
+            f32::from_le_bytes([d[0], d[1], d[2], d[3]]),
+            f32::INFINITY,
+            "no return is +inf"
+        );
+        assert!(wire.privileged.is_none() && wire.robot.as_ref().unwrap().ee_pose.is_empty());
+        let back = observation_from_wire(&wire).unwrap();
+        assert_eq!(
+            (back.images[0].width, back.images[0].rgb.len()),
+            (64, 64 * 32 * 3)
+        );
+        assert_eq!(back.images[0].depth[0], 0.0);
+        assert_eq!(back.odometry, obs.odometry);
+    }
+
+    #[test]
+    fn unknown_cameras_and_sizes_are_refused() {
+        let sim = [SimCamera {
+            name: "base".into(),
+            width: 128,
+            height: 128,
+        }];
+        let spec = |name: &str, w: u32| pb::PolicySpec {
+            cameras: vec![pb::CameraRequest {
+                name: name.into(),
+                width: w,
+                height: 8,
+                encoding: 0,
+                depth: false,
+            }],
+            ..pb::PolicySpec::default()
+        };
+        assert_eq!(
+            plan_cameras(&spec("base", 8), &sim).unwrap()[0].encoding,
+            pb::ImageEncoding::RawRgb8
+        );
+        assert!(
+            plan_cameras(&spec("thermal", 8), &sim)
+                .unwrap_err()
+                .contains("\"thermal\"")
+        );
+        assert!(
+            plan_cameras(&spec("base", 2048), &sim)
+                .unwrap_err()
+                .contains("outside 1..=1024")
+        );
+        assert!(
+            plan_cameras(&pb::PolicySpec::default(), &sim)
+                .unwrap_err()
+                .contains("\"gripper\"")
+        );
+    }
+}
