@@ -1,12 +1,12 @@
 #!/usr/bin/env bash
 # The one test command (README): every unit, property and end-to-end test of the workspace.
 # It does its own set-up on a fresh machine: the Python readers some end-to-end tests use
-# (mcap + mcap-ros2-support, h5py, grpcio) come from PyPI.
+# (mcap + mcap-ros2-support, h5py) and the starter kit's grpcio come from PyPI.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 if ! python3 - <<'PY' 2>/dev/null
 import importlib.util, sys
-mods = ["mcap", "mcap_ros2", "h5py", "numpy"]
+mods = ["mcap", "mcap_ros2", "h5py", "numpy", "grpc", "grpc_health", "grpc_tools", "google.protobuf"]
 sys.exit(0 if all(importlib.util.find_spec(m) for m in mods) else 1)
 PY
 then
