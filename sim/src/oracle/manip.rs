@@ -192,7 +192,7 @@ impl PhasePlan {
 /// Slerp along the shorter arc; falls back to a normalised lerp when the two are so close that
 /// nalgebra's slerp declines (it returns `None` for (nearly) equal rotations as well as for
 /// opposite ones).
-fn slerp(a: &UnitQuaternion<f64>, b: &UnitQuaternion<f64>, t: f64) -> UnitQuaternion<f64> {
+pub fn slerp(a: &UnitQuaternion<f64>, b: &UnitQuaternion<f64>, t: f64) -> UnitQuaternion<f64> {
     a.try_slerp(b, t, 1e-9).unwrap_or_else(|| {
         let bq = if a.coords.dot(&b.coords) < 0.0 {
             -b.into_inner()

@@ -2,7 +2,7 @@
 //! surface and back to the stow pose before the base drives, blended with the same raised
 //! cosine as the machine's phases so the commanded pose never jumps.
 
-use kitchen_r_sim::oracle::manip::alpha;
+use kitchen_r_sim::oracle::manip::{alpha, slerp};
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 
 /// Tool speed used to size a blend's duration, m/s (about the machine's phase speeds).
@@ -21,17 +21,6 @@ const RISE: f64 = 0.10;
 pub struct ArmPath {
     start: Isometry3<f64>,
     legs: Vec<(Isometry3<f64>, f64)>,
-}
-
-fn slerp(a: &UnitQuaternion<f64>, b: &UnitQuaternion<f64>, t: f64) -> UnitQuaternion<f64> {
-    a.try_slerp(b, t, 1e-9).unwrap_or_else(|| {
-        let bq = if a.coords.dot(&b.coords) < 0.0 {
-            -b.into_inner()
-        } else {
-            b.into_inner()
-        };
-        UnitQuaternion::new_normalize(a.into_inner().lerp(&bq, t))
-    })
 }
 
 fn blend_time(a: &Isometry3<f64>, b: &Isometry3<f64>) -> f64 {
