@@ -12,13 +12,14 @@ use serde::{Deserialize, Serialize};
 
 /// Environment variables read into the configuration (`KITCHEN_R_<KEY>`). Listed explicitly so
 /// the client-side variables (`KITCHEN_R_SERVER`, `KITCHEN_R_TOKEN`) are not mistaken for keys.
-const ENV_KEYS: [&str; 7] = [
+const ENV_KEYS: [&str; 8] = [
     "http",
     "grpc",
     "db",
     "workers",
     "assets",
     "admin_token",
+    "worker_token",
     "max_body_bytes",
 ];
 
@@ -38,10 +39,15 @@ pub struct Config {
     pub assets: PathBuf,
     /// Organiser token; empty means generate one at start and print it once.
     pub admin_token: String,
+    /// Token simulation workers present on the gRPC `Worker` service; empty means generate one
+    /// at start (in-process workers get it from [`crate::Server::worker_token`]).
+    pub worker_token: String,
     /// Largest accepted request body (a plan file), bytes.
     pub max_body_bytes: usize,
     pub plans: PlanLimits,
     pub quota: Quota,
+    pub control: ControlConfig,
+    pub policy: PolicyConfig,
 }
 
 /// Limits on an uploaded plan file, beyond the body size.
@@ -60,6 +66,51 @@ pub struct PlanLimits {
 pub struct Quota {
     pub dev_per_day: u32,
     pub test_per_day: u32,
+    /// Policy runs of one team evaluating at the same time; 0 means unlimited.
+    pub concurrent_runs: u32,
+}
+
+/// How policy runs are cut into episode jobs and how the job queue behaves (`[control]`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ControlConfig {
+    /// Queue an offline (MSE) episode beside each online one.
+    pub offline_mse: bool,
+    /// Evaluate only the first N dev instructions (0 = all); the test split always runs whole.
+    pub dev_episodes: u32,
+    /// Run seed handed to workers, which derive each instruction's seed from it.
+    pub seed: u64,
+    /// Simulated seconds per task.
+    pub task_time_limit_s: f64,
+    /// Actions executed from each 16-action chunk before the policy is asked again.
+    pub actions_executed_per_chunk: u32,
+    /// After a failed task, move robot and objects to the expert's state for the next one.
+    pub teleport_on_failure: bool,
+    /// Execute at most this many plan steps per episode; 0 = all.
+    pub max_plan_steps: u32,
+    /// Lease length granted by Lease and by each Heartbeat, seconds.
+    pub lease_s: u64,
+    /// How often expired leases are requeued, seconds.
+    pub reaper_interval_s: u64,
+    /// Leases a job gets before its episode is recorded as failed.
+    pub max_attempts: u32,
+}
+
+/// Calling participants' policies (`[policy]`): deadlines sent to workers with every job.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PolicyConfig {
+    /// Deadline of one Reset or Act call, milliseconds.
+    pub call_deadline_ms: u32,
+    /// Time an endpoint has to become healthy, milliseconds.
+    pub startup_deadline_ms: u32,
+    /// Wall-clock budget of one whole episode, milliseconds.
+    pub episode_budget_ms: u32,
+    /// Abort an episode after this many successive call timeouts.
+    pub max_successive_timeouts: u32,
+    /// Networks (CIDR) a policy endpoint may resolve to besides public addresses. Handed to the
+    /// registration probe, which owns the parsing and the check.
+    pub allow_networks: Vec<String>,
 }
 
 impl Default for Config {
@@ -71,9 +122,12 @@ impl Default for Config {
             workers: 0,
             assets: PathBuf::new(),
             admin_token: String::new(),
+            worker_token: String::new(),
             max_body_bytes: 4 << 20,
             plans: PlanLimits::default(),
             quota: Quota::default(),
+            control: ControlConfig::default(),
+            policy: PolicyConfig::default(),
         }
     }
 }
@@ -100,6 +154,36 @@ impl Default for Quota {
         Quota {
             dev_per_day: 0,
             test_per_day: 5,
+            concurrent_runs: 2,
+        }
+    }
+}
+
+impl Default for ControlConfig {
+    fn default() -> Self {
+        ControlConfig {
+            offline_mse: true,
+            dev_episodes: 0,
+            seed: 0,
+            task_time_limit_s: 120.0,
+            actions_executed_per_chunk: 8,
+            teleport_on_failure: true,
+            max_plan_steps: 0,
+            lease_s: 60,
+            reaper_interval_s: 5,
+            max_attempts: 3,
+        }
+    }
+}
+
+impl Default for PolicyConfig {
+    fn default() -> Self {
+        PolicyConfig {
+            call_deadline_ms: 10_000,
+            startup_deadline_ms: 30_000,
+            episode_budget_ms: 600_000,
+            max_successive_timeouts: 3,
+            allow_networks: vec!["127.0.0.0/8".into(), "::1/128".into()],
         }
     }
 }
@@ -154,6 +238,48 @@ impl Config {
         }
         if !self.admin_token.is_empty() && self.admin_token.len() < 16 {
             return invalid("admin_token", "must be at least 16 characters".into());
+        }
+        if !self.worker_token.is_empty() && self.worker_token.len() < 16 {
+            return invalid("worker_token", "must be at least 16 characters".into());
+        }
+        self.validate_control()
+    }
+
+    fn validate_control(&self) -> Result<(), ConfigError> {
+        let invalid = |key, message: &str| {
+            Err(ConfigError::Invalid {
+                key,
+                message: message.into(),
+            })
+        };
+        let c = &self.control;
+        if !(c.task_time_limit_s.is_finite() && c.task_time_limit_s > 0.0) {
+            return invalid(
+                "control.task_time_limit_s",
+                "must be a positive number of seconds",
+            );
+        }
+        if !(1..=16).contains(&c.actions_executed_per_chunk) {
+            return invalid("control.actions_executed_per_chunk", "must be between 1 and 16");
+        }
+        if c.lease_s == 0 || c.reaper_interval_s == 0 {
+            return invalid(
+                "control.lease_s",
+                "lease_s and reaper_interval_s must be at least 1",
+            );
+        }
+        if c.max_attempts == 0 {
+            return invalid("control.max_attempts", "must be at least 1");
+        }
+        let p = &self.policy;
+        if p.call_deadline_ms == 0 || p.startup_deadline_ms == 0 || p.episode_budget_ms == 0 {
+            return invalid(
+                "policy",
+                "call_deadline_ms, startup_deadline_ms and episode_budget_ms must be at least 1",
+            );
+        }
+        if p.max_successive_timeouts == 0 {
+            return invalid("policy.max_successive_timeouts", "must be at least 1");
         }
         Ok(())
     }

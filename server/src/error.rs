@@ -37,6 +37,19 @@ pub enum ServiceError {
     },
     #[error("{0}")]
     Unavailable(String),
+    /// The policy endpoint's address is not allowed (private network, malformed URL, ...).
+    #[error("policy endpoint refused: {0}")]
+    EndpointRefused(String),
+    /// The endpoint did not pass the registration probe (health, GetSpec).
+    #[error("policy probe failed: {0}")]
+    ProbeFailed(String),
+    /// This server was built without a policy probe, so it cannot accept policies.
+    #[error("{0}")]
+    PolicyDisabled(String),
+    #[error(
+        "quota exceeded: at most {limit} policy runs of a team evaluate at the same time; wait for one to finish"
+    )]
+    ConcurrentRuns { limit: u32 },
     #[error("internal error")]
     Internal(#[from] anyhow::Error),
 }
@@ -64,6 +77,10 @@ impl ServiceError {
             ServiceError::Conflict(_) => "conflict",
             ServiceError::Quota { .. } => "quota_exceeded",
             ServiceError::Unavailable(_) => "unavailable",
+            ServiceError::EndpointRefused(_) => "endpoint_refused",
+            ServiceError::ProbeFailed(_) => "policy_probe_failed",
+            ServiceError::PolicyDisabled(_) => "policy_evaluation_disabled",
+            ServiceError::ConcurrentRuns { .. } => "concurrent_runs_exceeded",
             ServiceError::Internal(_) => "internal",
         }
     }
@@ -78,7 +95,10 @@ impl ServiceError {
             ServiceError::NotFound { .. } => StatusCode::NOT_FOUND,
             ServiceError::Conflict(_) => StatusCode::CONFLICT,
             ServiceError::Quota { .. } => StatusCode::TOO_MANY_REQUESTS,
-            ServiceError::Unavailable(_) => StatusCode::SERVICE_UNAVAILABLE,
+            ServiceError::Unavailable(_) | ServiceError::PolicyDisabled(_) => StatusCode::SERVICE_UNAVAILABLE,
+            ServiceError::EndpointRefused(_) => StatusCode::BAD_REQUEST,
+            ServiceError::ProbeFailed(_) => StatusCode::UNPROCESSABLE_ENTITY,
+            ServiceError::ConcurrentRuns { .. } => StatusCode::TOO_MANY_REQUESTS,
             ServiceError::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
         }
     }
@@ -136,8 +156,12 @@ impl From<ServiceError> for tonic::Status {
             ServiceError::PlanFile(_) | ServiceError::BadRequest(_) => tonic::Status::invalid_argument(msg),
             ServiceError::NotFound { .. } => tonic::Status::not_found(msg),
             ServiceError::Conflict(_) => tonic::Status::already_exists(msg),
-            ServiceError::Quota { .. } => tonic::Status::resource_exhausted(msg),
-            ServiceError::Unavailable(_) => tonic::Status::unavailable(msg),
+            ServiceError::Quota { .. } | ServiceError::ConcurrentRuns { .. } => {
+                tonic::Status::resource_exhausted(msg)
+            }
+            ServiceError::Unavailable(_) | ServiceError::PolicyDisabled(_) => tonic::Status::unavailable(msg),
+            ServiceError::EndpointRefused(_) => tonic::Status::invalid_argument(msg),
+            ServiceError::ProbeFailed(_) => tonic::Status::failed_precondition(msg),
             ServiceError::Internal(_) => tonic::Status::internal(msg),
         }
     }

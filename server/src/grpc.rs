@@ -8,7 +8,7 @@ use tonic::{Request, Response, Status};
 
 use crate::error::ServiceError;
 use crate::leaderboard::Track;
-use crate::service::{AppState, Scores, SubmissionView};
+use crate::service::{AppState, EpisodeView, RegisterPolicy, Scores, SubmissionView};
 
 #[derive(Debug, Clone)]
 pub struct SubmissionsService {
@@ -28,7 +28,7 @@ impl SubmissionsService {
     }
 }
 
-fn bearer<T>(req: &Request<T>) -> Option<String> {
+pub(crate) fn bearer<T>(req: &Request<T>) -> Option<String> {
     let v = req.metadata().get("authorization")?.to_str().ok()?;
     let t = v
         .strip_prefix("Bearer ")
@@ -47,7 +47,21 @@ fn split(s: &str, default: Option<Split>) -> Result<Split, Status> {
 fn scores(s: Scores) -> pb::Scores {
     pb::Scores {
         em: s.em,
-        ..Default::default()
+        sr: s.sr,
+        mse: s.mse,
+        m: s.m,
+        p: s.p,
+    }
+}
+
+fn episode(e: EpisodeView) -> pb::EpisodeSummary {
+    pb::EpisodeSummary {
+        key: e.key,
+        mode: e.mode,
+        success_rate: e.success_rate,
+        mse: e.mse,
+        failure: e.failure.unwrap_or_default(),
+        failure_reasons: e.failure_reasons,
     }
 }
 
@@ -59,22 +73,30 @@ fn submission(v: SubmissionView) -> pb::Submission {
         kind: v.kind,
         created_at: v.created_at,
         runs: v.runs as u32,
-        latest_run: v.latest_run.map(|r| pb::ScoringRun {
-            id: r.id,
-            scorer_version: r.scorer_version,
-            created_at: r.created_at,
-            scores: Some(scores(r.scores)),
-            instructions: r
-                .instructions
-                .into_iter()
-                .map(|i| pb::InstructionResult {
-                    id: i.id,
-                    present: i.present,
-                    correct_steps: i.correct_steps.unwrap_or(0) as u32,
-                    total_steps: i.total_steps.unwrap_or(0) as u32,
-                    em: i.em,
-                })
-                .collect(),
+        latest_run: v.latest_run.map(|r| {
+            let eval = r.evaluation;
+            pb::ScoringRun {
+                state: eval.as_ref().map_or_else(String::new, |e| e.state.to_string()),
+                episodes_total: eval.as_ref().map_or(0, |e| e.episodes_total as u32),
+                episodes_done: eval.as_ref().map_or(0, |e| e.episodes_done as u32),
+                episodes_running: eval.as_ref().map_or(0, |e| e.episodes_running as u32),
+                episodes: eval.map_or_else(Vec::new, |e| e.episodes.into_iter().map(episode).collect()),
+                id: r.id,
+                scorer_version: r.scorer_version,
+                created_at: r.created_at,
+                scores: Some(scores(r.scores)),
+                instructions: r
+                    .instructions
+                    .into_iter()
+                    .map(|i| pb::InstructionResult {
+                        id: i.id,
+                        present: i.present,
+                        correct_steps: i.correct_steps.unwrap_or(0) as u32,
+                        total_steps: i.total_steps.unwrap_or(0) as u32,
+                        em: i.em,
+                    })
+                    .collect(),
+            }
         }),
     }
 }
@@ -103,11 +125,25 @@ impl Submissions for SubmissionsService {
         &self,
         req: Request<pb::RegisterPolicyRequest>,
     ) -> Result<Response<pb::RegisterPolicyResponse>, Status> {
-        // Authenticate first so a caller learns about a bad token before anything else.
-        self.state.authenticate(bearer(&req).as_deref()).await?;
-        Err(Status::unimplemented(
-            "this server scores the planning track only: policy evaluation is not enabled",
-        ))
+        let token = bearer(&req);
+        let m = req.into_inner();
+        let request = RegisterPolicy {
+            endpoint: m.endpoint,
+            split: split(&m.split, None)?,
+            token: Some(m.endpoint_token).filter(|t| !t.is_empty()),
+            plans: (m.plans_submission_id != 0).then_some(m.plans_submission_id),
+            episodes: m.episodes,
+            reference: m.reference,
+        };
+        let done = self.state.register_policy(token.as_deref(), request).await?;
+        Ok(Response::new(pb::RegisterPolicyResponse {
+            id: done.id,
+            episodes: done.episodes as u32,
+            run_id: done.run_id,
+            instructions: done.instructions as u32,
+            max_concurrency: done.max_concurrency,
+            policy: done.policy,
+        }))
     }
 
     async fn get_submission(
@@ -131,17 +167,18 @@ impl Submissions for SubmissionsService {
         let split = split(&msg.split, Some(Split::Test))?;
         let board = self.state.leaderboard(track, split).await?;
         Ok(Response::new(pb::Leaderboard {
-            track: "planning".into(),
+            track: track.as_str().into(),
             split: split.to_string(),
             rows: board
                 .rows
                 .into_iter()
                 .map(|r| pb::LeaderboardRow {
-                    rank: r.rank as u32,
+                    rank: r.rank.map_or(0, |n| n as u32),
                     team: r.team,
                     submission_id: r.submission_id,
                     scores: Some(scores(r.scores)),
                     submitted_at: r.submitted_at,
+                    baseline: r.baseline,
                 })
                 .collect(),
         }))

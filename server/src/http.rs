@@ -1,4 +1,4 @@
-//! The HTTP adapter (axum): routes of DESIGN.md "The public interface" for the planning track.
+//! The HTTP adapter (axum): routes of DESIGN.md "The public interface".
 //!
 //! Handlers only extract, call one service function and shape the answer; every rule is in
 //! [`crate::service`]. Errors are always JSON (`{"error", "code", ...}`), including bad query
@@ -19,7 +19,7 @@ use tokio_stream::StreamExt;
 
 use crate::error::ServiceError;
 use crate::leaderboard::{Format, Track};
-use crate::service::AppState;
+use crate::service::{AppState, RegisterPolicy};
 
 type Params = Query<HashMap<String, String>>;
 
@@ -33,6 +33,7 @@ pub fn router(state: AppState) -> Router {
         .route("/api/v1/scenes/{id}", get(scene))
         .route("/api/v1/scenes/{id}/topdown.png", get(topdown))
         .route("/api/v1/submissions/plans", post(submit_plans))
+        .route("/api/v1/submissions/policies", post(register_policy))
         .route("/api/v1/submissions/{id}", get(submission))
         .route("/api/v1/leaderboard", get(leaderboard))
         .route("/api/v1/admin/rescore", post(rescore))
@@ -72,9 +73,7 @@ async fn healthz() -> impl IntoResponse {
 
 async fn index(State(s): State<AppState>, Query(q): Params) -> Result<Response, ServiceError> {
     let split = split_param(q.get("split"), Some(Split::Test))?;
-    let body = s
-        .leaderboard_rendered(Track::Planning, split, Format::Html)
-        .await?;
+    let body = s.leaderboard_page(split).await?;
     Ok(Html(body).into_response())
 }
 
@@ -149,6 +148,20 @@ async fn submit_plans(
     let split = split_param(q.get("split"), None)?;
     let body = read_limited(body, s.config().max_body_bytes).await?;
     let done = s.submit_plans(token, split, &body).await?;
+    Ok((StatusCode::CREATED, axum::Json(done)).into_response())
+}
+
+async fn register_policy(
+    State(s): State<AppState>,
+    headers: HeaderMap,
+    body: Bytes,
+) -> Result<Response, ServiceError> {
+    let req: RegisterPolicy = serde_json::from_slice(&body).map_err(|e| {
+        ServiceError::BadRequest(format!(
+            "expected {{\"endpoint\": \"http://HOST:PORT\", \"split\": \"dev\"|\"test\", \"token\"?, \"plans\"?, \"episodes\"?, \"reference\"?}}: {e}"
+        ))
+    })?;
+    let done = s.register_policy(bearer(&headers), req).await?;
     Ok((StatusCode::CREATED, axum::Json(done)).into_response())
 }
 

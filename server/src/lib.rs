@@ -5,21 +5,31 @@
 //! runs, leaderboard order) and its storage. It must not step physics (that is `sim`) nor parse
 //! command lines (that is the `kitchen-r` binary, which calls [`build`] then [`Server::run`]).
 //!
-//! Layout: [`service`] holds the rules; [`http`] and [`grpc`] are thin adapters; [`store`] is
-//! every SQL statement; [`plans`] parses and scores plan files; [`content`] holds the dataset.
+//! Layout: [`service`] holds the rules; [`http`], [`grpc`] and [`grpc_worker`] are thin
+//! adapters; [`store`] is every SQL statement (including the job queue); [`plans`] parses and
+//! scores plan files; [`episodes`] defines policy-run episodes and their scoring; [`probe`] is
+//! the seam through which the binary supplies the policy endpoint probe; [`content`] holds the
+//! dataset.
 
 pub mod config;
 pub mod content;
+pub mod episodes;
 pub mod error;
 pub mod grpc;
+pub mod grpc_worker;
 pub mod http;
 pub mod leaderboard;
 pub mod plans;
+pub mod probe;
 pub mod service;
 pub mod store;
+#[cfg(test)]
+pub(crate) mod testutil;
 
 use std::future::Future;
 use std::net::SocketAddr;
+use std::sync::Arc;
+use std::time::Duration;
 
 use anyhow::Context;
 use tokio::net::TcpListener;
@@ -27,6 +37,7 @@ use tokio_stream::wrappers::TcpListenerStream;
 
 pub use config::Config;
 pub use error::ServiceError;
+pub use probe::{BoxFuture, NoProbe, PolicyProbe, ProbeError, ProbedSpec};
 pub use service::AppState;
 
 /// A server ready to listen: state loaded, database migrated.
@@ -35,31 +46,58 @@ pub struct Server {
     state: AppState,
     /// The organiser token generated at start because none was configured; print it once.
     pub generated_admin_token: Option<String>,
+    /// The worker token generated at start because none was configured (`worker_token` /
+    /// `KITCHEN_R_WORKER_TOKEN`); in-process workers use [`Server::worker_token`].
+    pub generated_worker_token: Option<String>,
+    worker_token: String,
 }
 
-/// Validate the configuration, load the content, open and migrate the database.
+/// [`build_with`] and [`NoProbe`]: a server that scores plans but refuses policy registration
+/// (503 `policy_evaluation_disabled`), for callers that cannot evaluate policies.
 pub async fn build(config: Config) -> anyhow::Result<Server> {
+    build_with(config, Arc::new(NoProbe)).await
+}
+
+/// Validate the configuration, load the content, open and migrate the database. `probe` checks
+/// policy endpoints at registration (the `kitchen-r` binary passes the worker crate's probe).
+pub async fn build_with(config: Config, probe: Arc<dyn PolicyProbe>) -> anyhow::Result<Server> {
     config.validate()?;
     let assets = config.assets_dir();
     let content = content::Content::load(&assets)
         .with_context(|| format!("loading assets from {}", assets.display()))?;
     let pool = store::connect(&config.db).await?;
-    let (admin, generated) = if config.admin_token.is_empty() {
+    let (admin, generated_admin_token) = token_or_generated(&config.admin_token);
+    let (worker_token, generated_worker_token) = token_or_generated(&config.worker_token);
+    let tokens = service::Tokens {
+        admin: &admin,
+        worker: &worker_token,
+    };
+    let state = AppState::new(pool, config, content, tokens, probe);
+    Ok(Server {
+        state,
+        generated_admin_token,
+        generated_worker_token,
+        worker_token,
+    })
+}
+
+fn token_or_generated(configured: &str) -> (String, Option<String>) {
+    if configured.is_empty() {
         let t = service::new_token();
         (t.clone(), Some(t))
     } else {
-        (config.admin_token.clone(), None)
-    };
-    let state = AppState::new(pool, config, content, &admin);
-    Ok(Server {
-        state,
-        generated_admin_token: generated,
-    })
+        (configured.to_string(), None)
+    }
 }
 
 impl Server {
     pub fn state(&self) -> &AppState {
         &self.state
+    }
+
+    /// The token workers must present on the `Worker` gRPC service (configured or generated).
+    pub fn worker_token(&self) -> &str {
+        &self.worker_token
     }
 
     /// Bind the configured HTTP and gRPC addresses (port 0 picks a free port).
@@ -89,6 +127,7 @@ impl Server {
         let wait = |mut rx: tokio::sync::watch::Receiver<bool>| async move {
             let _ = rx.wait_for(|stop| *stop).await;
         };
+        tokio::spawn(reaper(self.state.clone(), rx.clone()));
         let app = http::router(self.state.clone());
         let http_server = axum::serve(http, app).with_graceful_shutdown(wait(rx.clone()));
         let grpc_server = grpc_routes(self.state.clone())
@@ -101,7 +140,7 @@ impl Server {
     }
 }
 
-async fn grpc_routes(state: AppState) -> anyhow::Result<tonic::transport::server::Router> {
+pub(crate) async fn grpc_routes(state: AppState) -> anyhow::Result<tonic::transport::server::Router> {
     let (health_reporter, health) = tonic_health::server::health_reporter();
     health_reporter
         .set_serving::<kitchen_r_proto::submission::v1::submissions_server::SubmissionsServer<grpc::SubmissionsService>>()
@@ -114,7 +153,25 @@ async fn grpc_routes(state: AppState) -> anyhow::Result<tonic::transport::server
     Ok(tonic::transport::Server::builder()
         .add_service(health)
         .add_service(reflection)
-        .add_service(grpc::SubmissionsService::new(state).into_server()))
+        .add_service(grpc::SubmissionsService::new(state.clone()).into_server())
+        .add_service(grpc_worker::WorkerService::new(state).into_server()))
+}
+
+/// Requeues expired leases every `control.reaper_interval_s` until shutdown. Leases held by
+/// workers that died (or by a previous server process) simply expire and come back here.
+async fn reaper(state: AppState, mut stop: tokio::sync::watch::Receiver<bool>) {
+    let every = Duration::from_secs(state.config().control.reaper_interval_s.max(1));
+    let mut tick = tokio::time::interval(every);
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    loop {
+        tokio::select! {
+            _ = tick.tick() => {}
+            _ = stop.wait_for(|s| *s) => return,
+        }
+        if let Err(e) = state.reap_expired(service::now_ms()).await {
+            tracing::error!(error = %e, "reaper failed; retrying next tick");
+        }
+    }
 }
 
 /// The addresses a server actually listens on, for the readiness line.

@@ -1,6 +1,14 @@
 //! The service layer: every rule of the server (authentication, quotas, validation, scoring,
 //! leaderboard order) lives here, once. The HTTP and gRPC adapters only translate requests and
 //! answers; they call these functions and nothing below them.
+//!
+//! Submodules: [`policies`] registers policy endpoints and shows their runs; [`jobs`] is the
+//! worker-facing queue (lease, heartbeat, report, reaper); [`scores`] is how scores are shown.
+
+pub mod jobs;
+pub mod policies;
+mod progress;
+mod scores;
 
 use std::sync::Arc;
 
@@ -14,7 +22,12 @@ use crate::content::Content;
 use crate::error::ServiceError;
 use crate::leaderboard::LeaderboardCache;
 use crate::plans::{self, InstructionScore};
+use crate::probe::PolicyProbe;
 use crate::store::{self, NewRun, Team};
+
+pub use policies::{PolicyInfo, RegisterPolicy, Registered};
+pub use progress::{EpisodeView, PolicyRunView};
+pub use scores::{Scores, fmt_score};
 
 /// Version of the planning scorer; part of every scoring run's `scorer_version`.
 pub const PLANNING_SCORER: &str = "planning-em/1";
@@ -35,6 +48,10 @@ struct Inner {
     /// Serialises quota check + insert so two concurrent uploads cannot both take the last slot.
     submit_lock: tokio::sync::Mutex<()>,
     leaderboard: LeaderboardCache,
+    worker_hash: String,
+    probe: Arc<dyn PolicyProbe>,
+    /// Woken whenever jobs become available, so long-polling `Lease` calls answer at once.
+    jobs_ready: tokio::sync::Notify,
 }
 
 impl std::fmt::Debug for AppState {
@@ -60,11 +77,6 @@ pub struct Submitted {
     pub warnings: Vec<String>,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct Scores {
-    pub em: Option<f64>,
-}
-
 #[derive(Debug, Clone, Serialize)]
 pub struct SubmissionView {
     pub id: i64,
@@ -73,6 +85,9 @@ pub struct SubmissionView {
     pub kind: String,
     pub created_at: String,
     pub runs: i64,
+    /// Policy submissions: the endpoint as registered (never its token).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub policy: Option<PolicyInfo>,
     pub latest_run: Option<RunView>,
 }
 
@@ -83,6 +98,9 @@ pub struct RunView {
     pub created_at: String,
     pub scores: Scores,
     pub instructions: Vec<InstructionView>,
+    /// Policy runs: progress and per-episode, per-task results.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub evaluation: Option<PolicyRunView>,
 }
 
 /// Per-instruction result; never carries ground truth. For the test split the step counts are
@@ -110,16 +128,34 @@ pub struct RescoreFailure {
     pub error: String,
 }
 
+/// The secrets an [`AppState`] checks callers against.
+#[derive(Debug, Clone, Copy)]
+pub struct Tokens<'a> {
+    /// The organiser's token.
+    pub admin: &'a str,
+    /// The token simulation workers present on the `Worker` gRPC service.
+    pub worker: &'a str,
+}
+
 impl AppState {
-    pub fn new(pool: SqlitePool, config: Config, content: Content, admin_token: &str) -> AppState {
+    pub fn new(
+        pool: SqlitePool,
+        config: Config,
+        content: Content,
+        tokens: Tokens<'_>,
+        probe: Arc<dyn PolicyProbe>,
+    ) -> AppState {
         AppState {
             inner: Arc::new(Inner {
                 pool,
                 config,
                 content,
-                admin_hash: hash_token(admin_token),
+                admin_hash: hash_token(tokens.admin),
                 submit_lock: tokio::sync::Mutex::new(()),
                 leaderboard: LeaderboardCache::default(),
+                worker_hash: hash_token(tokens.worker),
+                probe,
+                jobs_ready: tokio::sync::Notify::new(),
             }),
         }
     }
@@ -209,7 +245,7 @@ impl AppState {
         Ok(Submitted {
             id,
             split,
-            scores: Scores { em: Some(score.em) },
+            scores: Scores::em(Some(score.em)),
             warnings: plans::warnings(&score),
         })
     }
@@ -247,21 +283,31 @@ impl AppState {
             .await?
             .filter(|s| viewer.as_ref().is_none_or(|t| t.id == s.team_id))
             .ok_or_else(|| ServiceError::not_found(format!("submission {id}")))?;
+        let hidden = sub.split == Split::Test.as_str();
+        let is_policy = sub.kind == "policy";
         let latest_run = match store::latest_run(self.pool(), id).await? {
             None => None,
             Some(run) => {
                 let instructions = store::instruction_results(self.pool(), run.id).await?;
+                let evaluation = match is_policy {
+                    true => Some(self.policy_run_view(&run, hidden).await?),
+                    false => None,
+                };
                 Some(RunView {
                     id: run.id,
                     scorer_version: run.scorer_version,
                     created_at: rfc3339(run.created_at),
-                    scores: Scores { em: run.em },
-                    instructions: instructions
-                        .iter()
-                        .map(|i| instruction_view(i, sub.split == Split::Test.as_str()))
-                        .collect(),
+                    scores: run.scores,
+                    instructions: instructions.iter().map(|i| instruction_view(i, hidden)).collect(),
+                    evaluation,
                 })
             }
+        };
+        let policy = match is_policy {
+            true => Some(policies::policy_info(
+                &store::submission_body(self.pool(), id).await?.1,
+            )?),
+            false => None,
         };
         Ok(SubmissionView {
             id: sub.id,
@@ -270,6 +316,7 @@ impl AppState {
             kind: sub.kind,
             created_at: rfc3339(sub.created_at),
             runs: sub.runs,
+            policy,
             latest_run,
         })
     }

@@ -4,6 +4,12 @@
 //! (a rescore is a new run on the same submission). A submission and its first run are inserted
 //! in one transaction, so a crash never leaves an unscored submission or an orphan run.
 //! Times are Unix milliseconds (UTC) in INTEGER columns.
+//!
+//! Submodules: [`runs`] (policy submissions, their runs, results, policy leaderboards) and
+//! [`queue`] (the job queue).
+
+pub mod queue;
+pub mod runs;
 
 use std::path::Path;
 use std::str::FromStr;
@@ -17,6 +23,7 @@ use sqlx::sqlite::{
 use sqlx::{QueryBuilder, Row, Sqlite};
 
 use crate::plans::InstructionScore;
+use crate::service::Scores;
 
 /// Open (creating file and directory if missing) and migrate the database.
 pub async fn connect(url: &str) -> anyhow::Result<SqlitePool> {
@@ -77,14 +84,19 @@ pub async fn team_by_token_hash(pool: &SqlitePool, token_hash: &str) -> sqlx::Re
     }))
 }
 
-/// A team's submissions to `split` received at or after `since` (ms).
+/// A team's submissions to `split` received at or after `since` (ms). Policy runs the platform
+/// could not evaluate (`platform_failed`) do not count: failures caused by the platform never
+/// use quota.
 pub async fn count_submissions_since(
     pool: &SqlitePool,
     team: i64,
     split: Split,
     since: i64,
 ) -> sqlx::Result<i64> {
-    sqlx::query_scalar("SELECT COUNT(*) FROM submissions WHERE team_id = ? AND split = ? AND created_at >= ?")
+    sqlx::query_scalar(
+        "SELECT COUNT(*) FROM submissions s WHERE s.team_id = ? AND s.split = ? AND s.created_at >= ?
+         AND NOT EXISTS (SELECT 1 FROM scoring_runs r WHERE r.submission_id = s.id AND r.state = 'platform_failed')",
+    )
         .bind(team)
         .bind(split.as_str())
         .bind(since)
@@ -203,12 +215,17 @@ pub struct RunRow {
     pub id: i64,
     pub scorer_version: String,
     pub created_at: i64,
-    pub em: Option<f64>,
+    pub scores: Scores,
+    /// `active`, `finished` or `platform_failed`.
+    pub state: String,
+    pub episodes_total: i64,
+    pub finished_at: Option<i64>,
 }
 
 pub async fn latest_run(pool: &SqlitePool, submission: i64) -> sqlx::Result<Option<RunRow>> {
     let row = sqlx::query(
-        "SELECT id, scorer_version, created_at, em FROM scoring_runs WHERE submission_id = ? ORDER BY id DESC LIMIT 1",
+        "SELECT id, scorer_version, created_at, em, sr, mse, m, p, state, episodes_total, finished_at
+         FROM scoring_runs WHERE submission_id = ? ORDER BY id DESC LIMIT 1",
     )
     .bind(submission)
     .fetch_optional(pool)
@@ -217,7 +234,16 @@ pub async fn latest_run(pool: &SqlitePool, submission: i64) -> sqlx::Result<Opti
         id: r.get(0),
         scorer_version: r.get(1),
         created_at: r.get(2),
-        em: r.get(3),
+        scores: Scores {
+            em: r.get(3),
+            sr: r.get(4),
+            mse: r.get(5),
+            m: r.get(6),
+            p: r.get(7),
+        },
+        state: r.get(8),
+        episodes_total: r.get(9),
+        finished_at: r.get(10),
     }))
 }
 

@@ -1,0 +1,101 @@
+//! The gRPC adapter (tonic) for `kitchen_r.worker.v1.Worker`: simulation workers lease jobs,
+//! heartbeat and report results here. Served on the same port as the participant API.
+//!
+//! Only conversion lives here; the queue's rules are in [`crate::service::jobs`]. Every call
+//! needs `authorization: Bearer <worker token>` (UNAUTHENTICATED otherwise).
+
+use kitchen_r_proto::worker::v1 as pb;
+use pb::worker_server::Worker;
+use tonic::{Request, Response, Status};
+
+use crate::episodes::TaskOutcome;
+use crate::grpc::bearer;
+use crate::service::AppState;
+use crate::service::jobs::{LeasedJob, Report};
+
+#[derive(Debug, Clone)]
+pub struct WorkerService {
+    state: AppState,
+}
+
+impl WorkerService {
+    pub fn new(state: AppState) -> Self {
+        WorkerService { state }
+    }
+
+    pub fn into_server(self) -> pb::worker_server::WorkerServer<Self> {
+        // Reports carry a log tail of up to 64 KiB plus task results; leave room.
+        pb::worker_server::WorkerServer::new(self).max_decoding_message_size(1 << 20)
+    }
+}
+
+fn job(j: LeasedJob) -> pb::Job {
+    pb::Job {
+        job_id: j.id,
+        attempt: j.attempt,
+        lease_expires_at_ms: j.lease_expires_at_ms,
+        run_id: j.run_id,
+        episode_key: j.episode_key,
+        episode: Some(j.spec.episode_proto()),
+        policy: Some(j.spec.endpoint_proto()),
+    }
+}
+
+#[tonic::async_trait]
+impl Worker for WorkerService {
+    async fn lease(&self, req: Request<pb::LeaseRequest>) -> Result<Response<pb::LeaseResponse>, Status> {
+        let token = bearer(&req);
+        let m = req.into_inner();
+        let jobs = self
+            .state
+            .lease(token.as_deref(), &m.worker_id, m.max_jobs, m.wait_ms)
+            .await?;
+        Ok(Response::new(pb::LeaseResponse {
+            jobs: jobs.into_iter().map(job).collect(),
+        }))
+    }
+
+    async fn heartbeat(
+        &self,
+        req: Request<pb::HeartbeatRequest>,
+    ) -> Result<Response<pb::HeartbeatResponse>, Status> {
+        let token = bearer(&req);
+        let m = req.into_inner();
+        let out = self
+            .state
+            .heartbeat(token.as_deref(), &m.worker_id, m.job_id, m.attempt)
+            .await?;
+        Ok(Response::new(pb::HeartbeatResponse {
+            lease_expires_at_ms: out.lease_expires_at_ms.unwrap_or(0),
+            cancelled: out.lease_expires_at_ms.is_none(),
+        }))
+    }
+
+    async fn report_result(
+        &self,
+        req: Request<pb::ReportResultRequest>,
+    ) -> Result<Response<pb::ReportResultResponse>, Status> {
+        let token = bearer(&req);
+        let m = req.into_inner();
+        let result = m.result.unwrap_or_default();
+        let report = Report {
+            worker_id: m.worker_id,
+            job_id: m.job_id,
+            attempt: m.attempt,
+            run_id: m.run_id,
+            episode_key: m.episode_key,
+            tasks: result.tasks.iter().map(TaskOutcome::from).collect(),
+            platform_error: result.platform_error,
+            log_tail: result.log_tail,
+            wall_ms: result.wall_ms,
+        };
+        let out = self.state.report_result(token.as_deref(), report).await?;
+        Ok(Response::new(pb::ReportResultResponse {
+            accepted: out.accepted,
+            duplicate: out.duplicate,
+        }))
+    }
+}
+
+#[cfg(test)]
+mod tests;

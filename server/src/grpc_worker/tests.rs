@@ -1,0 +1,195 @@
+use kitchen_r_core::dataset::Split;
+use kitchen_r_proto::worker::v1::worker_client::WorkerClient;
+use tokio_stream::wrappers::TcpListenerStream;
+use tonic::Code;
+use tonic::transport::Channel;
+
+use super::*;
+use crate::testutil::{FakeProbe, Fixture, WORKER, fixture};
+
+/// The real gRPC routes on 127.0.0.1:0; returns a connected client.
+async fn serve(f: &Fixture) -> WorkerClient<Channel> {
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    let routes = crate::grpc_routes(f.state.clone()).await.unwrap();
+    tokio::spawn(routes.serve_with_incoming(TcpListenerStream::new(listener)));
+    WorkerClient::connect(format!("http://{addr}")).await.unwrap()
+}
+
+fn with_token<T>(msg: T, token: &str) -> Request<T> {
+    let mut req = Request::new(msg);
+    req.metadata_mut()
+        .insert("authorization", format!("Bearer {token}").parse().unwrap());
+    req
+}
+
+fn lease_req() -> pb::LeaseRequest {
+    pb::LeaseRequest {
+        worker_id: "host-1/42".into(),
+        max_jobs: 8,
+        wait_ms: 0,
+    }
+}
+
+#[tokio::test]
+async fn unauthenticated_workers_are_refused() {
+    let f = fixture(FakeProbe::ok(1), |_| {}).await;
+    let mut client = serve(&f).await;
+    let e = client.lease(lease_req()).await.unwrap_err();
+    assert_eq!(e.code(), Code::Unauthenticated);
+    let e = client.lease(with_token(lease_req(), "wrong")).await.unwrap_err();
+    assert_eq!(e.code(), Code::Unauthenticated);
+    let e = client
+        .heartbeat(pb::HeartbeatRequest::default())
+        .await
+        .unwrap_err();
+    assert_eq!(e.code(), Code::Unauthenticated);
+}
+
+#[tokio::test]
+async fn lease_heartbeat_and_report_over_grpc() {
+    let f = fixture(FakeProbe::ok(8), |c| {
+        c.control.dev_episodes = 1;
+        c.control.seed = 1234;
+    })
+    .await;
+    let mut client = serve(&f).await;
+    let token = f.team("alpha").await;
+    let mut reference = f.request(Split::Dev);
+    reference.token = Some("participant-secret".into());
+    f.state.register_policy(Some(&token), reference).await.unwrap();
+
+    let empty = client
+        .lease(with_token(
+            pb::LeaseRequest {
+                max_jobs: 0,
+                ..lease_req()
+            },
+            WORKER,
+        ))
+        .await;
+    assert_eq!(empty.unwrap_err().code(), Code::InvalidArgument);
+    let jobs = client
+        .lease(with_token(lease_req(), WORKER))
+        .await
+        .unwrap()
+        .into_inner()
+        .jobs;
+    assert_eq!(jobs.len(), 2);
+    let gt = &f.state.content().ground_truth(Split::Dev)[0];
+    let job = &jobs[0];
+    let ep = job.episode.clone().unwrap();
+    assert_eq!(
+        (ep.scene_id.as_str(), ep.instruction_id.as_str()),
+        (gt.scene.as_str(), gt.id.as_str())
+    );
+    assert_eq!(ep.plan, gt.plan);
+    assert_eq!((ep.seed, ep.mode), (1234, pb::EvalMode::Online as i32));
+    assert_eq!((ep.task_time_limit_s, ep.actions_executed_per_chunk), (120.0, 8));
+    assert!(ep.teleport_on_failure && !ep.privileged);
+    assert_eq!(
+        jobs[1].episode.as_ref().unwrap().mode,
+        pb::EvalMode::Offline as i32
+    );
+    assert_eq!(jobs[1].episode_key, format!("{}/offline", gt.id));
+    let policy = job.policy.clone().unwrap();
+    assert_eq!(policy.url, "http://127.0.0.1:50099");
+    assert_eq!(policy.bearer_token, "participant-secret");
+    assert_eq!(
+        (policy.call_deadline_ms, policy.startup_deadline_ms),
+        (10_000, 30_000)
+    );
+    assert_eq!(
+        (policy.episode_budget_ms, policy.max_successive_timeouts),
+        (600_000, 3)
+    );
+    assert_eq!(job.attempt, 1);
+
+    let hb = pb::HeartbeatRequest {
+        worker_id: "host-1/42".into(),
+        job_id: job.job_id,
+        attempt: 1,
+        tasks_done: 0,
+    };
+    let out = client
+        .heartbeat(with_token(hb.clone(), WORKER))
+        .await
+        .unwrap()
+        .into_inner();
+    assert!(!out.cancelled && out.lease_expires_at_ms >= job.lease_expires_at_ms);
+    let stale = pb::HeartbeatRequest { attempt: 2, ..hb };
+    assert!(
+        client
+            .heartbeat(with_token(stale, WORKER))
+            .await
+            .unwrap()
+            .into_inner()
+            .cancelled
+    );
+
+    for j in &jobs {
+        let report = pb::ReportResultRequest {
+            worker_id: "host-1/42".into(),
+            job_id: j.job_id,
+            attempt: j.attempt,
+            run_id: j.run_id,
+            episode_key: j.episode_key.clone(),
+            result: Some(pb::EpisodeResult {
+                tasks: vec![pb::TaskResult {
+                    index: 0,
+                    step: gt.plan[0].clone(),
+                    success: true,
+                    completion_time_s: 4.0,
+                    mse: 0.5,
+                    mse_samples: 3,
+                    ..Default::default()
+                }],
+                log_tail: "done".into(),
+                wall_ms: 12,
+                ..Default::default()
+            }),
+        };
+        let out = client
+            .report_result(with_token(report.clone(), WORKER))
+            .await
+            .unwrap()
+            .into_inner();
+        assert!(out.accepted && !out.duplicate);
+        let again = client
+            .report_result(with_token(report, WORKER))
+            .await
+            .unwrap()
+            .into_inner();
+        assert!(again.accepted && again.duplicate);
+    }
+    let run = f
+        .state
+        .get_submission(Some(&token), 1)
+        .await
+        .unwrap()
+        .latest_run
+        .unwrap();
+    assert_eq!(run.evaluation.unwrap().state, "finished");
+    let sr = run.scores.sr.unwrap();
+    assert!((sr - 1.0 / gt.plan.len() as f64).abs() < 1e-12);
+    assert_eq!(run.scores.mse, Some(0.5));
+}
+
+#[tokio::test]
+async fn reference_runs_reach_workers_as_privileged() {
+    let f = fixture(FakeProbe::ok(8), |c| c.control.dev_episodes = 1).await;
+    let mut client = serve(&f).await;
+    let mut reference = f.request(Split::Dev);
+    reference.reference = true;
+    f.state
+        .register_policy(Some(crate::testutil::ADMIN), reference)
+        .await
+        .unwrap();
+    let jobs = client
+        .lease(with_token(lease_req(), WORKER))
+        .await
+        .unwrap()
+        .into_inner()
+        .jobs;
+    assert!(jobs.iter().all(|j| j.episode.as_ref().unwrap().privileged));
+}

@@ -1,0 +1,151 @@
+//! Leaderboard renderings: CSV (RFC 4180 quoting, one header per track) and the self-contained
+//! HTML page. Scores print with six decimals; +inf prints as `inf`.
+
+use std::fmt::Write as _;
+
+use kitchen_r_core::dataset::Split;
+
+use super::{Leaderboard, Row, Track};
+use crate::service::fmt_score;
+
+/// A score column: its header and how to read it from a row.
+type Column = (&'static str, fn(&Row) -> Option<f64>);
+
+/// The score columns of a track.
+fn columns(track: Track) -> &'static [Column] {
+    match track {
+        Track::Planning => &[("em", |r| r.scores.em)],
+        Track::Control => &[("sr", |r| r.scores.sr), ("mse", |r| r.scores.mse)],
+        Track::Integrated => &[
+            ("m", |r| r.scores.m),
+            ("p", |r| r.scores.p),
+            ("sr", |r| r.scores.sr),
+            ("mse", |r| r.scores.mse),
+        ],
+    }
+}
+
+fn quote(s: &str) -> String {
+    if s.contains([',', '"', '\n', '\r']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
+}
+
+fn rank(r: &Row) -> String {
+    r.rank.map_or_else(String::new, |n| n.to_string())
+}
+
+/// Planning: `rank,team,submission_id,em,submitted_at`. Policy tracks add their scores, the
+/// run state and the baseline flag: `rank,team,submission_id,sr,mse,state,baseline,submitted_at`.
+pub fn csv(board: &Leaderboard) -> String {
+    let cols = columns(board.track);
+    let policy = board.track != Track::Planning;
+    let mut out = String::from("rank,team,submission_id");
+    for (name, _) in cols {
+        let _ = write!(out, ",{name}");
+    }
+    out.push_str(if policy {
+        ",state,baseline,submitted_at\n"
+    } else {
+        ",submitted_at\n"
+    });
+    for r in &board.rows {
+        let _ = write!(out, "{},{},{}", rank(r), quote(&r.team), r.submission_id);
+        for (_, get) in cols {
+            let _ = write!(out, ",{}", fmt_score(get(r)));
+        }
+        if policy {
+            let _ = write!(out, ",{},{}", r.state.as_deref().unwrap_or(""), r.baseline);
+        }
+        let _ = writeln!(out, ",{}", r.submitted_at);
+    }
+    out
+}
+
+fn escape(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+        .replace('\'', "&#39;")
+}
+
+fn describe(track: Track) -> &'static str {
+    match track {
+        Track::Planning => "best plan submission per team by Exact Match",
+        Track::Control => "best policy per team by success rate SR, then lower MSE",
+        Track::Integrated => "best policy + plans pair per team by M, then lower P",
+    }
+}
+
+fn table(board: &Leaderboard) -> String {
+    let cols = columns(board.track);
+    let policy = board.track != Track::Planning;
+    let mut head = String::from("<tr><th>Rank</th><th>Team</th>");
+    for (name, _) in cols {
+        let _ = write!(head, "<th>{}</th>", name.to_uppercase());
+    }
+    head.push_str("<th>Submission</th><th>Submitted (UTC)</th></tr>");
+    let mut rows = String::new();
+    for r in &board.rows {
+        let label = if r.baseline { " <i>(baseline)</i>" } else { "" };
+        let class = if r.baseline { " class=baseline" } else { "" };
+        let _ = write!(
+            rows,
+            "<tr{class}><td>{}</td><td>{}{label}</td>",
+            rank(r),
+            escape(&r.team)
+        );
+        for (_, get) in cols {
+            let _ = write!(rows, "<td class=n>{}</td>", fmt_score(get(r)));
+        }
+        let state = match (policy, r.state.as_deref()) {
+            (true, Some("active")) => " (evaluating)",
+            (true, Some("platform_failed")) => " (platform failure)",
+            _ => "",
+        };
+        let _ = write!(
+            rows,
+            "<td class=n>{}{state}</td><td>{}</td></tr>",
+            r.submission_id,
+            escape(&r.submitted_at)
+        );
+    }
+    if board.rows.is_empty() {
+        let _ = write!(
+            rows,
+            "<tr><td colspan={}>No submissions yet.</td></tr>",
+            cols.len() + 4
+        );
+    }
+    let track = board.track.as_str();
+    format!(
+        "<h2 id={track}>{title} track</h2><p>{what} (ties: earlier submission first). \
+<a href=\"/api/v1/leaderboard?track={track}&amp;split={split}&amp;format=csv\">CSV</a> · \
+<a href=\"/api/v1/leaderboard?track={track}&amp;split={split}\">JSON</a></p>\
+<table><thead>{head}</thead><tbody>{rows}</tbody></table>",
+        title = track[..1].to_uppercase() + &track[1..],
+        what = describe(board.track),
+        split = board.split,
+    )
+}
+
+/// The public page: one table per board, all of one split.
+pub fn page(split: Split, boards: &[Leaderboard]) -> String {
+    let other = match split {
+        Split::Dev => Split::Test,
+        Split::Test => Split::Dev,
+    };
+    let tables: String = boards.iter().map(table).collect();
+    format!(
+        "<!doctype html><html lang=en><head><meta charset=utf-8><title>Kitchen-R leaderboard</title>\
+<meta name=viewport content=\"width=device-width,initial-scale=1\">\
+<style>body{{font-family:system-ui,sans-serif;margin:2rem auto;max-width:60rem;padding:0 1rem}}\
+table{{border-collapse:collapse;width:100%;margin-bottom:2rem}}th,td{{padding:.4rem .6rem;border-bottom:1px solid #ddd;text-align:left}}\
+td.n{{text-align:right;font-variant-numeric:tabular-nums}}th{{background:#f4f4f4}}tr.baseline{{color:#555;background:#fafafa}}</style></head><body>\
+<h1>Kitchen-R leaderboard</h1><p><b>{split}</b> split. <a href=\"/?split={other}\">Show the {other} split</a>. \
+Baseline rows are organiser reference runs and take no rank.</p>{tables}</body></html>"
+    )
+}

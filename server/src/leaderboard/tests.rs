@@ -1,0 +1,271 @@
+use super::render::{csv, page};
+use super::*;
+use crate::testutil::{FakeProbe, fixture};
+
+fn board(team: &str) -> Leaderboard {
+    Leaderboard {
+        track: Track::Planning,
+        split: Split::Test,
+        rows: vec![Row {
+            rank: Some(1),
+            team: team.into(),
+            submission_id: 7,
+            scores: Scores::em(Some(0.5)),
+            submitted_at: "2026-01-01T00:00:00Z".into(),
+            state: None,
+            baseline: false,
+        }],
+    }
+}
+
+#[test]
+fn csv_quotes_and_formats() {
+    assert_eq!(
+        csv(&board("a,b")),
+        "rank,team,submission_id,em,submitted_at\n1,\"a,b\",7,0.500000,2026-01-01T00:00:00Z\n"
+    );
+}
+
+#[test]
+fn html_escapes_team_names() {
+    let page = page(Split::Test, &[board("<script>")]);
+    assert!(page.contains("&lt;script&gt;") && !page.contains("<script>"));
+}
+
+#[test]
+fn tracks_parse() {
+    assert_eq!("".parse::<Track>().unwrap(), Track::Planning);
+    assert_eq!("control".parse::<Track>().unwrap(), Track::Control);
+    assert_eq!("integrated".parse::<Track>().unwrap(), Track::Integrated);
+    assert!("nope".parse::<Track>().is_err());
+}
+
+/// A policy submission with a finished (or active) run carrying exactly these scores.
+#[allow(clippy::too_many_arguments)]
+async fn policy(
+    pool: &sqlx::SqlitePool,
+    team: i64,
+    at: i64,
+    reference: bool,
+    plans: bool,
+    state: &str,
+    sr: Option<f64>,
+    mse: Option<f64>,
+    m: Option<f64>,
+    p: Option<f64>,
+) -> i64 {
+    let body = serde_json::json!({"reference": reference, "plans": if plans { Some(1) } else { None }});
+    let sub: i64 = sqlx::query_scalar(
+        "INSERT INTO submissions (team_id, split, kind, body, created_at) VALUES (?, 'dev', 'policy', ?, ?) RETURNING id",
+    )
+    .bind(team)
+    .bind(body.to_string())
+    .bind(at)
+    .fetch_one(pool)
+    .await
+    .unwrap();
+    sqlx::query(
+        "INSERT INTO scoring_runs (submission_id, scorer_version, created_at, scores, state, sr, mse, m, p)
+         VALUES (?, 'test', ?, '{}', ?, ?, ?, ?, ?)",
+    )
+    .bind(sub)
+    .bind(at)
+    .bind(state)
+    .bind(sr)
+    .bind(mse)
+    .bind(m)
+    .bind(p)
+    .execute(pool)
+    .await
+    .unwrap();
+    sub
+}
+
+#[tokio::test]
+async fn control_and_integrated_order_with_baselines_and_infinite_p() {
+    let f = fixture(FakeProbe::ok(1), |_| {}).await;
+    for name in ["a", "b", "c", "d"] {
+        f.team(name).await;
+    }
+    let base = crate::store::runs::baseline_team(f.state.pool(), 0)
+        .await
+        .unwrap()
+        .id;
+    let pool = f.state.pool();
+    let fin = "finished";
+    // Team a: SR 0.5 then 0.8 (best counts). b: 0.8 with lower MSE than a's → b first.
+    policy(
+        pool,
+        1,
+        10,
+        false,
+        true,
+        fin,
+        Some(0.5),
+        Some(0.1),
+        Some(1.0),
+        Some(2.0),
+    )
+    .await;
+    let a_best = policy(
+        pool,
+        1,
+        20,
+        false,
+        true,
+        fin,
+        Some(0.8),
+        Some(0.3),
+        Some(1.5),
+        Some(f64::INFINITY),
+    )
+    .await;
+    let b = policy(
+        pool,
+        2,
+        30,
+        false,
+        true,
+        fin,
+        Some(0.8),
+        Some(0.2),
+        Some(1.5),
+        Some(3.0),
+    )
+    .await;
+    // c: still evaluating → last, never first. d: no plans → not on the integrated track.
+    let c = policy(pool, 3, 5, false, true, "active", None, None, None, None).await;
+    let d = policy(pool, 4, 40, false, false, fin, Some(0.1), None, None, None).await;
+    // Two baseline runs: both shown, ranked among teams by score, without a rank number.
+    let b1 = policy(
+        pool,
+        base,
+        1,
+        true,
+        true,
+        fin,
+        Some(1.0),
+        Some(0.0),
+        Some(2.0),
+        Some(1.0),
+    )
+    .await;
+    let b2 = policy(
+        pool,
+        base,
+        2,
+        true,
+        true,
+        fin,
+        Some(0.0),
+        Some(9.0),
+        Some(0.0),
+        Some(f64::INFINITY),
+    )
+    .await;
+    f.state.leaderboard_cache().invalidate();
+
+    let control = f.state.leaderboard(Track::Control, Split::Dev).await.unwrap();
+    let order: Vec<(i64, Option<usize>, bool)> = control
+        .rows
+        .iter()
+        .map(|r| (r.submission_id, r.rank, r.baseline))
+        .collect();
+    assert_eq!(
+        order,
+        vec![
+            (b1, None, true),
+            (b, Some(1), false),
+            (a_best, Some(2), false),
+            (d, Some(3), false),
+            (b2, None, true),
+            (c, Some(4), false),
+        ]
+    );
+    let integrated = f.state.leaderboard(Track::Integrated, Split::Dev).await.unwrap();
+    let order: Vec<i64> = integrated.rows.iter().map(|r| r.submission_id).collect();
+    // M ties 1.5: b's P 3.0 beats a's +inf.
+    assert_eq!(order, vec![b1, b, a_best, b2, c]);
+
+    let json = String::from_utf8(
+        f.state
+            .leaderboard_rendered(Track::Integrated, Split::Dev, Format::Json)
+            .await
+            .unwrap()
+            .to_vec(),
+    )
+    .unwrap();
+    assert!(
+        json.contains(r#""p":"inf""#) && json.contains(r#""baseline":true"#),
+        "{json}"
+    );
+    let text = String::from_utf8(
+        f.state
+            .leaderboard_rendered(Track::Integrated, Split::Dev, Format::Csv)
+            .await
+            .unwrap()
+            .to_vec(),
+    )
+    .unwrap();
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next(),
+        Some("rank,team,submission_id,m,p,sr,mse,state,baseline,submitted_at")
+    );
+    let a_line = lines.nth(2).unwrap();
+    assert!(
+        a_line.starts_with(&format!(
+            "2,a,{a_best},1.500000,inf,0.800000,0.300000,finished,false,"
+        )),
+        "{text}"
+    );
+    let html = String::from_utf8(f.state.leaderboard_page(Split::Dev).await.unwrap().to_vec()).unwrap();
+    for needle in [
+        "Planning track",
+        "Control track",
+        "Integrated track",
+        "<td>a</td>",
+        "(baseline)",
+        ">inf<",
+    ] {
+        assert!(html.contains(needle), "{needle}");
+    }
+}
+
+#[tokio::test]
+async fn the_cache_is_dropped_when_a_run_finishes() {
+    use crate::testutil::WORKER;
+    let f = fixture(FakeProbe::ok(8), |c| {
+        c.control.dev_episodes = 1;
+        c.control.offline_mse = false;
+    })
+    .await;
+    let token = f.team("alpha").await;
+    f.state
+        .register_policy(Some(&token), f.request(Split::Dev))
+        .await
+        .unwrap();
+    let before = f
+        .state
+        .leaderboard_rendered(Track::Control, Split::Dev, Format::Csv)
+        .await
+        .unwrap();
+    assert!(
+        String::from_utf8_lossy(&before).contains(",active,"),
+        "{before:?}"
+    );
+    let job = f.lease("w", 1).await.remove(0);
+    f.state
+        .report_result(Some(WORKER), f.report("w", &job, |_| true, 0.0))
+        .await
+        .unwrap();
+    let after = f
+        .state
+        .leaderboard_rendered(Track::Control, Split::Dev, Format::Csv)
+        .await
+        .unwrap();
+    assert!(
+        String::from_utf8_lossy(&after).contains("1,alpha,1,1.000000,,finished,false,"),
+        "{after:?}"
+    );
+}

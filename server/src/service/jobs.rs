@@ -1,0 +1,418 @@
+//! The worker-facing queue: lease (long-polled), heartbeat, result reports and the reaper.
+//!
+//! Policy:
+//! - workers authenticate with the worker token; a lease is `(job, attempt, owner)`;
+//! - a report quoting an older attempt is refused (`accepted = false`), a second report of an
+//!   already recorded `(run, episode)` is acknowledged as a duplicate and changes nothing;
+//! - a report with `platform_error` set (or an expired lease) requeues the job without
+//!   recording anything against the participant; after `max_attempts` leases the episode is
+//!   recorded as failed with the reason, so a run always finishes;
+//! - the report (or reap) that closes a run's last job computes the run's scores in the same
+//!   transaction, so a crash can never leave a finished run unscored or scored twice.
+
+use std::collections::{BTreeSet, HashMap};
+use std::time::Duration;
+
+use kitchen_r_core::dataset::Split;
+use serde::Serialize;
+use sqlx::SqliteConnection;
+use tokio::time::Instant;
+
+use super::policies::parse_body;
+use super::{AppState, hash_token, now_ms};
+use crate::config::PlanLimits;
+use crate::episodes::{self, JobSpec, TaskOutcome};
+use crate::error::ServiceError;
+use crate::plans;
+use crate::store::queue::{self, JobRow, NewResult};
+use crate::store::runs;
+
+/// Most jobs one Lease call hands out, and the longest it is held open.
+pub const MAX_JOBS_PER_LEASE: u32 = 64;
+pub const MAX_LEASE_WAIT_MS: u32 = 30_000;
+/// Cap of the stored log tail (worker.proto: 64 KiB).
+pub const MAX_LOG_TAIL_BYTES: usize = 64 << 10;
+const MAX_TASKS: usize = 256;
+const MAX_REASON_CHARS: usize = 2000;
+/// A long-polling Lease re-checks the queue this often even without a wake-up, so a slot freed
+/// by another process's write is not missed.
+const POLL_INTERVAL: Duration = Duration::from_millis(500);
+
+/// A job as handed to a worker.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LeasedJob {
+    pub id: i64,
+    pub attempt: u32,
+    pub lease_expires_at_ms: i64,
+    pub run_id: i64,
+    pub episode_key: String,
+    pub spec: JobSpec,
+}
+
+/// A worker's result report.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Report {
+    pub worker_id: String,
+    pub job_id: i64,
+    pub attempt: u32,
+    pub run_id: i64,
+    pub episode_key: String,
+    pub tasks: Vec<TaskOutcome>,
+    pub platform_error: String,
+    pub log_tail: String,
+    pub wall_ms: u64,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub struct ReportOutcome {
+    pub accepted: bool,
+    pub duplicate: bool,
+}
+
+/// `None` expiry means the lease is gone: stop working.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct HeartbeatOutcome {
+    pub lease_expires_at_ms: Option<i64>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+pub struct ReapReport {
+    pub requeued: usize,
+    pub failed: usize,
+    pub runs_finished: usize,
+}
+
+impl AppState {
+    pub fn require_worker(&self, token: Option<&str>) -> Result<(), ServiceError> {
+        match token {
+            None => Err(ServiceError::MissingToken),
+            Some(t) if hash_token(t) == self.inner.worker_hash => Ok(()),
+            Some(_) => Err(ServiceError::BadToken),
+        }
+    }
+
+    fn lease_ms(&self) -> i64 {
+        i64::try_from(self.config().control.lease_s.saturating_mul(1000)).unwrap_or(i64::MAX / 2)
+    }
+
+    /// Claim up to `max_jobs` jobs for `worker_id`, waiting up to `wait_ms` for work.
+    pub async fn lease(
+        &self,
+        token: Option<&str>,
+        worker_id: &str,
+        max_jobs: u32,
+        wait_ms: u32,
+    ) -> Result<Vec<LeasedJob>, ServiceError> {
+        self.require_worker(token)?;
+        let worker = validate_worker_id(worker_id)?;
+        if !(1..=MAX_JOBS_PER_LEASE).contains(&max_jobs) {
+            return Err(ServiceError::BadRequest(format!(
+                "max_jobs must be between 1 and {MAX_JOBS_PER_LEASE}"
+            )));
+        }
+        let deadline = Instant::now() + Duration::from_millis(u64::from(wait_ms.min(MAX_LEASE_WAIT_MS)));
+        loop {
+            // Registered before the claim so a wake-up between claim and wait is not lost.
+            let notified = self.inner.jobs_ready.notified();
+            tokio::pin!(notified);
+            notified.as_mut().enable();
+            let now = now_ms();
+            let claimed = queue::claim(self.pool(), worker, now, now + self.lease_ms(), max_jobs).await?;
+            if !claimed.is_empty() || Instant::now() >= deadline {
+                let jobs = claimed
+                    .into_iter()
+                    .map(leased_job)
+                    .collect::<Result<Vec<_>, _>>()?;
+                for j in &jobs {
+                    tracing::info!(job = j.id, run = j.run_id, episode = %j.episode_key, attempt = j.attempt, worker, "job leased");
+                }
+                return Ok(jobs);
+            }
+            let _ = tokio::time::timeout_at(deadline.min(Instant::now() + POLL_INTERVAL), notified).await;
+        }
+    }
+
+    /// Extend a lease the worker still holds.
+    pub async fn heartbeat(
+        &self,
+        token: Option<&str>,
+        worker_id: &str,
+        job_id: i64,
+        attempt: u32,
+    ) -> Result<HeartbeatOutcome, ServiceError> {
+        self.require_worker(token)?;
+        let worker = validate_worker_id(worker_id)?;
+        let now = now_ms();
+        let until = queue::heartbeat(
+            self.pool(),
+            job_id,
+            i64::from(attempt),
+            worker,
+            now + self.lease_ms(),
+            now,
+        )
+        .await?;
+        if until.is_none() {
+            tracing::info!(
+                job = job_id,
+                attempt,
+                worker,
+                "heartbeat for a lease no longer held: cancelled"
+            );
+        }
+        Ok(HeartbeatOutcome {
+            lease_expires_at_ms: until,
+        })
+    }
+
+    /// Record one episode's result (idempotent on `(run, episode)`).
+    pub async fn report_result(
+        &self,
+        token: Option<&str>,
+        mut r: Report,
+    ) -> Result<ReportOutcome, ServiceError> {
+        self.require_worker(token)?;
+        validate_worker_id(&r.worker_id)?;
+        if r.tasks.len() > MAX_TASKS {
+            return Err(ServiceError::BadRequest(format!(
+                "at most {MAX_TASKS} task results per episode"
+            )));
+        }
+        r.log_tail = tail(&r.log_tail, MAX_LOG_TAIL_BYTES).to_string();
+        let now = now_ms();
+        let mut tx = self.pool().begin_with("BEGIN IMMEDIATE").await?;
+        let job = queue::job(&mut tx, r.job_id)
+            .await?
+            .ok_or_else(|| ServiceError::not_found(format!("job {}", r.job_id)))?;
+        if job.run_id != r.run_id || job.episode_key != r.episode_key {
+            return Err(ServiceError::BadRequest(format!(
+                "job {} is episode {:?} of run {}, not {:?} of run {}",
+                job.id, job.episode_key, job.run_id, r.episode_key, r.run_id
+            )));
+        }
+        if queue::result_exists(&mut tx, job.run_id, &job.episode_key).await? {
+            return Ok(ReportOutcome {
+                accepted: true,
+                duplicate: true,
+            });
+        }
+        // A requeued job keeps its attempt until leased again, so its last holder may still
+        // hand the result in; any other state or attempt is stale.
+        let current =
+            i64::from(r.attempt) == job.attempt && matches!(job.state.as_str(), "leased" | "queued");
+        if !current {
+            tracing::info!(job = job.id, attempt = r.attempt, current = job.attempt, state = %job.state, "stale report refused");
+            return Ok(ReportOutcome {
+                accepted: false,
+                duplicate: false,
+            });
+        }
+        let spec = job_spec(&job)?;
+        if r.platform_error.trim().is_empty() {
+            let result = NewResult {
+                job: &job,
+                mode: spec.mode.as_str(),
+                tasks: &r.tasks,
+                failure: None,
+                wall_ms: i64::try_from(r.wall_ms).unwrap_or(i64::MAX),
+                log_tail: &r.log_tail,
+                worker_id: &r.worker_id,
+            };
+            queue::insert_result(&mut tx, &result, now).await?;
+            queue::close_job(&mut tx, job.id, "done", None, now).await?;
+        } else {
+            let reason = format!(
+                "platform error: {}",
+                clip(r.platform_error.trim(), MAX_REASON_CHARS)
+            );
+            self.retry_or_fail(&mut tx, &job, &spec, &reason, &r.worker_id, now)
+                .await?;
+        }
+        let finished = self.finish_if_done(&mut tx, job.run_id, now).await?;
+        tx.commit().await?;
+        self.after_queue_write(finished);
+        tracing::info!(job = job.id, run = job.run_id, episode = %job.episode_key, finished, "result reported");
+        Ok(ReportOutcome {
+            accepted: true,
+            duplicate: false,
+        })
+    }
+
+    /// Requeue every job whose lease ended before `now`, or record it as failed once it has
+    /// had all its attempts.
+    pub async fn reap_expired(&self, now: i64) -> Result<ReapReport, ServiceError> {
+        let mut report = ReapReport::default();
+        // A cheap read first, so the periodic reaper takes the write lock only when needed.
+        if queue::expired(&mut *self.pool().acquire().await?, now)
+            .await?
+            .is_empty()
+        {
+            return Ok(report);
+        }
+        let mut tx = self.pool().begin_with("BEGIN IMMEDIATE").await?;
+        let mut runs = BTreeSet::new();
+        for job in queue::expired(&mut tx, now).await? {
+            let owner = job.lease_owner.clone().unwrap_or_default();
+            let reason = format!("lease expired: worker {owner:?} stopped reporting");
+            let spec = job_spec(&job)?;
+            if self
+                .retry_or_fail(&mut tx, &job, &spec, &reason, &owner, now)
+                .await?
+            {
+                report.failed += 1;
+                runs.insert(job.run_id);
+            } else {
+                report.requeued += 1;
+            }
+        }
+        for run in runs {
+            report.runs_finished += usize::from(self.finish_if_done(&mut tx, run, now).await?);
+        }
+        tx.commit().await?;
+        self.after_queue_write(report.runs_finished > 0);
+        tracing::info!(?report, "expired leases reaped");
+        Ok(report)
+    }
+
+    /// After a failed attempt: requeue, or record the episode as failed when the job had all its
+    /// attempts. Returns whether it was recorded as failed.
+    async fn retry_or_fail(
+        &self,
+        conn: &mut SqliteConnection,
+        job: &JobRow,
+        spec: &JobSpec,
+        reason: &str,
+        worker: &str,
+        now: i64,
+    ) -> Result<bool, ServiceError> {
+        let attempt_reason = format!("attempt {}: {reason}", job.attempt);
+        if job.attempt < job.max_attempts {
+            queue::requeue(conn, job.id, &attempt_reason, now).await?;
+            tracing::warn!(job = job.id, run = job.run_id, reason = %attempt_reason, "job requeued");
+            return Ok(false);
+        }
+        let failure = format!(
+            "the platform gave up after {} attempts; last: {reason}",
+            job.attempt
+        );
+        let result = NewResult {
+            job,
+            mode: spec.mode.as_str(),
+            tasks: &[],
+            failure: Some(&failure),
+            wall_ms: 0,
+            log_tail: "",
+            worker_id: worker,
+        };
+        queue::insert_result(conn, &result, now).await?;
+        queue::close_job(conn, job.id, "failed", Some(&attempt_reason), now).await?;
+        tracing::warn!(job = job.id, run = job.run_id, %failure, "job failed");
+        Ok(true)
+    }
+
+    /// When no job of `run` is queued or leased any more, compute and store its scores.
+    async fn finish_if_done(
+        &self,
+        conn: &mut SqliteConnection,
+        run: i64,
+        now: i64,
+    ) -> Result<bool, ServiceError> {
+        if queue::open_jobs(conn, run).await? > 0 {
+            return Ok(false);
+        }
+        let eps = queue::episodes(conn, run).await?;
+        let (_, body) = runs::run_submission(conn, run).await?;
+        let plans = match parse_body(&body)?.plans {
+            Some(id) => Some(self.linked_plans(conn, id).await?),
+            None => None,
+        };
+        let scores = episodes::aggregate(&eps, plans.as_ref());
+        let platform_failed = !eps.is_empty() && eps.iter().all(|e| e.failure.is_some());
+        let done = runs::finish_run(conn, run, &scores, platform_failed, now).await?;
+        if done {
+            tracing::info!(run, ?scores, platform_failed, "run finished");
+        }
+        Ok(done)
+    }
+
+    /// The linked plan submission's predictions by instruction id, re-read from its immutable
+    /// body so EM_j is recomputed against the ground truth rather than trusted from a run.
+    async fn linked_plans(
+        &self,
+        conn: &mut SqliteConnection,
+        id: i64,
+    ) -> Result<HashMap<String, Vec<String>>, ServiceError> {
+        let (split, body) = runs::submission_body_in(conn, id)
+            .await?
+            .ok_or_else(|| anyhow::anyhow!("linked plans submission {id} is missing"))?;
+        let split: Split = split.parse().map_err(|e: String| anyhow::anyhow!(e))?;
+        let gt = self.content().ground_truth(split);
+        let file = plans::parse(
+            body.as_bytes(),
+            split,
+            gt.len(),
+            &self.content().index,
+            &PlanLimits::UNLIMITED,
+        )?;
+        Ok(gt
+            .iter()
+            .zip(file.plans)
+            .filter_map(|(g, p)| p.map(|p| (g.id.clone(), p)))
+            .collect())
+    }
+
+    /// Wake long-polling leases (a job was requeued or a concurrency slot freed) and drop the
+    /// cached leaderboards when a run got its scores.
+    fn after_queue_write(&self, run_finished: bool) {
+        self.inner.jobs_ready.notify_waiters();
+        if run_finished {
+            self.leaderboard_cache().invalidate();
+        }
+    }
+}
+
+fn leased_job(c: queue::Claimed) -> Result<LeasedJob, ServiceError> {
+    let spec: JobSpec =
+        serde_json::from_str(&c.spec).map_err(|e| anyhow::anyhow!("job {} spec: {e}", c.id))?;
+    Ok(LeasedJob {
+        id: c.id,
+        attempt: u32::try_from(c.attempt).unwrap_or(u32::MAX),
+        lease_expires_at_ms: c.lease_expires_at,
+        run_id: c.run_id,
+        episode_key: c.episode_key,
+        spec,
+    })
+}
+
+fn job_spec(job: &JobRow) -> Result<JobSpec, ServiceError> {
+    Ok(serde_json::from_str(&job.spec).map_err(|e| anyhow::anyhow!("job {} spec: {e}", job.id))?)
+}
+
+fn validate_worker_id(id: &str) -> Result<&str, ServiceError> {
+    let id = id.trim();
+    if id.is_empty() || id.len() > 200 || id.chars().any(char::is_control) {
+        return Err(ServiceError::BadRequest(
+            "worker_id must be 1 to 200 printable characters (host name and pid, say)".into(),
+        ));
+    }
+    Ok(id)
+}
+
+/// The last `max` bytes of `s`, cut at a character boundary.
+fn tail(s: &str, max: usize) -> &str {
+    if s.len() <= max {
+        return s;
+    }
+    let mut start = s.len() - max;
+    while !s.is_char_boundary(start) {
+        start += 1;
+    }
+    &s[start..]
+}
+
+fn clip(s: &str, max_chars: usize) -> String {
+    s.chars().take(max_chars).collect()
+}
+
+#[cfg(test)]
+mod tests;

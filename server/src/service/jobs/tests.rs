@@ -1,0 +1,306 @@
+use kitchen_r_core::dataset::Split;
+
+use super::*;
+use crate::testutil::{FakeProbe, Fixture, WORKER, fixture};
+
+async fn registered(f: &Fixture) -> (String, i64) {
+    let token = f.team("alpha").await;
+    let done = f
+        .state
+        .register_policy(Some(&token), f.request(Split::Dev))
+        .await
+        .unwrap();
+    (token, done.id)
+}
+
+async fn run_state(f: &Fixture, token: &str, id: i64) -> crate::service::PolicyRunView {
+    let view = f.state.get_submission(Some(token), id).await.unwrap();
+    view.latest_run.unwrap().evaluation.unwrap()
+}
+
+#[tokio::test]
+async fn workers_must_present_the_worker_token() {
+    let f = fixture(FakeProbe::ok(1), |_| {}).await;
+    assert_eq!(
+        f.state.lease(None, "w", 1, 0).await.unwrap_err().code(),
+        "missing_token"
+    );
+    assert_eq!(
+        f.state.lease(Some("nope"), "w", 1, 0).await.unwrap_err().code(),
+        "bad_token"
+    );
+    assert_eq!(
+        f.state.lease(Some(WORKER), "w", 0, 0).await.unwrap_err().code(),
+        "bad_request"
+    );
+    assert_eq!(
+        f.state.lease(Some(WORKER), "", 1, 0).await.unwrap_err().code(),
+        "bad_request"
+    );
+}
+
+#[tokio::test]
+async fn claims_never_exceed_the_policys_max_concurrency() {
+    let f = fixture(FakeProbe::ok(2), |_| {}).await;
+    registered(&f).await;
+    let first = f.lease("w1", 64).await;
+    assert_eq!(first.len(), 2, "max_concurrency 2");
+    assert!(f.lease("w2", 64).await.is_empty());
+    let job = &first[0];
+    assert_eq!(job.attempt, 1);
+    assert_eq!(job.spec.endpoint.url, "http://127.0.0.1:50099");
+    let r = f.report("w1", job, |_| true, 0.0);
+    assert!(f.state.report_result(Some(WORKER), r).await.unwrap().accepted);
+    let next = f.lease("w2", 64).await;
+    assert_eq!(next.len(), 1, "one slot freed");
+    assert!(next[0].id > first[1].id, "oldest queued job first");
+}
+
+#[tokio::test]
+async fn long_poll_wakes_up_when_a_slot_frees() {
+    let f = fixture(FakeProbe::ok(1), |_| {}).await;
+    registered(&f).await;
+    let job = f.lease("w1", 1).await.remove(0);
+    let state = f.state.clone();
+    let waiter = tokio::spawn(async move { state.lease(Some(WORKER), "w2", 1, 10_000).await.unwrap() });
+    tokio::time::sleep(Duration::from_millis(50)).await;
+    let started = std::time::Instant::now();
+    f.state
+        .report_result(Some(WORKER), f.report("w1", &job, |_| true, 0.0))
+        .await
+        .unwrap();
+    let got = waiter.await.unwrap();
+    assert_eq!(got.len(), 1);
+    assert!(started.elapsed() < Duration::from_secs(5));
+}
+
+#[tokio::test]
+async fn heartbeats_extend_only_the_current_lease() {
+    let f = fixture(FakeProbe::ok(1), |_| {}).await;
+    registered(&f).await;
+    let job = f.lease("w1", 1).await.remove(0);
+    let hb = f
+        .state
+        .heartbeat(Some(WORKER), "w1", job.id, job.attempt)
+        .await
+        .unwrap();
+    assert!(hb.lease_expires_at_ms.unwrap() >= job.lease_expires_at_ms);
+    let other = f
+        .state
+        .heartbeat(Some(WORKER), "w2", job.id, job.attempt)
+        .await
+        .unwrap();
+    assert_eq!(other.lease_expires_at_ms, None, "another owner is told to stop");
+    let stale = f
+        .state
+        .heartbeat(Some(WORKER), "w1", job.id, job.attempt + 1)
+        .await
+        .unwrap();
+    assert_eq!(stale.lease_expires_at_ms, None);
+}
+
+#[tokio::test]
+async fn expired_lease_is_requeued_and_a_stale_attempt_refused_then_duplicates_count_once() {
+    let f = fixture(FakeProbe::ok(1), |c| c.control.lease_s = 1).await;
+    let (token, id) = registered(&f).await;
+    let first = f.lease("w1", 1).await.remove(0);
+    assert_eq!(
+        f.state.reap_expired(now_ms()).await.unwrap(),
+        ReapReport::default()
+    );
+    let reaped = f.state.reap_expired(now_ms() + 5_000).await.unwrap();
+    assert_eq!((reaped.requeued, reaped.failed), (1, 0));
+    let again = f.lease("w2", 1).await.remove(0);
+    assert_eq!((again.id, again.attempt), (first.id, 2));
+    // The worker that lost the lease reports late: refused, nothing recorded.
+    let late = f
+        .state
+        .report_result(Some(WORKER), f.report("w1", &first, |_| true, 0.0))
+        .await
+        .unwrap();
+    assert_eq!(
+        late,
+        ReportOutcome {
+            accepted: false,
+            duplicate: false
+        }
+    );
+    assert!(
+        f.state
+            .heartbeat(Some(WORKER), "w1", first.id, 1)
+            .await
+            .unwrap()
+            .lease_expires_at_ms
+            .is_none()
+    );
+    let r = f.report("w2", &again, |_| true, 0.0);
+    let ok = f.state.report_result(Some(WORKER), r.clone()).await.unwrap();
+    assert_eq!(
+        ok,
+        ReportOutcome {
+            accepted: true,
+            duplicate: false
+        }
+    );
+    let dup = f.state.report_result(Some(WORKER), r).await.unwrap();
+    assert_eq!(
+        dup,
+        ReportOutcome {
+            accepted: true,
+            duplicate: true
+        }
+    );
+    let eval = run_state(&f, &token, id).await;
+    assert_eq!((eval.state, eval.episodes_done), ("running", 1));
+    assert_eq!(eval.episodes[0].attempt, 2);
+}
+
+#[tokio::test]
+async fn platform_errors_requeue_then_fail_after_max_attempts_and_the_run_still_finishes() {
+    let f = fixture(FakeProbe::ok(8), |c| {
+        c.control.max_attempts = 2;
+        c.control.dev_episodes = 1;
+        c.control.offline_mse = false;
+    })
+    .await;
+    let (token, id) = registered(&f).await;
+    for attempt in 1..=2 {
+        let job = f.lease("w1", 8).await.remove(0);
+        assert_eq!(job.attempt, attempt);
+        let mut r = f.report("w1", &job, |_| true, 0.0);
+        r.platform_error = "simulator crashed".into();
+        assert!(f.state.report_result(Some(WORKER), r).await.unwrap().accepted);
+    }
+    assert!(f.lease("w1", 8).await.is_empty());
+    let view = f.state.get_submission(Some(&token), id).await.unwrap();
+    let run = view.latest_run.unwrap();
+    let eval = run.evaluation.unwrap();
+    assert_eq!(eval.state, "platform_failed");
+    let failure = eval.episodes[0].failure.clone().unwrap();
+    assert!(
+        failure.contains("gave up after 2 attempts") && failure.contains("simulator crashed"),
+        "{failure}"
+    );
+    assert_eq!(run.scores.sr, Some(0.0));
+    // A run the platform could not evaluate gives its quota back.
+    let used = crate::store::count_submissions_since(f.state.pool(), 1, Split::Dev, 0)
+        .await
+        .unwrap();
+    assert_eq!(used, 0);
+}
+
+#[tokio::test]
+async fn expired_leases_fail_after_max_attempts() {
+    let f = fixture(FakeProbe::ok(8), |c| {
+        c.control.max_attempts = 1;
+        c.control.dev_episodes = 1;
+    })
+    .await;
+    let (token, id) = registered(&f).await;
+    let jobs = f.lease("w1", 8).await;
+    assert_eq!(jobs.len(), 2);
+    let online = jobs
+        .iter()
+        .find(|j| !j.episode_key.ends_with("/offline"))
+        .unwrap();
+    let r = f.report("w1", online, |_| true, 0.0);
+    f.state.report_result(Some(WORKER), r).await.unwrap();
+    let reaped = f.state.reap_expired(now_ms() + 3_600_000).await.unwrap();
+    assert_eq!((reaped.requeued, reaped.failed, reaped.runs_finished), (0, 1, 1));
+    let run = f
+        .state
+        .get_submission(Some(&token), id)
+        .await
+        .unwrap()
+        .latest_run
+        .unwrap();
+    assert_eq!(run.evaluation.unwrap().state, "finished");
+    assert_eq!((run.scores.sr, run.scores.mse), (Some(1.0), None));
+}
+
+#[tokio::test]
+async fn a_finished_run_is_scored_once_with_sr_and_mse() {
+    let f = fixture(FakeProbe::ok(64), |c| c.control.dev_episodes = 2).await;
+    let (token, id) = registered(&f).await;
+    let jobs = f.lease("w1", 64).await;
+    assert_eq!(jobs.len(), 4);
+    for (i, job) in jobs.iter().enumerate() {
+        // Instruction 0 succeeds on its first task only; instruction 1 on every task.
+        let first = job.spec.instruction_id == f.state.content().ground_truth(Split::Dev)[0].id;
+        let r = f.report("w1", job, |j| !first || j == 0, 0.5 * (i as f64 + 1.0));
+        f.state.report_result(Some(WORKER), r).await.unwrap();
+    }
+    let dev = f.state.content().ground_truth(Split::Dev);
+    let expected_sr = (1.0 / dev[0].plan.len() as f64 + 1.0) / 2.0;
+    let run = f
+        .state
+        .get_submission(Some(&token), id)
+        .await
+        .unwrap()
+        .latest_run
+        .unwrap();
+    let sr = run.scores.sr.unwrap();
+    assert!((sr - expected_sr).abs() < 1e-12, "{sr} vs {expected_sr}");
+    // Offline MSEs were 0.5·(i+1) for the offline jobs (indices 1 and 3), weighted by tasks.
+    let (n0, n1) = (dev[0].plan.len() as f64, dev[1].plan.len() as f64);
+    let expected_mse = (1.0 * n0 + 2.0 * n1) / (n0 + n1);
+    assert!((run.scores.mse.unwrap() - expected_mse).abs() < 1e-12);
+    let eval = run.evaluation.unwrap();
+    assert_eq!(
+        (eval.state, eval.episodes_done, eval.episodes_total),
+        ("finished", 4, 4)
+    );
+    assert_eq!(eval.episodes[0].failure_reasons, vec!["timeout".to_string()]);
+    assert!(run.scores.m.is_none());
+}
+
+#[tokio::test]
+async fn an_integrated_run_recomputes_em_from_the_linked_plans() {
+    let f = fixture(FakeProbe::ok(64), |c| c.control.dev_episodes = 2).await;
+    let token = f.team("alpha").await;
+    let dev = f.state.content().ground_truth(Split::Dev).to_vec();
+    // Instruction 0 exactly right, instruction 1 right on its first step only.
+    let lines = format!(
+        "{}\n{}\n",
+        serde_json::json!({"id": dev[0].id, "plan": dev[0].plan}),
+        serde_json::json!({"id": dev[1].id, "plan": [dev[1].plan[0].clone()]}),
+    );
+    let plans = f
+        .state
+        .submit_plans(Some(&token), Split::Dev, lines.as_bytes())
+        .await
+        .unwrap()
+        .id;
+    let mut req = f.request(Split::Dev);
+    req.plans = Some(plans);
+    let id = f.state.register_policy(Some(&token), req).await.unwrap().id;
+    for job in f.lease("w1", 64).await {
+        // Every task succeeds online; offline MSE 0.25 everywhere.
+        let r = f.report("w1", &job, |_| true, 0.25);
+        f.state.report_result(Some(WORKER), r).await.unwrap();
+    }
+    let (n0, n1) = (dev[0].plan.len() as f64, dev[1].plan.len() as f64);
+    let em = (1.0 + 1.0 / n1) / 2.0;
+    // M: instruction 0 = 2 per task; instruction 1 = (2 + 1·(n1-1)) / n1.
+    let m = (2.0 + (2.0 + (n1 - 1.0)) / n1) / 2.0;
+    let p = 1.0 / em + 0.25;
+    let run = f
+        .state
+        .get_submission(Some(&token), id)
+        .await
+        .unwrap()
+        .latest_run
+        .unwrap();
+    let s = run.scores;
+    assert!((s.sr.unwrap() - 1.0).abs() < 1e-12);
+    assert!((s.m.unwrap() - m).abs() < 1e-12, "{s:?} m={m}");
+    assert!((s.p.unwrap() - p).abs() < 1e-12, "{s:?} p={p}");
+    assert!(n0 > 0.0);
+    let board = f
+        .state
+        .leaderboard(crate::leaderboard::Track::Integrated, Split::Dev)
+        .await
+        .unwrap();
+    assert_eq!(board.rows.len(), 1);
+    assert_eq!(board.rows[0].scores.m, s.m);
+}

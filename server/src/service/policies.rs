@@ -1,0 +1,327 @@
+//! Policy registration (control and integrated tracks) and what a policy submission's page shows.
+//!
+//! Policy: an endpoint is accepted only after the injected [`crate::probe::PolicyProbe`] found it
+//! allowed, SERVING and speaking our protocol; then the submission, its scoring run and one job
+//! per episode are inserted in one transaction. Quotas (per day, concurrent runs) are checked
+//! before the probe (a cheap refusal) and again under the submit lock at insert time. Organiser
+//! reference runs are exempt from quotas, are filed under a reserved `(baseline)` team, and are
+//! the only runs whose episodes carry `privileged = true`.
+
+use kitchen_r_core::dataset::{Instruction, Split};
+use serde::{Deserialize, Serialize};
+
+use super::{AppState, now_ms};
+use crate::episodes::{EndpointSpec, JobSpec, Mode};
+use crate::error::ServiceError;
+use crate::store::runs::{self as run_store, NewPolicyRun};
+use crate::store::{self, Team};
+
+/// Version of the control scorer; part of every policy run's `scorer_version`.
+pub const CONTROL_SCORER: &str = "control/1";
+
+const MAX_URL_CHARS: usize = 2048;
+const MAX_TOKEN_CHARS: usize = 4096;
+
+/// `POST /api/v1/submissions/policies` and `RegisterPolicy`.
+#[derive(Debug, Clone, PartialEq, Eq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RegisterPolicy {
+    /// `http://host:port` or `https://host:port`.
+    pub endpoint: String,
+    pub split: Split,
+    /// Bearer token the evaluator sends to the endpoint.
+    #[serde(default)]
+    pub token: Option<String>,
+    /// Plan submission (same team, same split) for the integrated track.
+    #[serde(default)]
+    pub plans: Option<i64>,
+    /// Dev split only: evaluate the first N instructions.
+    #[serde(default)]
+    pub episodes: Option<u32>,
+    /// Organiser only: a reference (baseline) run.
+    #[serde(default)]
+    pub reference: bool,
+}
+
+/// The answer to an accepted registration.
+#[derive(Debug, Clone, Serialize)]
+pub struct Registered {
+    pub id: i64,
+    pub run_id: i64,
+    pub split: Split,
+    /// Instructions evaluated.
+    pub instructions: usize,
+    /// Jobs queued (online, plus offline when MSE is measured).
+    pub episodes: usize,
+    pub max_concurrency: u32,
+    pub policy: String,
+    pub state: &'static str,
+}
+
+/// What `submissions.body` holds for a policy submission.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct PolicyBody {
+    pub endpoint: String,
+    /// Stored because workers must present it to the endpoint; never shown back.
+    pub token: Option<String>,
+    pub plans: Option<i64>,
+    pub reference: bool,
+    pub protocol_version: u32,
+    pub max_concurrency: u32,
+    /// The probe's one-line summary of GetSpec.
+    pub spec: String,
+    pub instructions: usize,
+    pub offline_mse: bool,
+}
+
+/// The endpoint as the submission page shows it: everything but the token.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct PolicyInfo {
+    pub endpoint: String,
+    pub has_token: bool,
+    pub plans: Option<i64>,
+    pub reference: bool,
+    pub max_concurrency: u32,
+    pub spec: String,
+}
+
+pub(crate) fn parse_body(body: &str) -> Result<PolicyBody, ServiceError> {
+    serde_json::from_str(body).map_err(|e| ServiceError::Internal(anyhow::anyhow!("stored policy body: {e}")))
+}
+
+pub(crate) fn policy_info(body: &str) -> Result<PolicyInfo, ServiceError> {
+    let b = parse_body(body)?;
+    Ok(PolicyInfo {
+        endpoint: b.endpoint,
+        has_token: b.token.is_some(),
+        plans: b.plans,
+        reference: b.reference,
+        max_concurrency: b.max_concurrency,
+        spec: b.spec,
+    })
+}
+
+impl AppState {
+    /// Probe and register a policy endpoint, queueing its episodes.
+    pub async fn register_policy(
+        &self,
+        token: Option<&str>,
+        req: RegisterPolicy,
+    ) -> Result<Registered, ServiceError> {
+        let team = if req.reference {
+            self.require_admin(token)?;
+            run_store::baseline_team(self.pool(), now_ms()).await?
+        } else {
+            self.authenticate(token).await?
+        };
+        let endpoint = validate_endpoint(&req.endpoint)?;
+        let bearer = validate_bearer(req.token.as_deref())?;
+        let instructions = self.run_instructions(req.split, req.episodes)?;
+        if let Some(plans) = req.plans {
+            self.check_linked_plans(&team, req.reference, req.split, plans)
+                .await?;
+        }
+        if !req.reference {
+            self.check_policy_quota(&team, req.split).await?;
+        }
+        let probed = self.inner.probe.probe(&endpoint, bearer.as_deref()).await?;
+        if probed.protocol_version != kitchen_r_proto::POLICY_PROTOCOL_VERSION {
+            return Err(ServiceError::ProbeFailed(format!(
+                "GetSpec announced protocol version {}, this server speaks {}",
+                probed.protocol_version,
+                kitchen_r_proto::POLICY_PROTOCOL_VERSION
+            )));
+        }
+        // policy.proto: 0 is read as 1.
+        let max_concurrency = probed.max_concurrency.max(1);
+        let cfg = self.config();
+        let endpoint_spec = EndpointSpec {
+            url: endpoint.clone(),
+            bearer_token: bearer.clone().unwrap_or_default(),
+            call_deadline_ms: cfg.policy.call_deadline_ms,
+            startup_deadline_ms: cfg.policy.startup_deadline_ms,
+            episode_budget_ms: cfg.policy.episode_budget_ms,
+            max_successive_timeouts: cfg.policy.max_successive_timeouts,
+        };
+        let jobs = self.job_specs(instructions, &endpoint_spec, req.reference)?;
+        let body = PolicyBody {
+            endpoint,
+            token: bearer,
+            plans: req.plans,
+            reference: req.reference,
+            protocol_version: probed.protocol_version,
+            max_concurrency,
+            spec: probed.summary.clone(),
+            instructions: instructions.len(),
+            offline_mse: cfg.control.offline_mse,
+        };
+        let body = serde_json::to_string(&body).map_err(anyhow::Error::from)?;
+        let scorer = format!("{CONTROL_SCORER}+{}", self.content().dataset_tag());
+        let new = NewPolicyRun {
+            team: team.id,
+            split: req.split,
+            body: &body,
+            scorer_version: &scorer,
+            max_concurrency,
+            max_attempts: cfg.control.max_attempts,
+            jobs: &jobs,
+        };
+        let (id, run_id) = {
+            let _guard = self.inner.submit_lock.lock().await;
+            if !req.reference {
+                self.check_policy_quota(&team, req.split).await?;
+            }
+            run_store::insert_policy_submission(self.pool(), &new, now_ms()).await?
+        };
+        self.inner.jobs_ready.notify_waiters();
+        self.leaderboard_cache().invalidate();
+        tracing::info!(submission = id, run = run_id, team = %team.name, split = %req.split,
+            episodes = jobs.len(), reference = req.reference, "policy registered");
+        Ok(Registered {
+            id,
+            run_id,
+            split: req.split,
+            instructions: instructions.len(),
+            episodes: jobs.len(),
+            max_concurrency,
+            policy: probed.summary,
+            state: "queued",
+        })
+    }
+
+    /// The instructions a run evaluates: the whole test split; on dev, the first
+    /// `control.dev_episodes` (0 = all), further limited by the request's `episodes`.
+    fn run_instructions(&self, split: Split, episodes: Option<u32>) -> Result<&[Instruction], ServiceError> {
+        let all = self.content().ground_truth(split);
+        match (split, episodes) {
+            (Split::Test, Some(_)) => Err(ServiceError::BadRequest(
+                "`episodes` applies to the dev split only: the test split always runs in full".into(),
+            )),
+            (_, Some(0)) => Err(ServiceError::BadRequest("`episodes` must be at least 1".into())),
+            (Split::Test, None) => Ok(all),
+            (Split::Dev, asked) => {
+                let cap = match self.config().control.dev_episodes {
+                    0 => all.len(),
+                    n => all.len().min(n as usize),
+                };
+                Ok(&all[..asked.map_or(cap, |n| cap.min(n as usize))])
+            }
+        }
+    }
+
+    /// `(episode_key, spec JSON)` for every job of a run: one online job per instruction, and
+    /// one offline job when `control.offline_mse` is on.
+    fn job_specs(
+        &self,
+        instructions: &[Instruction],
+        endpoint: &EndpointSpec,
+        privileged: bool,
+    ) -> Result<Vec<(String, String)>, ServiceError> {
+        let c = &self.config().control;
+        let modes: &[Mode] = if c.offline_mse {
+            &[Mode::Online, Mode::Offline]
+        } else {
+            &[Mode::Online]
+        };
+        let mut jobs = Vec::with_capacity(instructions.len() * modes.len());
+        for inst in instructions {
+            for &mode in modes {
+                let spec = JobSpec {
+                    mode,
+                    scene_id: inst.scene.clone(),
+                    instruction_id: inst.id.clone(),
+                    plan: inst.plan.clone(),
+                    seed: c.seed,
+                    task_time_limit_s: c.task_time_limit_s,
+                    actions_executed_per_chunk: c.actions_executed_per_chunk,
+                    teleport_on_failure: c.teleport_on_failure,
+                    max_plan_steps: c.max_plan_steps,
+                    privileged,
+                    endpoint: endpoint.clone(),
+                };
+                let json = serde_json::to_string(&spec).map_err(anyhow::Error::from)?;
+                jobs.push((mode.episode_key(&inst.id), json));
+            }
+        }
+        Ok(jobs)
+    }
+
+    async fn check_linked_plans(
+        &self,
+        team: &Team,
+        any_team: bool,
+        split: Split,
+        id: i64,
+    ) -> Result<(), ServiceError> {
+        // Another team's submission is "not found", so ids cannot be probed for existence.
+        let sub = store::submission(self.pool(), id)
+            .await?
+            .filter(|s| any_team || s.team_id == team.id)
+            .ok_or_else(|| ServiceError::not_found(format!("plans submission {id}")))?;
+        if sub.kind != "plans" {
+            return Err(ServiceError::BadRequest(format!(
+                "submission {id} is a {} submission; `plans` must name a plan file submission",
+                sub.kind
+            )));
+        }
+        if sub.split != split.as_str() {
+            return Err(ServiceError::BadRequest(format!(
+                "plans submission {id} is for the {} split, the policy for {split}",
+                sub.split
+            )));
+        }
+        Ok(())
+    }
+
+    async fn check_policy_quota(&self, team: &Team, split: Split) -> Result<(), ServiceError> {
+        self.check_quota(team, split, now_ms()).await?;
+        let limit = self.config().quota.concurrent_runs;
+        if limit > 0 && run_store::active_runs(self.pool(), team.id).await? >= i64::from(limit) {
+            return Err(ServiceError::ConcurrentRuns { limit });
+        }
+        Ok(())
+    }
+}
+
+/// `http://HOST:PORT` or `https://HOST:PORT`, trimmed; the probe does the real address check.
+fn validate_endpoint(url: &str) -> Result<String, ServiceError> {
+    let url = url.trim();
+    let refuse = |why: &str| Err(ServiceError::EndpointRefused(format!("{url:?} {why}")));
+    if url.is_empty() {
+        return Err(ServiceError::BadRequest(
+            "`endpoint` is required: http://HOST:PORT".into(),
+        ));
+    }
+    if url.chars().count() > MAX_URL_CHARS {
+        return refuse(&format!("is longer than {MAX_URL_CHARS} characters"));
+    }
+    if url.chars().any(|c| c.is_whitespace() || c.is_control()) {
+        return refuse("contains whitespace or control characters");
+    }
+    let Some(rest) = url
+        .strip_prefix("http://")
+        .or_else(|| url.strip_prefix("https://"))
+    else {
+        return refuse("must start with http:// or https://");
+    };
+    if rest.is_empty() || rest.starts_with('/') {
+        return refuse("has no host");
+    }
+    Ok(url.to_string())
+}
+
+/// The endpoint's bearer token travels in an HTTP/2 header: visible ASCII only.
+fn validate_bearer(token: Option<&str>) -> Result<Option<String>, ServiceError> {
+    let Some(t) = token.map(str::trim).filter(|t| !t.is_empty()) else {
+        return Ok(None);
+    };
+    if t.len() > MAX_TOKEN_CHARS || !t.bytes().all(|b| b.is_ascii_graphic()) {
+        return Err(ServiceError::BadRequest(format!(
+            "`token` must be at most {MAX_TOKEN_CHARS} visible ASCII characters"
+        )));
+    }
+    Ok(Some(t.to_string()))
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,261 @@
+//! The job queue's SQL: claim, heartbeat, result recording, reaping.
+//!
+//! Policy: a claim is one `UPDATE … RETURNING` statement, so two workers (or two server tasks)
+//! can never lease the same job, and the policy's max concurrency is part of that statement: a
+//! run never has more leased jobs than it announced. A lease is identified by
+//! `(job id, attempt, owner)`; anything quoting an older attempt is stale. Functions taking a
+//! `SqliteConnection` run inside the caller's transaction (report and reap must record the
+//! result, move the job and finish the run atomically).
+
+use sqlx::sqlite::SqlitePool;
+use sqlx::{Row, SqliteConnection};
+
+use crate::episodes::{Episode, JobSpec, TaskOutcome};
+
+/// A job handed to a worker.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Claimed {
+    pub id: i64,
+    pub attempt: i64,
+    pub run_id: i64,
+    pub episode_key: String,
+    pub spec: String,
+    pub lease_expires_at: i64,
+}
+
+/// Lease up to `limit` queued jobs to `owner` until `until`, oldest first, never taking a run
+/// past its `max_concurrency` (0 = unlimited) counting the leases it already has.
+pub async fn claim(
+    pool: &SqlitePool,
+    owner: &str,
+    now: i64,
+    until: i64,
+    limit: u32,
+) -> sqlx::Result<Vec<Claimed>> {
+    let rows = sqlx::query(
+        "WITH busy AS (
+            SELECT run_id, COUNT(*) AS n FROM jobs WHERE state = 'leased' GROUP BY run_id
+         ), candidates AS (
+            SELECT j.id, r.max_concurrency AS cap, COALESCE(b.n, 0) AS busy,
+                   ROW_NUMBER() OVER (PARTITION BY j.run_id ORDER BY j.id) AS rn
+            FROM jobs j JOIN scoring_runs r ON r.id = j.run_id
+            LEFT JOIN busy b ON b.run_id = j.run_id
+            WHERE j.state = 'queued'
+         )
+         UPDATE jobs SET state = 'leased', lease_owner = ?1, lease_expires_at = ?2,
+                         attempt = attempt + 1, updated_at = ?3
+         WHERE id IN (SELECT id FROM candidates WHERE cap = 0 OR rn + busy <= cap ORDER BY id LIMIT ?4)
+         RETURNING id, attempt, run_id, episode_key, spec, lease_expires_at",
+    )
+    .bind(owner)
+    .bind(until)
+    .bind(now)
+    .bind(i64::from(limit))
+    .fetch_all(pool)
+    .await?;
+    let mut jobs: Vec<Claimed> = rows
+        .into_iter()
+        .map(|r| Claimed {
+            id: r.get(0),
+            attempt: r.get(1),
+            run_id: r.get(2),
+            episode_key: r.get(3),
+            spec: r.get(4),
+            lease_expires_at: r.get(5),
+        })
+        .collect();
+    // RETURNING order is unspecified; hand jobs out oldest first.
+    jobs.sort_by_key(|j| j.id);
+    Ok(jobs)
+}
+
+/// Extend a lease still held by `(job, attempt, owner)`; `None` when it is not (requeued,
+/// leased again, finished or cancelled).
+pub async fn heartbeat(
+    pool: &SqlitePool,
+    job: i64,
+    attempt: i64,
+    owner: &str,
+    until: i64,
+    now: i64,
+) -> sqlx::Result<Option<i64>> {
+    sqlx::query_scalar(
+        "UPDATE jobs SET lease_expires_at = ?1, updated_at = ?2
+         WHERE id = ?3 AND attempt = ?4 AND lease_owner = ?5 AND state = 'leased'
+         RETURNING lease_expires_at",
+    )
+    .bind(until)
+    .bind(now)
+    .bind(job)
+    .bind(attempt)
+    .bind(owner)
+    .fetch_optional(pool)
+    .await
+}
+
+/// A job as the report and reaper paths see it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct JobRow {
+    pub id: i64,
+    pub run_id: i64,
+    pub episode_key: String,
+    pub spec: String,
+    pub state: String,
+    pub lease_owner: Option<String>,
+    pub attempt: i64,
+    pub max_attempts: i64,
+    pub last_error: Option<String>,
+}
+
+/// The columns [`job_row`] reads, as a macro so queries stay `&'static str` literals.
+macro_rules! job_columns {
+    () => {
+        "id, run_id, episode_key, spec, state, lease_owner, attempt, max_attempts, last_error"
+    };
+}
+
+fn job_row(r: &sqlx::sqlite::SqliteRow) -> JobRow {
+    JobRow {
+        id: r.get(0),
+        run_id: r.get(1),
+        episode_key: r.get(2),
+        spec: r.get(3),
+        state: r.get(4),
+        lease_owner: r.get(5),
+        attempt: r.get(6),
+        max_attempts: r.get(7),
+        last_error: r.get(8),
+    }
+}
+
+pub async fn job(conn: &mut SqliteConnection, id: i64) -> sqlx::Result<Option<JobRow>> {
+    let row = sqlx::query(concat!("SELECT ", job_columns!(), " FROM jobs WHERE id = ?"))
+        .bind(id)
+        .fetch_optional(&mut *conn)
+        .await?;
+    Ok(row.as_ref().map(job_row))
+}
+
+/// Leased jobs whose lease ended before `now`.
+pub async fn expired(conn: &mut SqliteConnection, now: i64) -> sqlx::Result<Vec<JobRow>> {
+    let rows = sqlx::query(concat!(
+        "SELECT ",
+        job_columns!(),
+        " FROM jobs WHERE state = 'leased' AND lease_expires_at < ? ORDER BY id"
+    ))
+    .bind(now)
+    .fetch_all(&mut *conn)
+    .await?;
+    Ok(rows.iter().map(job_row).collect())
+}
+
+pub async fn result_exists(conn: &mut SqliteConnection, run: i64, key: &str) -> sqlx::Result<bool> {
+    let n: i64 =
+        sqlx::query_scalar("SELECT COUNT(*) FROM episode_results WHERE run_id = ? AND episode_key = ?")
+            .bind(run)
+            .bind(key)
+            .fetch_one(&mut *conn)
+            .await?;
+    Ok(n > 0)
+}
+
+/// An episode result to record.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NewResult<'a> {
+    pub job: &'a JobRow,
+    pub mode: &'a str,
+    pub tasks: &'a [TaskOutcome],
+    pub failure: Option<&'a str>,
+    pub wall_ms: i64,
+    pub log_tail: &'a str,
+    pub worker_id: &'a str,
+}
+
+/// Record a result; `false` when `(run, episode)` was already recorded (nothing changes).
+pub async fn insert_result(conn: &mut SqliteConnection, r: &NewResult<'_>, now: i64) -> sqlx::Result<bool> {
+    let tasks = serde_json::to_string(r.tasks).map_err(|e| sqlx::Error::Encode(e.into()))?;
+    let done = sqlx::query(
+        "INSERT INTO episode_results (run_id, episode_key, job_id, mode, tasks, failure, wall_ms, log_tail,
+                                      attempt, worker_id, recorded_at)
+         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) ON CONFLICT (run_id, episode_key) DO NOTHING",
+    )
+    .bind(r.job.run_id)
+    .bind(&r.job.episode_key)
+    .bind(r.job.id)
+    .bind(r.mode)
+    .bind(tasks)
+    .bind(r.failure)
+    .bind(r.wall_ms)
+    .bind(r.log_tail)
+    .bind(r.job.attempt)
+    .bind(r.worker_id)
+    .bind(now)
+    .execute(&mut *conn)
+    .await?;
+    Ok(done.rows_affected() == 1)
+}
+
+/// Move a job to a final state (`done`, `failed`), dropping its lease.
+pub async fn close_job(
+    conn: &mut SqliteConnection,
+    id: i64,
+    state: &str,
+    error: Option<&str>,
+    now: i64,
+) -> sqlx::Result<()> {
+    sqlx::query(
+        "UPDATE jobs SET state = ?, lease_owner = NULL, lease_expires_at = NULL,
+                         last_error = COALESCE(?, last_error), updated_at = ? WHERE id = ?",
+    )
+    .bind(state)
+    .bind(error)
+    .bind(now)
+    .bind(id)
+    .execute(&mut *conn)
+    .await?;
+    Ok(())
+}
+
+/// Put a job back in the queue after a platform failure or an expired lease.
+pub async fn requeue(conn: &mut SqliteConnection, id: i64, error: &str, now: i64) -> sqlx::Result<()> {
+    sqlx::query(
+        "UPDATE jobs SET state = 'queued', lease_owner = NULL, lease_expires_at = NULL,
+                         last_error = ?, updated_at = ? WHERE id = ?",
+    )
+    .bind(error)
+    .bind(now)
+    .bind(id)
+    .execute(&mut *conn)
+    .await?;
+    Ok(())
+}
+
+/// Jobs of a run still queued or leased.
+pub async fn open_jobs(conn: &mut SqliteConnection, run: i64) -> sqlx::Result<i64> {
+    sqlx::query_scalar("SELECT COUNT(*) FROM jobs WHERE run_id = ? AND state IN ('queued', 'leased')")
+        .bind(run)
+        .fetch_one(&mut *conn)
+        .await
+}
+
+/// Every recorded episode of a run with the spec it ran under, in key order.
+pub async fn episodes(conn: &mut SqliteConnection, run: i64) -> anyhow::Result<Vec<Episode>> {
+    let rows = sqlx::query(
+        "SELECT j.spec, e.tasks, e.failure FROM episode_results e JOIN jobs j ON j.id = e.job_id
+         WHERE e.run_id = ? ORDER BY e.episode_key",
+    )
+    .bind(run)
+    .fetch_all(&mut *conn)
+    .await?;
+    rows.iter()
+        .map(|r| {
+            let spec: JobSpec = serde_json::from_str(r.get::<&str, _>(0))?;
+            let tasks: Vec<TaskOutcome> = serde_json::from_str(r.get::<&str, _>(1))?;
+            Ok(Episode {
+                spec,
+                tasks,
+                failure: r.get(2),
+            })
+        })
+        .collect()
+}

@@ -1,0 +1,288 @@
+//! Policy submissions and their scoring runs: inserting a submission with its run and every
+//! episode job in one transaction, finishing a run, and reading progress and results back.
+
+use kitchen_r_core::dataset::Split;
+use sqlx::sqlite::SqlitePool;
+use sqlx::{QueryBuilder, Row, Sqlite, SqliteConnection};
+
+use crate::episodes::RunScores;
+
+/// A policy submission to insert with its run and jobs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NewPolicyRun<'a> {
+    pub team: i64,
+    pub split: Split,
+    /// The endpoint JSON (`submissions.body`).
+    pub body: &'a str,
+    pub scorer_version: &'a str,
+    pub max_concurrency: u32,
+    pub max_attempts: u32,
+    /// `(episode_key, spec JSON)` of every job.
+    pub jobs: &'a [(String, String)],
+}
+
+/// Insert the submission, its active run and its queued jobs atomically: a crash never leaves a
+/// run without its episodes. Returns `(submission id, run id)`.
+pub async fn insert_policy_submission(
+    pool: &SqlitePool,
+    new: &NewPolicyRun<'_>,
+    now: i64,
+) -> sqlx::Result<(i64, i64)> {
+    let mut tx = pool.begin_with("BEGIN IMMEDIATE").await?;
+    let sub: i64 = sqlx::query_scalar(
+        "INSERT INTO submissions (team_id, split, kind, body, created_at) VALUES (?, ?, 'policy', ?, ?) RETURNING id",
+    )
+    .bind(new.team)
+    .bind(new.split.as_str())
+    .bind(new.body)
+    .bind(now)
+    .fetch_one(&mut *tx)
+    .await?;
+    let run: i64 = sqlx::query_scalar(
+        "INSERT INTO scoring_runs (submission_id, scorer_version, created_at, em, scores, state, episodes_total, max_concurrency)
+         VALUES (?, ?, ?, NULL, '{}', 'active', ?, ?) RETURNING id",
+    )
+    .bind(sub)
+    .bind(new.scorer_version)
+    .bind(now)
+    .bind(new.jobs.len() as i64)
+    .bind(i64::from(new.max_concurrency))
+    .fetch_one(&mut *tx)
+    .await?;
+    // 6 parameters a row; 100 rows stay far below SQLite's parameter limit.
+    for chunk in new.jobs.chunks(100) {
+        let mut q = QueryBuilder::<Sqlite>::new(
+            "INSERT INTO jobs (run_id, episode_key, spec, max_attempts, created_at, updated_at) ",
+        );
+        q.push_values(chunk, |mut b, (key, spec)| {
+            b.push_bind(run)
+                .push_bind(key.clone())
+                .push_bind(spec.clone())
+                .push_bind(i64::from(new.max_attempts))
+                .push_bind(now)
+                .push_bind(now);
+        });
+        q.build().execute(&mut *tx).await?;
+    }
+    tx.commit().await?;
+    Ok((sub, run))
+}
+
+/// Policy runs of a team still evaluating.
+pub async fn active_runs(pool: &SqlitePool, team: i64) -> sqlx::Result<i64> {
+    sqlx::query_scalar(
+        "SELECT COUNT(*) FROM scoring_runs r JOIN submissions s ON s.id = r.submission_id
+         WHERE s.team_id = ? AND r.state = 'active'",
+    )
+    .bind(team)
+    .fetch_one(pool)
+    .await
+}
+
+/// `(split, body)` of the submission a run belongs to.
+pub async fn run_submission(conn: &mut SqliteConnection, run: i64) -> sqlx::Result<(String, String)> {
+    let r = sqlx::query("SELECT s.split, s.body FROM scoring_runs r JOIN submissions s ON s.id = r.submission_id WHERE r.id = ?")
+        .bind(run)
+        .fetch_one(&mut *conn)
+        .await?;
+    Ok((r.get(0), r.get(1)))
+}
+
+/// `(split, body)` of any submission, inside a transaction.
+pub async fn submission_body_in(
+    conn: &mut SqliteConnection,
+    id: i64,
+) -> sqlx::Result<Option<(String, String)>> {
+    let r = sqlx::query("SELECT split, body FROM submissions WHERE id = ?")
+        .bind(id)
+        .fetch_optional(&mut *conn)
+        .await?;
+    Ok(r.map(|r| (r.get(0), r.get(1))))
+}
+
+/// Store a finished run's scores; only an `active` run is finished (a second call is a no-op).
+/// Returns whether the run was finished by this call.
+pub async fn finish_run(
+    conn: &mut SqliteConnection,
+    run: i64,
+    scores: &RunScores,
+    platform_failed: bool,
+    now: i64,
+) -> sqlx::Result<bool> {
+    let json = crate::service::Scores::from(*scores).to_json();
+    let done = sqlx::query(
+        "UPDATE scoring_runs SET state = ?, scores = ?, sr = ?, mse = ?, m = ?, p = ?, finished_at = ?
+         WHERE id = ? AND state = 'active'",
+    )
+    .bind(if platform_failed {
+        "platform_failed"
+    } else {
+        "finished"
+    })
+    .bind(json.to_string())
+    .bind(scores.sr)
+    .bind(scores.mse)
+    .bind(scores.m)
+    .bind(scores.p)
+    .bind(now)
+    .bind(run)
+    .execute(&mut *conn)
+    .await?;
+    Ok(done.rows_affected() == 1)
+}
+
+/// Job counts of a run by state.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct JobCounts {
+    pub queued: i64,
+    pub leased: i64,
+    pub done: i64,
+    pub failed: i64,
+    /// Jobs that were leased at least once.
+    pub started: i64,
+}
+
+pub async fn job_counts(pool: &SqlitePool, run: i64) -> sqlx::Result<JobCounts> {
+    let r = sqlx::query(
+        "SELECT COALESCE(SUM(state = 'queued'), 0), COALESCE(SUM(state = 'leased'), 0),
+                COALESCE(SUM(state = 'done'), 0), COALESCE(SUM(state = 'failed'), 0),
+                COALESCE(SUM(attempt > 0), 0)
+         FROM jobs WHERE run_id = ?",
+    )
+    .bind(run)
+    .fetch_one(pool)
+    .await?;
+    Ok(JobCounts {
+        queued: r.get(0),
+        leased: r.get(1),
+        done: r.get(2),
+        failed: r.get(3),
+        started: r.get(4),
+    })
+}
+
+/// One recorded episode as the submission page shows it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ResultRow {
+    pub episode_key: String,
+    pub mode: String,
+    pub tasks: String,
+    pub failure: Option<String>,
+    pub wall_ms: i64,
+    pub log_tail: String,
+    pub attempt: i64,
+}
+
+pub async fn results(pool: &SqlitePool, run: i64) -> sqlx::Result<Vec<ResultRow>> {
+    let rows = sqlx::query(
+        "SELECT episode_key, mode, tasks, failure, wall_ms, log_tail, attempt FROM episode_results
+         WHERE run_id = ? ORDER BY episode_key",
+    )
+    .bind(run)
+    .fetch_all(pool)
+    .await?;
+    Ok(rows
+        .into_iter()
+        .map(|r| ResultRow {
+            episode_key: r.get(0),
+            mode: r.get(1),
+            tasks: r.get(2),
+            failure: r.get(3),
+            wall_ms: r.get(4),
+            log_tail: r.get(5),
+            attempt: r.get(6),
+        })
+        .collect())
+}
+
+/// A control or integrated leaderboard row (best entry per team, or a baseline).
+#[derive(Debug, Clone, PartialEq)]
+pub struct PolicyBoardRow {
+    pub team: String,
+    pub submission_id: i64,
+    pub submitted_at: i64,
+    pub state: Option<String>,
+    pub sr: Option<f64>,
+    pub mse: Option<f64>,
+    pub m: Option<f64>,
+    pub p: Option<f64>,
+    pub baseline: bool,
+}
+
+/// Policy submissions ranked on `(primary DESC, secondary ASC)`: `("sr", "mse")` for the
+/// control track, `("m", "p")` for the integrated track (only runs linked to a plans
+/// submission). Best entry per team; reference runs are each their own baseline row. Unscored
+/// or failed entries sort last, then earliest submission, then id.
+pub async fn policy_leaderboard(
+    pool: &SqlitePool,
+    split: Split,
+    integrated: bool,
+) -> sqlx::Result<Vec<PolicyBoardRow>> {
+    let (primary, secondary) = if integrated { ("m", "p") } else { ("sr", "mse") };
+    let linked = if integrated {
+        "AND json_extract(s.body, '$.plans') IS NOT NULL"
+    } else {
+        ""
+    };
+    // Column names come from the two constants above, never from input.
+    let sql = format!(
+        "WITH latest AS (
+            SELECT r.submission_id, r.state, r.sr, r.mse, r.m, r.p,
+                   CASE WHEN r.state = 'finished' THEN r.{primary} END AS k1,
+                   CASE WHEN r.state = 'finished' THEN r.{secondary} END AS k2
+            FROM scoring_runs r
+            WHERE r.id = (SELECT MAX(id) FROM scoring_runs WHERE submission_id = r.submission_id)
+         ), ranked AS (
+            SELECT s.id, s.team_id, s.created_at, l.state, l.sr, l.mse, l.m, l.p, l.k1, l.k2,
+                   COALESCE(json_extract(s.body, '$.reference'), 0) AS baseline,
+                   ROW_NUMBER() OVER (
+                       PARTITION BY s.team_id, CASE WHEN COALESCE(json_extract(s.body, '$.reference'), 0) THEN s.id END
+                       ORDER BY l.k1 IS NULL, l.k1 DESC, l.k2 IS NULL, l.k2, s.created_at, s.id) AS rn
+            FROM submissions s LEFT JOIN latest l ON l.submission_id = s.id
+            WHERE s.split = ? AND s.kind = 'policy' {linked}
+         )
+         SELECT t.name, k.id, k.created_at, k.state, k.sr, k.mse, k.m, k.p, k.baseline
+         FROM ranked k JOIN teams t ON t.id = k.team_id
+         WHERE k.rn = 1
+         ORDER BY k.k1 IS NULL, k.k1 DESC, k.k2 IS NULL, k.k2, k.created_at, k.id"
+    );
+    let rows = sqlx::query(sqlx::AssertSqlSafe(sql))
+        .bind(split.as_str())
+        .fetch_all(pool)
+        .await?;
+    Ok(rows
+        .into_iter()
+        .map(|r| PolicyBoardRow {
+            team: r.get(0),
+            submission_id: r.get(1),
+            submitted_at: r.get(2),
+            state: r.get(3),
+            sr: r.get(4),
+            mse: r.get(5),
+            m: r.get(6),
+            p: r.get(7),
+            baseline: r.get::<i64, _>(8) != 0,
+        })
+        .collect())
+}
+
+/// Name of the reserved team organiser reference runs are filed under. Team names cannot
+/// contain parentheses, so no participant can take it.
+pub const BASELINE_TEAM: &str = "(baseline)";
+
+/// The reserved baseline team, created on first use. Its token hash is not a hex digest, so no
+/// bearer token ever authenticates as it.
+pub async fn baseline_team(pool: &SqlitePool, now: i64) -> sqlx::Result<crate::store::Team> {
+    let row = sqlx::query(
+        "INSERT INTO teams (name, token_hash, created_at) VALUES (?, '!baseline: no token', ?)
+         ON CONFLICT (name) DO UPDATE SET name = excluded.name RETURNING id, name",
+    )
+    .bind(BASELINE_TEAM)
+    .bind(now)
+    .fetch_one(pool)
+    .await?;
+    Ok(crate::store::Team {
+        id: row.get(0),
+        name: row.get(1),
+    })
+}

@@ -1,0 +1,136 @@
+//! Test support: a server state over a temporary SQLite file and the real assets, a scriptable
+//! policy probe, and helpers that play a worker.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use kitchen_r_core::dataset::Split;
+
+use crate::config::Config;
+use crate::content::Content;
+use crate::episodes::TaskOutcome;
+use crate::probe::{BoxFuture, PolicyProbe, ProbeError, ProbedSpec};
+use crate::service::jobs::{LeasedJob, Report};
+use crate::service::{AppState, RegisterPolicy, Tokens};
+
+pub const ADMIN: &str = "admin-token-for-tests-0123456789";
+pub const WORKER: &str = "worker-token-for-tests-012345678";
+
+/// A probe answering whatever the test set, counting its calls.
+#[derive(Debug)]
+pub struct FakeProbe {
+    pub answer: Result<ProbedSpec, ProbeError>,
+    pub calls: AtomicUsize,
+}
+
+impl FakeProbe {
+    pub fn ok(max_concurrency: u32) -> Arc<FakeProbe> {
+        Arc::new(FakeProbe {
+            answer: Ok(ProbedSpec {
+                protocol_version: kitchen_r_proto::POLICY_PROTOCOL_VERSION,
+                max_concurrency,
+                summary: "fake-policy 1.0".into(),
+            }),
+            calls: AtomicUsize::new(0),
+        })
+    }
+
+    pub fn err(e: ProbeError) -> Arc<FakeProbe> {
+        Arc::new(FakeProbe {
+            answer: Err(e),
+            calls: AtomicUsize::new(0),
+        })
+    }
+
+    pub fn calls(&self) -> usize {
+        self.calls.load(Ordering::SeqCst)
+    }
+}
+
+impl PolicyProbe for FakeProbe {
+    fn probe(&self, _url: &str, _bearer: Option<&str>) -> BoxFuture<'static, Result<ProbedSpec, ProbeError>> {
+        self.calls.fetch_add(1, Ordering::SeqCst);
+        let answer = self.answer.clone();
+        Box::pin(async move { answer })
+    }
+}
+
+pub struct Fixture {
+    pub state: AppState,
+    pub _dir: tempfile::TempDir,
+}
+
+/// A state with `control.dev_episodes = 3` (tweak further with `tweak`).
+pub async fn fixture(probe: Arc<dyn PolicyProbe>, tweak: impl FnOnce(&mut Config)) -> Fixture {
+    let dir = tempfile::tempdir().unwrap();
+    let mut config = Config {
+        db: format!("sqlite://{}", dir.path().join("t.db").display()),
+        ..Config::default()
+    };
+    config.control.dev_episodes = 3;
+    tweak(&mut config);
+    config.validate().unwrap();
+    let content = Content::load(&config.assets_dir()).unwrap();
+    let pool = crate::store::connect(&config.db).await.unwrap();
+    let tokens = Tokens {
+        admin: ADMIN,
+        worker: WORKER,
+    };
+    Fixture {
+        state: AppState::new(pool, config, content, tokens, probe),
+        _dir: dir,
+    }
+}
+
+impl Fixture {
+    pub async fn team(&self, name: &str) -> String {
+        self.state.create_team(Some(ADMIN), name).await.unwrap().token
+    }
+
+    pub fn request(&self, split: Split) -> RegisterPolicy {
+        RegisterPolicy {
+            endpoint: "http://127.0.0.1:50099".into(),
+            split,
+            token: None,
+            plans: None,
+            episodes: None,
+            reference: false,
+        }
+    }
+
+    pub async fn lease(&self, worker: &str, max: u32) -> Vec<LeasedJob> {
+        self.state.lease(Some(WORKER), worker, max, 0).await.unwrap()
+    }
+
+    /// A report of `job` where task j succeeds when `success(j)`, with MSE `mse` on 2 samples
+    /// per task for offline episodes.
+    pub fn report(&self, worker: &str, job: &LeasedJob, success: impl Fn(usize) -> bool, mse: f64) -> Report {
+        let offline = job.spec.mode == crate::episodes::Mode::Offline;
+        let tasks = (0..job.spec.task_count())
+            .map(|j| TaskOutcome {
+                index: j as u32,
+                step: job.spec.plan[j].clone(),
+                success: !offline && success(j),
+                completion_time_s: 0.0,
+                failure_reason: if offline || success(j) {
+                    String::new()
+                } else {
+                    "timeout".into()
+                },
+                mse: if offline { mse } else { 0.0 },
+                mse_samples: if offline { 2 } else { 0 },
+            })
+            .collect();
+        Report {
+            worker_id: worker.into(),
+            job_id: job.id,
+            attempt: job.attempt,
+            run_id: job.run_id,
+            episode_key: job.episode_key.clone(),
+            tasks,
+            platform_error: String::new(),
+            log_tail: "ok".into(),
+            wall_ms: 10,
+        }
+    }
+}
