@@ -316,6 +316,39 @@ mod tests {
     }
 
     #[test]
+    fn the_shipped_config_file_documents_exactly_the_defaults() {
+        let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/server.toml");
+        // The file alone, without KITCHEN_R_* variables the environment may set.
+        let c: Config = Figment::from(Serialized::defaults(Config::default()))
+            .merge(Toml::file(&file))
+            .extract()
+            .unwrap();
+        assert_eq!(c, Config::default());
+        assert_eq!(c.quota.concurrent_runs, 2);
+        assert!(c.control.offline_mse);
+        assert_eq!(c.policy.allow_networks, ["127.0.0.0/8", "::1/128"]);
+    }
+
+    #[test]
+    fn control_values_are_checked() {
+        let mut c = Config::default();
+        c.control.actions_executed_per_chunk = 17;
+        assert!(matches!(
+            c.validate(),
+            Err(ConfigError::Invalid {
+                key: "control.actions_executed_per_chunk",
+                ..
+            })
+        ));
+        let mut c = Config::default();
+        c.control.max_attempts = 0;
+        assert!(c.validate().is_err());
+        let mut c = Config::default();
+        c.worker_token = "short".into();
+        assert!(c.validate().is_err());
+    }
+
+    #[test]
     fn file_then_env_override_defaults() {
         let dir = tempfile::tempdir().unwrap();
         let f = dir.path().join("s.toml");

@@ -196,3 +196,6 @@ async fn leaderboard(State(s): State<AppState>, Query(q): Params) -> Result<Resp
 async fn rescore(State(s): State<AppState>, headers: HeaderMap) -> Result<Response, ServiceError> {
     Ok(axum::Json(s.rescore_all(bearer(&headers)).await?).into_response())
 }
+
+#[cfg(test)]
+mod tests;

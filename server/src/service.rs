@@ -8,6 +8,7 @@
 pub mod jobs;
 pub mod policies;
 mod progress;
+mod rescore;
 mod scores;
 
 use std::sync::Arc;
@@ -17,7 +18,7 @@ use serde::Serialize;
 use sha2::{Digest, Sha256};
 use sqlx::sqlite::SqlitePool;
 
-use crate::config::{Config, PlanLimits};
+use crate::config::Config;
 use crate::content::Content;
 use crate::error::ServiceError;
 use crate::leaderboard::LeaderboardCache;
@@ -27,6 +28,7 @@ use crate::store::{self, NewRun, Team};
 
 pub use policies::{PolicyInfo, RegisterPolicy, Registered};
 pub use progress::{EpisodeView, PolicyRunView};
+pub use rescore::{RescoreFailure, RescoreReport};
 pub use scores::{Scores, fmt_score};
 
 /// Version of the planning scorer; part of every scoring run's `scorer_version`.
@@ -114,18 +116,6 @@ pub struct InstructionView {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub total_steps: Option<usize>,
     pub em: f64,
-}
-
-#[derive(Debug, Clone, Serialize)]
-pub struct RescoreReport {
-    pub rescored: usize,
-    pub failed: Vec<RescoreFailure>,
-}
-
-#[derive(Debug, Clone, Serialize)]
-pub struct RescoreFailure {
-    pub id: i64,
-    pub error: String,
 }
 
 /// The secrets an [`AppState`] checks callers against.
@@ -319,55 +309,6 @@ impl AppState {
             policy,
             latest_run,
         })
-    }
-
-    /// Organiser: a new scoring run for every plan submission.
-    pub async fn rescore_all(&self, admin: Option<&str>) -> Result<RescoreReport, ServiceError> {
-        self.require_admin(admin)?;
-        let scorer = self.scorer_version();
-        let mut report = RescoreReport {
-            rescored: 0,
-            failed: Vec::new(),
-        };
-        for id in store::plan_submission_ids(self.pool()).await? {
-            match self.rescore_one(id, &scorer).await {
-                Ok(()) => report.rescored += 1,
-                Err(ServiceError::PlanFile(e)) => report.failed.push(RescoreFailure {
-                    id,
-                    error: e.to_string(),
-                }),
-                Err(e) => return Err(e),
-            }
-        }
-        self.inner.leaderboard.invalidate();
-        tracing::info!(
-            rescored = report.rescored,
-            failed = report.failed.len(),
-            "rescore done"
-        );
-        Ok(report)
-    }
-
-    async fn rescore_one(&self, id: i64, scorer: &str) -> Result<(), ServiceError> {
-        let (split, body) = store::submission_body(self.pool(), id).await?;
-        let split: Split = split.parse().map_err(|e: String| anyhow::anyhow!(e))?;
-        let gt = self.content().ground_truth(split);
-        // Stored files were accepted under the limits of their day; only the ids must still exist.
-        let file = plans::parse(
-            body.as_bytes(),
-            split,
-            gt.len(),
-            &self.content().index,
-            &PlanLimits::UNLIMITED,
-        )?;
-        let score = plans::score(&file, gt);
-        let run = NewRun {
-            scorer_version: scorer,
-            em: score.em,
-            instructions: &score.instructions,
-        };
-        store::insert_run(self.pool(), id, now_ms(), &run).await?;
-        Ok(())
     }
 
     fn scorer_version(&self) -> String {

@@ -10,22 +10,16 @@
 //! - the report (or reap) that closes a run's last job computes the run's scores in the same
 //!   transaction, so a crash can never leave a finished run unscored or scored twice.
 
-use std::collections::{BTreeSet, HashMap};
+use std::collections::BTreeSet;
 use std::time::Duration;
 
-use kitchen_r_core::dataset::Split;
 use serde::Serialize;
-use sqlx::SqliteConnection;
 use tokio::time::Instant;
 
-use super::policies::parse_body;
 use super::{AppState, hash_token, now_ms};
-use crate::config::PlanLimits;
-use crate::episodes::{self, JobSpec, TaskOutcome};
+use crate::episodes::{JobSpec, TaskOutcome};
 use crate::error::ServiceError;
-use crate::plans;
 use crate::store::queue::{self, JobRow, NewResult};
-use crate::store::runs;
 
 /// Most jobs one Lease call hands out, and the longest it is held open.
 pub const MAX_JOBS_PER_LEASE: u32 = 64;
@@ -274,93 +268,6 @@ impl AppState {
         Ok(report)
     }
 
-    /// After a failed attempt: requeue, or record the episode as failed when the job had all its
-    /// attempts. Returns whether it was recorded as failed.
-    async fn retry_or_fail(
-        &self,
-        conn: &mut SqliteConnection,
-        job: &JobRow,
-        spec: &JobSpec,
-        reason: &str,
-        worker: &str,
-        now: i64,
-    ) -> Result<bool, ServiceError> {
-        let attempt_reason = format!("attempt {}: {reason}", job.attempt);
-        if job.attempt < job.max_attempts {
-            queue::requeue(conn, job.id, &attempt_reason, now).await?;
-            tracing::warn!(job = job.id, run = job.run_id, reason = %attempt_reason, "job requeued");
-            return Ok(false);
-        }
-        let failure = format!(
-            "the platform gave up after {} attempts; last: {reason}",
-            job.attempt
-        );
-        let result = NewResult {
-            job,
-            mode: spec.mode.as_str(),
-            tasks: &[],
-            failure: Some(&failure),
-            wall_ms: 0,
-            log_tail: "",
-            worker_id: worker,
-        };
-        queue::insert_result(conn, &result, now).await?;
-        queue::close_job(conn, job.id, "failed", Some(&attempt_reason), now).await?;
-        tracing::warn!(job = job.id, run = job.run_id, %failure, "job failed");
-        Ok(true)
-    }
-
-    /// When no job of `run` is queued or leased any more, compute and store its scores.
-    async fn finish_if_done(
-        &self,
-        conn: &mut SqliteConnection,
-        run: i64,
-        now: i64,
-    ) -> Result<bool, ServiceError> {
-        if queue::open_jobs(conn, run).await? > 0 {
-            return Ok(false);
-        }
-        let eps = queue::episodes(conn, run).await?;
-        let (_, body) = runs::run_submission(conn, run).await?;
-        let plans = match parse_body(&body)?.plans {
-            Some(id) => Some(self.linked_plans(conn, id).await?),
-            None => None,
-        };
-        let scores = episodes::aggregate(&eps, plans.as_ref());
-        let platform_failed = !eps.is_empty() && eps.iter().all(|e| e.failure.is_some());
-        let done = runs::finish_run(conn, run, &scores, platform_failed, now).await?;
-        if done {
-            tracing::info!(run, ?scores, platform_failed, "run finished");
-        }
-        Ok(done)
-    }
-
-    /// The linked plan submission's predictions by instruction id, re-read from its immutable
-    /// body so EM_j is recomputed against the ground truth rather than trusted from a run.
-    async fn linked_plans(
-        &self,
-        conn: &mut SqliteConnection,
-        id: i64,
-    ) -> Result<HashMap<String, Vec<String>>, ServiceError> {
-        let (split, body) = runs::submission_body_in(conn, id)
-            .await?
-            .ok_or_else(|| anyhow::anyhow!("linked plans submission {id} is missing"))?;
-        let split: Split = split.parse().map_err(|e: String| anyhow::anyhow!(e))?;
-        let gt = self.content().ground_truth(split);
-        let file = plans::parse(
-            body.as_bytes(),
-            split,
-            gt.len(),
-            &self.content().index,
-            &PlanLimits::UNLIMITED,
-        )?;
-        Ok(gt
-            .iter()
-            .zip(file.plans)
-            .filter_map(|(g, p)| p.map(|p| (g.id.clone(), p)))
-            .collect())
-    }
-
     /// Wake long-polling leases (a job was requeued or a concurrency slot freed) and drop the
     /// cached leaderboards when a run got its scores.
     fn after_queue_write(&self, run_finished: bool) {
@@ -414,5 +321,6 @@ fn clip(s: &str, max_chars: usize) -> String {
     s.chars().take(max_chars).collect()
 }
 
+mod finish;
 #[cfg(test)]
 mod tests;
