@@ -343,8 +343,10 @@ mod tests {
         let mut c = Config::default();
         c.control.max_attempts = 0;
         assert!(c.validate().is_err());
-        let mut c = Config::default();
-        c.worker_token = "short".into();
+        let c = Config {
+            worker_token: "short".into(),
+            ..Config::default()
+        };
         assert!(c.validate().is_err());
     }
 
