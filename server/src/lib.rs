@@ -120,8 +120,10 @@ impl Server {
         shutdown: impl Future<Output = ()> + Send + 'static,
     ) -> anyhow::Result<()> {
         let (tx, rx) = tokio::sync::watch::channel(false);
+        let state = self.state.clone();
         tokio::spawn(async move {
             shutdown.await;
+            state.begin_shutdown();
             let _ = tx.send(true);
         });
         let wait = |mut rx: tokio::sync::watch::Receiver<bool>| async move {
@@ -144,6 +146,9 @@ pub(crate) async fn grpc_routes(state: AppState) -> anyhow::Result<tonic::transp
     let (health_reporter, health) = tonic_health::server::health_reporter();
     health_reporter
         .set_serving::<kitchen_r_proto::submission::v1::submissions_server::SubmissionsServer<grpc::SubmissionsService>>()
+        .await;
+    health_reporter
+        .set_serving::<kitchen_r_proto::worker::v1::worker_server::WorkerServer<grpc_worker::WorkerService>>()
         .await;
     let reflection = tonic_reflection::server::Builder::configure()
         .register_encoded_file_descriptor_set(kitchen_r_proto::FILE_DESCRIPTOR_SET)

@@ -54,6 +54,9 @@ struct Inner {
     probe: Arc<dyn PolicyProbe>,
     /// Woken whenever jobs become available, so long-polling `Lease` calls answer at once.
     jobs_ready: tokio::sync::Notify,
+    /// Set at shutdown so long-polling `Lease` calls answer at once instead of holding the
+    /// graceful drain for up to 30 s.
+    stopping: std::sync::atomic::AtomicBool,
 }
 
 impl std::fmt::Debug for AppState {
@@ -146,6 +149,7 @@ impl AppState {
                 worker_hash: hash_token(tokens.worker),
                 probe,
                 jobs_ready: tokio::sync::Notify::new(),
+                stopping: std::sync::atomic::AtomicBool::new(false),
             }),
         }
     }

@@ -85,6 +85,14 @@ impl AppState {
         }
     }
 
+    /// The server is shutting down: answer waiting leases now, empty, and lease nothing more.
+    pub fn begin_shutdown(&self) {
+        self.inner
+            .stopping
+            .store(true, std::sync::atomic::Ordering::SeqCst);
+        self.inner.jobs_ready.notify_waiters();
+    }
+
     fn lease_ms(&self) -> i64 {
         i64::try_from(self.config().control.lease_s.saturating_mul(1000)).unwrap_or(i64::MAX / 2)
     }
@@ -110,8 +118,16 @@ impl AppState {
             let notified = self.inner.jobs_ready.notified();
             tokio::pin!(notified);
             notified.as_mut().enable();
+            // No new leases while stopping: the results could not be reported to this process.
+            if self.inner.stopping.load(std::sync::atomic::Ordering::SeqCst) {
+                return Ok(Vec::new());
+            }
             let now = now_ms();
-            let claimed = queue::claim(self.pool(), worker, now, now + self.lease_ms(), max_jobs).await?;
+            // A read first: idle workers polling must not take the write lock every time.
+            let claimed = match queue::any_queued(self.pool()).await? {
+                true => queue::claim(self.pool(), worker, now, now + self.lease_ms(), max_jobs).await?,
+                false => Vec::new(),
+            };
             if !claimed.is_empty() || Instant::now() >= deadline {
                 let jobs = claimed
                     .into_iter()

@@ -69,6 +69,13 @@ pub async fn claim(
     Ok(jobs)
 }
 
+/// Whether any job waits in the queue (a read, cheaper than a claim that finds nothing).
+pub async fn any_queued(pool: &SqlitePool) -> sqlx::Result<bool> {
+    sqlx::query_scalar("SELECT EXISTS (SELECT 1 FROM jobs WHERE state = 'queued')")
+        .fetch_one(pool)
+        .await
+}
+
 /// Extend a lease still held by `(job, attempt, owner)`; `None` when it is not (requeued,
 /// leased again, finished or cancelled).
 pub async fn heartbeat(

@@ -304,3 +304,20 @@ async fn an_integrated_run_recomputes_em_from_the_linked_plans() {
     assert_eq!(board.rows.len(), 1);
     assert_eq!(board.rows[0].scores.m, s.m);
 }
+
+#[tokio::test]
+async fn shutdown_ends_long_polls_at_once() {
+    let f = fixture(FakeProbe::ok(1), |_| {}).await;
+    let state = f.state.clone();
+    let started = std::time::Instant::now();
+    let waiter = tokio::spawn(async move { state.lease(Some(WORKER), "w", 1, 30_000).await.unwrap() });
+    tokio::time::sleep(Duration::from_millis(50)).await;
+    f.state.begin_shutdown();
+    assert!(waiter.await.unwrap().is_empty());
+    assert!(started.elapsed() < Duration::from_secs(5));
+    registered(&f).await;
+    assert!(
+        f.lease("w", 1).await.is_empty(),
+        "nothing is leased while stopping"
+    );
+}
