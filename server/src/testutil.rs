@@ -83,6 +83,18 @@ pub async fn fixture(probe: Arc<dyn PolicyProbe>, tweak: impl FnOnce(&mut Config
 }
 
 impl Fixture {
+    /// A second server process on the same database file (a restart).
+    pub async fn reopen(&self, probe: Arc<dyn PolicyProbe>) -> AppState {
+        let config = self.state.config().clone();
+        let content = Content::load(&config.assets_dir()).unwrap();
+        let pool = crate::store::connect(&config.db).await.unwrap();
+        let tokens = Tokens {
+            admin: ADMIN,
+            worker: WORKER,
+        };
+        AppState::new(pool, config, content, tokens, probe)
+    }
+
     pub async fn team(&self, name: &str) -> String {
         self.state.create_team(Some(ADMIN), name).await.unwrap().token
     }

@@ -321,3 +321,34 @@ async fn shutdown_ends_long_polls_at_once() {
         "nothing is leased while stopping"
     );
 }
+
+#[tokio::test]
+async fn a_restarted_server_resumes_the_run_from_sqlite() {
+    let f = fixture(FakeProbe::ok(8), |c| {
+        c.control.dev_episodes = 1;
+        c.control.offline_mse = false;
+    })
+    .await;
+    let (token, id) = registered(&f).await;
+    let lost = f.lease("w1", 8).await.remove(0);
+    // The first process dies with the lease held; the next one reaps it once it expires.
+    let restarted = f.reopen(FakeProbe::ok(8)).await;
+    let reaped = restarted.reap_expired(now_ms() + 3_600_000).await.unwrap();
+    assert_eq!(reaped.requeued, 1);
+    let job = restarted.lease(Some(WORKER), "w2", 8, 0).await.unwrap().remove(0);
+    assert_eq!((job.id, job.attempt), (lost.id, 2));
+    restarted
+        .report_result(Some(WORKER), f.report("w2", &job, |_| true, 0.0))
+        .await
+        .unwrap();
+    let run = restarted
+        .get_submission(Some(&token), id)
+        .await
+        .unwrap()
+        .latest_run
+        .unwrap();
+    assert_eq!(
+        (run.evaluation.unwrap().state, run.scores.sr),
+        ("finished", Some(1.0))
+    );
+}
