@@ -9,6 +9,8 @@
 pub mod bench;
 pub mod collect;
 pub mod eval;
+pub mod job;
+pub mod offline;
 pub mod oracle;
 pub mod policy;
 pub mod record;

@@ -79,6 +79,10 @@ impl EpisodeOutcome {
 /// with that reason (the recording-rate monitor uses it).
 pub trait StepHook {
     fn on_step(&mut self, sim: &Sim, action: &Action, info: &StepInfo) -> Result<(), String>;
+
+    /// Called before task `index` begins, with the world as the task will find it: the
+    /// expert-start snapshots behind teleport-on-failure are taken here.
+    fn on_task_start(&mut self, _sim: &Sim, _index: usize) {}
 }
 
 impl StepHook for () {
@@ -200,6 +204,7 @@ fn run_task(
 ) -> Result<TaskOutcome, RunError> {
     let step_text = sim.episode().plan[j].clone();
     let episode_id = sim.episode().id.clone();
+    hook.on_task_start(sim, j);
     sim.begin_task(j)?;
     let target = kitchen_r_sim::task_target(sim.episode(), sim.scene(), j)?;
     let t0 = sim.time();

@@ -209,6 +209,83 @@ impl AllowedNetworks {
     }
 }
 
+/// The well-known ranges of each switchable class, as CIDR text: the server's and the worker's
+/// `allow_networks` list names them.
+pub const CLASS_RANGES: [(&str, NetworkKind); 9] = [
+    ("127.0.0.0/8", NetworkKind::Loopback),
+    ("::1/128", NetworkKind::Loopback),
+    ("10.0.0.0/8", NetworkKind::Private),
+    ("172.16.0.0/12", NetworkKind::Private),
+    ("192.168.0.0/16", NetworkKind::Private),
+    ("100.64.0.0/10", NetworkKind::Private),
+    ("fc00::/7", NetworkKind::Private),
+    ("169.254.0.0/16", NetworkKind::LinkLocal),
+    ("fe80::/10", NetworkKind::LinkLocal),
+];
+
+impl AllowedNetworks {
+    /// An `allow_networks` list of CIDR ranges as address classes. Only the ranges of
+    /// [`CLASS_RANGES`] are accepted, and one of them allows its whole class (the check is by
+    /// class), so a list never suggests a finer filter than the one applied.
+    pub fn from_cidrs<S: AsRef<str>>(list: &[S]) -> Result<AllowedNetworks, String> {
+        let mut a = AllowedNetworks {
+            loopback: false,
+            private: false,
+            link_local: false,
+        };
+        for item in list {
+            let item = item.as_ref().trim();
+            let kind = CLASS_RANGES
+                .iter()
+                .find(|(r, _)| r.eq_ignore_ascii_case(item))
+                .map(|(_, k)| *k)
+                .ok_or_else(|| {
+                    let known: Vec<&str> = CLASS_RANGES.iter().map(|(r, _)| *r).collect();
+                    format!(
+                        "allow_networks: {item:?} is not one of the ranges that can be allowed ({}); \
+                         public addresses are always allowed",
+                        known.join(", ")
+                    )
+                })?;
+            match kind {
+                NetworkKind::Loopback => a.loopback = true,
+                NetworkKind::Private => a.private = true,
+                NetworkKind::LinkLocal => a.link_local = true,
+                NetworkKind::NotUnicast => {}
+            }
+        }
+        Ok(a)
+    }
+}
+
+/// The [`CLASS_RANGES`] entry `ip` falls in, to name in a refusal.
+pub fn class_range(ip: IpAddr) -> Option<&'static str> {
+    let ip = match ip {
+        IpAddr::V6(v6) => v6.to_ipv4_mapped().map_or(ip, IpAddr::V4),
+        v4 => v4,
+    };
+    let inside = |net: &str| -> bool {
+        let Some((base, bits)) = net.split_once('/') else {
+            return false;
+        };
+        let (Ok(base), Ok(bits)) = (base.parse::<IpAddr>(), bits.parse::<u32>()) else {
+            return false;
+        };
+        match (base, ip) {
+            (IpAddr::V4(b), IpAddr::V4(a)) => {
+                let mask = u32::MAX.checked_shl(32 - bits).unwrap_or(0);
+                u32::from(b) & mask == u32::from(a) & mask
+            }
+            (IpAddr::V6(b), IpAddr::V6(a)) => {
+                let mask = u128::MAX.checked_shl(128 - bits).unwrap_or(0);
+                u128::from(b) & mask == u128::from(a) & mask
+            }
+            _ => false,
+        }
+    };
+    CLASS_RANGES.iter().map(|(r, _)| *r).find(|r| inside(r))
+}
+
 /// Parse, resolve and check `endpoint`: every resolved address must be allowed.
 pub fn resolve(endpoint: &str, allowed: &AllowedNetworks) -> Result<Endpoint, EndpointError> {
     let (tls, host, port) = parse(endpoint)?;
@@ -332,6 +409,21 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("multicast") && !err.contains("allows it"), "{err}");
+    }
+
+    #[test]
+    fn cidr_lists_map_to_classes() {
+        let a = AllowedNetworks::from_cidrs(&["127.0.0.0/8", "::1/128"]).unwrap();
+        assert_eq!(a, AllowedNetworks::default());
+        let a = AllowedNetworks::from_cidrs(&["10.0.0.0/8", "FE80::/10"]).unwrap();
+        assert!(!a.loopback && a.private && a.link_local);
+        let err = AllowedNetworks::from_cidrs(&["10.1.0.0/16"]).unwrap_err();
+        assert!(err.contains("10.1.0.0/16") && err.contains("10.0.0.0/8"), "{err}");
+        assert_eq!(class_range(ip("10.2.3.4")), Some("10.0.0.0/8"));
+        assert_eq!(class_range(ip("172.20.0.1")), Some("172.16.0.0/12"));
+        assert_eq!(class_range(ip("::ffff:192.168.1.1")), Some("192.168.0.0/16"));
+        assert_eq!(class_range(ip("fd12::1")), Some("fc00::/7"));
+        assert_eq!(class_range(ip("8.8.8.8")), None);
     }
 
     #[test]

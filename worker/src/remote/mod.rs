@@ -14,6 +14,7 @@ pub mod client;
 pub mod conn;
 pub mod convert;
 pub mod endpoint;
+pub mod probe;
 pub mod server;
 
 use std::time::Duration;

@@ -1,0 +1,430 @@
+//! The worker loop: N slots, each leasing one job at a time from the server's
+//! `kitchen_r.worker.v1.Worker` service, running it on its own thread (episodes are CPU-bound
+//! and the policy client blocks), heartbeating every third of the lease while it runs, and
+//! reporting the result.
+//!
+//! Failure policy: the server being down or restarting is transient, so every call is retried
+//! with capped exponential backoff and the worker never exits for it; only a refused worker
+//! token stops the loop (retrying cannot fix it). Results are idempotent server-side, so a report
+//! whose answer was lost is simply sent again. On shutdown a running episode is stopped at its
+//! next control step and reported as a platform error (the server requeues it at once without
+//! charging the participant); if even that report cannot get through, the lease expires and the
+//! server's reaper requeues the job.
+
+use std::future::Future;
+use std::sync::Arc;
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use kitchen_r_proto::worker::v1 as pb;
+use pb::worker_client::WorkerClient;
+use tokio::sync::{oneshot, watch};
+use tokio::task::JoinSet;
+use tonic::metadata::{Ascii, MetadataValue};
+use tonic::service::Interceptor;
+use tonic::service::interceptor::InterceptedService;
+use tonic::transport::{Channel, ClientTlsConfig, Endpoint};
+use tonic::{Code, Request, Status};
+use tracing::{Instrument, error, info, info_span, warn};
+
+use super::execute::{JobControl, execute_job};
+use super::{JobContext, WorkerConfig, WorkerError};
+
+/// How long a shutting-down worker keeps trying to hand in its last result.
+const SHUTDOWN_GRACE: Duration = Duration::from_secs(5);
+/// Longest pause between retries of a failed call.
+const MAX_BACKOFF: Duration = Duration::from_secs(30);
+
+/// Adds `authorization: Bearer <worker token>` to every call.
+#[derive(Debug, Clone)]
+struct Auth(MetadataValue<Ascii>);
+
+impl Interceptor for Auth {
+    fn call(&mut self, mut req: Request<()>) -> Result<Request<()>, Status> {
+        req.metadata_mut().insert("authorization", self.0.clone());
+        Ok(req)
+    }
+}
+
+type Client = WorkerClient<InterceptedService<Channel, Auth>>;
+
+/// A worker ready to run: configuration checked, assets and dataset loaded.
+pub struct Worker {
+    id: String,
+    cfg: WorkerConfig,
+    ctx: Arc<JobContext>,
+    client: Client,
+}
+
+impl std::fmt::Debug for Worker {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Worker")
+            .field("id", &self.id)
+            .field("server", &self.cfg.server)
+            .field("slots", &self.cfg.slots)
+            .finish_non_exhaustive()
+    }
+}
+
+/// Build and run until `shutdown` resolves.
+pub async fn run_worker(cfg: WorkerConfig, shutdown: impl Future<Output = ()>) -> Result<(), WorkerError> {
+    Worker::build(cfg).await?.run(shutdown).await
+}
+
+impl Worker {
+    /// Validate `cfg`, load what every job needs, and prepare a (lazy) channel to the server:
+    /// nothing is sent yet, so a server that is not up is not an error here.
+    pub async fn build(cfg: WorkerConfig) -> Result<Worker, WorkerError> {
+        cfg.validate()?;
+        let c = cfg.clone();
+        let ctx = tokio::task::spawn_blocking(move || JobContext::from_worker_config(&c))
+            .await
+            .map_err(|e| WorkerError::Config(format!("loading the assets: {e}")))??;
+        Worker::with_context(cfg, Arc::new(ctx))
+    }
+
+    /// As [`Worker::build`] with an already loaded context (the server's in-process slots).
+    pub fn with_context(cfg: WorkerConfig, ctx: Arc<JobContext>) -> Result<Worker, WorkerError> {
+        cfg.validate()?;
+        let bad = |e: String| WorkerError::Config(format!("`server` {:?}: {e}", cfg.server));
+        let mut ep = Endpoint::from_shared(cfg.server.clone())
+            .map_err(|e| bad(e.to_string()))?
+            .connect_timeout(Duration::from_secs(5))
+            .tcp_nodelay(true);
+        if cfg.server.starts_with("https://") {
+            ep = ep
+                .tls_config(ClientTlsConfig::new().with_webpki_roots())
+                .map_err(|e| bad(e.to_string()))?;
+        }
+        let token = format!("Bearer {}", cfg.token)
+            .parse()
+            .map_err(|_| WorkerError::Config("`token` must be printable ASCII".into()))?;
+        // Results carry at most a 64 KiB log; jobs are small too.
+        let client = WorkerClient::with_interceptor(ep.connect_lazy(), Auth(token));
+        Ok(Worker {
+            id: cfg.worker_id(),
+            cfg,
+            ctx,
+            client,
+        })
+    }
+
+    /// The lease owner name this worker uses.
+    pub fn id(&self) -> &str {
+        &self.id
+    }
+
+    /// Run the slots until `shutdown` resolves (then stop them cleanly) or the server refuses
+    /// the worker token.
+    pub async fn run(self, shutdown: impl Future<Output = ()>) -> Result<(), WorkerError> {
+        let (stop_tx, stop_rx) = watch::channel(false);
+        let shared = Arc::new(self);
+        let mut slots = JoinSet::new();
+        for n in 0..shared.cfg.slots {
+            let (w, stop) = (shared.clone(), stop_rx.clone());
+            slots.spawn(async move { w.slot(n, stop).await }.instrument(info_span!("slot", n)));
+        }
+        info!(worker = %shared.id, slots = shared.cfg.slots, server = %shared.cfg.server, "worker running");
+        tokio::pin!(shutdown);
+        let mut result = Ok(());
+        tokio::select! {
+            () = &mut shutdown => info!("shutting down"),
+            Some(r) = slots.join_next() => {
+                result = r.unwrap_or_else(|e| Err(WorkerError::Config(format!("a slot panicked: {e}"))));
+            }
+        }
+        let _ = stop_tx.send(true);
+        while let Some(r) = slots.join_next().await {
+            if let Ok(Err(e)) = r
+                && result.is_ok()
+            {
+                result = Err(e);
+            }
+        }
+        result
+    }
+
+    async fn slot(&self, n: usize, mut stop: watch::Receiver<bool>) -> Result<(), WorkerError> {
+        let mut backoff = Backoff::default();
+        let wait = self.cfg.lease_wait();
+        loop {
+            if *stop.borrow() {
+                return Ok(());
+            }
+            let mut req = Request::new(pb::LeaseRequest {
+                worker_id: self.id.clone(),
+                max_jobs: 1,
+                wait_ms: self.cfg.lease_wait_ms,
+            });
+            req.set_timeout(wait + Duration::from_secs(10));
+            let asked = Instant::now();
+            let mut client = self.client.clone();
+            let answer = tokio::select! {
+                r = client.lease(req) => r,
+                _ = stop.changed() => return Ok(()),
+            };
+            match answer {
+                Ok(r) => {
+                    backoff.reset();
+                    let jobs = r.into_inner().jobs;
+                    if jobs.is_empty() && asked.elapsed() < Duration::from_millis(100) {
+                        // A server that does not hold the call open must not be hammered.
+                        pause(Duration::from_millis(500), &mut stop).await;
+                    }
+                    for job in jobs {
+                        self.job(job, &mut stop).await;
+                    }
+                }
+                Err(s) if matches!(s.code(), Code::Unauthenticated | Code::PermissionDenied) => {
+                    error!(slot = n, "the server refused the worker token: {}", s.message());
+                    return Err(WorkerError::Refused(s.message().to_string()));
+                }
+                Err(s) => {
+                    let d = backoff.next();
+                    warn!(
+                        server = %self.cfg.server,
+                        "cannot lease from the server ({:?}: {}); retrying in {:.1} s",
+                        s.code(),
+                        s.message(),
+                        d.as_secs_f64()
+                    );
+                    pause(d, &mut stop).await;
+                }
+            }
+        }
+    }
+
+    /// Run one job with heartbeats, then report it.
+    async fn job(&self, job: pb::Job, stop: &mut watch::Receiver<bool>) {
+        let span = info_span!(
+            "job",
+            job_id = job.job_id,
+            run = job.run_id,
+            episode = %job.episode_key,
+            attempt = job.attempt
+        );
+        async {
+            info!("episode started");
+            let control = JobControl::default();
+            let mut done = spawn_episode(job.clone(), self.ctx.clone(), control.clone());
+            let mut next = heartbeat_in(job.lease_expires_at_ms);
+            let (mut stopping, mut dropped) = (*stop.borrow(), false);
+            if stopping {
+                control.cancel("worker shutting down");
+            }
+            let result = loop {
+                tokio::select! {
+                    r = &mut done => break r.unwrap_or_else(|_| platform("the episode thread panicked")),
+                    () = tokio::time::sleep(next) => {
+                        next = self.heartbeat(&job, &control, &mut dropped).await;
+                    }
+                    _ = stop.changed(), if !stopping => {
+                        stopping = true;
+                        control.cancel("worker shutting down");
+                        info!("stopping the episode: worker shutting down");
+                    }
+                }
+            };
+            if dropped {
+                info!("result dropped: the server cancelled the lease");
+                return;
+            }
+            info!(
+                tasks = result.tasks.len(),
+                wall_ms = result.wall_ms,
+                platform_error = %result.platform_error,
+                "episode finished"
+            );
+            self.report(&job, result, stopping, stop).await;
+        }
+        .instrument(span)
+        .await;
+    }
+
+    /// One heartbeat; returns when the next is due. A cancelled lease stops the episode.
+    async fn heartbeat(&self, job: &pb::Job, control: &JobControl, dropped: &mut bool) -> Duration {
+        let mut req = Request::new(pb::HeartbeatRequest {
+            worker_id: self.id.clone(),
+            job_id: job.job_id,
+            attempt: job.attempt,
+            tasks_done: control.tasks_done(),
+        });
+        req.set_timeout(Duration::from_secs(10));
+        match self.client.clone().heartbeat(req).await {
+            Ok(r) => {
+                let r = r.into_inner();
+                if r.cancelled && !*dropped {
+                    *dropped = true;
+                    control.cancel("the server cancelled the lease");
+                    info!("lease cancelled by the server: stopping the episode");
+                }
+                heartbeat_in(r.lease_expires_at_ms)
+            }
+            Err(s) => {
+                warn!("heartbeat failed ({:?}: {}); retrying", s.code(), s.message());
+                Duration::from_secs(1)
+            }
+        }
+    }
+
+    /// Hand in the result, retrying transport failures (the server dedups on run and episode).
+    async fn report(
+        &self,
+        job: &pb::Job,
+        result: pb::EpisodeResult,
+        stopping: bool,
+        stop: &mut watch::Receiver<bool>,
+    ) {
+        let req = pb::ReportResultRequest {
+            worker_id: self.id.clone(),
+            job_id: job.job_id,
+            attempt: job.attempt,
+            run_id: job.run_id,
+            episode_key: job.episode_key.clone(),
+            result: Some(result),
+        };
+        let mut backoff = Backoff::default();
+        let mut give_up_at = stopping.then(|| Instant::now() + SHUTDOWN_GRACE);
+        loop {
+            let mut r = Request::new(req.clone());
+            r.set_timeout(Duration::from_secs(10));
+            match self.client.clone().report_result(r).await {
+                Ok(a) => {
+                    let a = a.into_inner();
+                    info!(accepted = a.accepted, duplicate = a.duplicate, "result reported");
+                    return;
+                }
+                Err(s) if !retryable(&s) => {
+                    warn!(
+                        "the server refused the result ({:?}: {}); dropping it",
+                        s.code(),
+                        s.message()
+                    );
+                    return;
+                }
+                Err(s) => {
+                    if give_up_at.is_none() && *stop.borrow() {
+                        give_up_at = Some(Instant::now() + SHUTDOWN_GRACE);
+                    }
+                    if give_up_at.is_some_and(|t| Instant::now() >= t) {
+                        warn!(
+                            "giving up reporting on shutdown; the server will requeue the job when its lease expires"
+                        );
+                        return;
+                    }
+                    let d = backoff
+                        .next()
+                        .min(Duration::from_secs(if stopping { 1 } else { 30 }));
+                    warn!(
+                        "reporting the result failed ({:?}: {}); retrying in {:.1} s",
+                        s.code(),
+                        s.message(),
+                        d.as_secs_f64()
+                    );
+                    tokio::time::sleep(d).await;
+                }
+            }
+        }
+    }
+}
+
+/// Run the episode on a thread of its own; the receiver yields its result.
+fn spawn_episode(
+    job: pb::Job,
+    ctx: Arc<JobContext>,
+    control: JobControl,
+) -> oneshot::Receiver<pb::EpisodeResult> {
+    let (tx, rx) = oneshot::channel();
+    let name = format!("episode-{}", job.job_id);
+    let spawned = std::thread::Builder::new().name(name).spawn(move || {
+        let _ = tx.send(execute_job(&job, &ctx, &control));
+    });
+    if let Err(e) = spawned {
+        // `tx` went with the closure; the dropped sender reads as a platform error.
+        error!("cannot start an episode thread: {e}");
+    }
+    rx
+}
+
+fn platform(why: &str) -> pb::EpisodeResult {
+    pb::EpisodeResult {
+        platform_error: why.to_string(),
+        ..Default::default()
+    }
+}
+
+/// A third of the time left on the lease, within [0.5 s, 60 s].
+fn heartbeat_in(expires_at_ms: i64) -> Duration {
+    let now = SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as i64);
+    let left = expires_at_ms.saturating_sub(now);
+    if left <= 0 {
+        return Duration::from_secs(1);
+    }
+    Duration::from_millis((left / 3) as u64).clamp(Duration::from_millis(500), Duration::from_secs(60))
+}
+
+/// Transport trouble and server hiccups are retried; a refusal (stale attempt, bad request) is
+/// final.
+fn retryable(s: &Status) -> bool {
+    matches!(
+        s.code(),
+        Code::Unavailable
+            | Code::Unknown
+            | Code::DeadlineExceeded
+            | Code::Cancelled
+            | Code::ResourceExhausted
+            | Code::Aborted
+            | Code::Internal
+    )
+}
+
+/// Sleep for `d` unless asked to stop.
+async fn pause(d: Duration, stop: &mut watch::Receiver<bool>) {
+    tokio::select! {
+        () = tokio::time::sleep(d) => {}
+        _ = stop.changed() => {}
+    }
+}
+
+/// Capped exponential backoff from 250 ms.
+#[derive(Debug, Default)]
+struct Backoff(u32);
+
+impl Backoff {
+    fn next(&mut self) -> Duration {
+        let d = Duration::from_millis(250u64 << self.0.min(7)).min(MAX_BACKOFF);
+        self.0 += 1;
+        d
+    }
+    fn reset(&mut self) {
+        self.0 = 0;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn backoff_doubles_up_to_the_cap() {
+        let mut b = Backoff::default();
+        let v: Vec<u64> = (0..10).map(|_| b.next().as_millis() as u64).collect();
+        assert_eq!(&v[..4], &[250, 500, 1000, 2000]);
+        assert_eq!(*v.last().unwrap(), 30_000);
+        b.reset();
+        assert_eq!(b.next(), Duration::from_millis(250));
+    }
+
+    #[test]
+    fn heartbeats_come_at_a_third_of_the_lease() {
+        let now = SystemTime::now().duration_since(UNIX_EPOCH).unwrap().as_millis() as i64;
+        let d = heartbeat_in(now + 30_000);
+        assert!(
+            d > Duration::from_millis(9_000) && d <= Duration::from_millis(10_000),
+            "{d:?}"
+        );
+        assert_eq!(heartbeat_in(now - 5), Duration::from_secs(1));
+        assert_eq!(heartbeat_in(now + 600), Duration::from_millis(500));
+    }
+}

@@ -1,0 +1,312 @@
+//! One leased job, start to finish: episode set-up, the participant's endpoint, the online or
+//! offline run, and the result the server stores.
+//!
+//! Who pays for a failure decides where it goes: anything the policy does (unreachable, late,
+//! bad chunk, refused address) fails tasks with a reason and is scored; anything the platform
+//! does (simulator error, a job this worker cannot set up, cancellation, shutdown) is a
+//! `platform_error`, which the server retries without charging the participant.
+
+use std::sync::Arc;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+use std::time::Instant;
+
+use kitchen_r_proto::worker::v1 as pb;
+use kitchen_r_sim::{Action, EpisodeConfig, Sim, Snapshot, StepInfo};
+
+use super::spec;
+use super::{JobContext, JobError};
+use crate::offline::{OfflineOutcome, run_offline};
+use crate::oracle::{OraclePolicy, expert_options};
+use crate::remote::{Credentials, RemoteConfig, RemotePolicy, SimCamera};
+use crate::runner::{EpisodeOutcome, StepHook, run_episode};
+
+/// The log tail kept with a result (the contract's cap).
+const LOG_CAP: usize = 64 << 10;
+
+/// Shared between a running job and whoever supervises it (heartbeats, shutdown).
+#[derive(Debug, Clone, Default)]
+pub struct JobControl {
+    cancelled: Arc<AtomicBool>,
+    why: Arc<Mutex<String>>,
+    tasks_done: Arc<AtomicU32>,
+}
+
+impl JobControl {
+    /// Stop the episode at its next control step; `why` becomes the platform error.
+    pub fn cancel(&self, why: &str) {
+        if let Ok(mut w) = self.why.lock()
+            && w.is_empty()
+        {
+            *w = why.to_string();
+        }
+        self.cancelled.store(true, Ordering::SeqCst);
+    }
+
+    pub fn is_cancelled(&self) -> bool {
+        self.cancelled.load(Ordering::SeqCst)
+    }
+
+    fn reason(&self) -> String {
+        self.why.lock().map(|w| w.clone()).unwrap_or_default()
+    }
+
+    /// Tasks finished so far, for heartbeats.
+    pub fn tasks_done(&self) -> u32 {
+        self.tasks_done.load(Ordering::Relaxed)
+    }
+}
+
+/// Aborts the run when cancelled, counts finished tasks.
+struct Watch<'a>(&'a JobControl);
+
+impl StepHook for Watch<'_> {
+    fn on_step(&mut self, _: &Sim, _: &Action, info: &StepInfo) -> Result<(), String> {
+        if let Some(t) = &info.task {
+            let done = t.index as u32 + u32::from(t.success);
+            self.0.tasks_done.store(done, Ordering::Relaxed);
+        }
+        if self.0.is_cancelled() {
+            return Err(format!("cancelled: {}", self.0.reason()));
+        }
+        Ok(())
+    }
+}
+
+/// The expert's state at the start of each task, for teleport-on-failure.
+#[derive(Default)]
+struct Starts(Vec<Snapshot>);
+
+impl StepHook for Starts {
+    fn on_step(&mut self, _: &Sim, _: &Action, _: &StepInfo) -> Result<(), String> {
+        Ok(())
+    }
+    fn on_task_start(&mut self, sim: &Sim, index: usize) {
+        if self.0.len() == index {
+            self.0.push(sim.snapshot());
+        }
+    }
+}
+
+/// A bounded log of the episode, sent back as `log_tail`.
+#[derive(Default)]
+struct Log(String);
+
+impl Log {
+    fn line(&mut self, s: impl AsRef<str>) {
+        self.0.push_str(s.as_ref());
+        self.0.push('\n');
+        if self.0.len() > 2 * LOG_CAP {
+            self.trim();
+        }
+    }
+    fn trim(&mut self) {
+        if self.0.len() > LOG_CAP {
+            let mut cut = self.0.len() - LOG_CAP;
+            while !self.0.is_char_boundary(cut) {
+                cut += 1;
+            }
+            self.0.drain(..cut);
+        }
+    }
+    fn into_tail(mut self) -> String {
+        self.trim();
+        self.0
+    }
+}
+
+/// The id the policy sees: unique per run, episode and attempt, so a participant's server
+/// serving two runs (or a retried attempt) never mixes their state.
+pub fn policy_episode_id(job: &pb::Job) -> String {
+    format!("r{}/{}/a{}", job.run_id, job.episode_key, job.attempt)
+}
+
+/// Run `job` to its result. Never panics on what the policy does; the simulator is built here
+/// (a fresh world per job).
+pub fn execute_job(job: &pb::Job, ctx: &JobContext, control: &JobControl) -> pb::EpisodeResult {
+    let started = Instant::now();
+    let mut log = Log::default();
+    let result = run(job, ctx, control, &mut log);
+    let mut out = match result {
+        Ok(tasks) => pb::EpisodeResult {
+            tasks,
+            ..Default::default()
+        },
+        Err(e) => {
+            log.line(format!("platform error: {e}"));
+            pb::EpisodeResult {
+                platform_error: e.to_string(),
+                ..Default::default()
+            }
+        }
+    };
+    // A cancelled episode's tasks were cut short by us, not by the policy: never score them.
+    if control.is_cancelled() && out.platform_error.is_empty() {
+        out.tasks.clear();
+        out.platform_error = format!("cancelled: {}", control.reason());
+    }
+    out.wall_ms = started.elapsed().as_millis() as u64;
+    out.log_tail = log.into_tail();
+    out
+}
+
+fn run(
+    job: &pb::Job,
+    ctx: &JobContext,
+    control: &JobControl,
+    log: &mut Log,
+) -> Result<Vec<pb::TaskResult>, JobError> {
+    let spec = job
+        .episode
+        .as_ref()
+        .ok_or_else(|| JobError::Spec("the job has no episode".into()))?;
+    let ep = job.policy.clone().unwrap_or_default();
+    let mode = pb::EvalMode::try_from(spec.mode).unwrap_or(pb::EvalMode::Unspecified);
+    if mode == pb::EvalMode::Unspecified {
+        return Err(JobError::Spec(format!("unknown evaluation mode {}", spec.mode)));
+    }
+    let run = spec::run_options(spec, &ep)?;
+    let id = policy_episode_id(job);
+    let cfg = spec::episode_config(spec, &ctx.assets, &ctx.params, &ctx.instructions, &id)?;
+    log.line(format!(
+        "episode {id} scene {} instruction {} seed {} mode {} tasks {} policy {}",
+        cfg.scene,
+        spec.instruction_id,
+        cfg.seed,
+        mode.as_str_name(),
+        run.max_tasks.map_or(cfg.plan.len(), |m| m.min(cfg.plan.len())),
+        ep.url
+    ));
+    let n_tasks = run.max_tasks.map_or(cfg.plan.len(), |m| m.min(cfg.plan.len()));
+    let mut sim = Sim::new(ctx.assets.clone(), ctx.sim.clone(), ctx.sensors.clone(), &cfg)?.0;
+    let remote_cfg = remote_config(&ctx.remote, &ep, run.execute);
+    let creds = Credentials {
+        token: Some(ep.bearer_token.clone()).filter(|t| !t.is_empty()),
+        ca_pem: None,
+    };
+    let mut policy = match RemotePolicy::connect(
+        &ep.url,
+        &creds,
+        &remote_cfg,
+        &SimCamera::from_sensors(&ctx.sensors),
+    ) {
+        Ok(p) => p,
+        Err(e) => {
+            let reason = format!("policy unreachable: {e}");
+            log.line(&reason);
+            return Ok(all_failed(&cfg, n_tasks, &reason));
+        }
+    };
+    policy.set_scene(&cfg.scene);
+    log.line(format!("policy {:?} connected", policy.wire_spec().name));
+    let watch = &mut Watch(control);
+    if mode == pb::EvalMode::Offline {
+        let mut expert = OraclePolicy::new(&ctx.assets);
+        let opts = spec::offline_options(&run, ctx.sample_every);
+        let out = run_offline(&mut sim, &mut expert, &mut policy, &opts, watch)?;
+        return Ok(offline_results(&out, log));
+    }
+    let starts = if spec.teleport_on_failure {
+        Some(expert_starts(&mut sim, &cfg, ctx)?)
+    } else {
+        None
+    };
+    let out = run_episode(&mut sim, &mut policy, &run, starts.as_deref(), watch)?;
+    Ok(online_results(&out, log))
+}
+
+/// The worker's transport limits with the job's deadlines (zero = the worker's default).
+fn remote_config(base: &RemoteConfig, ep: &pb::PolicyEndpoint, execute: usize) -> RemoteConfig {
+    let secs = |ms: u32, default: f64| if ms == 0 { default } else { f64::from(ms) / 1e3 };
+    RemoteConfig {
+        call_deadline_s: secs(ep.call_deadline_ms, base.call_deadline_s),
+        startup_deadline_s: secs(ep.startup_deadline_ms, base.startup_deadline_s),
+        actions_executed_per_chunk: execute as u32,
+        ..base.clone()
+    }
+}
+
+/// Run the expert over the episode once, keeping its state at each task start, then reset.
+fn expert_starts(sim: &mut Sim, cfg: &EpisodeConfig, ctx: &JobContext) -> Result<Vec<Snapshot>, JobError> {
+    let mut expert = OraclePolicy::new(&ctx.assets);
+    let mut starts = Starts::default();
+    run_episode(sim, &mut expert, &expert_options(), None, &mut starts)?;
+    sim.reset(cfg)?;
+    Ok(starts.0)
+}
+
+fn all_failed(cfg: &EpisodeConfig, n: usize, reason: &str) -> Vec<pb::TaskResult> {
+    cfg.plan
+        .iter()
+        .take(n)
+        .enumerate()
+        .map(|(i, step)| pb::TaskResult {
+            index: i as u32,
+            step: step.clone(),
+            failure_reason: reason.to_string(),
+            ..Default::default()
+        })
+        .collect()
+}
+
+fn online_results(out: &EpisodeOutcome, log: &mut Log) -> Vec<pb::TaskResult> {
+    out.tasks
+        .iter()
+        .map(|t| {
+            let why = t.failure.clone().unwrap_or_default();
+            log.line(format!(
+                "task {} {:?}: {} after {:.1} s sim, {} calls{}",
+                t.index,
+                t.step,
+                if t.success { "success" } else { "failed" },
+                t.sim_time,
+                t.policy_calls,
+                if why.is_empty() {
+                    String::new()
+                } else {
+                    format!(": {why}")
+                }
+            ));
+            pb::TaskResult {
+                index: t.index as u32,
+                step: t.step.clone(),
+                success: t.success,
+                completion_time_s: if t.success { t.sim_time } else { 0.0 },
+                failure_reason: why,
+                mse: 0.0,
+                mse_samples: 0,
+            }
+        })
+        .collect()
+}
+
+fn offline_results(out: &OfflineOutcome, log: &mut Log) -> Vec<pb::TaskResult> {
+    out.tasks
+        .iter()
+        .map(|t| {
+            log.line(format!(
+                "task {} {:?}: mse {:.6} over {} samples ({} failed){}{}",
+                t.index,
+                t.step,
+                t.mse,
+                t.samples,
+                t.failed,
+                t.failure.as_ref().map_or(String::new(), |f| format!(": {f}")),
+                t.expert_failure
+                    .as_ref()
+                    .map_or(String::new(), |f| format!(" [expert did not finish: {f}]"))
+            ));
+            // SR is not measured offline: `success` stays false and the server reads SR from
+            // online episodes only.
+            pb::TaskResult {
+                index: t.index as u32,
+                step: t.step.clone(),
+                success: false,
+                completion_time_s: 0.0,
+                failure_reason: t.failure.clone().unwrap_or_default(),
+                mse: t.mse,
+                mse_samples: t.samples,
+            }
+        })
+        .collect()
+}
