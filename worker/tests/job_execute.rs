@@ -1,0 +1,157 @@
+//! `execute_job`: a leased job turned into an episode result, with the oracle over gRPC as the
+//! policy (a privileged reference run), online and offline; policy faults as task failures with
+//! reasons, platform faults as `platform_error`.
+
+mod remote_support;
+
+use std::sync::{Arc, OnceLock};
+
+use kitchen_r_proto::worker::v1 as pb;
+use kitchen_r_sim::Assets;
+use kitchen_r_worker::job::{JobContext, JobControl, execute_job};
+use kitchen_r_worker::oracle::OraclePolicy;
+use kitchen_r_worker::policy::Policy;
+use kitchen_r_worker::remote::server::{PolicyFactory, ServeOptions};
+use kitchen_r_worker::remote::{AllowedNetworks, RemoteConfig};
+use remote_support::*;
+
+fn ctx() -> &'static JobContext {
+    static CTX: OnceLock<JobContext> = OnceLock::new();
+    CTX.get_or_init(|| JobContext::load(&[], RemoteConfig::default(), AllowedNetworks::default(), 1).unwrap())
+}
+
+fn oracle_server() -> TestServer {
+    let assets = Arc::new(Assets::load_default().unwrap());
+    let f: PolicyFactory = Arc::new(move || Box::new(OraclePolicy::new(&assets)) as Box<dyn Policy>);
+    TestServer::start(f, ServeOptions::default())
+}
+
+/// A job for dev-0001 (move, pick, …), its first `steps` plan steps.
+pub fn job(url: &str, mode: pb::EvalMode, steps: u32, privileged: bool) -> pb::Job {
+    let data = kitchen_r_core::dataset::Dataset::load(&kitchen_r_core::assets::assets_dir().join("dataset"))
+        .unwrap();
+    let ins = &data.dev[0];
+    pb::Job {
+        job_id: 7,
+        attempt: 1,
+        lease_expires_at_ms: 0,
+        run_id: 3,
+        episode_key: ins.id.clone(),
+        episode: Some(pb::EpisodeSpec {
+            scene_id: ins.scene.clone(),
+            instruction_id: ins.id.clone(),
+            plan: ins.plan.clone(),
+            seed: 0,
+            mode: mode as i32,
+            task_time_limit_s: 120.0,
+            actions_executed_per_chunk: 8,
+            teleport_on_failure: true,
+            max_plan_steps: steps,
+            privileged,
+        }),
+        policy: Some(pb::PolicyEndpoint {
+            url: url.to_string(),
+            bearer_token: String::new(),
+            call_deadline_ms: 20_000,
+            startup_deadline_ms: 5_000,
+            episode_budget_ms: 300_000,
+            max_successive_timeouts: 3,
+        }),
+    }
+}
+
+#[test]
+fn a_privileged_online_job_with_the_oracle_succeeds() {
+    let server = oracle_server();
+    let r = execute_job(
+        &job(&server.url(), pb::EvalMode::Online, 2, true),
+        ctx(),
+        &JobControl::default(),
+    );
+    assert_eq!(r.platform_error, "", "{}", r.log_tail);
+    assert_eq!(r.tasks.len(), 2);
+    for t in &r.tasks {
+        assert!(t.success && t.completion_time_s > 0.0, "{t:?}\n{}", r.log_tail);
+        assert_eq!((t.mse, t.mse_samples), (0.0, 0));
+    }
+    assert!(r.log_tail.contains("episode r3/dev-0001/a1"), "{}", r.log_tail);
+    assert!(r.wall_ms > 0);
+}
+
+#[test]
+fn an_offline_job_reports_mse_per_task() {
+    let server = oracle_server();
+    let r = execute_job(
+        &job(&server.url(), pb::EvalMode::Offline, 1, true),
+        ctx(),
+        &JobControl::default(),
+    );
+    assert_eq!(r.platform_error, "", "{}", r.log_tail);
+    let t = &r.tasks[0];
+    assert!(t.mse_samples > 0 && t.mse < 1e-3 && !t.success, "{t:?}");
+    // Without privileged state the oracle cannot predict: every prediction fails, with the reason.
+    let r = execute_job(
+        &job(&server.url(), pb::EvalMode::Offline, 1, false),
+        ctx(),
+        &JobControl::default(),
+    );
+    let t = &r.tasks[0];
+    assert_eq!(t.mse, kitchen_r_worker::offline::FAILED_PREDICTION_MSE);
+    assert!(t.failure_reason.contains("FailedPrecondition"), "{t:?}");
+}
+
+#[test]
+fn policy_faults_fail_tasks_and_platform_faults_do_not() {
+    let free = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap();
+    let mut j = job(&format!("http://{free}"), pb::EvalMode::Online, 2, false);
+    j.policy.as_mut().unwrap().startup_deadline_ms = 300;
+    let r = execute_job(&j, ctx(), &JobControl::default());
+    assert_eq!(r.platform_error, "");
+    assert_eq!(r.tasks.len(), 2);
+    assert!(
+        r.tasks
+            .iter()
+            .all(|t| !t.success && t.failure_reason.starts_with("policy unreachable")),
+        "{r:?}"
+    );
+
+    let r = execute_job(
+        &job("http://192.168.3.4:50051", pb::EvalMode::Online, 1, false),
+        ctx(),
+        &JobControl::default(),
+    );
+    assert!(r.tasks[0].failure_reason.contains("private"), "{r:?}");
+
+    let mut j = job("http://127.0.0.1:1", pb::EvalMode::Online, 0, false);
+    j.episode.as_mut().unwrap().instruction_id = "dev-9999".into();
+    let r = execute_job(&j, ctx(), &JobControl::default());
+    assert!(
+        r.tasks.is_empty() && r.platform_error.contains("not in this worker's dataset"),
+        "{r:?}"
+    );
+
+    let mut j = job("http://127.0.0.1:1", pb::EvalMode::Unspecified, 0, false);
+    j.episode.as_mut().unwrap().mode = 0;
+    assert!(
+        execute_job(&j, ctx(), &JobControl::default())
+            .platform_error
+            .contains("mode")
+    );
+}
+
+#[test]
+fn a_cancelled_job_is_a_platform_error_not_a_score() {
+    let server = TestServer::start(still(), ServeOptions::default());
+    let control = JobControl::default();
+    control.cancel("worker shutting down");
+    let r = execute_job(
+        &job(&server.url(), pb::EvalMode::Online, 2, false),
+        ctx(),
+        &control,
+    );
+    assert!(r.tasks.is_empty(), "{r:?}");
+    assert_eq!(r.platform_error, "cancelled: worker shutting down");
+}

@@ -1,0 +1,241 @@
+//! The worker loop against a small in-test `kitchen_r.worker.v1.Worker` server on 127.0.0.1:0:
+//! two jobs handed out, heartbeats while they run, the first report failed by the server and
+//! retried, the token checked, and a clean stop on shutdown.
+
+mod remote_support;
+
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use kitchen_r_proto::worker::v1 as pb;
+use kitchen_r_worker::job::{WorkerConfig, WorkerError, run_worker};
+use kitchen_r_worker::policy::HORIZON;
+use pb::worker_server::{Worker, WorkerServer};
+use remote_support::*;
+use tonic::{Request, Response, Status};
+
+#[derive(Default)]
+struct State {
+    queue: Vec<pb::Job>,
+    heartbeats: Vec<(i64, u32)>,
+    report_calls: u32,
+    reports: Vec<pb::ReportResultRequest>,
+    lease_workers: Vec<String>,
+}
+
+#[derive(Clone)]
+struct TestWorkerServer(Arc<Mutex<State>>);
+
+fn now_ms() -> i64 {
+    SystemTime::now().duration_since(UNIX_EPOCH).unwrap().as_millis() as i64
+}
+
+fn authed<T>(req: &Request<T>) -> Result<(), Status> {
+    match req.metadata().get("authorization").and_then(|v| v.to_str().ok()) {
+        Some("Bearer worker-secret") => Ok(()),
+        _ => Err(Status::unauthenticated("bad worker token")),
+    }
+}
+
+#[tonic::async_trait]
+impl Worker for TestWorkerServer {
+    async fn lease(&self, req: Request<pb::LeaseRequest>) -> Result<Response<pb::LeaseResponse>, Status> {
+        authed(&req)?;
+        let r = req.into_inner();
+        assert_eq!(r.max_jobs, 1);
+        let job = {
+            let mut s = self.0.lock().unwrap();
+            s.lease_workers.push(r.worker_id);
+            s.queue.pop()
+        };
+        match job {
+            Some(mut j) => {
+                j.lease_expires_at_ms = now_ms() + 1_500;
+                Ok(Response::new(pb::LeaseResponse { jobs: vec![j] }))
+            }
+            None => {
+                tokio::time::sleep(Duration::from_millis(u64::from(r.wait_ms.min(200)))).await;
+                Ok(Response::new(pb::LeaseResponse { jobs: vec![] }))
+            }
+        }
+    }
+
+    async fn heartbeat(
+        &self,
+        req: Request<pb::HeartbeatRequest>,
+    ) -> Result<Response<pb::HeartbeatResponse>, Status> {
+        authed(&req)?;
+        let r = req.into_inner();
+        self.0.lock().unwrap().heartbeats.push((r.job_id, r.attempt));
+        Ok(Response::new(pb::HeartbeatResponse {
+            lease_expires_at_ms: now_ms() + 1_500,
+            cancelled: false,
+        }))
+    }
+
+    async fn report_result(
+        &self,
+        req: Request<pb::ReportResultRequest>,
+    ) -> Result<Response<pb::ReportResultResponse>, Status> {
+        authed(&req)?;
+        let mut s = self.0.lock().unwrap();
+        s.report_calls += 1;
+        if s.report_calls == 1 {
+            return Err(Status::unavailable("the database is restarting"));
+        }
+        s.reports.push(req.into_inner());
+        Ok(Response::new(pb::ReportResultResponse {
+            accepted: true,
+            duplicate: false,
+        }))
+    }
+}
+
+fn start(state: Arc<Mutex<State>>, rt: &tokio::runtime::Runtime) -> String {
+    let listener = rt.block_on(tokio::net::TcpListener::bind("127.0.0.1:0")).unwrap();
+    let addr = listener.local_addr().unwrap();
+    rt.spawn(
+        tonic::transport::Server::builder()
+            .add_service(WorkerServer::new(TestWorkerServer(state)))
+            .serve_with_incoming(tokio_stream::wrappers::TcpListenerStream::new(listener)),
+    );
+    format!("http://{addr}")
+}
+
+/// A slow policy (so heartbeats fall inside the episode) that never completes a task.
+fn slow_still() -> TestServer {
+    TestServer::start(
+        factory(
+            HORIZON,
+            Arc::new(|_| {
+                std::thread::sleep(Duration::from_millis(150));
+                Ok(vec![STILL; HORIZON])
+            }),
+        ),
+        Default::default(),
+    )
+}
+
+fn job(id: i64, policy: &str) -> pb::Job {
+    let data = kitchen_r_core::dataset::Dataset::load(&kitchen_r_core::assets::assets_dir().join("dataset"))
+        .unwrap();
+    let ins = &data.dev[(id as usize) % 3];
+    pb::Job {
+        job_id: id,
+        attempt: 1,
+        lease_expires_at_ms: 0,
+        run_id: 1,
+        episode_key: ins.id.clone(),
+        episode: Some(pb::EpisodeSpec {
+            scene_id: ins.scene.clone(),
+            instruction_id: ins.id.clone(),
+            plan: ins.plan.clone(),
+            seed: 5,
+            mode: pb::EvalMode::Online as i32,
+            task_time_limit_s: 2.0,
+            actions_executed_per_chunk: 8,
+            teleport_on_failure: false,
+            max_plan_steps: 1,
+            privileged: false,
+        }),
+        policy: Some(pb::PolicyEndpoint {
+            url: policy.to_string(),
+            call_deadline_ms: 5_000,
+            startup_deadline_ms: 5_000,
+            ..Default::default()
+        }),
+    }
+}
+
+fn config(server: &str, token: &str) -> WorkerConfig {
+    WorkerConfig {
+        server: server.to_string(),
+        token: token.to_string(),
+        slots: 2,
+        worker_id: "test-worker".into(),
+        lease_wait_ms: 200,
+        ..WorkerConfig::default()
+    }
+}
+
+#[test]
+fn two_jobs_are_run_heartbeated_and_reported_despite_a_failed_report() {
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let policy = slow_still();
+    let state = Arc::new(Mutex::new(State {
+        queue: vec![job(1, &policy.url()), job(2, &policy.url())],
+        ..State::default()
+    }));
+    let url = start(state.clone(), &rt);
+    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+    let worker = rt.spawn(run_worker(config(&url, "worker-secret"), async {
+        let _ = stop_rx.await;
+    }));
+    let t = Instant::now();
+    while state.lock().unwrap().reports.len() < 2 {
+        assert!(t.elapsed() < Duration::from_secs(120), "reports never arrived");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    stop_tx.send(()).unwrap();
+    rt.block_on(worker).unwrap().unwrap();
+
+    let s = state.lock().unwrap();
+    assert_eq!(s.report_calls, 3, "the failed report is retried once");
+    let mut ids: Vec<i64> = s.reports.iter().map(|r| r.job_id).collect();
+    ids.sort_unstable();
+    assert_eq!(ids, [1, 2]);
+    for r in &s.reports {
+        let res = r.result.as_ref().unwrap();
+        assert_eq!(res.platform_error, "", "{}", res.log_tail);
+        assert_eq!(res.tasks.len(), 1);
+        assert!(
+            res.tasks[0].failure_reason.contains("time limit of 2 s"),
+            "{:?}",
+            res.tasks
+        );
+        assert_eq!((r.run_id, r.attempt, r.worker_id.as_str()), (1, 1, "test-worker"));
+    }
+    for id in [1, 2] {
+        assert!(
+            s.heartbeats.contains(&(id, 1)),
+            "no heartbeat for job {id}: {:?}",
+            s.heartbeats
+        );
+    }
+    assert!(s.lease_workers.iter().all(|w| w == "test-worker"));
+}
+
+#[test]
+fn a_refused_token_stops_the_worker_with_a_clear_error() {
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let state = Arc::new(Mutex::new(State::default()));
+    let url = start(state, &rt);
+    let r = rt.block_on(async {
+        tokio::time::timeout(
+            Duration::from_secs(60),
+            run_worker(config(&url, "wrong"), std::future::pending()),
+        )
+        .await
+    });
+    let err = r.expect("the worker should stop").unwrap_err();
+    assert!(matches!(err, WorkerError::Refused(_)), "{err:?}");
+    assert!(err.to_string().contains("worker token"), "{err}");
+}
+
+#[test]
+fn a_server_that_is_down_is_retried_until_shutdown() {
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let free = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap();
+    let t = Instant::now();
+    let r = rt.block_on(run_worker(
+        config(&format!("http://{free}"), "worker-secret"),
+        async {
+            tokio::time::sleep(Duration::from_secs(2)).await;
+        },
+    ));
+    assert!(r.is_ok(), "{r:?}");
+    assert!(t.elapsed() >= Duration::from_secs(2), "the worker gave up early");
+}
