@@ -43,6 +43,9 @@ const FINGERS: [u32; 2] = [8, 9];
 /// and are outranked by fixed geometry (which stops them).
 const LINK_DOMINANCE: i8 = 10;
 
+/// Height (m) plus tilt (rad) of the base away from the floor plane beyond which it is put back.
+const PLANAR_TOLERANCE: f64 = 1e-6;
+
 /// A link penetrating fixed geometry deeper than this stops the arm (m).
 const STOP_PENETRATION: f64 = 0.003;
 
@@ -254,8 +257,12 @@ impl Robot {
         };
         state.v = step(state.v, cmd.v, b.acc_v, b.max_v);
         state.omega = step(state.omega, cmd.omega, b.acc_omega, b.max_omega);
-        let iso = self.base_iso(world);
-        let fwd = iso.rotation * Vector3::x();
+        let iso = self.hold_planar(world);
+        let yaw = yaw_of(&iso.rotation);
+        // Driven in the floor plane only: a drive velocity along a tilted heading would push the
+        // base into the floor, where a contact whose normal lies along the locked height axis
+        // makes the solver fling the base metres away.
+        let fwd = Vector3::new(yaw.cos(), yaw.sin(), 0.0);
         let body = &mut world.bodies[self.bodies.base];
         body.set_linvel(vec_to_glam(&(fwd * state.v)), true);
         body.set_angvel(vec_to_glam(&Vector3::new(0.0, 0.0, state.omega)), true);
@@ -268,7 +275,7 @@ impl Robot {
         state.opening += (want - state.opening).clamp(-g.opening_speed * dt, g.opening_speed * dt);
 
         // Links go where the base will be at the end of this substep.
-        let (yaw, x, y) = (yaw_of(&iso.rotation), iso.translation.x, iso.translation.y);
+        let (x, y) = (iso.translation.x, iso.translation.y);
         let next = planar(
             x + fwd.x * state.v * dt,
             y + fwd.y * state.v * dt,
@@ -278,6 +285,26 @@ impl Robot {
         self.place_links(world, &next, &state.arm.q, dt);
         self.place_fingers(world, state.opening);
         next
+    }
+
+    /// Put the base back on the floor plane (height 0, no roll or pitch) when solver round-off
+    /// has moved it off; returns the planar pose.
+    ///
+    /// Locked axes stop the solver from moving the base along them, but round-off in the
+    /// rotation integration still tilts it by ~1e-8 rad per step, and the drift accumulates over
+    /// a long episode until the base touches the floor and is flung away (the contact's normal
+    /// lies along a locked axis, so the solver's correction becomes unbounded).
+    fn hold_planar(&self, world: &mut PhysicsWorld) -> Isometry3<f64> {
+        let iso = self.base_iso(world);
+        let planar_iso = planar(iso.translation.x, iso.translation.y, 0.0, yaw_of(&iso.rotation));
+        let off = iso.translation.z.abs() + iso.rotation.angle_to(&planar_iso.rotation);
+        if off > PLANAR_TOLERANCE {
+            let body = &mut world.bodies[self.bodies.base];
+            body.set_position(iso_to_pose(&planar_iso), false);
+            let w = body.angvel();
+            body.set_angvel(vec_to_glam(&Vector3::new(0.0, 0.0, f64::from(w.z))), false);
+        }
+        planar_iso
     }
 
     /// Servo every link to its pose from the joint targets at the end of the substep.
