@@ -42,7 +42,10 @@ impl std::str::FromStr for PolicyChoice {
 
 #[derive(Debug, thiserror::Error)]
 pub enum EvalError {
-    #[error("unknown policy {0:?}; accepted values: {list}", list = ACCEPTED_POLICIES.join(", "))]
+    #[error(
+        "unknown policy {0:?}; accepted values: {list}, http://HOST:PORT, https://HOST:PORT",
+        list = ACCEPTED_POLICIES.join(", ")
+    )]
     UnknownPolicy(String),
     #[error(
         "the test split's plans are not public: pass the organiser's ground-truth file with \
@@ -99,6 +102,15 @@ pub struct EvalConfig {
     pub execute: usize,
     /// Default run seed.
     pub seed: u64,
+    /// Endpoint runs (`--policy http://…`): after a failed task, teleport to the expert's state
+    /// at the start of the next one (the server's `control.teleport_on_failure`).
+    pub teleport_on_failure: bool,
+    /// Execute at most this many plan steps per episode; 0 = all.
+    pub max_plan_steps: usize,
+    /// Wall-clock budget of one episode, seconds; 0 = none.
+    pub episode_budget_s: f64,
+    /// Abort an episode after this many successive policy timeouts.
+    pub max_successive_timeouts: u32,
 }
 
 impl Default for EvalConfig {
@@ -108,6 +120,10 @@ impl Default for EvalConfig {
             task_time_limit: r.task_time_limit,
             execute: r.execute,
             seed: 0,
+            teleport_on_failure: true,
+            max_plan_steps: 0,
+            episode_budget_s: 600.0,
+            max_successive_timeouts: r.max_consecutive_timeouts,
         }
     }
 }
@@ -121,9 +137,11 @@ impl EvalConfig {
             || c.task_time_limit <= 0.0
             || c.execute == 0
             || c.execute > crate::policy::HORIZON
+            || c.episode_budget_s.is_nan()
+            || c.episode_budget_s < 0.0
         {
             return Err(bad(format!(
-                "task_time_limit > 0 and execute in 1..={}",
+                "task_time_limit > 0, execute in 1..={} and episode_budget_s >= 0",
                 crate::policy::HORIZON
             )));
         }
@@ -144,6 +162,10 @@ impl EvalConfig {
         RunOptions {
             task_time_limit: self.task_time_limit,
             execute: self.execute,
+            max_tasks: (self.max_plan_steps > 0).then_some(self.max_plan_steps),
+            max_consecutive_timeouts: self.max_successive_timeouts.max(1),
+            wall_budget: (self.episode_budget_s > 0.0)
+                .then(|| std::time::Duration::from_secs_f64(self.episode_budget_s)),
             ..RunOptions::default()
         }
     }

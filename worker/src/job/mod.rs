@@ -7,6 +7,7 @@
 
 pub mod client;
 pub mod execute;
+pub mod local;
 pub mod spec;
 
 use std::path::{Path, PathBuf};
