@@ -1,19 +1,38 @@
-//! `kitchen-r eval`: local online evaluation through the workers' episode runner, with SR per
-//! task kind and overall, and sim and wall times. Argument parsing and printing only; the work
-//! is in `kitchen_r_worker::eval`.
+//! `kitchen-r eval`: local evaluation through the workers' episode runner, with SR per task kind
+//! and overall (online) or MSE against the expert (offline), and sim and wall times. Argument
+//! parsing and printing only; the work is in `kitchen_r_worker::eval` (built-in policies) and
+//! `kitchen_r_worker::job::local` (a policy endpoint, run as the server's workers run it).
 
 use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::Args;
 use kitchen_r_core::dataset::Split;
-use kitchen_r_worker::eval::{EvalConfig, EvalOptions, EvalReport, PolicyChoice, evaluate};
+use kitchen_r_worker::eval::{EvalConfig, EvalOptions, EvalReport, PolicyChoice, evaluate, instructions};
+use kitchen_r_worker::job::local::{LocalEpisode, LocalReport, LocalSettings, Mode, evaluate_endpoint};
 
 #[derive(Args, Debug)]
 pub struct EvalArgs {
-    /// Policy to evaluate; accepted values: builtin:oracle (the privileged reference expert).
+    /// Policy to evaluate: builtin:oracle (the privileged reference expert), or a policy server
+    /// at http://HOST:PORT or https://HOST:PORT, run exactly as the server's workers run it.
     #[arg(long, default_value = "builtin:oracle")]
     policy: String,
+    /// Endpoint policies: online (SR, the policy drives) or offline (MSE, the expert drives and
+    /// the policy predicts).
+    #[arg(long, default_value = "online")]
+    mode: Mode,
+    /// Bearer token the policy server expects.
+    #[arg(
+        long,
+        env = "KITCHEN_R_POLICY_TOKEN",
+        value_name = "T",
+        hide_env_values = true
+    )]
+    token: Option<String>,
+    /// Endpoint policies: send privileged world state, as organiser reference runs do (for
+    /// reference policies such as `kitchen-r policy oracle`; participants' runs never get it).
+    #[arg(long)]
+    privileged: bool,
     /// Instruction split: dev (public plans) or test (needs --ground-truth).
     #[arg(long, default_value = "dev")]
     split: Split,
@@ -38,11 +57,14 @@ pub struct EvalArgs {
 }
 
 pub fn eval(args: EvalArgs) -> anyhow::Result<()> {
-    let policy: PolicyChoice = args.policy.parse()?;
     let config = match &args.config {
         Some(p) => EvalConfig::load(p).with_context(|| format!("reading {}", p.display()))?,
         None => EvalConfig::load_default()?,
     };
+    if args.policy.starts_with("http://") || args.policy.starts_with("https://") {
+        return eval_endpoint(args, &config);
+    }
+    let policy: PolicyChoice = args.policy.parse()?;
     let opts = EvalOptions {
         policy,
         split: args.split,
@@ -106,4 +128,95 @@ fn print_table(r: &EvalReport) {
         "mean episode wall time {:.3} s   total wall time {:.1} s",
         r.mean_episode_wall_s, r.total_wall_s
     );
+}
+
+/// `--policy http://…`: every instruction as the job the server would lease for it.
+fn eval_endpoint(args: EvalArgs, config: &EvalConfig) -> anyhow::Result<()> {
+    let mut ins = instructions(args.split, args.ground_truth.as_ref())?;
+    ins.truncate(args.episodes.unwrap_or(usize::MAX));
+    let settings = LocalSettings {
+        mode: args.mode,
+        seed: args.seed.unwrap_or(config.seed),
+        run: config.run_options(),
+        teleport_on_failure: config.teleport_on_failure,
+        bearer_token: args.token,
+        privileged: args.privileged,
+        jobs: args
+            .jobs
+            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
+    };
+    let mut done = 0;
+    let report = evaluate_endpoint(
+        &args.policy,
+        args.split,
+        &ins,
+        &settings,
+        &mut |e: &LocalEpisode| {
+            done += 1;
+            if !e.platform_error.is_empty() {
+                eprintln!(
+                    "[{done}] {} {}  platform error: {}",
+                    e.episode_key, e.scene, e.platform_error
+                );
+                return;
+            }
+            let ok = e.tasks.iter().filter(|t| t.success).count();
+            let samples: u32 = e.tasks.iter().map(|t| t.mse_samples).sum();
+            eprintln!(
+                "[{done}] {} {}  {ok}/{} tasks  {samples} MSE samples  wall {:.2} s",
+                e.episode_key,
+                e.scene,
+                e.tasks.len(),
+                e.wall_s
+            );
+            for t in e.tasks.iter().filter(|t| !t.failure_reason.is_empty()) {
+                eprintln!("    {:?}: {}", t.step, t.failure_reason);
+            }
+        },
+    )?;
+    if args.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        print_local(&report);
+    }
+    Ok(())
+}
+
+fn print_local(r: &LocalReport) {
+    println!(
+        "policy {}  split {}  mode {:?}  episodes {}  seed {}  jobs {}",
+        r.policy,
+        r.split,
+        r.mode,
+        r.episodes.len(),
+        r.seed,
+        r.jobs
+    );
+    println!("spec {}", r.spec);
+    if let Some(o) = &r.overall {
+        for (k, s) in r
+            .by_kind
+            .iter()
+            .map(|(k, s)| (k.as_str(), s))
+            .chain([("overall", o)])
+        {
+            println!(
+                "{k:<14} {:>6} tasks {:>6} succeeded  SR {:.3}",
+                s.tasks, s.succeeded, s.sr
+            );
+        }
+    }
+    if let Some(sr) = r.sr {
+        println!("SR (mean over episodes of mean SR_j) {sr:.4}");
+    }
+    if let Some(mse) = r.mse {
+        println!("MSE {mse:.6} over {} predictions", r.mse_samples);
+    }
+    if r.platform_errors > 0 {
+        println!(
+            "{} episode(s) hit a platform error and are not scored",
+            r.platform_errors
+        );
+    }
+    println!("total wall time {:.1} s", r.total_wall_s);
 }

@@ -13,6 +13,7 @@ mod eval_cmd;
 mod policy_cmd;
 mod serve_cmd;
 mod sim_cmd;
+mod worker_cmd;
 
 use clap::{Parser, Subcommand};
 
@@ -31,6 +32,8 @@ struct Cli {
 enum Command {
     /// Run the evaluation server (HTTP + gRPC on SQLite). The default command.
     Serve(serve_cmd::ServeArgs),
+    /// A standalone simulation worker leasing episodes from a server's gRPC port.
+    Worker(worker_cmd::WorkerArgs),
     /// Organiser: manage teams.
     Team(client_cmd::TeamArgs),
     /// Upload a submission and print its scores.
@@ -60,6 +63,7 @@ fn main() -> anyhow::Result<()> {
     match cli.command {
         None => serve_cmd::serve(serve_cmd::ServeArgs::default()),
         Some(Command::Serve(args)) => serve_cmd::serve(args),
+        Some(Command::Worker(args)) => worker_cmd::worker(args),
         Some(Command::Team(args)) => client_cmd::team(args),
         Some(Command::Submit(args)) => client_cmd::submit(args),
         Some(Command::Leaderboard(args)) => client_cmd::leaderboard(args),

@@ -1,0 +1,91 @@
+//! `kitchen-r worker --server URL [--slots N]`: a standalone simulation worker leasing episodes
+//! from a server's gRPC port. Parsing, tracing set-up and Ctrl-C only; the loop is
+//! `kitchen_r_worker::job::client`.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::Args;
+use kitchen_r_worker::job::WorkerConfig;
+use kitchen_r_worker::job::client::Worker;
+
+#[derive(Args, Debug)]
+pub struct WorkerArgs {
+    /// The server's gRPC address, `http://HOST:PORT` [default: `server` in the config file,
+    /// else http://127.0.0.1:50051].
+    #[arg(long, env = "KITCHEN_R_WORKER_SERVER", value_name = "URL")]
+    server: Option<String>,
+    /// Episodes run at once, one thread and simulator each [default: the number of cores].
+    #[arg(long, value_name = "N")]
+    slots: Option<usize>,
+    /// Worker token the server was configured with.
+    #[arg(
+        long,
+        env = "KITCHEN_R_WORKER_TOKEN",
+        value_name = "TOKEN",
+        hide_env_values = true
+    )]
+    token: Option<String>,
+    /// Lease owner name [default: HOSTNAME-PID].
+    #[arg(long, value_name = "ID")]
+    worker_id: Option<String>,
+    /// Worker settings [default: configs/worker.toml when present].
+    #[arg(long, value_name = "FILE")]
+    config: Option<PathBuf>,
+}
+
+pub fn worker(args: WorkerArgs) -> anyhow::Result<()> {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let mut cfg = match &args.config {
+        Some(p) => WorkerConfig::load(p)?,
+        None => WorkerConfig::load_default()?,
+    };
+    if let Some(s) = args.server {
+        cfg.server = s;
+    }
+    if let Some(t) = args.token {
+        cfg.token = t;
+    }
+    if let Some(id) = args.worker_id {
+        cfg.worker_id = id;
+    }
+    cfg.slots = args
+        .slots
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .context("starting the runtime")?;
+    rt.block_on(async move {
+        let (server, slots) = (cfg.server.clone(), cfg.slots);
+        let worker = Worker::build(cfg).await?;
+        // Tests and scripts wait for this exact line.
+        eprintln!("worker ready id={} slots={slots} server={server}", worker.id());
+        std::io::stderr().flush()?;
+        worker.run(stop_signal()).await?;
+        Ok(())
+    })
+}
+
+/// Ctrl-C or SIGTERM (how containers and orchestrators stop a worker).
+async fn stop_signal() {
+    let term = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut s) => {
+                s.recv().await;
+            }
+            Err(_) => std::future::pending::<()>().await,
+        }
+    };
+    tokio::select! {
+        _ = tokio::signal::ctrl_c() => {}
+        () = term => {}
+    }
+}
