@@ -155,3 +155,49 @@ fn a_cancelled_job_is_a_platform_error_not_a_score() {
     assert!(r.tasks.is_empty(), "{r:?}");
     assert_eq!(r.platform_error, "cancelled: worker shutting down");
 }
+
+#[test]
+fn local_eval_of_an_endpoint_gives_the_workers_numbers() {
+    use kitchen_r_worker::job::local::{LocalSettings, Mode, evaluate_endpoint};
+    let server = oracle_server();
+    let data = kitchen_r_core::dataset::Dataset::load(&kitchen_r_core::assets::assets_dir().join("dataset"))
+        .unwrap();
+    let s = LocalSettings {
+        mode: Mode::Online,
+        seed: 0,
+        run: kitchen_r_worker::runner::RunOptions {
+            max_tasks: Some(2),
+            ..Default::default()
+        },
+        teleport_on_failure: true,
+        bearer_token: None,
+        privileged: true,
+        jobs: 4,
+    };
+    let local = evaluate_endpoint(
+        &server.url(),
+        kitchen_r_core::dataset::Split::Dev,
+        &data.dev[..1],
+        &s,
+        &mut |_| {},
+    )
+    .unwrap();
+    // The oracle announces max concurrency 1: the local run honours it.
+    assert_eq!((local.jobs, local.sr), (1, Some(1.0)), "{local:?}");
+    let worker = execute_job(
+        &job(&server.url(), pb::EvalMode::Online, 2, true),
+        ctx(),
+        &JobControl::default(),
+    );
+    let times = |v: Vec<f64>| v.into_iter().map(f64::to_bits).collect::<Vec<_>>();
+    assert_eq!(
+        times(
+            local.episodes[0]
+                .tasks
+                .iter()
+                .map(|t| t.completion_time_s)
+                .collect()
+        ),
+        times(worker.tasks.iter().map(|t| t.completion_time_s).collect())
+    );
+}
