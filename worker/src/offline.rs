@@ -13,7 +13,9 @@
 //! - a sample's MSE is [`chunk_mse`] of the predicted rows against the executed expert rows; the
 //!   window stops at the end of its task (a prediction for "pick the bowl" is not judged on the
 //!   expert's next sub-task), so the last samples of a task compare the available prefix, at
-//!   least one row; values cross as f32, as the wire contract's chunk does;
+//!   least one row; values cross as f32, as the wire contract's chunk does; a sample's MSE is
+//!   capped at [`FAILED_PREDICTION_MSE`] (reached only by chunks far outside the robot's ranges),
+//!   so a task's MSE is always finite and no answer scores worse than a failure;
 //! - a failed prediction (timeout, transport error, bad chunk: NaN, wrong shape, gripper out of
 //!   range, non-unit quaternion) is a sample worth [`FAILED_PREDICTION_MSE`] and names its reason
 //!   in the task's failure reason, so failing never scores better than answering within the
@@ -248,6 +250,13 @@ impl Shadow<'_> {
         let flat =
             |rows: &[[f64; ACTION_DIM]]| rows.iter().flatten().map(|v| *v as f32).collect::<Vec<f32>>();
         if let Some(mse) = chunk_mse(&flat(&w.predicted[..n]), &flat(&w.executed)) {
+            // Capped (and overflow to inf in f32 caught): no answer scores worse than no answer,
+            // and a task's mean stays finite whatever a policy sends.
+            let mse = if mse.is_finite() {
+                mse.min(FAILED_PREDICTION_MSE)
+            } else {
+                FAILED_PREDICTION_MSE
+            };
             let t = self.task();
             t.samples += 1;
             t.sum += mse;

@@ -160,6 +160,22 @@ fn failed_predictions_cost_the_penalty_and_say_why() {
         f.contains("predictions failed") && f.contains("not finite"),
         "{f}"
     );
+    // Finite in f64 but not in f32, where the comparison happens: capped at the penalty.
+    let mut huge = Scripted {
+        spec: spec(HORIZON),
+        answer: Arc::new(|_| {
+            let mut c = vec![STILL; HORIZON];
+            c[0][2] = 1e39;
+            Ok(c)
+        }),
+    };
+    let out = offline(&mut huge, &opts());
+    assert!(
+        out.tasks
+            .iter()
+            .all(|t| t.mse == FAILED_PREDICTION_MSE && t.failed == 0),
+        "{out:?}"
+    );
     let mut short = Scripted {
         spec: spec(HORIZON),
         answer: Arc::new(|_| Ok(vec![STILL; 3])),
