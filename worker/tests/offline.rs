@@ -131,12 +131,17 @@ fn the_oracle_over_grpc_predicts_the_expert_almost_exactly() {
         out.tasks.iter().all(|t| t.failed == 0 && t.samples > 0),
         "{out:?}"
     );
+    eprintln!(
+        "oracle over gRPC vs expert: MSE {mse:e} over {} samples",
+        out.tasks.iter().map(|t| t.samples).sum::<u32>()
+    );
     assert!(mse < 1e-3, "oracle vs expert MSE {mse}");
     let mut still = Scripted {
         spec: spec(HORIZON),
         answer: Arc::new(|_| Ok(vec![STILL; HORIZON])),
     };
     let still_mse = offline(&mut still, &opts()).mse().unwrap();
+    eprintln!("standing still vs expert: MSE {still_mse}");
     assert!(still_mse > 100.0 * mse.max(1e-9), "{still_mse} vs {mse}");
 }
 
