@@ -25,6 +25,18 @@ pub struct PolicyRunView {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub finished_at: Option<String>,
     pub episodes: Vec<EpisodeView>,
+    /// Episodes not finished yet whose earlier attempt failed on the platform side, and why
+    /// (they are retried without counting against the participant).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub retrying: Vec<RetryView>,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct RetryView {
+    pub key: String,
+    /// Leases so far.
+    pub attempt: i64,
+    pub last_error: String,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -69,7 +81,17 @@ impl AppState {
             .into_iter()
             .map(|r| episode_view(r, hidden))
             .collect::<Result<Vec<_>, _>>()?;
+        let retrying = run_store::retrying(self.pool(), run.id)
+            .await?
+            .into_iter()
+            .map(|(key, attempt, last_error)| RetryView {
+                key,
+                attempt,
+                last_error,
+            })
+            .collect();
         Ok(PolicyRunView {
+            retrying,
             state,
             episodes_total: run.episodes_total,
             episodes_done: episodes.len() as i64,

@@ -286,3 +286,15 @@ pub async fn baseline_team(pool: &SqlitePool, now: i64) -> sqlx::Result<crate::s
         name: row.get(1),
     })
 }
+
+/// Unfinished jobs of a run that already failed an attempt: `(episode_key, attempt, last_error)`.
+pub async fn retrying(pool: &SqlitePool, run: i64) -> sqlx::Result<Vec<(String, i64, String)>> {
+    let rows = sqlx::query(
+        "SELECT episode_key, attempt, last_error FROM jobs
+         WHERE run_id = ? AND state IN ('queued', 'leased') AND last_error IS NOT NULL ORDER BY episode_key",
+    )
+    .bind(run)
+    .fetch_all(pool)
+    .await?;
+    Ok(rows.into_iter().map(|r| (r.get(0), r.get(1), r.get(2))).collect())
+}

@@ -152,6 +152,7 @@ async fn expired_lease_is_requeued_and_a_stale_attempt_refused_then_duplicates_c
     );
     let eval = run_state(&f, &token, id).await;
     assert_eq!((eval.state, eval.episodes_done), ("running", 1));
+    assert!(eval.retrying.is_empty(), "the retried episode is recorded now");
     assert_eq!(eval.episodes[0].attempt, 2);
 }
 
@@ -165,6 +166,15 @@ async fn platform_errors_requeue_then_fail_after_max_attempts_and_the_run_still_
     .await;
     let (token, id) = registered(&f).await;
     for attempt in 1..=2 {
+        if attempt == 2 {
+            let retrying = run_state(&f, &token, id).await.retrying;
+            assert_eq!(retrying.len(), 1);
+            assert!(
+                retrying[0]
+                    .last_error
+                    .contains("attempt 1: platform error: simulator crashed")
+            );
+        }
         let job = f.lease("w1", 8).await.remove(0);
         assert_eq!(job.attempt, attempt);
         let mut r = f.report("w1", &job, |_| true, 0.0);
