@@ -1,4 +1,5 @@
-//! Client commands (`team create`, `submit plans`, `leaderboard`, `rescore`): thin HTTP calls to
+//! Client commands (`team create`, `submit plans`, `submit policy`, `leaderboard`, `rescore`):
+//! thin HTTP calls to
 //! a running server's `/api/v1`. Output is for people (tables, one-line summaries) unless a
 //! machine format is asked for; a refused request exits non-zero with the server's own message.
 
@@ -12,7 +13,7 @@ use serde_json::Value;
 pub struct ServerArgs {
     /// Server base URL.
     #[arg(long, env = "KITCHEN_R_SERVER", default_value = "http://127.0.0.1:8080")]
-    server: String,
+    pub server: String,
 }
 
 #[derive(Args, Debug)]
@@ -59,6 +60,9 @@ enum SubmitCommand {
         #[arg(long)]
         json: bool,
     },
+    /// Register a gRPC policy endpoint for evaluation (control track; integrated with --plans).
+    /// The server probes health and GetSpec first and refuses with the reason if either fails.
+    Policy(crate::policy_submit::PolicySubmitArgs),
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -95,19 +99,19 @@ pub struct RescoreArgs {
     admin_token: String,
 }
 
-fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
+pub fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
     tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
         .context("starting the async runtime")
 }
 
-fn url(server: &ServerArgs, path: &str) -> String {
+pub fn url(server: &ServerArgs, path: &str) -> String {
     format!("{}{path}", server.server.trim_end_matches('/'))
 }
 
 /// Send, and turn a non-2xx answer into an error carrying the server's message.
-async fn send(req: reqwest::RequestBuilder) -> anyhow::Result<reqwest::Response> {
+pub async fn send(req: reqwest::RequestBuilder) -> anyhow::Result<reqwest::Response> {
     let resp = req.send().await.context("cannot reach the server")?;
     if resp.status().is_success() {
         return Ok(resp);
@@ -121,7 +125,7 @@ async fn send(req: reqwest::RequestBuilder) -> anyhow::Result<reqwest::Response>
     bail!("{msg} (HTTP {})", status.as_u16())
 }
 
-async fn json(req: reqwest::RequestBuilder) -> anyhow::Result<Value> {
+pub async fn json(req: reqwest::RequestBuilder) -> anyhow::Result<Value> {
     send(req)
         .await?
         .json()
@@ -153,13 +157,16 @@ pub fn team(args: TeamArgs) -> anyhow::Result<()> {
 }
 
 pub fn submit(args: SubmitArgs) -> anyhow::Result<()> {
-    let SubmitCommand::Plans {
-        file,
-        split,
-        server,
-        token,
-        json: raw,
-    } = args.command;
+    let (file, split, server, token, raw) = match args.command {
+        SubmitCommand::Plans {
+            file,
+            split,
+            server,
+            token,
+            json,
+        } => (file, split, server, token, json),
+        SubmitCommand::Policy(a) => return crate::policy_submit::submit_policy(a),
+    };
     let body = std::fs::read(&file).with_context(|| format!("cannot read {}", file.display()))?;
     runtime()?.block_on(async {
         let req = reqwest::Client::new()
@@ -196,49 +203,13 @@ pub fn leaderboard(args: LeaderboardArgs) -> anyhow::Result<()> {
         let text = resp.text().await?;
         match args.format {
             OutputFormat::Csv | OutputFormat::Json => print!("{text}"),
-            OutputFormat::Table => print_table(&serde_json::from_str(&text)?),
+            OutputFormat::Table => crate::leaderboard_table::print_table(&serde_json::from_str(&text)?),
         }
         if args.format == OutputFormat::Json {
             println!();
         }
         Ok(())
     })
-}
-
-fn print_table(board: &Value) {
-    println!(
-        "{} track, {} split",
-        board["track"].as_str().unwrap_or("?"),
-        board["split"].as_str().unwrap_or("?")
-    );
-    let rows = board["rows"].as_array().cloned().unwrap_or_default();
-    if rows.is_empty() {
-        println!("no submissions yet");
-        return;
-    }
-    let width = rows
-        .iter()
-        .filter_map(|r| r["team"].as_str().map(|t| t.chars().count()))
-        .max()
-        .unwrap_or(4)
-        .max(4);
-    println!(
-        "{:>4}  {:<width$}  {:>8}  {:>10}  submitted (UTC)",
-        "rank", "team", "EM", "submission"
-    );
-    for r in rows {
-        let em = r["scores"]["em"]
-            .as_f64()
-            .map_or("-".into(), |v| format!("{v:.4}"));
-        println!(
-            "{:>4}  {:<width$}  {:>8}  {:>10}  {}",
-            r["rank"],
-            r["team"].as_str().unwrap_or("?"),
-            em,
-            r["submission_id"],
-            r["submitted_at"].as_str().unwrap_or("?")
-        );
-    }
 }
 
 pub fn rescore(args: RescoreArgs) -> anyhow::Result<()> {

@@ -1,12 +1,24 @@
-//! `kitchen-r serve`: load the layered configuration, apply flags, start the server and print a
-//! readiness line with the bound addresses (tests start it on port 0 and read that line).
+//! `kitchen-r serve`: load the layered configuration, apply flags, start the server with its
+//! in-process simulation slots and print a readiness line with the bound addresses (tests start
+//! it on port 0 and read that line).
+//!
+//! The in-process slots are an ordinary `kitchen-r worker` running in this process: they lease
+//! jobs from the server's own gRPC port over loopback with the worker token, so a contest on one
+//! machine and a contest with remote workers go through the same queue and the same code.
 
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use anyhow::Context;
 use clap::Args;
 use kitchen_r_server::Config;
+use kitchen_r_worker::job::WorkerConfig;
+use kitchen_r_worker::job::client::Worker;
+use kitchen_r_worker::remote::{AllowedNetworks, RemoteConfig};
+use tokio::sync::watch;
+
+use crate::probe_glue::WorkerProbe;
 
 #[derive(Args, Debug, Default)]
 pub struct ServeArgs {
@@ -19,7 +31,8 @@ pub struct ServeArgs {
     /// SQLite database URL, created if missing [config `db`, default sqlite://data/kitchen-r.db].
     #[arg(long, value_name = "URL")]
     pub db: Option<String>,
-    /// Simulation slots for policy evaluation; 0 = one per core [config `workers`].
+    /// In-process simulation slots for policy evaluation; 0 = none (standalone `kitchen-r worker`
+    /// processes do the work) [config `workers`, default one per core].
     #[arg(long, value_name = "N")]
     pub workers: Option<usize>,
     /// Configuration file [default: configs/server.toml when present].
@@ -39,7 +52,7 @@ fn load(args: ServeArgs) -> anyhow::Result<Config> {
         cfg.db = v;
     }
     if let Some(v) = args.workers {
-        cfg.workers = v;
+        cfg.workers = Some(v);
     }
     cfg.validate()?;
     Ok(cfg)
@@ -48,11 +61,44 @@ fn load(args: ServeArgs) -> anyhow::Result<Config> {
 pub fn serve(args: ServeArgs) -> anyhow::Result<()> {
     init_tracing();
     let cfg = load(args)?;
+    let allow = AllowedNetworks::from_cidrs(&cfg.policy.allow_networks)
+        .map_err(|e| anyhow::anyhow!("`policy.allow_networks`: {e}"))?;
+    let remote = RemoteConfig {
+        startup_deadline_s: f64::from(cfg.policy.startup_deadline_ms) / 1000.0,
+        call_deadline_s: f64::from(cfg.policy.call_deadline_ms) / 1000.0,
+        actions_executed_per_chunk: cfg.control.actions_executed_per_chunk,
+        allowed_networks: allow,
+        ..RemoteConfig::default()
+    };
+    let slots = cfg.worker_slots();
+    let datasets = dataset_files(&cfg.assets_dir());
+    let allow_networks = cfg.policy.allow_networks.clone();
     let rt = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     rt.block_on(async move {
-        let server = kitchen_r_server::build(cfg).await?;
+        let probe = Arc::new(WorkerProbe {
+            allow,
+            remote: remote.clone(),
+        });
+        let server = kitchen_r_server::build_with(cfg, probe).await?;
         let (http, grpc) = server.bind().await?;
         let (h, g) = kitchen_r_server::local_addrs(&http, &grpc)?;
+        let (stop_tx, stop_rx) = watch::channel(false);
+        let workers = if slots > 0 {
+            let wc = WorkerConfig {
+                server: format!("http://{g}"),
+                token: server.worker_token().to_string(),
+                slots,
+                worker_id: format!("serve-{}", std::process::id()),
+                allow_networks,
+                datasets,
+                policy: remote,
+                ..WorkerConfig::default()
+            };
+            let worker = Worker::build(wc).await.context("starting the in-process workers")?;
+            Some(tokio::spawn(worker.run(stopped(stop_rx.clone()))))
+        } else {
+            None
+        };
         let mut out = std::io::stdout().lock();
         if let Some(token) = &server.generated_admin_token {
             writeln!(
@@ -60,11 +106,47 @@ pub fn serve(args: ServeArgs) -> anyhow::Result<()> {
                 "admin token (generated for this run; set KITCHEN_R_ADMIN_TOKEN to keep one): {token}"
             )?;
         }
-        writeln!(out, "listening http={h} grpc={g}")?;
+        if let Some(token) = &server.generated_worker_token {
+            writeln!(
+                out,
+                "worker token (generated for this run; set KITCHEN_R_WORKER_TOKEN for remote workers): {token}"
+            )?;
+        }
+        writeln!(out, "listening http={h} grpc={g} workers={slots}")?;
         out.flush()?;
         drop(out);
-        server.run(http, grpc, shutdown_signal()).await
+        tokio::spawn(async move {
+            shutdown_signal().await;
+            let _ = stop_tx.send(true);
+        });
+        let served = server.run(http, grpc, stopped(stop_rx)).await;
+        if let Some(w) = workers {
+            match w.await {
+                Ok(Err(e)) => tracing::error!("in-process workers: {e}"),
+                Err(e) => tracing::error!("in-process workers panicked: {e}"),
+                Ok(Ok(())) => {}
+            }
+        }
+        served
     })
+}
+
+/// The ground-truth files the in-process workers simulate from: the server's own dataset.
+fn dataset_files(assets: &Path) -> Vec<PathBuf> {
+    ["dev.jsonl", "test_ground_truth.jsonl"]
+        .into_iter()
+        .map(|f| assets.join("dataset").join(f))
+        .filter(|p| p.is_file())
+        .collect()
+}
+
+/// Resolves once the shutdown flag is raised.
+async fn stopped(mut rx: watch::Receiver<bool>) {
+    while !*rx.borrow_and_update() {
+        if rx.changed().await.is_err() {
+            return;
+        }
+    }
 }
 
 fn init_tracing() {

@@ -66,9 +66,9 @@ pub fn worker(args: WorkerArgs) -> anyhow::Result<()> {
     rt.block_on(async move {
         let (server, slots) = (cfg.server.clone(), cfg.slots);
         let worker = Worker::build(cfg).await?;
-        // Tests and scripts wait for this exact line.
-        eprintln!("worker ready id={} slots={slots} server={server}", worker.id());
-        std::io::stderr().flush()?;
+        // Tests and scripts wait for this exact line on stdout (like serve's `listening` line).
+        println!("worker ready id={} slots={slots} server={server}", worker.id());
+        std::io::stdout().flush()?;
         worker.run(stop_signal()).await?;
         Ok(())
     })

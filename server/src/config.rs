@@ -32,8 +32,9 @@ pub struct Config {
     pub grpc: String,
     /// SQLite URL; the file and its directory are created if missing.
     pub db: String,
-    /// In-process simulation slots for policy evaluation; 0 means one per CPU core.
-    pub workers: usize,
+    /// In-process simulation slots for policy evaluation; unset means one per CPU core, 0 means
+    /// none (every episode waits for a standalone `kitchen-r worker`).
+    pub workers: Option<usize>,
     /// Benchmark content (scenes, catalogue, `dataset/`); empty means the default lookup of
     /// `kitchen_r_core::assets::assets_dir()`.
     pub assets: PathBuf,
@@ -119,7 +120,7 @@ impl Default for Config {
             http: "127.0.0.1:8080".into(),
             grpc: "127.0.0.1:50051".into(),
             db: "sqlite://data/kitchen-r.db".into(),
-            workers: 0,
+            workers: None,
             assets: PathBuf::new(),
             admin_token: String::new(),
             worker_token: String::new(),
@@ -293,13 +294,10 @@ impl Config {
         }
     }
 
-    /// Simulation slots: `workers`, or the number of cores when 0.
+    /// In-process simulation slots: `workers`, or the number of cores when unset.
     pub fn worker_slots(&self) -> usize {
-        if self.workers > 0 {
-            self.workers
-        } else {
-            std::thread::available_parallelism().map_or(1, |n| n.get())
-        }
+        self.workers
+            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
     }
 }
 

@@ -256,3 +256,160 @@ pub async fn get_json(server: &Server, path: &str, token: Option<&str>) -> (u16,
     let status = r.status().as_u16();
     (status, r.json().await.unwrap())
 }
+
+/// Worker token the control-track tests configure.
+pub const WORKER_TOKEN: &str = "test-worker-token-0123456789";
+/// Upper bound on how long one test waits for a run to finish (debug build, shared machine).
+pub const RUN_DEADLINE: Duration = Duration::from_secs(900);
+
+/// Start `cmd` with piped stdout and wait for its first line starting with `prefix`; the rest of
+/// stdout is drained in the background. Returns the child and that line.
+pub fn spawn_ready(cmd: &mut Command, prefix: &str) -> (Child, String) {
+    let mut child = cmd
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("spawn process");
+    let stdout = child.stdout.take().unwrap();
+    let (tx, rx) = mpsc::channel();
+    let prefix = prefix.to_string();
+    std::thread::spawn(move || {
+        for l in BufReader::new(stdout).lines().map_while(Result::ok) {
+            if l.starts_with(&prefix) {
+                let _ = tx.send(l);
+            }
+        }
+    });
+    match rx.recv_timeout(STARTUP) {
+        Ok(l) => (child, l),
+        Err(_) => {
+            let _ = child.kill();
+            panic!("{cmd:?} printed no line starting with the readiness prefix");
+        }
+    }
+}
+
+/// A process killed (SIGKILL) when dropped.
+pub struct Proc(pub Child);
+
+impl Proc {
+    /// SIGKILL now and reap.
+    pub fn kill(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        self.kill();
+    }
+}
+
+/// The reference oracle served over gRPC (`kitchen-r policy oracle --listen 127.0.0.1:0`);
+/// returns the process and its `http://` URL.
+pub fn oracle_policy() -> (Proc, String) {
+    let (child, line) = spawn_ready(
+        Command::new(bin())
+            .args(["policy", "oracle", "--listen", "127.0.0.1:0"])
+            .env("RUST_LOG", "warn"),
+        "listening grpc=",
+    );
+    let addr = line.trim_start_matches("listening grpc=").trim().to_string();
+    (Proc(child), format!("http://{addr}"))
+}
+
+/// A server on the committed benchmark (real scenes and dataset) with a temporary database;
+/// `config` is appended to its server.toml.
+pub struct ControlFixture {
+    pub dir: tempfile::TempDir,
+}
+
+impl ControlFixture {
+    pub fn new(config: &str) -> ControlFixture {
+        let dir = tempfile::tempdir().unwrap();
+        let db = dir.path().join("db/kitchen-r.db");
+        let toml = format!(
+            "http = \"127.0.0.1:0\"\ngrpc = \"127.0.0.1:0\"\ndb = \"sqlite://{}\"\nworker_token = \"{WORKER_TOKEN}\"\n{config}\n",
+            db.display(),
+        );
+        std::fs::write(dir.path().join("server.toml"), toml).unwrap();
+        ControlFixture { dir }
+    }
+
+    /// `kitchen-r serve --workers N` on this fixture (N = 0: no in-process workers).
+    pub fn serve(&self, workers: usize) -> Server {
+        let mut cmd = Command::new(bin());
+        cmd.args(["serve", "--workers", &workers.to_string(), "--config"])
+            .arg(self.dir.path().join("server.toml"))
+            .env("KITCHEN_R_ADMIN_TOKEN", ADMIN)
+            .env("RUST_LOG", "warn");
+        let (child, ready) = spawn_ready(&mut cmd, "listening ");
+        let field = |k: &str| {
+            ready
+                .split_whitespace()
+                .find_map(|w| w.strip_prefix(k))
+                .unwrap()
+                .to_string()
+        };
+        Server {
+            child,
+            http: format!("http://{}", field("http=")),
+            grpc: format!("http://{}", field("grpc=")),
+        }
+    }
+}
+
+/// `kitchen-r worker --server GRPC --slots N` with the test worker token, started and ready.
+pub fn worker(server: &Server, slots: usize, id: &str) -> Proc {
+    let (child, _) = spawn_ready(
+        Command::new(bin())
+            .args(["worker", "--server", &server.grpc, "--slots", &slots.to_string()])
+            .args(["--worker-id", id])
+            .env("KITCHEN_R_WORKER_TOKEN", WORKER_TOKEN)
+            .env("RUST_LOG", "warn"),
+        "worker ready",
+    );
+    Proc(child)
+}
+
+/// Register a policy endpoint; returns (status, JSON body).
+pub async fn register_policy(server: &Server, token: &str, body: Value) -> (u16, Value) {
+    let r = client()
+        .post(server.url("/api/v1/submissions/policies"))
+        .bearer_auth(token)
+        .json(&body)
+        .send()
+        .await
+        .unwrap();
+    let status = r.status().as_u16();
+    (status, r.json().await.unwrap())
+}
+
+/// Poll a submission until `done(evaluation)` holds; returns the submission view.
+pub async fn wait_for(
+    server: &Server,
+    id: i64,
+    token: &str,
+    what: &str,
+    done: impl Fn(&Value) -> bool,
+) -> Value {
+    let start = std::time::Instant::now();
+    loop {
+        let (status, v) = get_json(server, &format!("/api/v1/submissions/{id}"), Some(token)).await;
+        assert_eq!(status, 200, "{v}");
+        if done(&v["latest_run"]["evaluation"]) {
+            return v;
+        }
+        assert!(
+            start.elapsed() < RUN_DEADLINE,
+            "gave up waiting for {what}; last view: {v:#}"
+        );
+        tokio::time::sleep(Duration::from_millis(300)).await;
+    }
+}
+
+/// Whether a run's evaluation has finished.
+pub fn finished(e: &Value) -> bool {
+    e["state"] == "finished" || e["state"] == "platform_failed"
+}
