@@ -180,6 +180,7 @@ impl Sim {
 
     /// Render the configured cameras and LiDAR and read odometry.
     pub fn observe(&self) -> Observation {
+        let mut obs = self.observe_state();
         let base = self.robot.base_iso(&self.world);
         let tcp = self.robot.tcp_world(&self.world, &self.dynamic.robot);
         let mount = |m: Mount| match m {
@@ -202,6 +203,15 @@ impl Sim {
             let pose = mount(l.mount) * Translation3::from(Vector3::from(l.position));
             crate::sensors::lidar::scan(&self.world, l, &pose)
         });
+        obs.images = images;
+        obs.lidar = lidar;
+        obs
+    }
+
+    /// Odometry, joints, gripper and task without rendering anything (`images` empty, no
+    /// LiDAR): for steps where nobody looks at the sensors.
+    pub fn observe_state(&self) -> Observation {
+        let base = self.robot.base_iso(&self.world);
         let s = self.episode.robot_start;
         let start = crate::convert::planar(s[0], s[1], 0.0, s[2]);
         let rel = start.inverse() * base;
@@ -209,8 +219,8 @@ impl Sim {
         let (joints, _) = self.joints();
         Observation {
             time: self.time(),
-            images,
-            lidar,
+            images: Vec::new(),
+            lidar: None,
             odometry: Odometry {
                 pose: [
                     rel.translation.x,

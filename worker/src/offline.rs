@@ -331,6 +331,11 @@ impl Policy for Shadow<'_> {
         self.expert.reset(episode_id, task_index, sub_task)
     }
 
+    /// Images only for the decision points the participant's policy is asked at.
+    fn wants_images(&self) -> bool {
+        self.stopped.is_none() && self.step_in_task.is_multiple_of(self.period)
+    }
+
     fn act(&mut self, input: &PolicyInput<'_>) -> Result<Vec<[f64; ACTION_DIM]>, PolicyError> {
         if self.step_in_task.is_multiple_of(self.period) {
             self.sample(input);

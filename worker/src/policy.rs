@@ -82,6 +82,11 @@ pub trait Policy: Send {
     fn reset(&mut self, episode_id: &str, task_index: usize, sub_task: &str) -> Result<(), PolicyError>;
     /// The next chunk of `horizon` actions.
     fn act(&mut self, input: &PolicyInput<'_>) -> Result<Vec<[f64; ACTION_DIM]>, PolicyError>;
+    /// Whether the next `act` call needs camera images and LiDAR. The runner renders only when
+    /// it does (rendering is most of an episode's cost); the robot state is always there.
+    fn wants_images(&self) -> bool {
+        true
+    }
 }
 
 /// Tolerance on the quaternion norm: chunks are produced in f32 by most learned policies.

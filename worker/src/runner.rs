@@ -79,6 +79,13 @@ impl EpisodeOutcome {
 /// with that reason (the recording-rate monitor uses it).
 pub trait StepHook {
     fn on_step(&mut self, sim: &Sim, action: &Action, info: &StepInfo) -> Result<(), String>;
+    /// Whether the hook needs the rendered observation of every step (a recorder does); it then
+    /// gets it through [`StepHook::observation`] just before `on_step`, rendered once and shared
+    /// with the policy.
+    fn wants_observation(&self) -> bool {
+        false
+    }
+    fn observation(&mut self, _obs: &Observation) {}
 
     /// Called before task `index` begins, with the world as the task will find it: the
     /// expert-start snapshots behind teleport-on-failure are taken here.
@@ -217,7 +224,11 @@ fn run_task(
     if let Err(e) = policy.reset(&episode_id, j, &step_text) {
         return fail(sim, format!("reset: {e}"), calls);
     }
-    let mut obs: Observation = sim.observe();
+    let mut obs: Observation = if policy.wants_images() || hook.wants_observation() {
+        sim.observe()
+    } else {
+        sim.observe_state()
+    };
     loop {
         if opts.wall_budget.is_some_and(|b| episode_started.elapsed() > b) {
             return fail(sim, format!("{ABORT}wall-clock budget exceeded"), calls);
@@ -255,10 +266,18 @@ fn run_task(
             Err(e) => return fail(sim, e.to_string(), calls),
         };
         let k = opts.execute.clamp(1, chunk.len());
+        let hook_watches = hook.wants_observation();
         for (i, a) in chunk[..k].iter().enumerate() {
             let action = Action(*a);
-            let render = i + 1 == k;
+            // The policy is asked again after the last action of the part-chunk.
+            let query = i + 1 == k;
+            let render = hook_watches || (query && policy.wants_images());
             let (o, info) = sim.step(&action, render)?;
+            if let Some(o) = &o
+                && hook_watches
+            {
+                hook.observation(o);
+            }
             if let Err(reason) = hook.on_step(sim, &action, &info) {
                 return fail(sim, format!("{ABORT}{reason}"), calls);
             }
@@ -281,8 +300,8 @@ fn run_task(
                     calls,
                 );
             }
-            if let Some(o) = o {
-                obs = o;
+            if query {
+                obs = o.unwrap_or_else(|| sim.observe_state());
             }
         }
     }

@@ -3,7 +3,7 @@
 
 use kitchen_r_sim::config::MonitorConfig;
 use kitchen_r_sim::task::MonitorTrip;
-use kitchen_r_sim::{Action, Sim, StepInfo};
+use kitchen_r_sim::{Action, Observation, Sim, StepInfo};
 
 use crate::record::hdf5_aloha::Hdf5Recorder;
 use crate::record::mcap_ros2::McapRecorder;
@@ -60,6 +60,8 @@ pub struct Recorder {
     pub trip: Option<Trip>,
     /// Task index and first frame of the running task.
     current: Option<(usize, usize, f64)>,
+    /// This step's observation, rendered once by the runner (see `StepHook::observation`).
+    latest: Option<Observation>,
 }
 
 impl Recorder {
@@ -78,11 +80,12 @@ impl Recorder {
             frames: 0,
             trip: None,
             current: None,
+            latest: None,
         }
     }
 
-    fn frame(sim: &Sim, action: &Action, info: &StepInfo, task: usize) -> Frame {
-        let obs = sim.observe();
+    fn frame(&mut self, sim: &Sim, action: &Action, info: &StepInfo, task: usize) -> Frame {
+        let obs = self.latest.take().unwrap_or_else(|| sim.observe());
         let (_, qd) = sim.joints();
         let mut qpos = info.joints.to_vec();
         qpos.push(info.gripper);
@@ -113,7 +116,7 @@ impl Recorder {
     }
 
     fn record(&mut self, sim: &Sim, action: &Action, info: &StepInfo, task: usize) -> Result<(), Trip> {
-        let frame = Self::frame(sim, action, info, task);
+        let frame = self.frame(sim, action, info, task);
         if let Some(m) = &mut self.mcap {
             m.write_frame(&frame, Some(&mut self.rate))
                 .map_err(|e| Trip::new("write_error", e.to_string()))?;
@@ -178,6 +181,14 @@ impl Recorder {
 }
 
 impl StepHook for Recorder {
+    fn wants_observation(&self) -> bool {
+        true
+    }
+
+    fn observation(&mut self, obs: &Observation) {
+        self.latest = Some(obs.clone());
+    }
+
     fn on_step(&mut self, sim: &Sim, action: &Action, info: &StepInfo) -> Result<(), String> {
         self.check(sim, action, info).map_err(|t| {
             let msg = format!("{}: {}", t.kind, t.message);

@@ -228,7 +228,7 @@ fn remote_config(base: &RemoteConfig, ep: &pb::PolicyEndpoint, execute: usize) -
 
 /// Run the expert over the episode once, keeping its state at each task start, then reset.
 fn expert_starts(sim: &mut Sim, cfg: &EpisodeConfig, ctx: &JobContext) -> Result<Vec<Snapshot>, JobError> {
-    let mut expert = OraclePolicy::new(&ctx.assets);
+    let mut expert = OraclePolicy::new(&ctx.assets).without_images();
     let mut starts = Starts::default();
     run_episode(sim, &mut expert, &expert_options(), None, &mut starts)?;
     sim.reset(cfg)?;

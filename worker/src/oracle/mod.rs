@@ -68,6 +68,9 @@ pub struct OraclePolicy {
     /// The approach pose of the last move, kept across the tasks of an episode.
     last_goal: Option<[f64; 3]>,
     episode: String,
+    /// Whether to have the runner render for each query; the oracle itself reads only
+    /// privileged state, but reference runs and the benchmark render as for any policy.
+    images: bool,
 }
 
 impl OraclePolicy {
@@ -87,7 +90,15 @@ impl OraclePolicy {
             active: None,
             last_goal: None,
             episode: String::new(),
+            images: true,
         }
+    }
+
+    /// The oracle as an expert nobody watches: no rendering for its queries (offline
+    /// replays and teleport pre-runs, where only its actions and states matter).
+    pub fn without_images(mut self) -> OraclePolicy {
+        self.images = false;
+        self
     }
 
     fn scene(&self, id: &str) -> Result<&Scene, PolicyError> {
@@ -197,6 +208,10 @@ fn iso(p: &[f64; 7]) -> Isometry3<f64> {
 impl Policy for OraclePolicy {
     fn spec(&self) -> &PolicySpec {
         &self.spec
+    }
+
+    fn wants_images(&self) -> bool {
+        self.images
     }
 
     fn reset(&mut self, episode_id: &str, task_index: usize, _: &str) -> Result<(), PolicyError> {
