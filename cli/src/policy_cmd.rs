@@ -13,7 +13,7 @@ use clap::{Args, Subcommand};
 use kitchen_r_sim::Assets;
 use kitchen_r_worker::oracle::OraclePolicy;
 use kitchen_r_worker::policy::Policy;
-use kitchen_r_worker::remote::server::{PolicyFactory, ServeOptions, serve_policy};
+use kitchen_r_worker::remote::server::{PolicyFactory, ServeOptions, TlsIdentity, serve_policy};
 
 #[derive(Args, Debug)]
 pub struct PolicyArgs {
@@ -32,6 +32,12 @@ pub struct OracleArgs {
     /// Listen address; port 0 picks a free port (printed in the `listening grpc=...` line).
     #[arg(long, value_name = "ADDR", default_value = "127.0.0.1:50061")]
     pub listen: String,
+    /// Serve over TLS with this PEM certificate chain (needs --tls-key); clients then use https://.
+    #[arg(long, value_name = "FILE", requires = "tls_key")]
+    pub tls_cert: Option<std::path::PathBuf>,
+    /// The PEM private key of --tls-cert.
+    #[arg(long, value_name = "FILE", requires = "tls_cert")]
+    pub tls_key: Option<std::path::PathBuf>,
 }
 
 pub fn policy(args: PolicyArgs) -> anyhow::Result<()> {
@@ -41,6 +47,18 @@ pub fn policy(args: PolicyArgs) -> anyhow::Result<()> {
 }
 
 fn oracle(args: OracleArgs) -> anyhow::Result<()> {
+    let read = |p: &std::path::Path| std::fs::read(p).with_context(|| format!("reading {}", p.display()));
+    let tls = match (&args.tls_cert, &args.tls_key) {
+        (Some(c), Some(k)) => Some(TlsIdentity {
+            cert_pem: read(c)?,
+            key_pem: read(k)?,
+        }),
+        _ => None,
+    };
+    let opts = ServeOptions {
+        tls,
+        ..ServeOptions::default()
+    };
     let assets = Arc::new(Assets::load_default().context("loading the benchmark assets")?);
     let factory: PolicyFactory = Arc::new(move || Box::new(OraclePolicy::new(&assets)) as Box<dyn Policy>);
     let rt = tokio::runtime::Builder::new_multi_thread()
@@ -57,7 +75,7 @@ fn oracle(args: OracleArgs) -> anyhow::Result<()> {
         let shutdown = async {
             let _ = tokio::signal::ctrl_c().await;
         };
-        serve_policy(listener, factory, ServeOptions::default(), shutdown)
+        serve_policy(listener, factory, opts, shutdown)
             .await
             .context("serving the oracle policy")
     })

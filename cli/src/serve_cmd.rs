@@ -94,7 +94,10 @@ pub fn serve(args: ServeArgs) -> anyhow::Result<()> {
                 policy: remote,
                 ..WorkerConfig::default()
             };
-            let worker = Worker::build(wc).await.context("starting the in-process workers")?;
+            let worker = Worker::build(wc).await.context(
+                "starting the in-process simulation slots (set `workers = 0` or --workers 0 to serve \
+                 without them, e.g. for planning-only content)",
+            )?;
             Some(tokio::spawn(worker.run(stopped(stop_rx.clone()))))
         } else {
             None

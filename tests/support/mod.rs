@@ -107,6 +107,7 @@ pub fn line(id: &str, plan: &[&str]) -> String {
 }
 
 /// A temporary benchmark: assets (committed scenes and catalogue, fixture dataset) and a config.
+/// Planning content only (no robot), so the server runs without simulation slots.
 pub struct Fixture {
     pub dir: tempfile::TempDir,
 }
@@ -132,7 +133,7 @@ impl Fixture {
         std::fs::write(ds.join("manifest.json"), manifest.to_string()).unwrap();
         let db = dir.path().join("db/kitchen-r.db");
         let toml = format!(
-            "http = \"127.0.0.1:0\"\ngrpc = \"127.0.0.1:0\"\ndb = \"sqlite://{}\"\nassets = \"{}\"\n{config}\n",
+            "http = \"127.0.0.1:0\"\ngrpc = \"127.0.0.1:0\"\ndb = \"sqlite://{}\"\nassets = \"{}\"\nworkers = 0\n{config}\n",
             db.display(),
             assets.display()
         );

@@ -33,6 +33,15 @@ pub struct ServeOptions {
     pub max_request_bytes: usize,
     /// Episodes whose policy instance is kept.
     pub max_episodes: usize,
+    /// Serve over TLS with this certificate chain and private key (PEM); plain gRPC when unset.
+    pub tls: Option<TlsIdentity>,
+}
+
+/// A server certificate chain and its private key, PEM-encoded.
+#[derive(Debug, Clone)]
+pub struct TlsIdentity {
+    pub cert_pem: Vec<u8>,
+    pub key_pem: Vec<u8>,
 }
 
 impl Default for ServeOptions {
@@ -41,6 +50,7 @@ impl Default for ServeOptions {
             cameras: Vec::new(),
             max_request_bytes: 64 << 20,
             max_episodes: 256,
+            tls: None,
         }
     }
 }
@@ -200,7 +210,12 @@ pub async fn serve_policy(
         }
         s
     });
-    tonic::transport::Server::builder()
+    let mut builder = tonic::transport::Server::builder();
+    if let Some(id) = &opts.tls {
+        let identity = tonic::transport::Identity::from_pem(&id.cert_pem, &id.key_pem);
+        builder = builder.tls_config(tonic::transport::ServerTlsConfig::new().identity(identity))?;
+    }
+    builder
         .add_service(health)
         .add_service(
             PolicyServer::new(service)
