@@ -36,6 +36,14 @@ fn assert_counted_once(view: &Value, expected: usize) {
     assert_eq!(e["episodes_total"], expected, "{view:#}");
 }
 
+/// Register an organiser reference run of `url` on the first `episodes` dev instructions.
+async fn register_reference(server: &Server, url: &str, episodes: u32) -> i64 {
+    let body = json!({"endpoint": url, "split": "dev", "episodes": episodes, "reference": true});
+    let (status, reg) = register_policy(server, ADMIN, body).await;
+    assert_eq!(status, 201, "{reg}");
+    reg["id"].as_i64().unwrap()
+}
+
 fn sr(view: &Value) -> f64 {
     view["latest_run"]["scores"]["sr"]
         .as_f64()
@@ -47,14 +55,7 @@ async fn the_oracle_reference_run_scores_at_least_095_through_serve() {
     let fx = ControlFixture::new(CONFIG);
     let server = fx.serve(2);
     let (_oracle, url) = oracle_policy();
-    let (status, reg) = register_policy(
-        &server,
-        ADMIN,
-        json!({"endpoint": url, "split": "dev", "episodes": 4, "reference": true}),
-    )
-    .await;
-    assert_eq!(status, 201, "{reg}");
-    let id = reg["id"].as_i64().unwrap();
+    let id = register_reference(&server, &url, 4).await;
     let view = wait_for(&server, id, ADMIN, "the reference run", finished).await;
     assert_eq!(view["latest_run"]["evaluation"]["state"], "finished", "{view:#}");
     // Four online episodes and their four offline (MSE) twins.
@@ -80,14 +81,7 @@ async fn a_sigkilled_worker_loses_no_episode_and_counts_none_twice() {
     let fx = ControlFixture::new(&format!("{CONFIG}offline_mse = false\n"));
     let server = fx.serve(0);
     let (_oracle, url) = oracle_policy();
-    let (status, reg) = register_policy(
-        &server,
-        ADMIN,
-        json!({"endpoint": url, "split": "dev", "episodes": 3, "reference": true}),
-    )
-    .await;
-    assert_eq!(status, 201, "{reg}");
-    let id = reg["id"].as_i64().unwrap();
+    let id = register_reference(&server, &url, 3).await;
 
     let mut first = worker(&server, 1, "doomed");
     wait_for(&server, id, ADMIN, "an episode to start", |e| {
@@ -117,14 +111,7 @@ async fn a_server_restarted_mid_run_resumes_the_run() {
     let (_oracle, url) = oracle_policy();
     let id = {
         let server = fx.serve(1);
-        let (status, reg) = register_policy(
-            &server,
-            ADMIN,
-            json!({"endpoint": url, "split": "dev", "episodes": 3, "reference": true}),
-        )
-        .await;
-        assert_eq!(status, 201, "{reg}");
-        let id = reg["id"].as_i64().unwrap();
+        let id = register_reference(&server, &url, 3).await;
         wait_for(&server, id, ADMIN, "the first episode", |e| {
             e["episodes_done"].as_u64().unwrap_or(0) >= 1
         })
@@ -221,6 +208,9 @@ async fn a_private_address_endpoint_is_refused_at_registration() {
     assert!(board["rows"].as_array().unwrap().is_empty(), "{board:#}");
 }
 
+/// What a scripted policy answers to every Act.
+type Answer = Box<dyn Fn() -> Vec<[f64; 10]> + Send + Sync>;
+
 /// A policy answering every Act with `answer`, served over gRPC on 127.0.0.1:0 by the worker
 /// crate's policy server in its own runtime (dropped with the returned guard).
 fn scripted_policy(
@@ -272,7 +262,7 @@ fn scripted_policy(
 #[test]
 fn misbehaving_policies_fail_their_tasks_with_the_reason_while_the_runs_complete() {
     const STILL: [f64; 10] = [0.0, 0.0, 0.35, 0.0, 0.95, 0.0, 1.0, 0.0, 0.0, 1.0];
-    let cases: Vec<(&str, Box<dyn Fn() -> Vec<[f64; 10]> + Send + Sync>)> = vec![
+    let cases: Vec<(&str, Answer)> = vec![
         ("is not finite", Box::new(|| vec![[f64::NAN; 10]; 16])),
         ("expected 160 values", Box::new(|| vec![STILL; 3])),
         (

@@ -160,28 +160,18 @@ pub struct Server {
 
 impl Server {
     fn start(config: &Path, cwd: &Path) -> Server {
-        let mut child = Command::new(bin())
-            .args(["serve", "--config"])
+        let mut cmd = Command::new(bin());
+        cmd.args(["serve", "--config"])
             .arg(config)
             .current_dir(cwd)
             .env("KITCHEN_R_ADMIN_TOKEN", ADMIN)
-            .env("RUST_LOG", "warn")
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .expect("spawn kitchen-r serve");
-        let stdout = child.stdout.take().unwrap();
-        let (tx, rx) = mpsc::channel();
-        std::thread::spawn(move || {
-            for l in BufReader::new(stdout).lines().map_while(Result::ok) {
-                if l.starts_with("listening ") {
-                    let _ = tx.send(l);
-                }
-            }
-        });
-        let ready = rx
-            .recv_timeout(STARTUP)
-            .expect("server printed no readiness line");
+            .env("RUST_LOG", "warn");
+        Server::spawn(&mut cmd)
+    }
+
+    /// Spawn a prepared `kitchen-r serve` command and read its `listening` line.
+    fn spawn(cmd: &mut Command) -> Server {
+        let (child, ready) = spawn_ready(cmd, "listening ");
         let field = |k: &str| {
             ready
                 .split_whitespace()
@@ -345,19 +335,7 @@ impl ControlFixture {
             .arg(self.dir.path().join("server.toml"))
             .env("KITCHEN_R_ADMIN_TOKEN", ADMIN)
             .env("RUST_LOG", "warn");
-        let (child, ready) = spawn_ready(&mut cmd, "listening ");
-        let field = |k: &str| {
-            ready
-                .split_whitespace()
-                .find_map(|w| w.strip_prefix(k))
-                .unwrap()
-                .to_string()
-        };
-        Server {
-            child,
-            http: format!("http://{}", field("http=")),
-            grpc: format!("http://{}", field("grpc=")),
-        }
+        Server::spawn(&mut cmd)
     }
 }
 
