@@ -8,9 +8,15 @@
 //! private address is refused at registration.
 
 mod support;
+// The worker crate's scripted policies served over real sockets (`TestServer`, `factory`).
+#[path = "../worker/tests/remote_support/mod.rs"]
+mod remote_support;
 
 use std::collections::BTreeSet;
 use std::process::Command;
+use std::sync::Arc;
+
+use kitchen_r_worker::remote::server::ServeOptions;
 
 use serde_json::{Value, json};
 use support::*;
@@ -208,75 +214,27 @@ async fn a_private_address_endpoint_is_refused_at_registration() {
     assert!(board["rows"].as_array().unwrap().is_empty(), "{board:#}");
 }
 
-/// What a scripted policy answers to every Act.
-type Answer = Box<dyn Fn() -> Vec<[f64; 10]> + Send + Sync>;
-
-/// A policy answering every Act with `answer`, served over gRPC on 127.0.0.1:0 by the worker
-/// crate's policy server in its own runtime (dropped with the returned guard).
-fn scripted_policy(
-    answer: impl Fn() -> Vec<[f64; 10]> + Send + Sync + 'static,
-) -> (tokio::runtime::Runtime, String) {
-    use kitchen_r_worker::policy::{Policy, PolicyError, PolicyInput, PolicySpec};
-    use kitchen_r_worker::remote::server::{PolicyFactory, ServeOptions, serve_policy};
-    use std::sync::Arc;
-
-    struct Scripted(PolicySpec, Arc<dyn Fn() -> Vec<[f64; 10]> + Send + Sync>);
-    impl Policy for Scripted {
-        fn spec(&self) -> &PolicySpec {
-            &self.0
-        }
-        fn reset(&mut self, _: &str, _: usize, _: &str) -> Result<(), PolicyError> {
-            Ok(())
-        }
-        fn act(&mut self, _: &PolicyInput<'_>) -> Result<Vec<[f64; 10]>, PolicyError> {
-            Ok((self.1)())
-        }
-    }
-    let answer: Arc<dyn Fn() -> Vec<[f64; 10]> + Send + Sync> = Arc::new(answer);
-    let factory: PolicyFactory = Arc::new(move || {
-        let spec = PolicySpec {
-            name: "scripted".into(),
-            horizon: 16,
-            action_dim: 10,
-            cameras: vec![],
-            max_concurrency: 1,
-        };
-        Box::new(Scripted(spec, answer.clone())) as Box<dyn Policy>
-    });
-    let rt = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .unwrap();
-    let listener = rt.block_on(tokio::net::TcpListener::bind("127.0.0.1:0")).unwrap();
-    let url = format!("http://{}", listener.local_addr().unwrap());
-    rt.spawn(serve_policy(
-        listener,
-        factory,
-        ServeOptions::default(),
-        std::future::pending(),
-    ));
-    (rt, url)
-}
-
 #[test]
 fn misbehaving_policies_fail_their_tasks_with_the_reason_while_the_runs_complete() {
-    const STILL: [f64; 10] = [0.0, 0.0, 0.35, 0.0, 0.95, 0.0, 1.0, 0.0, 0.0, 1.0];
-    let cases: Vec<(&str, Answer)> = vec![
-        ("is not finite", Box::new(|| vec![[f64::NAN; 10]; 16])),
-        ("expected 160 values", Box::new(|| vec![STILL; 3])),
+    use kitchen_r_worker::policy::HORIZON as H;
+    use remote_support::{STILL, TestServer, factory};
+    let scripted = |answer: fn() -> Vec<[f64; 10]>| {
+        TestServer::start(
+            factory(H, Arc::new(move |_| Ok(answer()))),
+            ServeOptions::default(),
+        )
+    };
+    let policies = [
+        ("is not finite", scripted(|| vec![[f64::NAN; 10]; H])),
+        ("expected 160 values", scripted(|| vec![STILL; 3])),
         (
             "did not answer within",
-            Box::new(|| {
+            scripted(|| {
                 std::thread::sleep(std::time::Duration::from_millis(1500));
-                vec![STILL; 16]
+                vec![STILL; H]
             }),
         ),
     ];
-    let policies: Vec<_> = cases
-        .into_iter()
-        .map(|(needle, f)| (needle, scripted_policy(f)))
-        .collect();
     let fx = ControlFixture::new(&format!(
         "{CONFIG}offline_mse = false\nmax_plan_steps = 1\ntask_time_limit_s = 5.0\n\
          [policy]\ncall_deadline_ms = 300\nmax_successive_timeouts = 1\n[quota]\nconcurrent_runs = 0\n"
@@ -286,11 +244,11 @@ fn misbehaving_policies_fail_their_tasks_with_the_reason_while_the_runs_complete
     rt.block_on(async {
         let token = team(&server, "chaos").await;
         let mut runs = Vec::new();
-        for (needle, (_, url)) in &policies {
+        for (needle, policy) in &policies {
             let (status, reg) = register_policy(
                 &server,
                 &token,
-                json!({"endpoint": url, "split": "dev", "episodes": 1}),
+                json!({"endpoint": policy.url(), "split": "dev", "episodes": 1}),
             )
             .await;
             assert_eq!(status, 201, "{reg}");

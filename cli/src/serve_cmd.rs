@@ -7,14 +7,14 @@
 //! machine and a contest with remote workers go through the same queue and the same code.
 
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::Arc;
 
 use anyhow::Context;
 use clap::Args;
 use kitchen_r_server::Config;
-use kitchen_r_worker::job::WorkerConfig;
 use kitchen_r_worker::job::client::Worker;
+use kitchen_r_worker::job::{Instructions, WorkerConfig};
 use kitchen_r_worker::remote::{AllowedNetworks, RemoteConfig};
 use tokio::sync::watch;
 
@@ -71,7 +71,8 @@ pub fn serve(args: ServeArgs) -> anyhow::Result<()> {
         ..RemoteConfig::default()
     };
     let slots = cfg.worker_slots();
-    let datasets = dataset_files(&cfg.assets_dir());
+    // The in-process workers simulate from the server's own dataset.
+    let datasets = Instructions::files_in(&cfg.assets_dir());
     let allow_networks = cfg.policy.allow_networks.clone();
     let rt = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     rt.block_on(async move {
@@ -132,15 +133,6 @@ pub fn serve(args: ServeArgs) -> anyhow::Result<()> {
         }
         served
     })
-}
-
-/// The ground-truth files the in-process workers simulate from: the server's own dataset.
-fn dataset_files(assets: &Path) -> Vec<PathBuf> {
-    ["dev.jsonl", "test_ground_truth.jsonl"]
-        .into_iter()
-        .map(|f| assets.join("dataset").join(f))
-        .filter(|p| p.is_file())
-        .collect()
 }
 
 /// Resolves once the shutdown flag is raised.

@@ -2,10 +2,11 @@
 //! time limit, a bad chunk fails its task with the reason, successive timeouts abort the episode,
 //! and the run always completes with one outcome per plan step.
 
-use kitchen_r_core::dataset::Dataset;
-use kitchen_r_sim::{Assets, EpisodeConfig, EpisodeParams, SensorsConfig, Sim, SimConfig};
+mod remote_support;
+
 use kitchen_r_worker::policy::{HORIZON, Policy, PolicyError, PolicyInput, PolicySpec};
 use kitchen_r_worker::runner::{RunOptions, run_episode};
+use remote_support::sim;
 
 struct Scripted {
     spec: PolicySpec,
@@ -44,19 +45,6 @@ fn policy(answer: fn(u64) -> Result<Vec<[f64; 10]>, PolicyError>) -> Scripted {
         answer,
         resets: 0,
     }
-}
-
-fn sim() -> Sim {
-    let assets = Assets::load_default().unwrap();
-    let data = Dataset::load(&kitchen_r_core::assets::assets_dir().join("dataset")).unwrap();
-    let ins = &data.dev[0];
-    let scene = assets.scene(&ins.scene).unwrap().clone();
-    let params = EpisodeParams::load_default().unwrap();
-    let cfg = EpisodeConfig::from_instruction(ins, &scene, &assets.catalogue, &params, 1).unwrap();
-    let sensors = SensorsConfig::load_default().unwrap();
-    Sim::new(assets, SimConfig::load_default().unwrap(), sensors, &cfg)
-        .unwrap()
-        .0
 }
 
 fn opts() -> RunOptions {

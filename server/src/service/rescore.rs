@@ -55,17 +55,8 @@ impl AppState {
 
     async fn rescore_one(&self, id: i64, scorer: &str) -> Result<(), ServiceError> {
         let (split, body) = store::submission_body(self.pool(), id).await?;
-        let split: Split = split.parse().map_err(|e: String| anyhow::anyhow!(e))?;
-        let gt = self.content().ground_truth(split);
-        // Stored files were accepted under the limits of their day; only the ids must still exist.
-        let file = plans::parse(
-            body.as_bytes(),
-            split,
-            gt.len(),
-            &self.content().index,
-            &PlanLimits::UNLIMITED,
-        )?;
-        let score = plans::score(&file, gt);
+        let (split, file) = self.stored_plans(&split, &body)?;
+        let score = plans::score(&file, self.content().ground_truth(split));
         let run = NewRun {
             scorer_version: scorer,
             em: score.em,
@@ -73,5 +64,25 @@ impl AppState {
         };
         store::insert_run(self.pool(), id, now_ms(), &run).await?;
         Ok(())
+    }
+}
+
+impl AppState {
+    /// Parse a stored plan file again (rescoring, M and P of integrated runs). Stored files were
+    /// accepted under the limits of their day; only the ids must still exist.
+    pub(crate) fn stored_plans(
+        &self,
+        split: &str,
+        body: &str,
+    ) -> Result<(Split, plans::PlanFile), ServiceError> {
+        let split: Split = split.parse().map_err(|e: String| anyhow::anyhow!(e))?;
+        let file = plans::parse(
+            body.as_bytes(),
+            split,
+            self.content().ground_truth(split).len(),
+            &self.content().index,
+            &PlanLimits::UNLIMITED,
+        )?;
+        Ok((split, file))
     }
 }

@@ -202,7 +202,7 @@ pub async fn insert_result(conn: &mut SqliteConnection, r: &NewResult<'_>, now: 
     Ok(done.rows_affected() == 1)
 }
 
-/// Move a job to a final state (`done`, `failed`), dropping its lease.
+/// Move a job to another state (`done`, `failed`, or back to `queued`), dropping its lease.
 pub async fn close_job(
     conn: &mut SqliteConnection,
     id: i64,
@@ -225,16 +225,7 @@ pub async fn close_job(
 
 /// Put a job back in the queue after a platform failure or an expired lease.
 pub async fn requeue(conn: &mut SqliteConnection, id: i64, error: &str, now: i64) -> sqlx::Result<()> {
-    sqlx::query(
-        "UPDATE jobs SET state = 'queued', lease_owner = NULL, lease_expires_at = NULL,
-                         last_error = ?, updated_at = ? WHERE id = ?",
-    )
-    .bind(error)
-    .bind(now)
-    .bind(id)
-    .execute(&mut *conn)
-    .await?;
-    Ok(())
+    close_job(conn, id, "queued", Some(error), now).await
 }
 
 /// Jobs of a run still queued or leased.

@@ -31,7 +31,12 @@ pub struct Instructions {
 impl Instructions {
     /// `dev.jsonl` and, when present, `test_ground_truth.jsonl` of the assets' `dataset/`.
     pub fn default_files() -> Vec<PathBuf> {
-        let dir = kitchen_r_core::assets::assets_dir().join("dataset");
+        Instructions::files_in(&kitchen_r_core::assets::assets_dir())
+    }
+
+    /// The ground-truth files of the assets directory `assets` (those that exist).
+    pub fn files_in(assets: &std::path::Path) -> Vec<PathBuf> {
+        let dir = assets.join("dataset");
         ["dev.jsonl", "test_ground_truth.jsonl"]
             .into_iter()
             .map(|f| dir.join(f))

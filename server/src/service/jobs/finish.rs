@@ -6,13 +6,10 @@
 
 use std::collections::HashMap;
 
-use kitchen_r_core::dataset::Split;
 use sqlx::SqliteConnection;
 
-use crate::config::PlanLimits;
 use crate::episodes::{self, JobSpec};
 use crate::error::ServiceError;
-use crate::plans;
 use crate::service::AppState;
 use crate::service::policies::parse_body;
 use crate::store::queue::{self, JobRow, NewResult};
@@ -90,16 +87,10 @@ impl AppState {
         let (split, body) = runs::submission_body_in(conn, id)
             .await?
             .ok_or_else(|| anyhow::anyhow!("linked plans submission {id} is missing"))?;
-        let split: Split = split.parse().map_err(|e: String| anyhow::anyhow!(e))?;
-        let gt = self.content().ground_truth(split);
-        let file = plans::parse(
-            body.as_bytes(),
-            split,
-            gt.len(),
-            &self.content().index,
-            &PlanLimits::UNLIMITED,
-        )?;
-        Ok(gt
+        let (split, file) = self.stored_plans(&split, &body)?;
+        Ok(self
+            .content()
+            .ground_truth(split)
             .iter()
             .zip(file.plans)
             .filter_map(|(g, p)| p.map(|p| (g.id.clone(), p)))
