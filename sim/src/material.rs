@@ -44,8 +44,9 @@ impl Material {
         let k = match self.pattern {
             Pattern::Plain => 1.0,
             Pattern::Tiles { size, contrast } => {
-                let (i, j) = ((p[0] / size).floor() as i64, (p[1] / size).floor() as i64);
-                let grout = (p[0] / size).fract().abs() < 0.03 || (p[1] / size).fract().abs() < 0.03;
+                let (x, y) = (p[0] / size, p[1] / size);
+                let (i, j) = (floor(x) as i64, floor(y) as i64);
+                let grout = fract(x).abs() < 0.03 || fract(y).abs() < 0.03;
                 if grout {
                     1.0 - 2.0 * contrast
                 } else if (i + j) % 2 == 0 {
@@ -55,7 +56,7 @@ impl Material {
                 }
             }
             Pattern::Stripes { size, contrast } => {
-                if ((p[2] / size).floor() as i64) % 2 == 0 {
+                if (floor(p[2] / size) as i64) % 2 == 0 {
                     1.0
                 } else {
                     1.0 - contrast
@@ -64,6 +65,30 @@ impl Material {
         };
         self.color.map(|c| (c * k).clamp(0.0, 1.0))
     }
+}
+
+/// `f32::trunc` without the libm call (x86-64 without SSE4.1 has no rounding instruction, and
+/// the renderer calls this per pixel); exact wherever an `i32` holds the value.
+#[inline]
+fn trunc(x: f32) -> f32 {
+    if x.abs() < 2_147_483_520.0 {
+        x as i32 as f32
+    } else {
+        x.trunc()
+    }
+}
+
+/// `f32::floor`, the same way.
+#[inline]
+fn floor(x: f32) -> f32 {
+    let t = trunc(x);
+    if x < t { t - 1.0 } else { t }
+}
+
+/// `f32::fract` (`x - x.trunc()`), the same way.
+#[inline]
+fn fract(x: f32) -> f32 {
+    x - trunc(x)
 }
 
 /// What a collider belongs to.
@@ -171,4 +196,27 @@ impl Materials {
 /// Blend two colours: `t = 0` gives `a`.
 pub fn mix(a: [f32; 3], b: [f32; 3], t: f32) -> [f32; 3] {
     [0, 1, 2].map(|i| a[i] * (1.0 - t) + b[i] * t)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fast_rounding_matches_the_standard_library() {
+        let mut x = -70_000.0f32;
+        while x < 70_000.0 {
+            for v in [x, x + 0.5, x - 1e-3, x + 0.999, -x] {
+                assert_eq!(trunc(v), v.trunc(), "{v}");
+                assert_eq!(floor(v), v.floor(), "{v}");
+                assert_eq!(fract(v), v.fract(), "{v}");
+            }
+            x += 0.37;
+        }
+        for v in [3e9f32, -3e9, f32::MAX, f32::MIN, 0.0, -0.0, 1e-30, -1e-30] {
+            assert_eq!(floor(v), v.floor(), "{v}");
+            assert_eq!(fract(v), v.fract(), "{v}");
+        }
+        assert!(floor(f32::NAN).is_nan() && fract(f32::INFINITY).is_nan());
+    }
 }

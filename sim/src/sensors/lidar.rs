@@ -5,7 +5,7 @@ use nalgebra::{Isometry3, Vector3};
 use rapier3d::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::tiles::TileGrid;
+use super::raycast::Caster;
 use crate::config::LidarConfig;
 use crate::convert::vec_to_glam;
 use crate::material::{Owner, Tag};
@@ -19,7 +19,7 @@ pub struct PointCloud {
 /// Scan from `sensor` (world pose of the sensor frame).
 pub fn scan(world: &PhysicsWorld, cfg: &LidarConfig, sensor: &Isometry3<f64>) -> PointCloud {
     let origin = vec_to_glam(&sensor.translation.vector);
-    let grid = TileGrid::unbinned(world, origin, |c| {
+    let grid = Caster::unbinned(world, origin, |c| {
         let owner = Tag::unpack(c.user_data).owner;
         owner != Owner::Robot && owner != Owner::Decoration
     });

@@ -2,9 +2,11 @@
 //! only when an observation is requested. `png` writes images for people to look at.
 
 pub mod camera;
+mod footprint;
 pub mod lidar;
 pub mod png;
-pub mod tiles;
+mod ray_shapes;
+pub mod raycast;
 
 pub use camera::CameraImage;
 pub use lidar::PointCloud;
