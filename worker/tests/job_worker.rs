@@ -108,7 +108,7 @@ fn slow_still() -> TestServer {
         factory(
             HORIZON,
             Arc::new(|_| {
-                std::thread::sleep(Duration::from_millis(150));
+                std::thread::sleep(Duration::from_millis(400));
                 Ok(vec![STILL; HORIZON])
             }),
         ),
@@ -123,7 +123,9 @@ fn job(id: i64, policy: &str) -> pb::Job {
     pb::Job {
         job_id: id,
         attempt: 1,
-        lease_expires_at_ms: 0,
+        // Leased for 1.5 s: the worker heartbeats every 0.5 s, well inside one job (two policy
+        // calls of 0.4 s each), however fast the simulation runs.
+        lease_expires_at_ms: now_ms() + 1_500,
         run_id: 1,
         episode_key: ins.id.clone(),
         episode: Some(pb::EpisodeSpec {
