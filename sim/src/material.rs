@@ -40,6 +40,7 @@ impl Material {
     }
 
     /// Albedo at world point `p`.
+    #[inline]
     pub fn albedo(&self, p: [f32; 3]) -> [f32; 3] {
         let k = match self.pattern {
             Pattern::Plain => 1.0,
