@@ -73,11 +73,14 @@ pub fn bench(args: BenchArgs) -> anyhow::Result<()> {
                 println!("{}", r.to_json());
             } else {
                 println!("scene                 {}", r.scene);
-                println!("physics_step_us       {:.1}", r.physics_step_us);
+                println!(
+                    "physics_step_us       {:.1} (median of 5 batches; fastest {:.1})",
+                    r.physics_step_us, r.physics_step_us_min
+                );
                 println!("control_step_us       {:.1}", r.control_step_us);
                 println!(
-                    "observation_ms        {:.2} ({} cameras, {} px)",
-                    r.observation_ms, r.cameras, r.camera_pixels
+                    "observation_ms        {:.2} ({} cameras, {} px; median of 5 batches; fastest {:.2})",
+                    r.observation_ms, r.cameras, r.camera_pixels, r.observation_ms_min
                 );
                 println!("rays_per_second       {:.0}", r.rays_per_second);
                 println!(

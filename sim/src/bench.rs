@@ -4,31 +4,27 @@
 
 use std::time::Instant;
 
-/// A stopwatch on this thread's CPU time where Linux exposes it (`/proc/thread-self/schedstat`),
-/// so figures mean "one core" even on a shared machine; wall time elsewhere.
+/// A stopwatch on this thread's CPU time (`CLOCK_THREAD_CPUTIME_ID`, exact to the nanosecond,
+/// unlike the tick-granular `/proc` counters), so figures mean "one core" even on a shared
+/// machine; wall time where the platform has no thread clock.
 struct Clock {
     wall: Instant,
-    cpu: Option<u64>,
-}
-
-fn thread_cpu_ns() -> Option<u64> {
-    let s = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
-    s.split_whitespace().next()?.parse().ok()
+    cpu: Option<cpu_time::ThreadTime>,
 }
 
 impl Clock {
     fn start() -> Clock {
         Clock {
             wall: Instant::now(),
-            cpu: thread_cpu_ns(),
+            cpu: cpu_time::ThreadTime::try_now().ok(),
         }
     }
 
     /// Seconds since start.
     fn secs(&self) -> f64 {
-        match (self.cpu, thread_cpu_ns()) {
-            (Some(a), Some(b)) => (b - a) as f64 * 1e-9,
-            _ => self.wall.elapsed().as_secs_f64(),
+        match &self.cpu {
+            Some(t) => t.elapsed().as_secs_f64(),
+            None => self.wall.elapsed().as_secs_f64(),
         }
     }
 }
@@ -47,12 +43,17 @@ pub struct BenchReport {
     pub scene: String,
     /// `thread_cpu` (this thread's CPU time, immune to other load) or `wall`.
     pub timing: &'static str,
-    /// Mean wall time of one physics substep, robot commanded and moving (µs).
+    /// One physics substep, robot commanded and moving (µs): the median over `BATCHES` batches
+    /// of control steps, so one burst of load on a shared host does not decide the figure.
     pub physics_step_us: f64,
-    /// Mean wall time of one control step without rendering (µs).
+    /// The fastest batch's physics substep (µs): the figure with the least interference.
+    pub physics_step_us_min: f64,
+    /// One control step without rendering (µs), median batch.
     pub control_step_us: f64,
-    /// Mean wall time of one observation: every configured camera plus LiDAR (ms).
+    /// One observation: every configured camera plus LiDAR (ms), median over `BATCHES` batches.
     pub observation_ms: f64,
+    /// The fastest batch's observation (ms).
+    pub observation_ms_min: f64,
     /// Of which the LiDAR scan (ms).
     pub lidar_ms: f64,
     pub cameras: usize,
@@ -66,6 +67,15 @@ pub struct BenchReport {
     pub substeps_per_control_step: u32,
     pub bodies: usize,
     pub colliders: usize,
+}
+
+/// Timed batches per figure.
+const BATCHES: u32 = 5;
+
+/// Median and minimum of a few timings.
+fn median_min(mut v: Vec<f64>) -> (f64, f64) {
+    v.sort_by(f64::total_cmp);
+    (v[v.len() / 2], v[0])
 }
 
 /// A deterministic, varied action for step `k`: drive, turn, sweep the arm, open and close.
@@ -104,18 +114,27 @@ pub fn run(steps: u32, query_every: u32) -> Result<BenchReport, SimError> {
     let (mut sim, _) = Sim::new(assets, config, sensors, &ep)?;
     let substeps = sim.config().physics.substeps;
 
-    let t0 = Clock::start();
-    for k in 0..steps {
-        sim.step(&wobble_action(k), false)?;
+    let per_batch = (steps / BATCHES).max(1);
+    let mut control = Vec::new();
+    for b in 0..BATCHES {
+        let t0 = Clock::start();
+        for k in b * per_batch..(b + 1) * per_batch {
+            sim.step(&wobble_action(k), false)?;
+        }
+        control.push(t0.secs() * 1e6 / f64::from(per_batch));
     }
-    let control_step_us = t0.secs() * 1e6 / f64::from(steps);
+    let (control_step_us, control_min) = median_min(control);
 
     let n_obs = 30;
-    let t0 = Clock::start();
-    for _ in 0..n_obs {
-        std::hint::black_box(sim.observe());
+    let mut observe = Vec::new();
+    for _ in 0..BATCHES {
+        let t0 = Clock::start();
+        for _ in 0..n_obs / BATCHES {
+            std::hint::black_box(sim.observe());
+        }
+        observe.push(t0.secs() * 1e3 / f64::from(n_obs / BATCHES));
     }
-    let observation_ms = t0.secs() * 1e3 / f64::from(n_obs);
+    let (observation_ms, observation_ms_min) = median_min(observe);
     let lidar_ms = match &sim.sensors.lidar {
         Some(l) => {
             let pose = sim.robot.base_iso(&sim.world);
@@ -142,14 +161,16 @@ pub fn run(steps: u32, query_every: u32) -> Result<BenchReport, SimError> {
     let busy = t0.secs();
     Ok(BenchReport {
         scene: scene.id,
-        timing: if thread_cpu_ns().is_some() {
+        timing: if cpu_time::ThreadTime::try_now().is_ok() {
             "thread_cpu"
         } else {
             "wall"
         },
         physics_step_us: control_step_us / f64::from(substeps),
+        physics_step_us_min: control_min / f64::from(substeps),
         control_step_us,
         observation_ms,
+        observation_ms_min,
         lidar_ms,
         cameras: sim.sensors.cameras.len(),
         camera_pixels: pixels,
