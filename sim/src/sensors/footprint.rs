@@ -206,8 +206,9 @@ impl Coverage {
 
     fn set_span(&mut self, k: usize, v: usize, u0: usize, u1: usize) {
         let (word, bit) = (k / 64, 1u64 << (k % 64));
-        for u in u0..=u1 {
-            self.bits[(v * self.width + u) * self.words + word] |= bit;
+        let at = |u: usize| (v * self.width + u) * self.words + word;
+        for w in self.bits[at(u0)..=at(u1)].iter_mut().step_by(self.words) {
+            *w |= bit;
         }
     }
 
