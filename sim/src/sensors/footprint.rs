@@ -164,6 +164,7 @@ fn hull(mut points: Vec<[f64; 2]>) -> Vec<[f64; 2]> {
 }
 
 /// One bit per pixel and box: bit `k` of pixel `(u, v)` is set when box `k` may appear there.
+/// Memory: pixels × ⌈boxes / 64⌉ × 8 bytes per image (256 KiB for 128×128 and 66 colliders).
 pub struct Coverage {
     width: usize,
     height: usize,
