@@ -144,7 +144,8 @@ async fn stopped(mut rx: watch::Receiver<bool>) {
     }
 }
 
-fn init_tracing() {
+/// Log to stderr, `RUST_LOG` or `info` (the server and the worker alike).
+pub(crate) fn init_tracing() {
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
     let _ = tracing_subscriber::fmt()

@@ -36,13 +36,7 @@ pub struct WorkerArgs {
 }
 
 pub fn worker(args: WorkerArgs) -> anyhow::Result<()> {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
-        )
-        .with_writer(std::io::stderr)
-        .init();
+    crate::serve_cmd::init_tracing();
     let mut cfg = match &args.config {
         Some(p) => WorkerConfig::load(p)?,
         None => WorkerConfig::load_default()?,

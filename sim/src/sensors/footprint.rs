@@ -64,15 +64,20 @@ impl Projector {
         }
     }
 
-    /// How far in front of the image plane `aabb` starts (0 if it reaches behind it), a little
+    /// Where `aabb` lands, and the distance that bounds every hit on it: `near` (from the eye)
+    /// for a pinhole; for parallel rays, which start across the image plane rather than at the
+    /// eye, how far in front of that plane the box starts (0 if it reaches behind it), a little
     /// short so that round-off never puts it beyond a hit on it.
-    pub fn depth(&self, aabb: &Aabb) -> f32 {
-        let d = self
-            .corners(aabb)
-            .iter()
-            .map(|p| p.x)
-            .fold(f64::INFINITY, f64::min);
-        (d - 1e-4 * (1.0 + d.abs())).max(0.0) as f32
+    pub fn place(&self, aabb: &Aabb, near: f32) -> (f32, Footprint) {
+        let corners = self.corners(aabb);
+        match self.projection {
+            Projection::Ortho { .. } => {
+                let d = corners.iter().map(|p| p.x).fold(f64::INFINITY, f64::min);
+                let depth = (d - 1e-4 * (1.0 + d.abs())).max(0.0) as f32;
+                (depth, self.footprint(&corners, depth))
+            }
+            Projection::Pinhole { .. } => (near, self.footprint(&corners, near)),
+        }
     }
 
     fn corners(&self, aabb: &Aabb) -> Vec<Vector3<f64>> {
@@ -89,9 +94,8 @@ impl Projector {
             .collect()
     }
 
-    /// The footprint of `aabb`, whose distance from the eye is `near`.
-    pub fn footprint(&self, aabb: &Aabb, near: f32) -> Footprint {
-        let corners = self.corners(aabb);
+    /// The footprint of a box with camera-frame `corners`, whose distance from the eye is `near`.
+    fn footprint(&self, corners: &[Vector3<f64>], near: f32) -> Footprint {
         let points = match self.projection {
             Projection::Ortho { scale } => corners
                 .iter()
@@ -105,7 +109,7 @@ impl Projector {
                 if behind > 0 && f64::from(near) <= self.close {
                     return Footprint::Everywhere;
                 }
-                self.clipped(&corners)
+                self.clipped(corners)
             }
         };
         Footprint::Hull(hull(points))
@@ -312,14 +316,14 @@ mod tests {
         let cam = Isometry3::identity();
         let p = Projector::new(&cam, Projection::Pinhole { fov: 1.4 }, 16, 16);
         let behind = Aabb::new([-3.0, -1.0, -1.0].into(), [-2.0, 1.0, 1.0].into());
-        assert_eq!(p.footprint(&behind, 2.0), Footprint::Hidden);
+        assert_eq!(p.place(&behind, 2.0).1, Footprint::Hidden);
         // A slab from behind the eye to 2 m in front, off to the left: its footprint is finite.
         let across = Aabb::new([-1.0, 0.5, -0.2].into(), [2.0, 1.5, 0.2].into());
-        let Footprint::Hull(h) = p.footprint(&across, 0.5) else {
+        let Footprint::Hull(h) = p.place(&across, 0.5).1 else {
             panic!("expected a hull");
         };
         assert!(h.iter().all(|q| q[0].is_finite() && q[1].is_finite()));
         let close = Aabb::new([-1.0, -0.0005, -0.1].into(), [1.0, 0.1, 0.1].into());
-        assert_eq!(p.footprint(&close, 0.0), Footprint::Everywhere);
+        assert_eq!(p.place(&close, 0.0).1, Footprint::Everywhere);
     }
 }

@@ -27,8 +27,7 @@ struct Prim<'a> {
     maxs: Vec3A,
     /// Euclidean distance from the eye to the bounding box.
     near: f32,
-    /// The eye, and the eye in the shape's frame.
-    eye: Vector,
+    /// The eye in the shape's frame: every ray of a perspective camera starts there.
     local_eye: Vector,
 }
 
@@ -45,8 +44,8 @@ enum Kind {
 }
 
 impl<'a> Prim<'a> {
-    fn of(co: &'a Collider, eye: Vector) -> Prim<'a> {
-        let aabb = co.compute_aabb();
+    /// `co` with its world bounding box `aabb`, seen from `eye`.
+    fn of(co: &'a Collider, aabb: &Aabb, eye: Vector) -> Prim<'a> {
         let shape = co.shape();
         let r = co.position().rotation;
         let aligned = r.x.abs() < 1e-6 && r.y.abs() < 1e-6 && r.z.abs() < 1e-6;
@@ -70,8 +69,7 @@ impl<'a> Prim<'a> {
             user_data: co.user_data,
             mins: Vec3A::from(aabb.mins),
             maxs: Vec3A::from(aabb.maxs),
-            near: box_distance(eye, &aabb),
-            eye,
+            near: box_distance(eye, aabb),
             local_eye: co.position().inverse_transform_point(eye),
         }
     }
@@ -110,12 +108,12 @@ impl Prim<'_> {
     /// if nearer than `best_t`: the parameter and the normal in the shape's frame (unused for
     /// aligned boxes, whose normal `hit` derives from the entry face).
     #[inline]
-    fn exact(&self, origin: Vector, dir: Vector, entry: f32, best_t: f32) -> Option<(f32, Vector)> {
+    fn exact(&self, ray: &Ray3, from_eye: bool, entry: f32, best_t: f32) -> Option<(f32, Vector)> {
         if let Kind::AlignedBox = self.kind {
             return (entry < best_t).then_some((entry, Vector::ZERO));
         }
-        // Every ray of a perspective camera starts at the eye: its local image is computed once.
-        let o = if origin == self.eye {
+        let (origin, dir) = (ray.origin, ray.dir);
+        let o = if from_eye {
             self.local_eye
         } else {
             self.pose.inverse_transform_point(origin)
@@ -156,6 +154,7 @@ fn box_distance(eye: Vector, aabb: &Aabb) -> f32 {
 /// The colliders of one image (or one scan), nearest to the eye first, and which of them each
 /// pixel's ray may cross.
 pub struct Caster<'a> {
+    eye: Vector,
     prims: Vec<Prim<'a>>,
     coverage: Coverage,
 }
@@ -176,14 +175,10 @@ impl<'a> Caster<'a> {
             if !co.is_enabled() {
                 continue;
             }
-            let mut prim = Prim::of(co, eye);
             let aabb = co.compute_aabb();
-            if let Projection::Ortho { .. } = projection {
-                // Parallel rays start across the image plane, not at the eye: what bounds their
-                // hits is the box's depth along the view axis.
-                prim.near = projector.depth(&aabb);
-            }
-            let footprint = projector.footprint(&aabb, prim.near);
+            let mut prim = Prim::of(co, &aabb, eye);
+            let footprint;
+            (prim.near, footprint) = projector.place(&aabb, prim.near);
             if footprint != Footprint::Hidden {
                 placed.push((prim, footprint));
             }
@@ -196,6 +191,7 @@ impl<'a> Caster<'a> {
             coverage.add(k, footprint);
         }
         Caster {
+            eye,
             prims: placed.into_iter().map(|(p, _)| p).collect(),
             coverage,
         }
@@ -208,14 +204,14 @@ impl<'a> Caster<'a> {
             .colliders
             .iter()
             .filter(|(_, co)| co.is_enabled() && keep(co))
-            .map(|(_, co)| Prim::of(co, eye))
+            .map(|(_, co)| Prim::of(co, &co.compute_aabb(), eye))
             .collect();
         prims.sort_by(|a, b| a.near.total_cmp(&b.near));
         let mut coverage = Coverage::new(1, 1, prims.len());
         for k in 0..prims.len() {
             coverage.add(k, &Footprint::Everywhere);
         }
-        Caster { prims, coverage }
+        Caster { eye, prims, coverage }
     }
 
     /// Nearest hit of the ray through pixel `(u, v)` within `max` (units of `dir`). Candidates
@@ -230,6 +226,8 @@ impl<'a> Caster<'a> {
     #[inline]
     pub fn cast_ray(&self, u: usize, v: usize, ray: &Ray3, max: f32) -> Option<Hit> {
         let (origin, dir, len) = (ray.origin, ray.dir, ray.len);
+        // Every ray of a perspective camera starts at the eye: shapes keep its local image.
+        let from_eye = origin == self.eye;
         let inv_dir = Vec3A::from(ray.inv);
         let origin_a = Vec3A::from(origin);
         let mut best: Option<(usize, Vector)> = None;
@@ -246,7 +244,7 @@ impl<'a> Caster<'a> {
                 let Some((entry, _)) = slab(origin_a, inv_dir, p.mins, p.maxs, best_t) else {
                     continue;
                 };
-                if let Some((t, n)) = p.exact(origin, dir, entry, best_t) {
+                if let Some((t, n)) = p.exact(ray, from_eye, entry, best_t) {
                     best_t = t;
                     best = Some((k, n));
                 }
