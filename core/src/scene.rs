@@ -100,6 +100,11 @@ pub struct Zone {
     pub height: f64,
     /// Where the base centre stops to work at this zone: `[x, y, yaw]`.
     pub approach: [f64; 3],
+    /// Referring expressions for the zone by the furniture that holds it, with their article
+    /// ("the dining table", "the shelf by the fridge"): instructions may name the place this way
+    /// instead of by colour, while plan steps always use the colour. Each is unique in the scene.
+    #[serde(default)]
+    pub names: Vec<String>,
 }
 
 /// A key object's starting place.
