@@ -5,7 +5,7 @@
 //! `[0, 1]`. Furniture is described by its outer box; how a kind is built out of parts (legs,
 //! shelf boards) is the simulator's business. Adding a scene is adding a file here.
 
-use std::collections::BTreeSet;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
@@ -283,6 +283,7 @@ impl Scene {
                 ));
             }
         }
+        self.check_zone_names()?;
         for o in &self.key_objects {
             let model = catalogue
                 .model(&o.model)
@@ -318,6 +319,47 @@ impl Scene {
     }
 }
 
+impl Scene {
+    /// Zone `names` are referring expressions a planner must resolve to exactly one zone: each
+    /// starts with "the ", is lower-case, names no zone colour of the scene (instructions would
+    /// become ambiguous) and is used by one zone only.
+    fn check_zone_names(&self) -> Result<(), String> {
+        let mut seen: BTreeMap<&str, &str> = BTreeMap::new();
+        for z in &self.zones {
+            for name in &z.names {
+                let bad = |why: String| {
+                    Err(format!(
+                        "scene {:?}, zone {:?}: name {name:?} {why}",
+                        self.id, z.color
+                    ))
+                };
+                let rest = name.strip_prefix("the ").unwrap_or_default();
+                if rest.trim().is_empty() {
+                    return bad(
+                        "must be \"the \" followed by the furniture, e.g. \"the dining table\"".into(),
+                    );
+                }
+                if name.trim() != name || name.contains("  ") || name.contains(['{', '}']) {
+                    return bad("has stray spaces or braces".into());
+                }
+                if name.to_lowercase() != *name {
+                    return bad("must be lower-case".into());
+                }
+                let words: Vec<&str> = name.split(|c: char| !c.is_alphanumeric()).collect();
+                if let Some(c) = self.zones.iter().find(|c| words.contains(&c.color.as_str())) {
+                    return bad(format!("contains the zone colour {:?}", c.color));
+                }
+                match seen.insert(name, &z.color) {
+                    Some(other) if other == z.color => return bad("is listed twice".into()),
+                    Some(other) => return bad(format!("is also a name of zone {other:?}")),
+                    None => {}
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
 fn unique(items: impl Iterator<Item = String>, what: &str) -> Result<(), String> {
     let mut seen = BTreeSet::new();
     for i in items {
@@ -326,4 +368,53 @@ fn unique(items: impl Iterator<Item = String>, what: &str) -> Result<(), String>
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn kitchen_a() -> (Scene, Catalogue) {
+        let dir = crate::assets::assets_dir();
+        let cat = Catalogue::load(&dir.join("objects.toml")).unwrap();
+        let scene = Scene::load(&dir.join("scenes/kitchen_a.toml"), &cat).unwrap();
+        (scene, cat)
+    }
+
+    #[test]
+    fn committed_zones_have_names() {
+        let dir = crate::assets::assets_dir();
+        let cat = Catalogue::load(&dir.join("objects.toml")).unwrap();
+        for s in Scene::load_all(&dir.join("scenes"), &cat).unwrap() {
+            for z in &s.zones {
+                assert!(!z.names.is_empty(), "{} {}", s.id, z.color);
+            }
+        }
+    }
+
+    #[test]
+    fn bad_zone_names_are_refused_naming_scene_and_zone() {
+        let (scene, cat) = kitchen_a();
+        for (name, why) in [
+            ("dining table", "must be \"the \""),
+            ("the ", "must be \"the \""),
+            ("the Dining table", "lower-case"),
+            ("the red table", "zone colour \"red\""),
+            ("the dining table", "also a name of zone \"red\""),
+            ("the middle shelf", "listed twice"),
+            ("the  table", "stray spaces"),
+        ] {
+            let mut s = scene.clone();
+            s.zones.last_mut().unwrap().names.push(name.into());
+            let err = s.validate(&cat).unwrap_err();
+            assert!(
+                err.contains("scene \"kitchen_a\", zone \"purple\"") && err.contains(why),
+                "{name:?}: {err}"
+            );
+        }
+        // A colour inside another word is not a colour.
+        let mut s = scene;
+        s.zones[0].names.push("the covered counter".into());
+        s.validate(&cat).unwrap();
+    }
 }
