@@ -218,8 +218,22 @@ pub fn rescore(args: RescoreArgs) -> anyhow::Result<()> {
             .post(url(&args.server, "/api/v1/admin/rescore"))
             .bearer_auth(&args.admin_token);
         let v = json(req).await?;
-        println!("rescored {} submissions", v["rescored"]);
-        let failed = v["failed"].as_array().cloned().unwrap_or_default();
+        println!(
+            "rescored {} plan submissions and {} policy runs",
+            v["rescored"], v["policy_runs_rescored"]
+        );
+        let list = |key: &str| v[key].as_array().cloned().unwrap_or_default();
+        for f in list("needs_resimulation") {
+            println!(
+                "needs re-simulation: submission {}: {} (scores kept; simulating again needs the endpoint)",
+                f["id"],
+                f["error"].as_str().unwrap_or("?")
+            );
+        }
+        for f in list("skipped") {
+            println!("skipped: submission {}: {}", f["id"], f["error"].as_str().unwrap_or("?"));
+        }
+        let failed = list("failed");
         for f in &failed {
             println!(
                 "failed: submission {}: {}",

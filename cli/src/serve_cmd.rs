@@ -14,7 +14,7 @@ use anyhow::Context;
 use clap::Args;
 use kitchen_r_server::Config;
 use kitchen_r_worker::job::client::Worker;
-use kitchen_r_worker::job::{Instructions, WorkerConfig};
+use kitchen_r_worker::job::WorkerConfig;
 use kitchen_r_worker::remote::{AllowedNetworks, RemoteConfig};
 use tokio::sync::watch;
 
@@ -38,6 +38,10 @@ pub struct ServeArgs {
     /// Configuration file [default: configs/server.toml when present].
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
+    /// Serve and score this private test set (a directory written by `kitchen-r dataset
+    /// generate`, kept outside the repository) instead of the public sample [config `test_set`].
+    #[arg(long, value_name = "DIR")]
+    pub test_set: Option<PathBuf>,
 }
 
 fn load(args: ServeArgs) -> anyhow::Result<Config> {
@@ -53,6 +57,9 @@ fn load(args: ServeArgs) -> anyhow::Result<Config> {
     }
     if let Some(v) = args.workers {
         cfg.workers = Some(v);
+    }
+    if let Some(v) = args.test_set {
+        cfg.test_set = v;
     }
     cfg.validate()?;
     Ok(cfg)
@@ -71,8 +78,6 @@ pub fn serve(args: ServeArgs) -> anyhow::Result<()> {
         ..RemoteConfig::default()
     };
     let slots = cfg.worker_slots();
-    // The in-process workers simulate from the server's own dataset.
-    let datasets = Instructions::files_in(&cfg.assets_dir());
     let allow_networks = cfg.policy.allow_networks.clone();
     let rt = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     rt.block_on(async move {
@@ -91,7 +96,6 @@ pub fn serve(args: ServeArgs) -> anyhow::Result<()> {
                 slots,
                 worker_id: format!("serve-{}", std::process::id()),
                 allow_networks,
-                datasets,
                 policy: remote,
                 ..WorkerConfig::default()
             };
@@ -116,6 +120,8 @@ pub fn serve(args: ServeArgs) -> anyhow::Result<()> {
                 "worker token (generated for this run; set KITCHEN_R_WORKER_TOKEN for remote workers): {token}"
             )?;
         }
+        let test_set = &server.state().content().test_set;
+        writeln!(out, "test set: {} ({} instructions)", test_set.notice, test_set.instructions)?;
         writeln!(out, "listening http={h} grpc={g} workers={slots}")?;
         out.flush()?;
         drop(out);

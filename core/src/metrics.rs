@@ -78,6 +78,14 @@ pub fn em_of(matches: &[PlanMatch]) -> f64 {
     mean(matches.iter().map(PlanMatch::accuracy))
 }
 
+/// MSE charged for a prediction the policy failed to make (timeout, unreachable endpoint, bad
+/// chunk). Every value of an action inside the robot's physical ranges (positions within the
+/// ±1 m reach box, quaternion components in [-1, 1], gripper in [0, 1], |v|, |ω| < 1) differs
+/// from the expert's by at most 2, so a chunk inside those ranges scores at most 4: a failure is
+/// never cheaper than an answer. Workers charge it per decision point; the server charges it
+/// for an offline task that came back with no sample because of the policy.
+pub const FAILED_PREDICTION_MSE: f64 = 4.0;
+
 /// Mean squared error between two equally long action chunks (16×10 values, row-major).
 /// `None` when the lengths differ or the chunks are empty: such a chunk is refused upstream,
 /// not scored.

@@ -12,12 +12,14 @@ use serde::{Deserialize, Serialize};
 
 /// Environment variables read into the configuration (`KITCHEN_R_<KEY>`). Listed explicitly so
 /// the client-side variables (`KITCHEN_R_SERVER`, `KITCHEN_R_TOKEN`) are not mistaken for keys.
-const ENV_KEYS: [&str; 8] = [
+const ENV_KEYS: [&str; 10] = [
     "http",
     "grpc",
     "db",
     "workers",
     "assets",
+    "test_set",
+    "contest",
     "admin_token",
     "worker_token",
     "max_body_bytes",
@@ -38,6 +40,13 @@ pub struct Config {
     /// Benchmark content (scenes, catalogue, `dataset/`); empty means the default lookup of
     /// `kitchen_r_core::assets::assets_dir()`.
     pub assets: PathBuf,
+    /// The test split to serve and score: a directory written by `kitchen-r dataset generate`
+    /// (outside the repository, for a contest); empty means the repository's public sample
+    /// (`<assets>/dataset`), whose answers are public.
+    pub test_set: PathBuf,
+    /// Contest mode: refuse to start unless the test set is private (generated with private
+    /// phrasings, its seed not recorded).
+    pub contest: bool,
     /// Organiser token; empty means generate one at start and print it once.
     pub admin_token: String,
     /// Token simulation workers present on the gRPC `Worker` service; empty means generate one
@@ -122,6 +131,8 @@ impl Default for Config {
             db: "sqlite://data/kitchen-r.db".into(),
             workers: None,
             assets: PathBuf::new(),
+            test_set: PathBuf::new(),
+            contest: false,
             admin_token: String::new(),
             worker_token: String::new(),
             max_body_bytes: 4 << 20,
@@ -283,6 +294,11 @@ impl Config {
             return invalid("policy.max_successive_timeouts", "must be at least 1");
         }
         Ok(())
+    }
+
+    /// The private test set directory, if one is configured.
+    pub fn test_set_dir(&self) -> Option<&Path> {
+        (!self.test_set.as_os_str().is_empty()).then_some(self.test_set.as_path())
     }
 
     /// The assets directory to use.

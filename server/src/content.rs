@@ -1,8 +1,15 @@
 //! The benchmark content the server holds in memory: both dataset splits with ground truth, the
-//! scenes and the catalogue, read once at start from the configured assets directory.
+//! scenes and the catalogue, read once at start.
 //!
-//! Policy: test ground truth never leaves this module except as scores. The public files are
-//! rendered here once (dev with plans, test without) so a download is a memory copy.
+//! The dev split always comes from the assets directory (public, with plans). The test split is
+//! either the repository's *public sample* (`<assets>/dataset`, whose answers anyone can rebuild
+//! from public files: labelled as such wherever it shows) or an organiser's *private test set*
+//! (`serve --test-set DIR`, generated outside the repository with private phrasings and a secret
+//! seed). In contest mode the server refuses to start on anything but a private set.
+//!
+//! Policy: test ground truth never leaves this module except as scores and as the episodes
+//! handed to simulation workers. The public files are rendered here once (dev with plans, test
+//! without) so a download is a memory copy.
 
 use std::collections::HashMap;
 use std::path::Path;
@@ -17,9 +24,38 @@ use serde::Serialize;
 
 use crate::plans::IdIndex;
 
+/// What kind of test split the server holds.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TestSetKind {
+    /// Generated from public phrasings and/or a published seed: its answers are public.
+    PublicSample,
+    /// Generated with private phrasings and a seed that is not recorded.
+    Private,
+}
+
+/// The test split's provenance, as `GET /api/v1/dataset/manifest` and the start-up line show it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TestSetInfo {
+    pub kind: TestSetKind,
+    pub instructions: usize,
+    /// A human sentence: what the set is and whether it can run a contest.
+    pub notice: String,
+    /// sha256 of the private phrasings file the set was generated with (never the phrasings).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub phrasings_sha256: Option<String>,
+    /// Identifies the exact ground truth scores were computed against (a digest of it).
+    pub version: String,
+}
+
+/// The notice shown wherever a public sample is served.
+pub const PUBLIC_SAMPLE_NOTICE: &str =
+    "public sample: its answers are public; not for a contest";
+
 #[derive(Debug)]
 pub struct Content {
     pub dataset: Dataset,
+    pub test_set: TestSetInfo,
     pub index: IdIndex,
     pub scenes: Vec<Scene>,
     pub catalogue: Catalogue,
@@ -42,19 +78,37 @@ pub struct SceneSummary {
 }
 
 impl Content {
-    /// Load `objects.toml`, `scenes/*.toml` and `dataset/` from `assets`.
-    pub fn load(assets: &Path) -> anyhow::Result<Content> {
+    /// Load `objects.toml`, `scenes/*.toml` and `dataset/` from `assets`; the test split from
+    /// `test_set` (a directory written by `kitchen-r dataset generate`) when given.
+    pub fn load(assets: &Path, test_set: Option<&Path>) -> anyhow::Result<Content> {
         let catalogue = Catalogue::load(&assets.join("objects.toml"))?;
         let scenes = Scene::load_all(&assets.join("scenes"), &catalogue)?;
         let dataset_dir = assets.join("dataset");
-        let dataset = Dataset::load(&dataset_dir).with_context(|| {
+        let mut dataset = Dataset::load(&dataset_dir).with_context(|| {
             format!(
                 "no dataset in {} (generate one with `kitchen-r dataset generate --seed S --out {}`)",
                 dataset_dir.display(),
                 dataset_dir.display()
             )
         })?;
-        Content::new(dataset, scenes, catalogue)
+        let manifest_dir = match test_set {
+            None => dataset_dir,
+            Some(dir) => {
+                let private = Dataset::load(dir).with_context(|| {
+                    format!(
+                        "reading the test set {} (it needs test_ground_truth.jsonl and \
+                         manifest.json as `kitchen-r dataset generate --out DIR` writes them)",
+                        dir.display()
+                    )
+                })?;
+                dataset.test = private.test;
+                dir.to_path_buf()
+            }
+        };
+        let manifest = read_manifest(&manifest_dir.join("manifest.json"))?;
+        let mut content = Content::new(dataset, scenes, catalogue)?;
+        content.test_set = test_set_info(&manifest, &content.dataset);
+        Ok(content)
     }
 
     pub fn new(dataset: Dataset, scenes: Vec<Scene>, catalogue: Catalogue) -> anyhow::Result<Content> {
@@ -69,8 +123,10 @@ impl Content {
         let index = IdIndex::new(&dataset.dev, &dataset.test);
         let dev_jsonl = jsonl(dataset.dev.iter())?;
         let test_jsonl = jsonl(dataset.test.iter().map(PublicInstruction::from))?;
+        let test_set = test_set_info(&serde_json::Value::Null, &dataset);
         Ok(Content {
             dataset,
+            test_set,
             index,
             scenes,
             catalogue,
@@ -78,6 +134,21 @@ impl Content {
             test_jsonl,
             topdown: Mutex::default(),
         })
+    }
+
+    /// Refuse to run a contest on a test set whose answers can be rebuilt from public material.
+    pub fn check_contest_ready(&self) -> anyhow::Result<()> {
+        match self.test_set.kind {
+            TestSetKind::Private => Ok(()),
+            TestSetKind::PublicSample => anyhow::bail!(
+                "contest = true, but the test split is a public sample ({}): its answers can be \
+                 rebuilt from public files. Generate a private set outside the repository with \
+                 `kitchen-r dataset generate --seed <secret> --phrasings <private file> --out DIR`, \
+                 check it with `kitchen-r dataset audit DIR`, then serve it with \
+                 `--test-set DIR` (see docs/private-test-set.md)",
+                self.test_set.notice
+            ),
+        }
     }
 
     /// The public file of a split: dev with ground-truth plans, test without.
@@ -130,11 +201,56 @@ impl Content {
             .collect()
     }
 
-    /// Identifies the dataset a score was computed against, for the scoring run's version.
+    /// Identifies the ground truth a score was computed against, for the scoring run's version:
+    /// a digest of both splits' instructions, plans and place targets, so any change to them (a
+    /// regenerated set, a feasibility fix) gives a new tag and a rescore records it.
     pub fn dataset_tag(&self) -> String {
-        let m = &self.dataset.manifest;
-        format!("dataset-seed-{}-gen-{}", m.seed, m.generator_version)
+        format!("dataset-{}", self.test_set.version)
     }
+}
+
+/// `manifest.json` as loose JSON: older and newer generators write different fields, and only
+/// the provenance ones matter here.
+fn read_manifest(path: &Path) -> anyhow::Result<serde_json::Value> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))
+}
+
+/// The provenance of the test split from its manifest: private only when the generator says so,
+/// recorded private phrasings, and recorded no seed (a private set never records its seed).
+fn test_set_info(manifest: &serde_json::Value, dataset: &Dataset) -> TestSetInfo {
+    let phrasings = manifest
+        .pointer("/private_phrasings/sha256")
+        .and_then(|v| v.as_str())
+        .map(str::to_string);
+    let private = manifest.get("kind").and_then(|k| k.as_str()) == Some("private")
+        && phrasings.is_some()
+        && manifest.get("seed").is_none_or(|s| s.is_null());
+    let (kind, notice) = match private {
+        true => (
+            TestSetKind::Private,
+            "private test set: generated outside the repository with private phrasings".to_string(),
+        ),
+        false => (TestSetKind::PublicSample, PUBLIC_SAMPLE_NOTICE.to_string()),
+    };
+    TestSetInfo {
+        kind,
+        instructions: dataset.test.len(),
+        notice,
+        phrasings_sha256: phrasings,
+        version: ground_truth_digest(dataset),
+    }
+}
+
+/// First 16 hex digits of the sha256 of both splits' ground truth.
+fn ground_truth_digest(dataset: &Dataset) -> String {
+    use sha2::{Digest, Sha256};
+    let mut h = Sha256::new();
+    for i in dataset.dev.iter().chain(&dataset.test) {
+        h.update(serde_json::to_vec(&(&i.id, &i.scene, &i.instruction, &i.plan, &i.place_targets)).unwrap_or_default());
+        h.update(b"\n");
+    }
+    hex::encode(h.finalize())[..16].to_string()
 }
 
 fn jsonl<T: Serialize>(items: impl Iterator<Item = T>) -> anyhow::Result<Bytes> {

@@ -9,15 +9,19 @@
 //!   task the worker did not report (the episode aborted) counts as failed, so stopping early
 //!   never helps;
 //! - SR = mean over online episodes of mean over tasks of SR_j;
-//! - MSE = every offline prediction weighted equally: Σ(mse·samples) / Σ samples;
+//! - MSE = every offline prediction weighted equally: Σ(mse·samples) / Σ samples; a task the
+//!   policy left without any sample (refused or unreachable endpoint) is one failed prediction,
+//!   so no score improves by failing;
 //! - integrated runs (a linked plans submission): EM_j per step from the plans' immutable body
 //!   against the ground truth, M = mean over instructions of mean over tasks of (EM_j + SR_j),
 //!   P = 1/EM + mean over instructions of mean over tasks of MSE, EM taken over the run's
-//!   instructions (the same set M averages over), tasks without an MSE sample left out.
+//!   instructions (the same set M averages over), with the same per-task MSEs as above.
 
 use std::collections::HashMap;
 
-use kitchen_r_core::metrics::{PlanMatch, em_of, m_score, mean, p_score, step_matches};
+use kitchen_r_core::metrics::{
+    FAILED_PREDICTION_MSE, PlanMatch, em_of, m_score, mean, p_score, step_matches,
+};
 use kitchen_r_proto::worker::v1 as pb;
 use serde::{Deserialize, Serialize};
 
@@ -76,6 +80,11 @@ pub struct JobSpec {
     /// Organiser reference run: the policy gets privileged state.
     pub privileged: bool,
     pub endpoint: EndpointSpec,
+    /// World `[x, y, z]` of each `place` step's target, in plan order: the job carries its whole
+    /// episode so workers hold no dataset. Empty in specs stored before it was added (filled in
+    /// from the content at lease time).
+    #[serde(default)]
+    pub place_targets: Vec<[f64; 3]>,
 }
 
 impl JobSpec {
@@ -87,7 +96,8 @@ impl JobSpec {
         }
     }
 
-    pub fn episode_proto(&self) -> pb::EpisodeSpec {
+    /// The episode as a worker gets it; `policy_episode_id` is the opaque name the endpoint sees.
+    pub fn episode_proto(&self, policy_episode_id: &str) -> pb::EpisodeSpec {
         pb::EpisodeSpec {
             scene_id: self.scene_id.clone(),
             instruction_id: self.instruction_id.clone(),
@@ -102,6 +112,14 @@ impl JobSpec {
             teleport_on_failure: self.teleport_on_failure,
             max_plan_steps: self.max_plan_steps,
             privileged: self.privileged,
+            place_targets: (self.place_targets.iter())
+                .map(|t| pb::PlaceTarget {
+                    x: t[0],
+                    y: t[1],
+                    z: t[2],
+                })
+                .collect(),
+            policy_episode_id: policy_episode_id.to_string(),
         }
     }
 
@@ -167,14 +185,28 @@ impl Episode {
             .collect()
     }
 
-    /// Per-task MSE of the tasks that have samples.
-    fn task_mses(&self) -> Vec<f64> {
-        let n = self.spec.task_count();
-        self.tasks
-            .iter()
-            .filter(|t| (t.index as usize) < n && t.mse_samples > 0)
-            .map(|t| t.mse)
+    /// `(MSE, samples)` of each task of an offline episode that counts towards MSE and P. A task
+    /// the policy left without a sample (unreported, or reported with a failure and no sample,
+    /// e.g. an endpoint that refused the episode) counts as one failed prediction, so dodging the
+    /// MSE episodes never improves a score. An episode the platform gave up on counts nothing (it
+    /// shows its failure instead), and a task without samples and without a failure (sampling
+    /// skipped it) is left out.
+    pub fn mse_samples(&self) -> Vec<(f64, u32)> {
+        if self.failure.is_some() {
+            return Vec::new();
+        }
+        (0..self.spec.task_count())
+            .filter_map(|j| match self.tasks.iter().find(|t| t.index as usize == j) {
+                Some(t) if t.mse_samples > 0 => Some((t.mse, t.mse_samples)),
+                Some(t) if t.failure_reason.is_empty() => None,
+                _ => Some((FAILED_PREDICTION_MSE, 1)),
+            })
             .collect()
+    }
+
+    /// Per-task MSE of the tasks that count (see [`Episode::mse_samples`]).
+    fn task_mses(&self) -> Vec<f64> {
+        self.mse_samples().into_iter().map(|(m, _)| m).collect()
     }
 }
 
@@ -201,16 +233,9 @@ pub fn aggregate(episodes: &[Episode], plans: Option<&HashMap<String, Vec<String
                 .map(|e| mean(e.successes().into_iter().map(|s| f64::from(u8::from(s))))),
         )
     });
-    let (weighted, samples) = offline
-        .iter()
-        .flat_map(|e| {
-            e.tasks
-                .iter()
-                .filter(|t| (t.index as usize) < e.spec.task_count())
-        })
-        .fold((0.0, 0u64), |(w, n), t| {
-            (w + t.mse * f64::from(t.mse_samples), n + u64::from(t.mse_samples))
-        });
+    let (weighted, samples) = (offline.iter())
+        .flat_map(|e| e.mse_samples())
+        .fold((0.0, 0u64), |(w, n), (mse, k)| (w + mse * f64::from(k), n + u64::from(k)));
     let mse = (samples > 0).then(|| weighted / samples as f64);
     let mut scores = RunScores {
         sr,

@@ -73,9 +73,21 @@ fn submission(v: SubmissionView) -> pb::Submission {
         kind: v.kind,
         created_at: v.created_at,
         runs: v.runs as u32,
+        ranked: v.ranked,
+        unranked_reason: v.unranked_reason.unwrap_or_default(),
         latest_run: v.latest_run.map(|r| {
             let eval = r.evaluation;
             pb::ScoringRun {
+                failure_counts: eval.as_ref().map_or_else(Vec::new, |e| {
+                    (e.failure_counts.iter())
+                        .map(|c| pb::ReasonCount {
+                            reason: c.reason.clone(),
+                            count: c.count as u32,
+                        })
+                        .collect()
+                }),
+                instructions_total: r.instructions_total.unwrap_or(0) as u32,
+                instructions_present: r.instructions_present.unwrap_or(0) as u32,
                 state: eval.as_ref().map_or_else(String::new, |e| e.state.to_string()),
                 episodes_total: eval.as_ref().map_or(0, |e| e.episodes_total as u32),
                 episodes_done: eval.as_ref().map_or(0, |e| e.episodes_done as u32),
@@ -91,8 +103,8 @@ fn submission(v: SubmissionView) -> pb::Submission {
                     .map(|i| pb::InstructionResult {
                         id: i.id,
                         present: i.present,
-                        correct_steps: i.correct_steps.unwrap_or(0) as u32,
-                        total_steps: i.total_steps.unwrap_or(0) as u32,
+                        correct_steps: i.correct_steps as u32,
+                        total_steps: i.total_steps as u32,
                         em: i.em,
                     })
                     .collect(),

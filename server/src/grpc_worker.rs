@@ -36,7 +36,7 @@ fn job(j: LeasedJob) -> pb::Job {
         lease_expires_at_ms: j.lease_expires_at_ms,
         run_id: j.run_id,
         episode_key: j.episode_key,
-        episode: Some(j.spec.episode_proto()),
+        episode: Some(j.spec.episode_proto(&j.policy_episode_id)),
         policy: Some(j.spec.endpoint_proto()),
     }
 }

@@ -17,6 +17,7 @@ use kitchen_r_core::dataset::Split;
 use serde_json::json;
 use tokio_stream::StreamExt;
 
+use crate::content::TestSetKind;
 use crate::error::ServiceError;
 use crate::leaderboard::{Format, Track};
 use crate::service::{AppState, RegisterPolicy};
@@ -28,10 +29,12 @@ pub fn router(state: AppState) -> Router {
         .route("/", get(index))
         .route("/healthz", get(healthz))
         .route("/api/v1/teams", post(create_team))
+        .route("/api/v1/dataset/manifest", get(dataset_manifest))
         .route("/api/v1/dataset/{split}", get(dataset))
         .route("/api/v1/scenes", get(scenes))
         .route("/api/v1/scenes/{id}", get(scene))
         .route("/api/v1/scenes/{id}/topdown.png", get(topdown))
+        .route("/api/v1/scenes/{id}/brief", get(brief))
         .route("/api/v1/submissions/plans", post(submit_plans))
         .route("/api/v1/submissions/policies", post(register_policy))
         .route("/api/v1/submissions/{id}", get(submission))
@@ -96,7 +99,37 @@ async fn create_team(
 
 async fn dataset(State(s): State<AppState>, Path(split): Path<String>) -> Result<Response, ServiceError> {
     let split: Split = split.parse().map_err(ServiceError::BadRequest)?;
-    Ok(typed("application/x-ndjson", s.content().public_jsonl(split)))
+    let mut response = typed("application/x-ndjson", s.content().public_jsonl(split));
+    // Says on every test download whether its answers are public (see /api/v1/dataset/manifest).
+    let kind = match (split, &s.content().test_set.kind) {
+        (Split::Dev, _) => "dev",
+        (Split::Test, TestSetKind::PublicSample) => "public-sample",
+        (Split::Test, TestSetKind::Private) => "private",
+    };
+    response
+        .headers_mut()
+        .insert("x-kitchen-r-split-kind", HeaderValue::from_static(kind));
+    Ok(response)
+}
+
+/// What the dataset splits are: the dev split (public, with plans) and the test split's
+/// provenance (public sample or private set), with a notice to show participants.
+async fn dataset_manifest(State(s): State<AppState>) -> impl IntoResponse {
+    let c = s.content();
+    axum::Json(json!({
+        "dev": { "instructions": c.dataset.dev.len(), "plans": "public" },
+        "test": c.test_set,
+    }))
+}
+
+/// The English scene description planners read (zones, the furniture that holds them and the
+/// names instructions may use for them, and where each key object starts).
+async fn brief(State(s): State<AppState>, Path(id): Path<String>) -> Result<Response, ServiceError> {
+    let scene = s
+        .content()
+        .scene(&id)
+        .ok_or_else(|| ServiceError::not_found(format!("scene {id:?}")))?;
+    Ok(typed("text/plain; charset=utf-8", Bytes::from(scene.planner_brief())))
 }
 
 async fn scenes(State(s): State<AppState>) -> impl IntoResponse {

@@ -203,10 +203,14 @@ impl AppState {
         let body: Bytes = match format {
             Format::Json => serde_json::to_vec(&board).map_err(anyhow::Error::from)?.into(),
             Format::Csv => render::csv(&board).into(),
-            Format::Html => render::page(split, &[board]).into(),
+            Format::Html => render::page(split, &[board], self.public_sample()).into(),
         };
         cache.put(key, generation, &body);
         Ok(body)
+    }
+
+    fn public_sample(&self) -> bool {
+        self.content().test_set.kind == crate::content::TestSetKind::PublicSample
     }
 
     /// The public page at `/`: all three tracks of `split`.
@@ -221,7 +225,7 @@ impl AppState {
         for track in Track::ALL {
             boards.push(self.leaderboard(track, split).await?);
         }
-        let body: Bytes = render::page(split, &boards).into();
+        let body: Bytes = render::page(split, &boards, self.public_sample()).into();
         cache.put(key, generation, &body);
         Ok(body)
     }

@@ -63,8 +63,11 @@ pub async fn build(config: Config) -> anyhow::Result<Server> {
 pub async fn build_with(config: Config, probe: Arc<dyn PolicyProbe>) -> anyhow::Result<Server> {
     config.validate()?;
     let assets = config.assets_dir();
-    let content = content::Content::load(&assets)
+    let content = content::Content::load(&assets, config.test_set_dir())
         .with_context(|| format!("loading assets from {}", assets.display()))?;
+    if config.contest {
+        content.check_contest_ready()?;
+    }
     let pool = store::connect(&config.db).await?;
     let (admin, generated_admin_token) = token_or_generated(&config.admin_token);
     let (worker_token, generated_worker_token) = token_or_generated(&config.worker_token);

@@ -93,6 +93,11 @@ pub struct SubmissionView {
     /// Policy submissions: the endpoint as registered (never its token).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub policy: Option<PolicyInfo>,
+    /// Whether the submission can appear on the leaderboard.
+    pub ranked: bool,
+    /// Why it cannot, when it cannot.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub unranked_reason: Option<String>,
     pub latest_run: Option<RunView>,
 }
 
@@ -102,22 +107,27 @@ pub struct RunView {
     pub scorer_version: String,
     pub created_at: String,
     pub scores: Scores,
+    /// Dev plan runs: one row per instruction. Empty on the test split, whose feedback is
+    /// aggregate only (`instructions_total`, `instructions_present`).
     pub instructions: Vec<InstructionView>,
+    /// Plan runs: instructions in the split and how many the file had a plan for.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub instructions_total: Option<usize>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub instructions_present: Option<usize>,
     /// Policy runs: progress and per-episode, per-task results.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub evaluation: Option<PolicyRunView>,
 }
 
-/// Per-instruction result; never carries ground truth. For the test split the step counts are
-/// left out too, since the length of a hidden plan is part of its ground truth.
+/// Per-instruction result of a dev plan run (test runs show none: per-instruction EM would turn
+/// every upload into hundreds of probes of the hidden answers).
 #[derive(Debug, Clone, Serialize)]
 pub struct InstructionView {
     pub id: String,
     pub present: bool,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub correct_steps: Option<usize>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub total_steps: Option<usize>,
+    pub correct_steps: usize,
+    pub total_steps: usize,
     pub em: f64,
 }
 
@@ -282,17 +292,26 @@ impl AppState {
         let latest_run = match store::latest_run(self.pool(), id).await? {
             None => None,
             Some(run) => {
-                let instructions = store::instruction_results(self.pool(), run.id).await?;
                 let evaluation = match is_policy {
                     true => Some(self.policy_run_view(&run, hidden).await?),
                     false => None,
                 };
+                let results = match is_policy {
+                    true => Vec::new(),
+                    false => store::instruction_results(self.pool(), run.id).await?,
+                };
+                let present = results.iter().filter(|i| i.present).count();
                 Some(RunView {
                     id: run.id,
                     scorer_version: run.scorer_version,
                     created_at: rfc3339(run.created_at),
                     scores: run.scores,
-                    instructions: instructions.iter().map(|i| instruction_view(i, hidden)).collect(),
+                    instructions_total: (!is_policy).then_some(results.len()),
+                    instructions_present: (!is_policy).then_some(present),
+                    instructions: match hidden {
+                        true => Vec::new(),
+                        false => results.iter().map(instruction_view).collect(),
+                    },
                     evaluation,
                 })
             }
@@ -303,6 +322,7 @@ impl AppState {
             )?),
             false => None,
         };
+        let unranked_reason = self.unranked_reason(&sub).await?;
         Ok(SubmissionView {
             id: sub.id,
             team: sub.team,
@@ -311,7 +331,24 @@ impl AppState {
             created_at: rfc3339(sub.created_at),
             runs: sub.runs,
             policy,
+            ranked: unranked_reason.is_none(),
+            unranked_reason,
             latest_run,
+        })
+    }
+
+    /// Why a submission cannot appear on the leaderboard (the rule [`store::planning_leaderboard`]
+    /// applies), or `None` when it can.
+    async fn unranked_reason(&self, sub: &store::SubmissionRow) -> Result<Option<String>, ServiceError> {
+        if sub.kind != "plans" || sub.split != Split::Test.as_str() {
+            return Ok(None);
+        }
+        Ok(match store::first_test_policy(self.pool(), sub.team_id).await? {
+            Some(first) if first < sub.id => Some(format!(
+                "created after the team's first test-split policy run (submission {first}), whose \
+                 endpoint received the test plans' steps as sub-tasks: scored, not ranked"
+            )),
+            _ => None,
         })
     }
 
@@ -320,12 +357,12 @@ impl AppState {
     }
 }
 
-fn instruction_view(i: &InstructionScore, hidden: bool) -> InstructionView {
+fn instruction_view(i: &InstructionScore) -> InstructionView {
     InstructionView {
         id: i.id.clone(),
         present: i.present,
-        correct_steps: (!hidden).then_some(i.correct),
-        total_steps: (!hidden).then_some(i.total),
+        correct_steps: i.correct,
+        total_steps: i.total,
         em: i.em(),
     }
 }

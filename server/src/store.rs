@@ -210,6 +210,18 @@ pub async fn submission(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<Submi
     }))
 }
 
+/// The id of a team's first test-split policy submission, if any. Test plan files created after
+/// it are not ranked, and integrated test runs must link a plan file created before it: from
+/// that run on, the team's endpoint has seen the test ground-truth steps as sub-tasks.
+pub async fn first_test_policy(pool: &SqlitePool, team: i64) -> sqlx::Result<Option<i64>> {
+    sqlx::query_scalar(
+        "SELECT MIN(id) FROM submissions WHERE team_id = ? AND split = 'test' AND kind = 'policy'",
+    )
+    .bind(team)
+    .fetch_one(pool)
+    .await
+}
+
 #[derive(Debug, Clone, PartialEq)]
 pub struct RunRow {
     pub id: i64,
@@ -220,11 +232,24 @@ pub struct RunRow {
     pub state: String,
     pub episodes_total: i64,
     pub finished_at: Option<i64>,
+    /// A rescore of a policy run: the run whose recorded episodes it was computed from.
+    pub source_run_id: Option<i64>,
+    /// The ground truth changed under this policy run's episodes: only a new simulation can
+    /// score it again.
+    pub needs_resimulation: bool,
+}
+
+impl RunRow {
+    /// The run whose episodes (jobs and results) this run's scores come from.
+    pub fn episodes_run(&self) -> i64 {
+        self.source_run_id.unwrap_or(self.id)
+    }
 }
 
 pub async fn latest_run(pool: &SqlitePool, submission: i64) -> sqlx::Result<Option<RunRow>> {
     let row = sqlx::query(
-        "SELECT id, scorer_version, created_at, em, sr, mse, m, p, state, episodes_total, finished_at
+        "SELECT id, scorer_version, created_at, em, sr, mse, m, p, state, episodes_total, finished_at,
+                source_run_id, needs_resimulation
          FROM scoring_runs WHERE submission_id = ? ORDER BY id DESC LIMIT 1",
     )
     .bind(submission)
@@ -244,6 +269,8 @@ pub async fn latest_run(pool: &SqlitePool, submission: i64) -> sqlx::Result<Opti
         state: r.get(8),
         episodes_total: r.get(9),
         finished_at: r.get(10),
+        source_run_id: r.get(11),
+        needs_resimulation: r.get::<i64, _>(12) != 0,
     }))
 }
 
@@ -266,6 +293,12 @@ pub async fn instruction_results(pool: &SqlitePool, run: i64) -> sqlx::Result<Ve
 }
 
 /// Ids of every plan submission, oldest first (for rescoring).
+pub async fn policy_submission_ids(pool: &SqlitePool) -> sqlx::Result<Vec<i64>> {
+    sqlx::query_scalar("SELECT id FROM submissions WHERE kind = 'policy' ORDER BY id")
+        .fetch_all(pool)
+        .await
+}
+
 pub async fn plan_submission_ids(pool: &SqlitePool) -> sqlx::Result<Vec<i64>> {
     sqlx::query_scalar("SELECT id FROM submissions WHERE kind = 'plans' ORDER BY id")
         .fetch_all(pool)
@@ -290,7 +323,9 @@ pub struct LeaderboardRow {
 }
 
 /// Planning track: each team's best plan submission to `split` by its latest run's EM; ties go
-/// to the earlier submission, then the lower id. Unscored entries sort last.
+/// to the earlier submission, then the lower id. Unscored entries sort last. On the test split a
+/// plan file created after the team's first test policy submission is left out
+/// ([`first_test_policy`]).
 pub async fn planning_leaderboard(pool: &SqlitePool, split: Split) -> sqlx::Result<Vec<LeaderboardRow>> {
     let rows = sqlx::query(
         "WITH latest AS (
@@ -302,6 +337,9 @@ pub async fn planning_leaderboard(pool: &SqlitePool, split: Split) -> sqlx::Resu
                        ORDER BY l.em IS NULL, l.em DESC, s.created_at, s.id) AS rn
             FROM submissions s LEFT JOIN latest l ON l.submission_id = s.id
             WHERE s.split = ? AND s.kind = 'plans'
+              -- Test plan files made after the team's first test policy run are not ranked.
+              AND (s.split <> 'test' OR s.id < COALESCE((SELECT MIN(p.id) FROM submissions p
+                   WHERE p.team_id = s.team_id AND p.split = 'test' AND p.kind = 'policy'), s.id + 1))
          )
          SELECT t.name, k.id, k.em, k.created_at FROM ranked k JOIN teams t ON t.id = k.team_id
          WHERE k.rn = 1

@@ -70,7 +70,7 @@ pub async fn fixture(probe: Arc<dyn PolicyProbe>, tweak: impl FnOnce(&mut Config
     config.control.dev_episodes = 3;
     tweak(&mut config);
     config.validate().unwrap();
-    let content = Content::load(&config.assets_dir()).unwrap();
+    let content = Content::load(&config.assets_dir(), config.test_set_dir()).unwrap();
     let pool = crate::store::connect(&config.db).await.unwrap();
     let tokens = Tokens {
         admin: ADMIN,
@@ -86,7 +86,7 @@ impl Fixture {
     /// A second server process on the same database file (a restart).
     pub async fn reopen(&self, probe: Arc<dyn PolicyProbe>) -> AppState {
         let config = self.state.config().clone();
-        let content = Content::load(&config.assets_dir()).unwrap();
+        let content = Content::load(&config.assets_dir(), config.test_set_dir()).unwrap();
         let pool = crate::store::connect(&config.db).await.unwrap();
         let tokens = Tokens {
             admin: ADMIN,

@@ -33,11 +33,8 @@ use serde::{Deserialize, Serialize};
 use crate::policy::{ACTION_DIM, HORIZON, Policy, PolicyError, PolicyInput, PolicySpec, validate_chunk};
 use crate::runner::{RunError, RunOptions, StepHook, run_episode};
 
-/// MSE charged for a prediction the policy failed to make. Every value of an action inside the
-/// robot's physical ranges (positions within the ±1 m reach box, quaternion components in
-/// [-1, 1], gripper in [0, 1], |v|, |ω| < 1) differs from the expert's by at most 2, so a chunk
-/// inside those ranges scores at most 4: a failure is never cheaper than an answer.
-pub const FAILED_PREDICTION_MSE: f64 = 4.0;
+/// MSE charged for a failed prediction (defined with the metrics, so server and worker agree).
+pub use kitchen_r_core::metrics::FAILED_PREDICTION_MSE;
 
 /// How an offline episode is run.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -89,6 +89,46 @@ pub trait Policy: Send {
     }
 }
 
+/// Stands in for an endpoint that could not be reached or refused the handshake: every call
+/// fails with the same reason. Offline episodes run it so that such a policy is charged a failed
+/// prediction at every decision point, exactly as a bad chunk is: dodging the MSE episodes never
+/// improves MSE or P.
+#[derive(Debug, Clone)]
+pub struct Unreachable {
+    spec: PolicySpec,
+    reason: String,
+}
+
+impl Unreachable {
+    pub fn new(reason: impl Into<String>) -> Unreachable {
+        Unreachable {
+            spec: PolicySpec {
+                name: "unreachable".into(),
+                horizon: HORIZON,
+                action_dim: ACTION_DIM,
+                cameras: Vec::new(),
+                max_concurrency: 1,
+            },
+            reason: reason.into(),
+        }
+    }
+}
+
+impl Policy for Unreachable {
+    fn spec(&self) -> &PolicySpec {
+        &self.spec
+    }
+    fn reset(&mut self, _: &str, _: usize, _: &str) -> Result<(), PolicyError> {
+        Ok(())
+    }
+    fn act(&mut self, _: &PolicyInput<'_>) -> Result<Vec<[f64; ACTION_DIM]>, PolicyError> {
+        Err(PolicyError::Call(self.reason.clone()))
+    }
+    fn wants_images(&self) -> bool {
+        false
+    }
+}
+
 /// Tolerance on the quaternion norm: chunks are produced in f32 by most learned policies.
 pub const QUAT_NORM_TOLERANCE: f64 = 1e-2;
 

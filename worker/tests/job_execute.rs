@@ -17,7 +17,7 @@ use remote_support::*;
 
 fn ctx() -> &'static JobContext {
     static CTX: OnceLock<JobContext> = OnceLock::new();
-    CTX.get_or_init(|| JobContext::load(&[], RemoteConfig::default(), AllowedNetworks::default(), 1).unwrap())
+    CTX.get_or_init(|| JobContext::load(RemoteConfig::default(), AllowedNetworks::default(), 1).unwrap())
 }
 
 fn oracle_server() -> TestServer {
@@ -48,6 +48,8 @@ pub fn job(url: &str, mode: pb::EvalMode, steps: u32, privileged: bool) -> pb::J
             teleport_on_failure: true,
             max_plan_steps: steps,
             privileged,
+            place_targets: kitchen_r_worker::job::spec::place_targets(ins),
+            policy_episode_id: "ep-0123456789abcdef01234567".into(),
         }),
         policy: Some(pb::PolicyEndpoint {
             url: url.to_string(),
@@ -74,7 +76,7 @@ fn a_privileged_online_job_with_the_oracle_succeeds() {
         assert!(t.success && t.completion_time_s > 0.0, "{t:?}\n{}", r.log_tail);
         assert_eq!((t.mse, t.mse_samples), (0.0, 0));
     }
-    assert!(r.log_tail.contains("episode r3/dev-0001/a1"), "{}", r.log_tail);
+    assert!(r.log_tail.contains("episode ep-0123456789abcdef01234567"), "{}", r.log_tail);
     assert!(r.wall_ms > 0);
 }
 
@@ -118,6 +120,19 @@ fn policy_faults_fail_tasks_and_platform_faults_do_not() {
         "{r:?}"
     );
 
+    // Refusing the offline (MSE) episode costs a failed prediction at every decision point the
+    // expert passes, exactly like answering badly: dodging never improves MSE.
+    let mut j = job(&format!("http://{free}"), pb::EvalMode::Offline, 2, false);
+    j.policy.as_mut().unwrap().startup_deadline_ms = 300;
+    let r = execute_job(&j, ctx(), &JobControl::default());
+    assert_eq!(r.platform_error, "", "{}", r.log_tail);
+    assert_eq!(r.tasks.len(), 2);
+    for t in &r.tasks {
+        assert!(t.mse_samples > 1, "{t:?}");
+        assert_eq!(t.mse, kitchen_r_worker::offline::FAILED_PREDICTION_MSE, "{t:?}");
+        assert!(t.failure_reason.contains("policy unreachable"), "{t:?}");
+    }
+
     let r = execute_job(
         &job("http://192.168.3.4:50051", pb::EvalMode::Online, 1, false),
         ctx(),
@@ -125,11 +140,12 @@ fn policy_faults_fail_tasks_and_platform_faults_do_not() {
     );
     assert!(r.tasks[0].failure_reason.contains("private"), "{r:?}");
 
+    // A job without its place targets cannot be simulated: a platform fault, never a score.
     let mut j = job("http://127.0.0.1:1", pb::EvalMode::Online, 0, false);
-    j.episode.as_mut().unwrap().instruction_id = "dev-9999".into();
+    j.episode.as_mut().unwrap().place_targets.clear();
     let r = execute_job(&j, ctx(), &JobControl::default());
     assert!(
-        r.tasks.is_empty() && r.platform_error.contains("not in this worker's dataset"),
+        r.tasks.is_empty() && r.platform_error.contains("place targets"),
         "{r:?}"
     );
 

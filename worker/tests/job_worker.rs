@@ -139,6 +139,8 @@ fn job(id: i64, policy: &str) -> pb::Job {
             teleport_on_failure: false,
             max_plan_steps: 1,
             privileged: false,
+            place_targets: kitchen_r_worker::job::spec::place_targets(ins),
+            policy_episode_id: String::new(),
         }),
         policy: Some(pb::PolicyEndpoint {
             url: policy.to_string(),

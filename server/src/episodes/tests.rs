@@ -20,6 +20,7 @@ fn spec(mode: Mode, id: &str, plan: &[&str]) -> JobSpec {
             episode_budget_ms: 1,
             max_successive_timeouts: 1,
         },
+        place_targets: Vec::new(),
     }
 }
 
@@ -38,7 +39,8 @@ fn task(index: u32, success: bool, mse: f64, mse_samples: u32) -> TaskOutcome {
 const A: [&str; 4] = ["a1", "a2", "a3", "a4"];
 const B: [&str; 2] = ["b1", "b2"];
 
-/// Two instructions, online and offline; B's online episode stopped after its first task.
+/// Two instructions, online and offline; B's episodes stopped after their first task, and A's
+/// offline task 2 came back failed without a sample: each of those costs one failed prediction.
 fn run() -> Vec<Episode> {
     let ep = |spec, tasks| Episode {
         spec,
@@ -78,8 +80,8 @@ fn control_run_sr_and_mse_by_hand() {
     let s = aggregate(&run(), None);
     // SR: a = 3/4, b = 0/2 (the unreported task counts as failed) → 0.375.
     assert!(close(s.sr, 0.375), "{s:?}");
-    // MSE: (0.1·2 + 0.3·2 + 0.5·4 + 1.0·2) / (2 + 2 + 4 + 2) = 4.8 / 10.
-    assert!(close(s.mse, 0.48), "{s:?}");
+    // MSE: (0.1·2 + 0.3·2 + 4·1 + 0.5·4 + 1.0·2 + 4·1) / (2 + 2 + 1 + 4 + 2 + 1) = 12.8 / 12.
+    assert!(close(s.mse, 12.8 / 12.0), "{s:?}");
     assert_eq!((s.em, s.m, s.p), (None, None, None));
 }
 
@@ -95,8 +97,8 @@ fn integrated_run_m_and_p_by_hand() {
     assert!(close(s.em, 0.375), "{s:?}");
     // M: a = (2 + 2 + 0 + 2) / 4 = 1.5, b = 0 → 0.75.
     assert!(close(s.m, 0.75), "{s:?}");
-    // P: 1/0.375 + mean(a = mean(0.1, 0.3, 0.5) = 0.3, b = 1.0) = 8/3 + 0.65.
-    assert!(close(s.p, 8.0 / 3.0 + 0.65), "{s:?}");
+    // P: 1/0.375 + mean(a = mean(0.1, 0.3, 4, 0.5) = 1.225, b = mean(1, 4) = 2.5) = 8/3 + 1.8625.
+    assert!(close(s.p, 8.0 / 3.0 + 1.8625), "{s:?}");
 }
 
 #[test]
@@ -116,9 +118,10 @@ fn max_plan_steps_caps_the_tasks_scored() {
         e.spec.max_plan_steps = 2;
     }
     let s = aggregate(&eps, None);
-    // a: tasks 0 and 1 succeeded → 1; b: 0 → SR 0.5. MSE only over tasks 0..2: (0.2+0.6+2.0)/6.
+    // a: tasks 0 and 1 succeeded → 1; b: 0 → SR 0.5. MSE only over tasks 0..2, b's unreported
+    // task 1 a failed prediction: (0.2 + 0.6 + 2.0 + 4) / 7.
     assert!(close(s.sr, 0.5), "{s:?}");
-    assert!(close(s.mse, 2.8 / 6.0), "{s:?}");
+    assert!(close(s.mse, 6.8 / 7.0), "{s:?}");
 }
 
 #[test]
@@ -150,8 +153,59 @@ fn spec_round_trips_through_json_and_proto() {
     s.privileged = true;
     let back: JobSpec = serde_json::from_str(&serde_json::to_string(&s).unwrap()).unwrap();
     assert_eq!(back, s);
-    let p = s.episode_proto();
+    let p = s.episode_proto("ep-x");
     assert_eq!(p.mode, pb::EvalMode::Offline as i32);
     assert!(p.privileged);
     assert_eq!(Mode::Offline.episode_key("dev-0007"), "dev-0007/offline");
+}
+
+#[test]
+fn refusing_the_offline_episodes_never_beats_answering() {
+    let plans: HashMap<String, Vec<String>> =
+        [("a".to_string(), A.iter().map(|s| s.to_string()).collect())].into();
+    let online = |id| Episode {
+        spec: spec(Mode::Online, id, &A),
+        tasks: (0..4).map(|j| task(j, true, 0.0, 0)).collect(),
+        failure: None,
+    };
+    // The honest policy answers every decision point, badly (MSE 3, the worst inside the ranges
+    // is 4); the dodging one refuses its offline episode at the handshake (every task reported
+    // failed, no sample) or not at all (nothing reported).
+    let honest = vec![
+        online("a"),
+        Episode {
+            spec: spec(Mode::Offline, "a", &A),
+            tasks: (0..4).map(|j| task(j, false, 3.0, 20)).collect(),
+            failure: None,
+        },
+    ];
+    let refused = vec![
+        online("a"),
+        Episode {
+            spec: spec(Mode::Offline, "a", &A),
+            tasks: (0..4)
+                .map(|j| TaskOutcome {
+                    failure_reason: "policy unreachable: UNAVAILABLE".into(),
+                    ..task(j, false, 0.0, 0)
+                })
+                .collect(),
+            failure: None,
+        },
+    ];
+    let silent = vec![
+        online("a"),
+        Episode {
+            spec: spec(Mode::Offline, "a", &A),
+            tasks: Vec::new(),
+            failure: None,
+        },
+    ];
+    let h = aggregate(&honest, Some(&plans));
+    for dodge in [refused, silent] {
+        let d = aggregate(&dodge, Some(&plans));
+        assert_eq!(d.m, h.m);
+        assert!(d.mse.unwrap() > h.mse.unwrap(), "{d:?} vs {h:?}");
+        assert!(d.p.unwrap() > h.p.unwrap(), "{d:?} vs {h:?}");
+        assert_eq!(d.mse, Some(FAILED_PREDICTION_MSE));
+    }
 }

@@ -133,19 +133,39 @@ fn table(board: &Leaderboard) -> String {
 }
 
 /// The public page: one table per board, all of one split.
-pub fn page(split: Split, boards: &[Leaderboard]) -> String {
+pub fn page(split: Split, boards: &[Leaderboard], public_sample: bool) -> String {
     let other = match split {
         Split::Dev => Split::Test,
         Split::Test => Split::Dev,
     };
     let tables: String = boards.iter().map(table).collect();
+    let banner = match (split, public_sample) {
+        (Split::Test, true) => format!(
+            "<p class=banner><b>{}</b>: this server scores the repository's public test \
+sample, whose answers anyone can rebuild from public files. Rankings here show the tools work; \
+they do not rank planners.</p>",
+            crate::content::PUBLIC_SAMPLE_NOTICE
+        ),
+        _ => String::new(),
+    };
     format!(
         "<!doctype html><html lang=en><head><meta charset=utf-8><title>Kitchen-R leaderboard</title>\
 <meta name=viewport content=\"width=device-width,initial-scale=1\">\
 <style>body{{font-family:system-ui,sans-serif;margin:2rem auto;max-width:60rem;padding:0 1rem}}\
 table{{border-collapse:collapse;width:100%;margin-bottom:2rem}}th,td{{padding:.4rem .6rem;border-bottom:1px solid #ddd;text-align:left}}\
-td.n{{text-align:right;font-variant-numeric:tabular-nums}}th{{background:#f4f4f4}}tr.baseline{{color:#555;background:#fafafa}}</style></head><body>\
-<h1>Kitchen-R leaderboard</h1><p><b>{split}</b> split. <a href=\"/?split={other}\">Show the {other} split</a>. \
-Baseline rows are organiser reference runs and take no rank.</p>{tables}</body></html>"
+td.n{{text-align:right;font-variant-numeric:tabular-nums}}th{{background:#f4f4f4}}tr.baseline{{color:#555;background:#fafafa}}\
+.banner{{background:#fff4d6;border:1px solid #e0b84a;padding:.6rem .8rem}}</style></head><body>\
+<h1>Kitchen-R leaderboard</h1>{banner}<p><b>{split}</b> split. <a href=\"/?split={other}\">Show the {other} split</a>. \
+Baseline rows are organiser reference runs and take no rank.</p>{tables}\
+<h2>Rules that keep the test split honest</h2><ul>\
+<li>Test-split feedback is aggregate only: a submission shows its scores and counts of failure \
+reasons, never a result per instruction or task.</li>\
+<li>A policy endpoint receives each task's sub-task sentence (a ground-truth plan step) but no \
+instruction id: episode ids are opaque.</li>\
+<li>Because a test-split policy run shows the endpoint the test plans' steps, a team's test plan \
+files created after its first test-split policy run are scored but not ranked, and an integrated \
+test run must link a plan file created before that run.</li>\
+<li>A policy that refuses or fails its offline (MSE) episodes is charged the failure penalty at \
+every decision point, as if it had answered badly.</li></ul></body></html>"
     )
 }

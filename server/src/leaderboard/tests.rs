@@ -28,7 +28,8 @@ fn csv_quotes_and_formats() {
 
 #[test]
 fn html_escapes_team_names() {
-    let page = page(Split::Test, &[board("<script>")]);
+    let page = page(Split::Test, &[board("<script>")], true);
+    assert!(page.contains("public sample"), "{page}");
     assert!(page.contains("&lt;script&gt;") && !page.contains("<script>"));
 }
 
@@ -268,4 +269,58 @@ async fn the_cache_is_dropped_when_a_run_finishes() {
         String::from_utf8_lossy(&after).contains("1,alpha,1,1.000000,,finished,false,"),
         "{after:?}"
     );
+}
+
+/// Issue: a policy that refused its offline (MSE) episodes at the handshake got no MSE and an
+/// integrated P of 1/EM alone, ranking above an honest policy with the same M. Refusing now
+/// costs the failure penalty, so it ranks below on both boards.
+#[tokio::test]
+async fn a_policy_dodging_its_mse_episodes_ranks_below_an_honest_one() {
+    use crate::testutil::WORKER;
+    let f = fixture(FakeProbe::ok(8), |c| {
+        c.control.dev_episodes = 2;
+        c.quota.concurrent_runs = 0;
+    })
+    .await;
+    let gt = f.state.content().ground_truth(Split::Dev)[..2].to_vec();
+    let plans: String = (gt.iter())
+        .map(|i| serde_json::json!({"id": i.id, "plan": i.plan}).to_string() + "\n")
+        .collect();
+    let mut runs = Vec::new();
+    for name in ["honest", "dodger"] {
+        let token = f.team(name).await;
+        let sub = f
+            .state
+            .submit_plans(Some(&token), Split::Dev, plans.as_bytes())
+            .await
+            .unwrap();
+        let mut req = f.request(Split::Dev);
+        req.plans = Some(sub.id);
+        let reg = f.state.register_policy(Some(&token), req).await.unwrap();
+        runs.push((name, reg.run_id));
+    }
+    loop {
+        let jobs = f.lease("w", 16).await;
+        if jobs.is_empty() {
+            break;
+        }
+        for job in jobs {
+            let dodger = runs.iter().any(|(n, r)| *n == "dodger" && *r == job.run_id);
+            let mut report = f.report("w", &job, |_| true, 3.0);
+            if dodger && job.spec.mode == crate::episodes::Mode::Offline {
+                for t in &mut report.tasks {
+                    (t.mse, t.mse_samples) = (0.0, 0);
+                    t.failure_reason = "policy unreachable: GetSpec: UNAVAILABLE".into();
+                }
+            }
+            f.state.report_result(Some(WORKER), report).await.unwrap();
+        }
+    }
+    for track in [Track::Control, Track::Integrated] {
+        let board = f.state.leaderboard(track, Split::Dev).await.unwrap();
+        let order: Vec<&str> = board.rows.iter().map(|r| r.team.as_str()).collect();
+        assert_eq!(order, vec!["honest", "dodger"], "{track:?}: {:?}", board.rows);
+        let dodger = &board.rows[1].scores;
+        assert_eq!(dodger.mse, Some(kitchen_r_core::metrics::FAILED_PREDICTION_MSE));
+    }
 }

@@ -16,6 +16,8 @@ use std::time::Duration;
 use serde::Serialize;
 use tokio::time::Instant;
 
+use kitchen_r_core::dataset::Split;
+
 use super::{AppState, hash_token, now_ms};
 use crate::episodes::{JobSpec, TaskOutcome};
 use crate::error::ServiceError;
@@ -41,6 +43,9 @@ pub struct LeasedJob {
     pub run_id: i64,
     pub episode_key: String,
     pub spec: JobSpec,
+    /// What the policy endpoint sees as `episode_id`: random per lease, so it names neither
+    /// the instruction nor the run.
+    pub policy_episode_id: String,
 }
 
 /// A worker's result report.
@@ -131,7 +136,7 @@ impl AppState {
             if !claimed.is_empty() || Instant::now() >= deadline {
                 let jobs = claimed
                     .into_iter()
-                    .map(leased_job)
+                    .map(|c| self.leased_job(c))
                     .collect::<Result<Vec<_>, _>>()?;
                 for j in &jobs {
                     tracing::info!(job = j.id, run = j.run_id, episode = %j.episode_key, attempt = j.attempt, worker, "job leased");
@@ -294,17 +299,37 @@ impl AppState {
     }
 }
 
-fn leased_job(c: queue::Claimed) -> Result<LeasedJob, ServiceError> {
-    let spec: JobSpec =
-        serde_json::from_str(&c.spec).map_err(|e| anyhow::anyhow!("job {} spec: {e}", c.id))?;
-    Ok(LeasedJob {
-        id: c.id,
-        attempt: u32::try_from(c.attempt).unwrap_or(u32::MAX),
-        lease_expires_at_ms: c.lease_expires_at,
-        run_id: c.run_id,
-        episode_key: c.episode_key,
-        spec,
-    })
+impl AppState {
+    fn leased_job(&self, c: queue::Claimed) -> Result<LeasedJob, ServiceError> {
+        let mut spec: JobSpec =
+            serde_json::from_str(&c.spec).map_err(|e| anyhow::anyhow!("job {} spec: {e}", c.id))?;
+        if spec.place_targets.is_empty() {
+            // A job queued before specs carried their targets.
+            let content = self.content();
+            let found = [Split::Dev, Split::Test]
+                .into_iter()
+                .flat_map(|s| content.ground_truth(s))
+                .find(|i| i.id == spec.instruction_id && i.plan == spec.plan);
+            if let Some(i) = found {
+                spec.place_targets = i.place_targets.clone();
+            }
+        }
+        Ok(LeasedJob {
+            id: c.id,
+            attempt: u32::try_from(c.attempt).unwrap_or(u32::MAX),
+            lease_expires_at_ms: c.lease_expires_at,
+            run_id: c.run_id,
+            episode_key: c.episode_key,
+            spec,
+            policy_episode_id: opaque_episode_id(),
+        })
+    }
+}
+
+/// `ep-` and 24 random hex digits.
+fn opaque_episode_id() -> String {
+    let bytes: [u8; 12] = rand::random();
+    format!("ep-{}", hex::encode(bytes))
 }
 
 fn job_spec(job: &JobRow) -> Result<JobSpec, ServiceError> {

@@ -238,6 +238,7 @@ impl AppState {
                     max_plan_steps: c.max_plan_steps,
                     privileged,
                     endpoint: endpoint.clone(),
+                    place_targets: inst.place_targets.clone(),
                 };
                 let json = serde_json::to_string(&spec).map_err(anyhow::Error::from)?;
                 jobs.push((mode.episode_key(&inst.id), json));
@@ -268,6 +269,19 @@ impl AppState {
             return Err(ServiceError::BadRequest(format!(
                 "plans submission {id} is for the {} split, the policy for {split}",
                 sub.split
+            )));
+        }
+        // From a team's first test policy run on, its endpoint has seen the test plans' steps
+        // as sub-tasks: plan files made after that cannot carry an integrated score.
+        if split == Split::Test
+            && !any_team
+            && let Some(first) = store::first_test_policy(self.pool(), team.id).await?
+            && first < id
+        {
+            return Err(ServiceError::BadRequest(format!(
+                "plans submission {id} was created after your first test-split policy run \
+                 (submission {first}); an integrated test run must link a plan file created \
+                 before it"
             )));
         }
         Ok(())

@@ -1,9 +1,10 @@
 //! What a policy run's page shows: progress while it evaluates, then per-episode and per-task
 //! results with failure reasons.
 //!
-//! Policy: the test split's ground truth stays hidden, and a plan's steps and length are part of
-//! it. So for test runs each episode shows its success rate, MSE and the distinct failure reasons
-//! only (no task list, no log tail, which may quote steps); dev runs show everything.
+//! Policy: test-split feedback is aggregate only: progress counts, the run's scores and how often
+//! each kind of failure happened, never a row per episode, task or instruction (episode keys are
+//! instruction ids, and per-episode success rates would let a team probe the hidden plans one
+//! instruction at a time). Dev runs show everything: per-episode, per-task results and logs.
 
 use serde::Serialize;
 
@@ -24,11 +25,30 @@ pub struct PolicyRunView {
     pub episodes_running: i64,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub finished_at: Option<String>,
+    /// The ground truth changed under this run's episodes since they were simulated: its scores
+    /// are those of the old ground truth until an organiser has it simulated again.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub needs_resimulation: bool,
+    /// A rescore: the run whose recorded episodes these scores were recomputed from.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rescored_from_run: Option<i64>,
+    /// Dev split: one entry per recorded episode. Empty on the test split.
     pub episodes: Vec<EpisodeView>,
-    /// Episodes not finished yet whose earlier attempt failed on the platform side, and why
-    /// (they are retried without counting against the participant).
+    /// How often each kind of failure happened over the run's tasks and episodes, most frequent
+    /// first (numbers in a reason replaced by `N`, so counts group).
+    pub failure_counts: Vec<ReasonCount>,
+    /// Dev split: episodes not finished yet whose earlier attempt failed on the platform side,
+    /// and why (they are retried without counting against the participant).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub retrying: Vec<RetryView>,
+    /// Episodes being retried after a platform failure (both splits).
+    pub episodes_retrying: usize,
+}
+
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct ReasonCount {
+    pub reason: String,
+    pub count: usize,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -69,8 +89,9 @@ impl AppState {
         run: &RunRow,
         hidden: bool,
     ) -> Result<PolicyRunView, ServiceError> {
-        let counts = run_store::job_counts(self.pool(), run.id).await?;
-        let results = run_store::results(self.pool(), run.id).await?;
+        let source = run.episodes_run();
+        let counts = run_store::job_counts(self.pool(), source).await?;
+        let results = run_store::results(self.pool(), source).await?;
         let state = match run.state.as_str() {
             "finished" => "finished",
             "platform_failed" => "platform_failed",
@@ -79,9 +100,10 @@ impl AppState {
         };
         let episodes = results
             .into_iter()
-            .map(|r| episode_view(r, hidden))
+            .map(episode_view)
             .collect::<Result<Vec<_>, _>>()?;
-        let retrying = run_store::retrying(self.pool(), run.id)
+        let failure_counts = failure_counts(&episodes);
+        let retrying: Vec<RetryView> = run_store::retrying(self.pool(), source)
             .await?
             .into_iter()
             .map(|(key, attempt, last_error)| RetryView {
@@ -90,19 +112,61 @@ impl AppState {
                 last_error,
             })
             .collect();
+        let episodes_done = episodes.len() as i64;
+        let episodes_retrying = retrying.len();
         Ok(PolicyRunView {
-            retrying,
+            retrying: if hidden { Vec::new() } else { retrying },
+            episodes_retrying,
             state,
             episodes_total: run.episodes_total,
-            episodes_done: episodes.len() as i64,
+            episodes_done,
             episodes_running: counts.leased,
             finished_at: run.finished_at.map(super::rfc3339),
-            episodes,
+            needs_resimulation: run.needs_resimulation,
+            rescored_from_run: run.source_run_id,
+            episodes: if hidden { Vec::new() } else { episodes },
+            failure_counts,
         })
     }
 }
 
-fn episode_view(r: ResultRow, hidden: bool) -> Result<EpisodeView, ServiceError> {
+/// Every task failure and platform give-up of the run, grouped by [`reason_kind`].
+fn failure_counts(episodes: &[EpisodeView]) -> Vec<ReasonCount> {
+    let mut counts: std::collections::BTreeMap<String, usize> = Default::default();
+    for e in episodes {
+        let tasks = e.tasks.iter().flatten().map(|t| t.failure_reason.as_str());
+        for reason in tasks.chain(e.failure.as_deref()).filter(|r| !r.is_empty()) {
+            *counts.entry(reason_kind(reason)).or_default() += 1;
+        }
+    }
+    let mut out: Vec<ReasonCount> = (counts.into_iter())
+        .map(|(reason, count)| ReasonCount { reason, count })
+        .collect();
+    out.sort_by(|a, b| b.count.cmp(&a.count).then_with(|| a.reason.cmp(&b.reason)));
+    out
+}
+
+/// The kind of a failure reason: its text with every number replaced by `N`, capped at 160
+/// characters, so "time limit of 120 s reached" on two tasks counts twice under one kind.
+pub fn reason_kind(reason: &str) -> String {
+    let mut out = String::new();
+    let mut in_number = false;
+    for c in reason.chars() {
+        let digit = c.is_ascii_digit() || (in_number && matches!(c, '.' | 'e' | '-'));
+        if digit && !in_number {
+            out.push('N');
+        } else if !digit {
+            out.push(c);
+        }
+        in_number = digit;
+        if out.len() >= 160 {
+            break;
+        }
+    }
+    out
+}
+
+fn episode_view(r: ResultRow) -> Result<EpisodeView, ServiceError> {
     let tasks: Vec<TaskOutcome> = serde_json::from_str(&r.tasks)
         .map_err(|e| anyhow::anyhow!("stored tasks of {}: {e}", r.episode_key))?;
     let online = r.mode == "online";
@@ -131,7 +195,22 @@ fn episode_view(r: ResultRow, hidden: bool) -> Result<EpisodeView, ServiceError>
         failure_reasons,
         wall_ms: r.wall_ms,
         attempt: r.attempt,
-        tasks: (!hidden).then_some(tasks),
-        log_tail: (!hidden).then_some(r.log_tail),
+        tasks: Some(tasks),
+        log_tail: Some(r.log_tail),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reasons_group_by_kind_with_numbers_masked() {
+        assert_eq!(reason_kind("time limit of 120 s reached"), "time limit of N s reached");
+        assert_eq!(
+            reason_kind("invalid action chunk: action 3: gripper 1.7 outside [0, 1]"),
+            "invalid action chunk: action N: gripper N outside [N, N]"
+        );
+        assert_eq!(reason_kind("policy unreachable"), "policy unreachable");
+    }
 }

@@ -111,7 +111,7 @@ pub async fn finish_run(
 ) -> sqlx::Result<bool> {
     let json = crate::service::Scores::from(*scores).to_json();
     let done = sqlx::query(
-        "UPDATE scoring_runs SET state = ?, scores = ?, sr = ?, mse = ?, m = ?, p = ?, finished_at = ?
+        "UPDATE scoring_runs SET state = ?, scores = ?, em = ?, sr = ?, mse = ?, m = ?, p = ?, finished_at = ?
          WHERE id = ? AND state = 'active'",
     )
     .bind(if platform_failed {
@@ -120,6 +120,7 @@ pub async fn finish_run(
         "finished"
     })
     .bind(json.to_string())
+    .bind(scores.em)
     .bind(scores.sr)
     .bind(scores.mse)
     .bind(scores.m)
@@ -129,6 +130,48 @@ pub async fn finish_run(
     .execute(&mut *conn)
     .await?;
     Ok(done.rows_affected() == 1)
+}
+
+/// A rescore of a finished policy run: a new finished scoring run with `scores` recomputed from
+/// the episodes of `source` (which stay keyed by `source`).
+pub async fn insert_derived_run(
+    pool: &SqlitePool,
+    submission: i64,
+    source: i64,
+    scorer_version: &str,
+    scores: &RunScores,
+    now: i64,
+) -> sqlx::Result<i64> {
+    let json = crate::service::Scores::from(*scores).to_json();
+    sqlx::query_scalar(
+        "INSERT INTO scoring_runs (submission_id, scorer_version, created_at, em, scores, state,
+             episodes_total, max_concurrency, sr, mse, m, p, finished_at, source_run_id)
+         SELECT ?, ?, ?, ?, ?, 'finished', episodes_total, max_concurrency, ?, ?, ?, ?, ?, ?
+         FROM scoring_runs WHERE id = ? RETURNING id",
+    )
+    .bind(submission)
+    .bind(scorer_version)
+    .bind(now)
+    .bind(scores.em)
+    .bind(json.to_string())
+    .bind(scores.sr)
+    .bind(scores.mse)
+    .bind(scores.m)
+    .bind(scores.p)
+    .bind(now)
+    .bind(source)
+    .bind(source)
+    .fetch_one(pool)
+    .await
+}
+
+/// Flag a run whose episodes no longer match the ground truth.
+pub async fn mark_needs_resimulation(pool: &SqlitePool, run: i64) -> sqlx::Result<()> {
+    sqlx::query("UPDATE scoring_runs SET needs_resimulation = 1 WHERE id = ?")
+        .bind(run)
+        .execute(pool)
+        .await
+        .map(drop)
 }
 
 /// Job counts of a run by state.

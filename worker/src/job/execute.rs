@@ -18,6 +18,7 @@ use super::spec;
 use super::{JobContext, JobError};
 use crate::offline::{OfflineOutcome, run_offline};
 use crate::oracle::{OraclePolicy, expert_options};
+use crate::policy::Unreachable;
 use crate::remote::{Credentials, RemoteConfig, RemotePolicy, SimCamera};
 use crate::runner::{EpisodeOutcome, StepHook, run_episode};
 
@@ -115,10 +116,22 @@ impl Log {
     }
 }
 
-/// The id the policy sees: unique per run, episode and attempt, so a participant's server
-/// serving two runs (or a retried attempt) never mixes their state.
+/// The id the policy sees: the server's opaque one, or a random one. Unique per job attempt, so
+/// a participant's server serving two runs (or a retried attempt) never mixes their state, and
+/// it names neither the instruction nor the run: an endpoint that logs its traffic learns nothing
+/// it could map back to the hidden test split.
 pub fn policy_episode_id(job: &pb::Job) -> String {
-    format!("r{}/{}/a{}", job.run_id, job.episode_key, job.attempt)
+    match job.episode.as_ref().map(|e| e.policy_episode_id.as_str()) {
+        Some(id) if !id.is_empty() => id.to_string(),
+        _ => random_episode_id(),
+    }
+}
+
+/// `ep-` and 24 random hex digits.
+pub fn random_episode_id() -> String {
+    let bytes: [u8; 12] = rand::random();
+    let hex: String = bytes.iter().map(|b| format!("{b:02x}")).collect();
+    format!("ep-{hex}")
 }
 
 /// Run `job` to its result. Never panics on what the policy does; the simulator is built here
@@ -167,7 +180,7 @@ fn run(
     }
     let run = spec::run_options(spec, &ep)?;
     let id = policy_episode_id(job);
-    let cfg = spec::episode_config(spec, &ctx.assets, &ctx.params, &ctx.instructions, &id)?;
+    let cfg = spec::episode_config(spec, &ctx.assets, &ctx.params, &id)?;
     log.line(format!(
         "episode {id} scene {} instruction {} seed {} mode {} tasks {} policy {}",
         cfg.scene,
@@ -194,6 +207,15 @@ fn run(
         Err(e) => {
             let reason = format!("policy unreachable: {e}");
             log.line(&reason);
+            if mode == pb::EvalMode::Offline {
+                // The expert still drives and every decision point is a failed prediction, so
+                // an endpoint that refuses its MSE episodes pays as much as one answering badly.
+                let mut expert = OraclePolicy::new(&ctx.assets);
+                let opts = spec::offline_options(&run, ctx.sample_every);
+                let mut dead = Unreachable::new(reason);
+                let out = run_offline(&mut sim, &mut expert, &mut dead, &opts, &mut Watch(control))?;
+                return Ok(offline_results(&out, log));
+            }
             return Ok(all_failed(&cfg, n_tasks, &reason));
         }
     };

@@ -133,6 +133,8 @@ pub fn local_job(ins: &Instruction, url: &str, s: &LocalSettings, remote: &Remot
             teleport_on_failure: s.teleport_on_failure,
             max_plan_steps: s.run.max_tasks.unwrap_or(0) as u32,
             privileged: s.privileged,
+            place_targets: super::spec::place_targets(ins),
+            policy_episode_id: String::new(),
         }),
         policy: Some(pb::PolicyEndpoint {
             url: url.to_string(),
@@ -170,11 +172,7 @@ pub fn evaluate_endpoint(
         &remote,
     ))?;
     drop(rt);
-    let ctx = JobContext::load(&[], remote.clone(), AllowedNetworks::ALL, 1)?;
-    let ctx = JobContext {
-        instructions: super::Instructions::from_list(instructions.iter().cloned()),
-        ..ctx
-    };
+    let ctx = JobContext::load(remote.clone(), AllowedNetworks::ALL, 1)?;
     let jobs: Vec<pb::Job> = instructions
         .iter()
         .map(|i| local_job(i, url, s, &remote))

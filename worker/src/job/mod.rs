@@ -10,7 +10,7 @@ pub mod execute;
 pub mod local;
 pub mod spec;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Duration;
 
 use kitchen_r_sim::{Assets, EpisodeParams, SensorsConfig, SimConfig, SimError};
@@ -18,7 +18,6 @@ use serde::{Deserialize, Serialize};
 
 pub use client::run_worker;
 pub use execute::{JobControl, execute_job};
-pub use spec::Instructions;
 
 use crate::remote::{AllowedNetworks, RemoteConfig};
 use crate::runner::RunError;
@@ -66,8 +65,6 @@ pub struct WorkerConfig {
     pub lease_wait_ms: u32,
     /// Offline mode: query the policy at every N-th decision point.
     pub sample_every: usize,
-    /// Ground-truth instruction files (JSON Lines); empty = the assets' dev and test files.
-    pub datasets: Vec<PathBuf>,
     /// Transport limits towards policies; the job's deadlines override the deadlines here.
     pub policy: RemoteConfig,
 }
@@ -82,7 +79,6 @@ impl Default for WorkerConfig {
             allow_networks: vec!["127.0.0.0/8".into(), "::1/128".into()],
             lease_wait_ms: 20_000,
             sample_every: 1,
-            datasets: Vec::new(),
             policy: RemoteConfig::default(),
         }
     }
@@ -159,7 +155,6 @@ pub struct JobContext {
     pub sim: SimConfig,
     pub sensors: SensorsConfig,
     pub params: EpisodeParams,
-    pub instructions: Instructions,
     /// Transport limits and the endpoint allow-list.
     pub remote: RemoteConfig,
     /// Offline mode: query the policy at every N-th decision point.
@@ -167,25 +162,18 @@ pub struct JobContext {
 }
 
 impl JobContext {
-    /// The default assets and configs, the given dataset files (empty = the default ones), and
-    /// `remote` with `allow` as its allow-list.
+    /// The default assets and configs, and `remote` with `allow` as its allow-list. No dataset:
+    /// every job carries its episode.
     pub fn load(
-        datasets: &[PathBuf],
         remote: RemoteConfig,
         allow: AllowedNetworks,
         sample_every: usize,
     ) -> Result<JobContext, JobError> {
-        let files = if datasets.is_empty() {
-            Instructions::default_files()
-        } else {
-            datasets.to_vec()
-        };
         Ok(JobContext {
             assets: Assets::load_default()?,
             sim: SimConfig::load_default()?,
             sensors: SensorsConfig::load_default()?,
             params: EpisodeParams::load_default()?,
-            instructions: Instructions::load(&files)?,
             remote: RemoteConfig {
                 allowed_networks: allow,
                 ..remote
@@ -197,7 +185,6 @@ impl JobContext {
     /// The context a [`WorkerConfig`] describes.
     pub fn from_worker_config(cfg: &WorkerConfig) -> Result<JobContext, WorkerError> {
         Ok(JobContext::load(
-            &cfg.datasets,
             cfg.policy.clone(),
             cfg.allowed()?,
             cfg.sample_every,

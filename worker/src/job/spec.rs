@@ -3,16 +3,14 @@
 //! [`instruction_seed`] of the run seed and the instruction id), so a participant's local number
 //! and the leaderboard's are the same number.
 //!
-//! The spec carries the plan but not the place targets (where each placed object must end up),
-//! which are part of the dataset's ground truth: the worker looks the instruction up in its own
-//! copy of the dataset and refuses a job whose scene or plan disagree with it, since scoring a
-//! different episode than the server asked for would be silent corruption.
-
-use std::collections::HashMap;
-use std::path::PathBuf;
+//! The spec carries everything the episode needs: scene, plan, seed and the place targets (where
+//! each placed object must end up). A worker therefore reads no dataset file, and a worker
+//! machine never holds the test split's ground truth on disk; a spec whose place targets do not
+//! match its plan's `place` steps is refused as a platform fault, never scored.
 use std::time::Duration;
 
-use kitchen_r_core::dataset::{Instruction, read_jsonl};
+use kitchen_r_core::dataset::Instruction;
+use kitchen_r_core::plan::Step;
 use kitchen_r_proto::worker::v1 as pb;
 use kitchen_r_sim::{Assets, EpisodeConfig, EpisodeParams};
 
@@ -22,87 +20,39 @@ use crate::offline::OfflineOptions;
 use crate::policy::HORIZON;
 use crate::runner::RunOptions;
 
-/// The ground-truth instructions a worker can simulate, by id.
-#[derive(Debug, Clone, Default)]
-pub struct Instructions {
-    by_id: HashMap<String, Instruction>,
+/// The instruction a job's spec describes: its plan and place targets as the server sent them.
+pub fn instruction(spec: &pb::EpisodeSpec) -> Result<Instruction, JobError> {
+    let places = (spec.plan.iter())
+        .filter(|s| matches!(s.parse::<Step>(), Ok(Step::Place { .. })))
+        .count();
+    if spec.place_targets.len() != places {
+        return Err(JobError::Spec(format!(
+            "instruction {:?}: {} place steps but {} place targets in the job (the server and \
+             the worker must speak the same worker protocol)",
+            spec.instruction_id,
+            places,
+            spec.place_targets.len()
+        )));
+    }
+    Ok(Instruction {
+        id: spec.instruction_id.clone(),
+        scene: spec.scene_id.clone(),
+        instruction: String::new(),
+        plan: spec.plan.clone(),
+        template: String::new(),
+        place_targets: spec.place_targets.iter().map(|t| [t.x, t.y, t.z]).collect(),
+    })
 }
 
-impl Instructions {
-    /// `dev.jsonl` and, when present, `test_ground_truth.jsonl` of the assets' `dataset/`.
-    pub fn default_files() -> Vec<PathBuf> {
-        Instructions::files_in(&kitchen_r_core::assets::assets_dir())
-    }
-
-    /// The ground-truth files of the assets directory `assets` (those that exist).
-    pub fn files_in(assets: &std::path::Path) -> Vec<PathBuf> {
-        let dir = assets.join("dataset");
-        ["dev.jsonl", "test_ground_truth.jsonl"]
-            .into_iter()
-            .map(|f| dir.join(f))
-            .filter(|p| p.is_file())
-            .collect()
-    }
-
-    /// Every instruction of the given JSON Lines files; a later file wins on a repeated id.
-    pub fn load(files: &[PathBuf]) -> Result<Instructions, JobError> {
-        let mut by_id = HashMap::new();
-        for f in files {
-            let list: Vec<Instruction> =
-                read_jsonl(f).map_err(|e| JobError::Setup(format!("dataset {}: {e}", f.display())))?;
-            by_id.extend(list.into_iter().map(|i| (i.id.clone(), i)));
-        }
-        Ok(Instructions { by_id })
-    }
-
-    pub fn from_list(list: impl IntoIterator<Item = Instruction>) -> Instructions {
-        Instructions {
-            by_id: list.into_iter().map(|i| (i.id.clone(), i)).collect(),
-        }
-    }
-
-    pub fn len(&self) -> usize {
-        self.by_id.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.by_id.is_empty()
-    }
-
-    /// The instruction the spec names, checked against it.
-    pub fn resolve(&self, spec: &pb::EpisodeSpec) -> Result<Instruction, JobError> {
-        let id = &spec.instruction_id;
-        let Some(ins) = self.by_id.get(id) else {
-            // Without place steps nothing is missing from the spec itself.
-            if spec.plan.iter().all(|s| !s.starts_with("place ")) {
-                return Ok(Instruction {
-                    id: id.clone(),
-                    scene: spec.scene_id.clone(),
-                    instruction: String::new(),
-                    plan: spec.plan.clone(),
-                    template: String::new(),
-                    place_targets: Vec::new(),
-                });
-            }
-            return Err(JobError::Spec(format!(
-                "instruction {id:?} is not in this worker's dataset ({} instructions), and its \
-                 place targets are needed: give the worker the dataset file (`datasets` key)",
-                self.by_id.len()
-            )));
-        };
-        if ins.scene != spec.scene_id || ins.plan != spec.plan {
-            return Err(JobError::Spec(format!(
-                "instruction {id:?} differs between the job (scene {:?}, {} steps) and this \
-                 worker's dataset (scene {:?}, {} steps): the server and the worker must use the \
-                 same dataset",
-                spec.scene_id,
-                spec.plan.len(),
-                ins.scene,
-                ins.plan.len()
-            )));
-        }
-        Ok(ins.clone())
-    }
+/// The wire form of an instruction's place targets.
+pub fn place_targets(ins: &Instruction) -> Vec<pb::PlaceTarget> {
+    (ins.place_targets.iter())
+        .map(|t| pb::PlaceTarget {
+            x: t[0],
+            y: t[1],
+            z: t[2],
+        })
+        .collect()
 }
 
 /// The simulator configuration of the job's episode; `episode_id` names it towards the policy.
@@ -110,10 +60,9 @@ pub fn episode_config(
     spec: &pb::EpisodeSpec,
     assets: &Assets,
     params: &EpisodeParams,
-    instructions: &Instructions,
     episode_id: &str,
 ) -> Result<EpisodeConfig, JobError> {
-    let ins = instructions.resolve(spec)?;
+    let ins = instruction(spec)?;
     let scene = assets
         .scene(&ins.scene)
         .map_err(|e| JobError::Spec(format!("scene {:?}: {e}", ins.scene)))?;

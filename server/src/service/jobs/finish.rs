@@ -79,7 +79,7 @@ impl AppState {
 
     /// The linked plan submission's predictions by instruction id, re-read from its immutable
     /// body so EM_j is recomputed against the ground truth rather than trusted from a run.
-    async fn linked_plans(
+    pub(crate) async fn linked_plans(
         &self,
         conn: &mut SqliteConnection,
         id: i64,
