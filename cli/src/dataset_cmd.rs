@@ -1,11 +1,19 @@
-//! `kitchen-r dataset generate`: regenerate the instruction set deterministically from the
-//! scenes, catalogue and templates (the same seed gives byte-identical files).
+//! `kitchen-r dataset …`: the instruction set's subcommands.
+//!
+//! - `generate`: regenerate the instruction set deterministically from the scenes, catalogue and
+//!   templates (the same seed and phrasings give byte-identical files); with `--phrasings` it
+//!   makes a private test set (docs/private-test-set.md).
+//!
+//! Each subcommand is one variant of [`DatasetCommand`] and one function below.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::{Args, Subcommand};
-use kitchen_r_core::dataset;
+use kitchen_r_core::dataset::{self, GenerateOptions, templates};
+
+#[path = "audit_cmd.rs"]
+mod audit_cmd;
 
 #[derive(Args, Debug)]
 pub struct DatasetArgs {
@@ -20,27 +28,72 @@ enum DatasetCommand {
         /// Generator seed (the committed dataset uses 20241; organisers use a secret one).
         #[arg(long)]
         seed: u64,
-        /// Output directory, created if missing.
+        /// Output directory, created if missing (keep a private set outside the repository).
         #[arg(long, value_name = "DIR")]
         out: PathBuf,
         /// Assets directory with scenes/, objects.toml and templates.toml [default: the
         /// KITCHEN_R_ASSETS lookup].
         #[arg(long, value_name = "DIR")]
         assets: Option<PathBuf>,
+        /// Private phrasings (templates.toml schema, `id` and `instructions` only) that replace
+        /// the public ones in the test split: makes a private set whose manifest records the
+        /// file's digest and not the seed.
+        #[arg(long, value_name = "FILE")]
+        phrasings: Option<PathBuf>,
     },
+    /// Leak and feasibility audit of a test set: public-phrasing share, the EM of a
+    /// template-inversion attack built from public material, test plans shared with dev and,
+    /// with --oracle, instructions the oracle cannot complete. Exits non-zero if a check fails.
+    Audit(audit_cmd::AuditArgs),
 }
 
 pub fn dataset(args: DatasetArgs) -> anyhow::Result<()> {
-    let DatasetCommand::Generate { seed, out, assets } = args.command;
+    match args.command {
+        DatasetCommand::Generate {
+            seed,
+            out,
+            assets,
+            phrasings,
+        } => generate(seed, &out, assets, phrasings.as_deref()),
+        DatasetCommand::Audit(args) => audit_cmd::audit(args),
+    }
+}
+
+fn generate(seed: u64, out: &Path, assets: Option<PathBuf>, phrasings: Option<&Path>) -> anyhow::Result<()> {
     let assets = assets.unwrap_or_else(kitchen_r_core::assets::assets_dir);
-    let ds =
-        dataset::generate(seed, &assets).with_context(|| format!("generating from {}", assets.display()))?;
-    dataset::write(&ds, &out).with_context(|| format!("writing {}", out.display()))?;
-    println!(
-        "wrote {} dev and {} test instructions (seed {seed}) to {}",
-        ds.dev.len(),
-        ds.test.len(),
-        out.display()
-    );
+    let private = match phrasings {
+        Some(path) => {
+            let templates = templates::load_templates(&assets.join("templates.toml"))
+                .with_context(|| format!("reading the templates under {}", assets.display()))?;
+            let private = templates::load_private_phrasings(path, &templates)
+                .with_context(|| format!("reading private phrasings {}", path.display()))?;
+            Some(private)
+        }
+        None => None,
+    };
+    let options = GenerateOptions { seed, private };
+    let ds = dataset::generate_with(&options, &assets)
+        .with_context(|| format!("generating from {}", assets.display()))?;
+    dataset::write(&ds, out).with_context(|| format!("writing {}", out.display()))?;
+    let m = &ds.manifest;
+    match &m.private_phrasings {
+        // The seed is a secret of a private set: not echoed into terminals or logs.
+        Some(p) => println!(
+            "wrote a private set: {} dev and {} test instructions to {} (private phrasings: {} \
+             for {} templates, sha256 {})",
+            m.dev,
+            m.test,
+            out.display(),
+            p.phrasings,
+            p.templates,
+            p.sha256
+        ),
+        None => println!(
+            "wrote a public sample: {} dev and {} test instructions (seed {seed}) to {}",
+            m.dev,
+            m.test,
+            out.display()
+        ),
+    }
     Ok(())
 }

@@ -5,7 +5,12 @@
 //! being the first 163, holds every template), a scene is drawn, then objects and zones of that
 //! scene are substituted. A substitution is kept only if its plan runs symbolically from the
 //! scene's initial placement ([`super::symbolic`]) and its text is new in that scene; otherwise
-//! another scene and substitution are drawn. Scenes that break the navigation conventions
+//! another scene and substitution are drawn. Each `the {Z} zone` of the drawn phrasing is
+//! rendered by colour or, about half the time when the zone has `names`, by one of its
+//! furniture names; plans always use the colour. With private phrasings
+//! ([`GenerateOptions::private`]) the test split draws its phrasings from them for the templates
+//! they cover; the dev split, generated first, is the same as without them.
+//! Scenes that break the navigation conventions
 //! ([`crate::layout`]) are refused up front, so a new scene is a data change the generator
 //! vets. Only vectors and `BTreeMap`s are iterated and all randomness comes from one
 //! [`SplitMix64`], so the same seed gives the same bytes.
@@ -15,14 +20,16 @@ use std::path::Path;
 
 use super::rng::SplitMix64;
 use super::symbolic::plan_targets;
-use super::templates::{Binding, Template, load_templates, start_zone_var};
-use super::{DEV_INSTRUCTIONS, Dataset, Instruction, Manifest, PublicInstruction, TOTAL_INSTRUCTIONS};
+use super::templates::{Binding, PrivatePhrasings, Template, fill_places, load_templates, start_zone_var};
+use super::{
+    DEV_INSTRUCTIONS, Dataset, DatasetKind, Instruction, Manifest, PublicInstruction, TOTAL_INSTRUCTIONS,
+};
 use crate::ContentError;
 use crate::catalogue::Catalogue;
 use crate::scene::Scene;
 
 /// Bumped whenever the same seed would give different files.
-pub const GENERATOR_VERSION: u32 = 2;
+pub const GENERATOR_VERSION: u32 = 3;
 /// The seed of the committed `assets/dataset/`.
 pub const COMMITTED_SEED: u64 = 20241;
 /// Substitutions tried per instruction before the template is declared unusable.
@@ -30,12 +37,46 @@ const ATTEMPTS: usize = 600;
 /// Substitutions tried in the drawn scene before the next scene is tried.
 const SCENE_ATTEMPTS: usize = 100;
 
-/// Generate the whole dataset from the scenes, catalogue and templates under `assets`.
+/// What to generate: the seed, and for a private set the phrasings its test split uses.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct GenerateOptions {
+    pub seed: u64,
+    /// Private phrasings ([`super::templates::load_private_phrasings`]); `Some` makes a
+    /// [`DatasetKind::Private`] set whose manifest omits the seed.
+    pub private: Option<PrivatePhrasings>,
+}
+
+impl GenerateOptions {
+    /// A public sample from `seed`.
+    pub fn public(seed: u64) -> GenerateOptions {
+        GenerateOptions { seed, private: None }
+    }
+}
+
+/// Generate a public sample from the scenes, catalogue and templates under `assets`
+/// (`generate_with(&GenerateOptions::public(seed), assets)`).
 pub fn generate(seed: u64, assets: &Path) -> Result<Dataset, ContentError> {
+    generate_with(&GenerateOptions::public(seed), assets)
+}
+
+/// Generate the whole dataset from the scenes, catalogue and templates under `assets`, with the
+/// private phrasings of `options` (if any) in the test split.
+pub fn generate_with(options: &GenerateOptions, assets: &Path) -> Result<Dataset, ContentError> {
+    let seed = options.seed;
     let catalogue = Catalogue::load(&assets.join("objects.toml"))?;
     let scenes = Scene::load_all(&assets.join("scenes"), &catalogue)?;
     let templates_path = assets.join("templates.toml");
     let templates = load_templates(&templates_path)?;
+    if let Some(private) = &options.private
+        && let Some(id) = private
+            .template_ids()
+            .find(|id| !templates.iter().any(|t| t.id == *id))
+    {
+        return Err(ContentError::Invalid {
+            path: templates_path,
+            message: format!("private phrasings name template {id:?}, which is not in this file"),
+        });
+    }
     if scenes.is_empty() {
         return Err(ContentError::Invalid {
             path: assets.join("scenes"),
@@ -62,12 +103,16 @@ pub fn generate(seed: u64, assets: &Path) -> Result<Dataset, ContentError> {
     let mut all = Vec::with_capacity(TOTAL_INSTRUCTIONS);
     for (k, &t) in order.iter().take(TOTAL_INSTRUCTIONS).enumerate() {
         let template = &templates[t];
+        let private = (k >= DEV_INSTRUCTIONS)
+            .then(|| options.private.as_ref()?.for_template(&template.id))
+            .flatten();
+        let phrasings = private.unwrap_or(&template.instructions);
         // The scene is drawn first and kept for a while, so that scenes whose zones are
         // crowded are not under-represented; a template that cannot run there moves on.
         let first = rng.below(scenes.len());
         let found = (0..ATTEMPTS).find_map(|n| {
             let scene = &scenes[(first + n / SCENE_ATTEMPTS) % scenes.len()];
-            let inst = instantiate(template, scene, &catalogue, &mut rng)?;
+            let inst = instantiate(template, phrasings, scene, &catalogue, &mut rng)?;
             used_texts
                 .insert((scene.id.clone(), inst.instruction.clone()))
                 .then_some(inst)
@@ -87,22 +132,30 @@ pub fn generate(seed: u64, assets: &Path) -> Result<Dataset, ContentError> {
         all.push(inst);
     }
     let test = all.split_off(DEV_INSTRUCTIONS);
+    let private = options.private.as_ref().map(PrivatePhrasings::summary);
     Ok(Dataset {
         manifest: Manifest {
-            seed,
+            kind: match private {
+                Some(_) => DatasetKind::Private,
+                None => DatasetKind::PublicSample,
+            },
+            seed: private.is_none().then_some(seed),
             generator_version: GENERATOR_VERSION,
             templates: templates.len(),
             dev: all.len(),
             test: test.len(),
+            private_phrasings: private,
         },
         dev: all,
         test,
     })
 }
 
-/// One random substitution of `template` in `scene`, or `None` if it does not execute.
+/// One random substitution of `template` in `scene`, phrased with one of `phrasings`, or `None`
+/// if it does not execute.
 fn instantiate(
     template: &Template,
+    phrasings: &[String],
     scene: &Scene,
     catalogue: &Catalogue,
     rng: &mut SplitMix64,
@@ -132,11 +185,19 @@ fn instantiate(
         .map(|p| p.instantiate(&binding))
         .collect::<Option<Vec<_>>>()?;
     let place_targets = plan_targets(scene, catalogue, &steps, rng).ok()?;
-    let phrasing = rng.choose(&template.instructions)?;
+    let phrasing = rng.choose(phrasings)?;
+    let instruction = fill_places(phrasing, &binding, |color| {
+        let names = scene.zone(color).map_or(&[][..], |z| z.names.as_slice());
+        match names {
+            [] => format!("the {color} zone"),
+            _ if rng.below(2) == 0 => format!("the {color} zone"),
+            _ => rng.choose(names).cloned().unwrap_or_default(),
+        }
+    })?;
     Some(Instruction {
         id: String::new(),
         scene: scene.id.clone(),
-        instruction: super::templates::fill(phrasing, &binding)?,
+        instruction,
         plan: steps.iter().map(ToString::to_string).collect(),
         template: template.id.clone(),
         place_targets,

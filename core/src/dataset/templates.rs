@@ -5,6 +5,13 @@
 //! `{y}`, `{v}`, `{u}` free, pairwise distinct zone choices. Loading refuses a template whose
 //! phrasings do not pin its plan down (a placeholder of the plan missing from a phrasing), so
 //! every generated instruction determines its ground truth.
+//!
+//! In a phrasing, a zone written `the {x} zone` may be rendered by the furniture that holds it
+//! ([`fill_places`]; the zone's `names` in the scene file), while plan steps always use the colour.
+//!
+//! A *private phrasings* file ([`load_private_phrasings`]) has the same schema without `plan`:
+//! extra phrasings for some templates, kept outside the repository by an organiser, that replace
+//! the public ones in the test split of a private test set.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
@@ -145,6 +152,51 @@ pub fn fill(text: &str, binding: &Binding) -> Option<String> {
     Some(out)
 }
 
+/// Like [`fill`], but every `the {Z} zone` (or `The {Z} zone`) with a zone placeholder `Z` is
+/// replaced by `place(colour)`, a referring expression with its article ("the blue zone", "the
+/// dining table"); it is capitalised where the phrasing had `The`. Other zone mentions, such as
+/// `the {x} and {y} zones`, keep the bare colour.
+pub fn fill_places(text: &str, binding: &Binding, mut place: impl FnMut(&str) -> String) -> Option<String> {
+    let mut out = String::with_capacity(text.len() + 32);
+    let mut rest = text;
+    while let Some(open) = rest.find('{') {
+        let close = open + rest[open..].find('}')?;
+        let (before, name, after) = (&rest[..open], &rest[open + 1..close], &rest[close + 1..]);
+        let value = binding.get(name)?;
+        let article = ["the ", "The "].into_iter().find(|a| {
+            before
+                .strip_suffix(a)
+                .is_some_and(|b| !b.ends_with(|c: char| c.is_alphanumeric()))
+        });
+        let zone_word = after
+            .strip_prefix(" zone")
+            .is_some_and(|a| !a.starts_with(|c: char| c.is_alphanumeric()));
+        match article {
+            Some(article) if zone_word && is_zone_var(name) => {
+                out.push_str(&before[..before.len() - article.len()]);
+                let phrase = place(value);
+                if article == "The " {
+                    let mut chars = phrase.chars();
+                    if let Some(first) = chars.next() {
+                        out.extend(first.to_uppercase());
+                        out.push_str(chars.as_str());
+                    }
+                } else {
+                    out.push_str(&phrase);
+                }
+                rest = &after[" zone".len()..];
+            }
+            _ => {
+                out.push_str(before);
+                out.push_str(value);
+                rest = after;
+            }
+        }
+    }
+    out.push_str(rest);
+    Some(out)
+}
+
 impl Template {
     pub fn patterns(&self) -> Result<Vec<Pattern>, String> {
         self.plan.iter().map(|s| Pattern::parse(s)).collect()
@@ -168,6 +220,16 @@ impl Template {
     fn used(&self) -> BTreeSet<String> {
         let texts = self.plan.iter().chain(&self.instructions);
         texts.flat_map(|t| placeholders(t)).map(str::to_string).collect()
+    }
+
+    /// Placeholders a substitution binds: the object placeholders used, their start zones and
+    /// the free zone placeholders used.
+    pub fn bound_vars(&self) -> BTreeSet<String> {
+        let objects = self.object_vars();
+        let starts = objects.iter().map(|o| start_zone_var(o));
+        let free = self.free_zone_vars();
+        let names = objects.iter().chain(&free).map(|v| v.to_string());
+        names.chain(starts).collect()
     }
 
     /// Check the template on its own; the message says what to fix.
@@ -233,6 +295,113 @@ pub fn load_templates(path: &Path) -> Result<Vec<Template>, ContentError> {
         t.validate().map_err(invalid)?;
     }
     Ok(file.templates)
+}
+
+/// The private phrasings file: `[[template]]` tables with `id` and `instructions` only.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PrivateFile {
+    #[serde(rename = "template", default)]
+    templates: Vec<PrivateEntry>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PrivateEntry {
+    id: String,
+    instructions: Vec<String>,
+}
+
+/// Phrasings that replace the public ones in the test split of a private test set, by
+/// template id, with the SHA-256 digest of the file they came from. Their text must never be
+/// written anywhere public; a manifest records only [`PrivatePhrasings::summary`].
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct PrivatePhrasings {
+    by_template: BTreeMap<String, Vec<String>>,
+    sha256: String,
+}
+
+impl PrivatePhrasings {
+    /// Parse and check a private phrasings file's text against the (public) templates: every
+    /// id names a template, appears once and has at least one phrasing; every phrasing obeys
+    /// the template rules (each placeholder of the plan is mentioned), uses only placeholders
+    /// the template binds, and is not one of the template's public phrasings.
+    pub fn parse(text: &str, templates: &[Template]) -> Result<PrivatePhrasings, String> {
+        let file: PrivateFile = toml::from_str(text).map_err(|e| e.to_string())?;
+        if file.templates.is_empty() {
+            return Err("no [[template]] entries".into());
+        }
+        let mut by_template = BTreeMap::new();
+        for entry in file.templates {
+            let ctx = |m: String| format!("private phrasings of template {:?}: {m}", entry.id);
+            let Some(public) = templates.iter().find(|t| t.id == entry.id) else {
+                return Err(format!(
+                    "unknown template id {:?} (ids are those of the templates file, e.g. {:?})",
+                    entry.id,
+                    templates.first().map_or("t01_move", |t| t.id.as_str())
+                ));
+            };
+            if by_template.contains_key(&entry.id) {
+                return Err(ctx("the id appears twice".into()));
+            }
+            if entry.instructions.is_empty() {
+                return Err(ctx("no instruction phrasing".into()));
+            }
+            let bound = public.bound_vars();
+            for text in &entry.instructions {
+                if public.instructions.contains(text) {
+                    return Err(ctx(format!("{text:?} is also a public phrasing")));
+                }
+                if let Some(extra) = placeholders(text).into_iter().find(|p| !bound.contains(*p)) {
+                    return Err(ctx(format!(
+                        "{text:?} uses {{{extra}}}, which the template's plan does not bind"
+                    )));
+                }
+            }
+            let check = Template {
+                instructions: entry.instructions.clone(),
+                ..public.clone()
+            };
+            check.validate().map_err(|m| format!("private {m}"))?;
+            by_template.insert(entry.id, entry.instructions);
+        }
+        Ok(PrivatePhrasings {
+            by_template,
+            sha256: super::sha256::sha256_hex(text.as_bytes()),
+        })
+    }
+
+    /// The private phrasings of template `id`, if the file has any.
+    pub fn for_template(&self, id: &str) -> Option<&[String]> {
+        self.by_template.get(id).map(Vec::as_slice)
+    }
+
+    /// Template ids that have private phrasings, sorted.
+    pub fn template_ids(&self) -> impl Iterator<Item = &str> {
+        self.by_template.keys().map(String::as_str)
+    }
+
+    /// Counts and digest, for the manifest; never the text.
+    pub fn summary(&self) -> super::PrivatePhrasingsSummary {
+        super::PrivatePhrasingsSummary {
+            templates: self.by_template.len(),
+            phrasings: self.by_template.values().map(Vec::len).sum(),
+            sha256: self.sha256.clone(),
+        }
+    }
+}
+
+/// Read and check a private phrasings file (see [`PrivatePhrasings::parse`]) against the
+/// templates it extends.
+pub fn load_private_phrasings(path: &Path, templates: &[Template]) -> Result<PrivatePhrasings, ContentError> {
+    let text = std::fs::read_to_string(path).map_err(|source| ContentError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    PrivatePhrasings::parse(&text, templates).map_err(|message| ContentError::Invalid {
+        path: path.to_path_buf(),
+        message,
+    })
 }
 
 #[cfg(test)]
