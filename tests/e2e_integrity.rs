@@ -7,9 +7,9 @@
 //! never saw an instruction id or run number; the later plan file is scored but not ranked and
 //! cannot be linked for an integrated run; and no test-split page carries per-instruction data.
 
-mod support;
 #[path = "../worker/tests/remote_support/mod.rs"]
 mod remote_support;
+mod support;
 
 use std::sync::{Arc, Mutex};
 
@@ -62,8 +62,8 @@ async fn upload(server: &Server, token: &str, body: String) -> Value {
     v
 }
 
-#[tokio::test(flavor = "multi_thread")]
-async fn endpoint_traffic_cannot_raise_a_teams_planning_or_integrated_score() {
+#[test]
+fn endpoint_traffic_cannot_raise_a_teams_planning_or_integrated_score() {
     // What the participant's endpoint receives, as it would log it.
     let log: Arc<Mutex<Vec<String>>> = Arc::default();
     let seen = log.clone();
@@ -87,23 +87,25 @@ async fn endpoint_traffic_cannot_raise_a_teams_planning_or_integrated_score() {
     let truth = private_test_set(&set_dir);
     let config = fx.dir.path().join("server.toml");
     let text = std::fs::read_to_string(&config).unwrap();
-    let text = format!(
-        "test_set = \"{}\"\ncontest = true\n{text}",
-        set_dir.display()
-    );
+    let text = format!("test_set = \"{}\"\ncontest = true\n{text}", set_dir.display());
     std::fs::write(&config, text).unwrap();
     let server = fx.serve(1);
-    let token = team(&server, "Loggers").await;
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    rt.block_on(the_story(&server, &policy, &truth, &log));
+}
+
+async fn the_story(server: &Server, policy: &TestServer, truth: &[Instruction], log: &Mutex<Vec<String>>) {
+    let token = team(server, "Loggers").await;
 
     // A plan file before any policy run: ranked.
-    let before = upload(&server, &token, plan_file(&truth, true)).await;
+    let before = upload(server, &token, plan_file(truth, true)).await;
     let before_id = before["id"].as_i64().unwrap();
 
     let body = json!({"endpoint": policy.url(), "split": "test"});
-    let (status, reg) = register_policy(&server, &token, body).await;
+    let (status, reg) = register_policy(server, &token, body).await;
     assert_eq!(status, 201, "{reg}");
     let run = reg["id"].as_i64().unwrap();
-    let view = wait_for(&server, run, &token, "the test policy run", finished).await;
+    let view = wait_for(server, run, &token, "the test policy run", finished).await;
 
     // 1. Nothing the endpoint received names an instruction or the run.
     let received = log.lock().unwrap().clone();
@@ -118,7 +120,7 @@ async fn endpoint_traffic_cannot_raise_a_teams_planning_or_integrated_score() {
             id.len() == 27 && id.starts_with("ep-") && id[3..].chars().all(|c| c.is_ascii_hexdigit()),
             "episode id is not opaque: {entry}"
         );
-        for i in &truth {
+        for i in truth {
             assert!(!entry.contains(&i.id), "{entry} names {}", i.id);
         }
         assert!(!entry.contains(&format!("r{run}/")), "{entry} names the run");
@@ -126,31 +128,52 @@ async fn endpoint_traffic_cannot_raise_a_teams_planning_or_integrated_score() {
 
     // 2. Test-split pages are aggregate only.
     let text = view.to_string();
-    for i in &truth {
-        assert!(!text.contains(&i.id), "the policy run page names {}: {view:#}", i.id);
+    for i in truth {
+        assert!(
+            !text.contains(&i.id),
+            "the policy run page names {}: {view:#}",
+            i.id
+        );
     }
     let eval = &view["latest_run"]["evaluation"];
     assert_eq!(eval["episodes"], json!([]), "{view:#}");
-    assert!(eval["failure_counts"].as_array().is_some_and(|c| !c.is_empty()), "{view:#}");
-    let (_, plan_view) = get_json(&server, &format!("/api/v1/submissions/{before_id}"), Some(&token)).await;
-    assert_eq!(plan_view["latest_run"]["instructions"], json!([]), "{plan_view:#}");
-    assert_eq!(plan_view["latest_run"]["instructions_total"], truth.len(), "{plan_view:#}");
+    assert!(
+        eval["failure_counts"].as_array().is_some_and(|c| !c.is_empty()),
+        "{view:#}"
+    );
+    let (_, plan_view) = get_json(server, &format!("/api/v1/submissions/{before_id}"), Some(&token)).await;
+    assert_eq!(
+        plan_view["latest_run"]["instructions"],
+        json!([]),
+        "{plan_view:#}"
+    );
+    assert_eq!(
+        plan_view["latest_run"]["instructions_total"],
+        truth.len(),
+        "{plan_view:#}"
+    );
     assert_eq!(plan_view["ranked"], true, "{plan_view:#}");
-    for i in &truth {
+    for i in truth {
         assert!(!plan_view.to_string().contains(&i.id), "{plan_view:#}");
     }
 
     // 3. The ground truth the log reveals, uploaded afterwards: scored, shown, not ranked.
-    let after = upload(&server, &token, plan_file(&truth, false)).await;
-    assert_eq!(after["scores"]["em"], 1.0, "a plan file equal to the ground truth scores EM 1: {after}");
+    let after = upload(server, &token, plan_file(truth, false)).await;
+    assert_eq!(
+        after["scores"]["em"], 1.0,
+        "a plan file equal to the ground truth scores EM 1: {after}"
+    );
     let after_id = after["id"].as_i64().unwrap();
-    let (_, after_view) = get_json(&server, &format!("/api/v1/submissions/{after_id}"), Some(&token)).await;
+    let (_, after_view) = get_json(server, &format!("/api/v1/submissions/{after_id}"), Some(&token)).await;
     assert_eq!(after_view["ranked"], false, "{after_view:#}");
     assert!(
-        after_view["unranked_reason"].as_str().unwrap().contains("policy run"),
+        after_view["unranked_reason"]
+            .as_str()
+            .unwrap()
+            .contains("policy run"),
         "{after_view:#}"
     );
-    let (_, board) = get_json(&server, "/api/v1/leaderboard?track=planning&split=test", None).await;
+    let (_, board) = get_json(server, "/api/v1/leaderboard?track=planning&split=test", None).await;
     let rows = board["rows"].as_array().unwrap();
     assert_eq!(rows.len(), 1, "{board:#}");
     assert_eq!(rows[0]["submission_id"], before_id, "{board:#}");
@@ -158,13 +181,19 @@ async fn endpoint_traffic_cannot_raise_a_teams_planning_or_integrated_score() {
 
     // 4. An integrated test run cannot link the later plan file; the earlier one it can.
     let body = json!({"endpoint": policy.url(), "split": "test", "plans": after_id});
-    let (status, refused) = register_policy(&server, &token, body).await;
+    let (status, refused) = register_policy(server, &token, body).await;
     assert_eq!(status, 400, "{refused}");
-    assert!(refused["error"].as_str().unwrap().contains("created after"), "{refused}");
+    assert!(
+        refused["error"].as_str().unwrap().contains("created after"),
+        "{refused}"
+    );
     let body = json!({"endpoint": policy.url(), "split": "test", "plans": before_id});
-    let (status, linked) = register_policy(&server, &token, body).await;
+    let (status, linked) = register_policy(server, &token, body).await;
     assert_eq!(status, 201, "{linked}");
     let id = linked["id"].as_i64().unwrap();
-    let view = wait_for(&server, id, &token, "the integrated run", finished).await;
-    assert_eq!(view["latest_run"]["scores"]["em"], 0.0, "integrated runs show their EM: {view:#}");
+    let view = wait_for(server, id, &token, "the integrated run", finished).await;
+    assert_eq!(
+        view["latest_run"]["scores"]["em"], 0.0,
+        "integrated runs show their EM: {view:#}"
+    );
 }

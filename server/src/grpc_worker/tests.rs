@@ -172,7 +172,15 @@ async fn lease_heartbeat_and_report_over_grpc() {
     assert_eq!(run.evaluation.unwrap().state, "finished");
     let sr = run.scores.sr.unwrap();
     assert!((sr - 1.0 / gt.plan.len() as f64).abs() < 1e-12);
-    assert_eq!(run.scores.mse, Some(0.5));
+    // Only task 0 was reported: each unreported task of the offline episode is one failed
+    // prediction, so a worker (or policy) that stops early never lowers the MSE.
+    let missing = (gt.plan.len() - 1) as f64;
+    let expected = (0.5 * 3.0 + kitchen_r_core::metrics::FAILED_PREDICTION_MSE * missing) / (3.0 + missing);
+    assert!(
+        (run.scores.mse.unwrap() - expected).abs() < 1e-12,
+        "{:?}",
+        run.scores
+    );
 }
 
 #[tokio::test]
