@@ -9,6 +9,7 @@
 //! scene file or a plan string means the same thing everywhere.
 
 pub mod assets;
+pub mod audit;
 pub mod catalogue;
 pub mod dataset;
 pub mod describe;
