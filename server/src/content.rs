@@ -49,8 +49,7 @@ pub struct TestSetInfo {
 }
 
 /// The notice shown wherever a public sample is served.
-pub const PUBLIC_SAMPLE_NOTICE: &str =
-    "public sample: its answers are public; not for a contest";
+pub const PUBLIC_SAMPLE_NOTICE: &str = "public sample: its answers are public; not for a contest";
 
 #[derive(Debug)]
 pub struct Content {
@@ -247,7 +246,10 @@ fn ground_truth_digest(dataset: &Dataset) -> String {
     use sha2::{Digest, Sha256};
     let mut h = Sha256::new();
     for i in dataset.dev.iter().chain(&dataset.test) {
-        h.update(serde_json::to_vec(&(&i.id, &i.scene, &i.instruction, &i.plan, &i.place_targets)).unwrap_or_default());
+        h.update(
+            serde_json::to_vec(&(&i.id, &i.scene, &i.instruction, &i.plan, &i.place_targets))
+                .unwrap_or_default(),
+        );
         h.update(b"\n");
     }
     hex::encode(h.finalize())[..16].to_string()
@@ -260,4 +262,54 @@ fn jsonl<T: Serialize>(items: impl Iterator<Item = T>) -> anyhow::Result<Bytes> 
         out.push(b'\n');
     }
     Ok(out.into())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn assets() -> std::path::PathBuf {
+        kitchen_r_core::assets::assets_dir()
+    }
+
+    #[test]
+    fn the_repository_test_split_is_a_public_sample_and_cannot_run_a_contest() {
+        let c = Content::load(&assets(), None).unwrap();
+        assert_eq!(c.test_set.kind, TestSetKind::PublicSample);
+        assert_eq!(c.test_set.notice, PUBLIC_SAMPLE_NOTICE);
+        let e = c.check_contest_ready().unwrap_err().to_string();
+        assert!(e.contains("public sample") && e.contains("--test-set"), "{e}");
+    }
+
+    #[test]
+    fn a_private_set_is_served_instead_of_the_public_sample() {
+        let dir = tempfile::tempdir().unwrap();
+        let public = assets().join("dataset");
+        let gt = std::fs::read_to_string(public.join("test_ground_truth.jsonl")).unwrap();
+        let two: String = gt.lines().take(2).map(|l| format!("{l}\n")).collect();
+        std::fs::write(dir.path().join("test_ground_truth.jsonl"), two).unwrap();
+        std::fs::write(dir.path().join("dev.jsonl"), "").unwrap();
+        let manifest = |extra: &str| {
+            format!(
+                r#"{{"kind": "private", {extra} "generator_version": 3, "templates": 58, "dev": 0, "test": 2,
+                "private_phrasings": {{"templates": 1, "phrasings": 4, "sha256": "{}"}}}}"#,
+                "a".repeat(64)
+            )
+        };
+        std::fs::write(dir.path().join("manifest.json"), manifest("")).unwrap();
+        let c = Content::load(&assets(), Some(dir.path())).unwrap();
+        assert_eq!(c.test_set.kind, TestSetKind::Private);
+        assert_eq!(c.ground_truth(Split::Test).len(), 2);
+        assert!(
+            c.ground_truth(Split::Dev).len() > 100,
+            "dev stays the public split"
+        );
+        c.check_contest_ready().unwrap();
+        let public = Content::load(&assets(), None).unwrap();
+        assert_ne!(c.dataset_tag(), public.dataset_tag());
+        // A set that records its seed is not private, whatever its kind says.
+        std::fs::write(dir.path().join("manifest.json"), manifest(r#""seed": 7,"#)).unwrap();
+        let e = format!("{:#}", Content::load(&assets(), Some(dir.path())).unwrap_err());
+        assert!(e.contains("seed"), "{e}");
+    }
 }
