@@ -163,6 +163,7 @@ async fn the_story(server: &Server, policy: &TestServer, truth: &[Instruction], 
         after["scores"]["em"], 1.0,
         "a plan file equal to the ground truth scores EM 1: {after}"
     );
+    assert!(after["warnings"].to_string().contains("not ranked"), "{after}");
     let after_id = after["id"].as_i64().unwrap();
     let (_, after_view) = get_json(server, &format!("/api/v1/submissions/{after_id}"), Some(&token)).await;
     assert_eq!(after_view["ranked"], false, "{after_view:#}");

@@ -246,11 +246,19 @@ impl AppState {
         };
         self.inner.leaderboard.invalidate();
         tracing::info!(submission = id, team = %team.name, %split, em = score.em, "plans submitted");
+        let mut warnings = plans::warnings(&score);
+        let row = store::submission(self.pool(), id).await?;
+        if let Some(why) = match row {
+            Some(row) => self.unranked_reason(&row).await?,
+            None => None,
+        } {
+            warnings.push(format!("not ranked: {why}"));
+        }
         Ok(Submitted {
             id,
             split,
             scores: Scores::em(Some(score.em)),
-            warnings: plans::warnings(&score),
+            warnings,
         })
     }
 
