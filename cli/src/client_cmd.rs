@@ -231,7 +231,11 @@ pub fn rescore(args: RescoreArgs) -> anyhow::Result<()> {
             );
         }
         for f in list("skipped") {
-            println!("skipped: submission {}: {}", f["id"], f["error"].as_str().unwrap_or("?"));
+            println!(
+                "skipped: submission {}: {}",
+                f["id"],
+                f["error"].as_str().unwrap_or("?")
+            );
         }
         let failed = list("failed");
         for f in &failed {

@@ -13,8 +13,8 @@ use std::sync::Arc;
 use anyhow::Context;
 use clap::Args;
 use kitchen_r_server::Config;
-use kitchen_r_worker::job::client::Worker;
 use kitchen_r_worker::job::WorkerConfig;
+use kitchen_r_worker::job::client::Worker;
 use kitchen_r_worker::remote::{AllowedNetworks, RemoteConfig};
 use tokio::sync::watch;
 

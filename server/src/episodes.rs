@@ -235,7 +235,9 @@ pub fn aggregate(episodes: &[Episode], plans: Option<&HashMap<String, Vec<String
     });
     let (weighted, samples) = (offline.iter())
         .flat_map(|e| e.mse_samples())
-        .fold((0.0, 0u64), |(w, n), (mse, k)| (w + mse * f64::from(k), n + u64::from(k)));
+        .fold((0.0, 0u64), |(w, n), (mse, k)| {
+            (w + mse * f64::from(k), n + u64::from(k))
+        });
     let mse = (samples > 0).then(|| weighted / samples as f64);
     let mut scores = RunScores {
         sr,

@@ -129,7 +129,10 @@ async fn brief(State(s): State<AppState>, Path(id): Path<String>) -> Result<Resp
         .content()
         .scene(&id)
         .ok_or_else(|| ServiceError::not_found(format!("scene {id:?}")))?;
-    Ok(typed("text/plain; charset=utf-8", Bytes::from(scene.planner_brief())))
+    Ok(typed(
+        "text/plain; charset=utf-8",
+        Bytes::from(scene.planner_brief()),
+    ))
 }
 
 async fn scenes(State(s): State<AppState>) -> impl IntoResponse {

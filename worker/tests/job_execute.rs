@@ -76,7 +76,11 @@ fn a_privileged_online_job_with_the_oracle_succeeds() {
         assert!(t.success && t.completion_time_s > 0.0, "{t:?}\n{}", r.log_tail);
         assert_eq!((t.mse, t.mse_samples), (0.0, 0));
     }
-    assert!(r.log_tail.contains("episode ep-0123456789abcdef01234567"), "{}", r.log_tail);
+    assert!(
+        r.log_tail.contains("episode ep-0123456789abcdef01234567"),
+        "{}",
+        r.log_tail
+    );
     assert!(r.wall_ms > 0);
 }
 

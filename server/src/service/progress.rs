@@ -206,7 +206,10 @@ mod tests {
 
     #[test]
     fn reasons_group_by_kind_with_numbers_masked() {
-        assert_eq!(reason_kind("time limit of 120 s reached"), "time limit of N s reached");
+        assert_eq!(
+            reason_kind("time limit of 120 s reached"),
+            "time limit of N s reached"
+        );
         assert_eq!(
             reason_kind("invalid action chunk: action 3: gripper 1.7 outside [0, 1]"),
             "invalid action chunk: action N: gripper N outside [N, N]"

@@ -15,9 +15,9 @@ use serde::Serialize;
 
 use super::{AppState, now_ms};
 use crate::config::PlanLimits;
+use crate::episodes;
 use crate::error::ServiceError;
 use crate::plans;
-use crate::episodes;
 use crate::service::policies::{CONTROL_SCORER, parse_body};
 use crate::store::queue;
 use crate::store::runs as run_store;
