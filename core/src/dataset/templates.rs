@@ -432,6 +432,34 @@ mod tests {
     }
 
     #[test]
+    fn places_render_by_the_callback_only_in_the_zone_form() {
+        let b: Binding = [("a", "bowl"), ("x", "green"), ("y", "red")]
+            .into_iter()
+            .map(|(k, v)| (k.to_string(), v.to_string()))
+            .collect();
+        let mut seen = Vec::new();
+        let mut furniture = |c: &str| {
+            seen.push(c.to_string());
+            "the dining table".to_string()
+        };
+        assert_eq!(
+            fill_places(
+                "The {x} zone gets the {a}; then the {y} zones.",
+                &b,
+                &mut furniture
+            )
+            .unwrap(),
+            "The dining table gets the bowl; then the red zones."
+        );
+        assert_eq!(
+            fill_places("Put the {a} on the {x} zone, bathe {y} zone.", &b, &mut furniture).unwrap(),
+            "Put the bowl on the dining table, bathe red zone."
+        );
+        assert_eq!(seen, ["green", "green"]);
+        assert_eq!(fill_places("the {b} zone", &b, |_| String::new()), None);
+    }
+
+    #[test]
     fn underdetermined_templates_are_refused() {
         let t = Template {
             id: "t".into(),

@@ -187,6 +187,201 @@ fn check_plan_rejects_broken_plans() {
     }
 }
 
+#[test]
+fn every_template_has_at_least_four_phrasings() {
+    let ts = templates::load_templates(&assets().join("templates.toml")).unwrap();
+    for t in &ts {
+        assert!(
+            t.instructions.len() >= 4,
+            "{}: {} phrasings",
+            t.id,
+            t.instructions.len()
+        );
+    }
+}
+
+#[test]
+fn places_are_named_by_colour_or_furniture_and_plans_use_colours() {
+    let cat = Catalogue::load(&assets().join("objects.toml")).unwrap();
+    let scenes = Scene::load_all(&assets().join("scenes"), &cat).unwrap();
+    let d = generated();
+    let (mut by_name, mut by_colour) = (0, 0);
+    for i in d.dev.iter().chain(&d.test) {
+        let scene = scenes.iter().find(|s| s.id == i.scene).unwrap();
+        assert!(!i.instruction.contains(['{', '}']), "{}: {}", i.id, i.instruction);
+        let text = i.instruction.to_lowercase();
+        let names = scene.zones.iter().flat_map(|z| &z.names);
+        by_name += usize::from(names.into_iter().any(|n| text.contains(n.as_str())));
+        by_colour += usize::from(text.contains(" zone"));
+        for step in &i.plan {
+            if let Step::MoveTo { zone } = step.parse::<Step>().unwrap() {
+                assert!(scene.zone(&zone).is_some(), "{}: {step}", i.id);
+            }
+        }
+    }
+    let total = d.dev.len() + d.test.len();
+    assert!(
+        by_name > total / 4,
+        "{by_name} of {total} name a place by furniture"
+    );
+    assert!(
+        by_colour > total / 4,
+        "{by_colour} of {total} name a place by colour"
+    );
+}
+
+const PRIVATE: &str = r#"
+[[template]]
+id = "t01_move"
+instructions = ["Kindly relocate the {a} onto the {x} zone.", "The {x} zone wants the {a}."]
+
+[[template]]
+id = "t36_swap"
+instructions = ["Have the {a} and the {b} change places, the {a} going first."]
+"#;
+
+fn public_templates() -> Vec<templates::Template> {
+    templates::load_templates(&assets().join("templates.toml")).unwrap()
+}
+
+fn private_options(seed: u64) -> GenerateOptions {
+    let private = templates::PrivatePhrasings::parse(PRIVATE, &public_templates()).unwrap();
+    GenerateOptions {
+        seed,
+        private: Some(private),
+    }
+}
+
+#[test]
+fn private_phrasings_replace_test_phrasings_only() {
+    let public = generated();
+    let private = generate_with(&private_options(COMMITTED_SEED), &assets()).unwrap();
+    assert_eq!(
+        private.dev, public.dev,
+        "the dev split does not depend on private phrasings"
+    );
+    let is_private = |text: &str| {
+        ["Kindly relocate", "wants the", "change places, the"]
+            .iter()
+            .any(|p| text.contains(p))
+    };
+    assert!(private.dev.iter().all(|i| !is_private(&i.instruction)));
+    let mut seen = 0;
+    for i in &private.test {
+        let covered = ["t01_move", "t36_swap"].contains(&i.template.as_str());
+        assert_eq!(covered, is_private(&i.instruction), "{}: {}", i.id, i.instruction);
+        seen += usize::from(covered);
+    }
+    assert!(seen >= 10, "{seen} private test instructions");
+    // Plans do not depend on the phrasing: the same template still gives colour plans.
+    let swap = private.test.iter().find(|i| i.template == "t36_swap").unwrap();
+    assert!(swap.plan[0].starts_with("move to the ") && swap.plan[0].ends_with(" zone"));
+}
+
+#[test]
+fn private_manifest_has_digest_and_no_seed() {
+    let d = generate_with(&private_options(987_654_321), &assets()).unwrap();
+    let m = &d.manifest;
+    assert!(m.is_private() && !m.is_public_sample());
+    assert_eq!(m.seed, None);
+    let p = m.private_phrasings.as_ref().unwrap();
+    assert_eq!((p.templates, p.phrasings), (2, 3));
+    assert_eq!(p.sha256, sha256_hex(PRIVATE.as_bytes()));
+    assert!(
+        m.tag()
+            .starts_with(&format!("dataset-private-{}", &p.sha256[..12]))
+    );
+    let out = std::env::temp_dir().join(format!("kitchen-r-private-{}", std::process::id()));
+    write(&d, &out).unwrap();
+    let json = std::fs::read_to_string(out.join("manifest.json")).unwrap();
+    assert!(!json.contains("seed") && !json.contains("987654321"), "{json}");
+    assert!(
+        json.contains("\"kind\": \"private\"") && json.contains(&p.sha256),
+        "{json}"
+    );
+    for name in ["manifest.json", "dev.jsonl"] {
+        let text = std::fs::read_to_string(out.join(name)).unwrap();
+        assert!(
+            !text.contains("Kindly relocate"),
+            "{name} leaks a private phrasing"
+        );
+    }
+    assert_eq!(Dataset::load(&out).unwrap(), d);
+    std::fs::remove_dir_all(&out).unwrap();
+}
+
+#[test]
+fn generation_is_deterministic_with_private_phrasings() {
+    let a = generate_with(&private_options(5), &assets()).unwrap();
+    let b = generate_with(&private_options(5), &assets()).unwrap();
+    assert_eq!(a, b);
+    assert_ne!(
+        a.test,
+        generate_with(&private_options(6), &assets()).unwrap().test
+    );
+}
+
+#[test]
+fn bad_private_phrasings_are_refused() {
+    let ts = public_templates();
+    let parse = |text: &str| templates::PrivatePhrasings::parse(text, &ts).unwrap_err();
+    let entry =
+        |id: &str, phrasing: &str| format!("[[template]]\nid = {id:?}\ninstructions = [{phrasing:?}]\n");
+    let cases = [
+        (
+            entry("t99_nope", "Move the {a} to the {x} zone."),
+            "unknown template id \"t99_nope\"",
+        ),
+        (
+            entry("t01_move", "Move the {a} somewhere."),
+            "does not mention {x}",
+        ),
+        (
+            entry("t01_move", "Move the {a} to the {x} zone."),
+            "also a public phrasing",
+        ),
+        (
+            entry("t01_move", "Move the {a} to the {x} zone near the {b}."),
+            "uses {b}",
+        ),
+        (entry("t01_move", "Move the {a} to the {q} zone."), "uses {q}"),
+        (
+            entry("t01_move", "Shove the {a} to the {x} zone.")
+                + &entry("t01_move", "Shove the {a} at the {x} zone."),
+            "appears twice",
+        ),
+        (
+            entry("t01_move", "Shove the {a} to the {x} zone.") + "plan = [\"move to the {za} zone\"]\n",
+            "unknown field `plan`",
+        ),
+        (String::new(), "no [[template]]"),
+    ];
+    for (text, want) in cases {
+        let err = parse(&text);
+        assert!(err.contains(want), "{text}: {err}");
+    }
+    let missing = entry("t01_move", "Move the {a} somewhere.");
+    assert!(parse(&missing).contains("t01_move"));
+}
+
+#[test]
+fn old_manifests_read_as_public_samples_and_kinds_are_checked() {
+    let old = r#"{"seed": 20241, "generator_version": 2, "templates": 58, "dev": 163, "test": 400}"#;
+    let m: Manifest = serde_json::from_str(old).unwrap();
+    assert!(m.is_public_sample() && m.check().is_ok());
+    assert_eq!(
+        (m.seed, m.tag().as_str()),
+        (Some(20241), "dataset-seed-20241-gen-2")
+    );
+    let mut private = generate_with(&private_options(1), &assets()).unwrap().manifest;
+    private.check().unwrap();
+    private.seed = Some(1);
+    assert!(private.check().unwrap_err().contains("seed"));
+    private.seed = None;
+    private.kind = DatasetKind::PublicSample;
+    assert!(private.check().is_err());
+}
+
 /// Not a check: `cargo test -p kitchen-r-core -- --ignored write_committed_dataset` rewrites
 /// `assets/dataset/` from the committed seed (the CLI's `dataset generate` does the same).
 #[test]
