@@ -126,8 +126,19 @@ fn print_scores(view: &Value) {
         Value::String(t) => Some(format!("{k} = {t}")),
         _ => None,
     };
-    let parts: Vec<String> = ["sr", "mse", "m", "p"].iter().filter_map(|k| show(k)).collect();
+    let parts: Vec<String> = ["sr", "mse", "em", "m", "p"]
+        .iter()
+        .filter_map(|k| show(k))
+        .collect();
     println!("submission {}: {}", view["id"], parts.join(", "));
+    // Both splits: how often each kind of failure happened (the test split shows only this).
+    for c in view["latest_run"]["evaluation"]["failure_counts"]
+        .as_array()
+        .into_iter()
+        .flatten()
+    {
+        println!("  {:>5} × {}", c["count"], c["reason"].as_str().unwrap_or("?"));
+    }
     for e in view["latest_run"]["evaluation"]["episodes"]
         .as_array()
         .into_iter()
