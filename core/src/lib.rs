@@ -17,6 +17,7 @@ pub mod error;
 pub mod layout;
 pub mod metrics;
 pub mod plan;
+pub mod reach;
 pub mod scene;
 pub mod topdown;
 

@@ -6,10 +6,12 @@
 //! zone other than the current one; `pick` needs an empty gripper and the robot at the object's
 //! zone; `place` puts the held object into the zone the robot is at, never into the zone it
 //! was picked up from (that would be a no-op, or a detour the instruction cannot express). A place target is a free spot in that zone: the object's footprint keeps
-//! [`ZONE_MARGIN`] from the zone edge and [`OBJECT_GAP`] from every other object there.
+//! [`ZONE_MARGIN`] from the zone edge and [`OBJECT_GAP`] from every other object there, and
+//! the arm reaches it from the zone's approach pose ([`crate::reach`]).
 
 use crate::catalogue::Catalogue;
 use crate::plan::{Step, parse_plan};
+use crate::reach::ArmReach;
 use crate::scene::{Scene, Zone};
 
 use super::rng::SplitMix64;
@@ -25,15 +27,35 @@ const SPOT_TRIES: usize = 96;
 /// Footprint of an object already in a zone: centre and bounding-circle radius.
 pub type Footprint = ([f64; 2], f64);
 
-/// Chooses a place spot: given the zone, the placed object's radius and the other footprints.
-pub type SpotChooser<'a> = dyn FnMut(&Zone, f64, &[Footprint]) -> Result<[f64; 2], String> + 'a;
+/// The geometry of an object being placed, from its catalogue model.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Placed {
+    /// Footprint bounding-circle radius.
+    pub radius: f64,
+    /// Centre height above the supporting surface.
+    pub half_height: f64,
+    /// Grasp point relative to the centre, object frame.
+    pub grasp_offset: [f64; 3],
+}
+
+impl Placed {
+    pub fn of(model: &crate::catalogue::ObjectModel) -> Placed {
+        Placed {
+            radius: model.shape.footprint_radius(),
+            half_height: model.shape.half_height(),
+            grasp_offset: model.grasp_offset,
+        }
+    }
+}
+
+/// Chooses a place spot: given the zone, the placed object and the other footprints.
+pub type SpotChooser<'a> = dyn FnMut(&Zone, &Placed, &[Footprint]) -> Result<[f64; 2], String> + 'a;
 
 /// A key object during symbolic execution.
 #[derive(Debug, Clone)]
 struct Obj {
     name: String,
-    radius: f64,
-    half_height: f64,
+    placed: Placed,
     zone: String,
     xy: [f64; 2],
 }
@@ -72,8 +94,7 @@ impl<'s> SymbolicWorld<'s> {
                 .ok_or_else(|| format!("unknown zone {:?}", o.zone))?;
             objects.push(Obj {
                 name: o.name(),
-                radius: m.shape.footprint_radius(),
-                half_height: m.shape.half_height(),
+                placed: Placed::of(m),
                 zone: o.zone.clone(),
                 xy: [z.center[0] + o.offset[0], z.center[1] + o.offset[1]],
             });
@@ -88,8 +109,8 @@ impl<'s> SymbolicWorld<'s> {
     }
 
     /// Apply one step. For a `place`, `spot` chooses where the object's centre goes, given the
-    /// zone, the object's footprint radius and the other objects' footprints in that zone; the
-    /// returned value is then the world target `[x, y, z]`.
+    /// zone, the object's geometry and the other objects' footprints in that zone; the returned
+    /// value is then the world target `[x, y, z]`.
     pub fn step(&mut self, step: &Step, spot: &mut SpotChooser<'_>) -> Result<Option<[f64; 3]>, String> {
         match step {
             Step::MoveTo { zone } => {
@@ -128,13 +149,13 @@ impl<'s> SymbolicWorld<'s> {
                 let zone = self.scene.zone(&zone_name).ok_or("robot at an unknown zone")?;
                 let others: Vec<Footprint> = (self.objects.iter().enumerate())
                     .filter(|(j, o)| *j != i && o.zone == zone_name)
-                    .map(|(_, o)| (o.xy, o.radius))
+                    .map(|(_, o)| (o.xy, o.placed.radius))
                     .collect();
-                let xy = spot(zone, self.objects[i].radius, &others)?;
+                let xy = spot(zone, &self.objects[i].placed, &others)?;
                 let o = &mut self.objects[i];
                 (o.zone, o.xy) = (zone_name, xy);
                 self.held = None;
-                Ok(Some([xy[0], xy[1], mm(zone.height + o.half_height)]))
+                Ok(Some([xy[0], xy[1], mm(zone.height + o.placed.half_height)]))
             }
         }
     }
@@ -155,13 +176,22 @@ pub fn spot_is_free(zone: &Zone, radius: f64, others: &[Footprint], xy: [f64; 2]
         })
 }
 
-/// A random free spot on the millimetre grid, or an error when the zone looks full.
+/// Whether the arm can place `placed` with its centre at `xy` in `zone` from the zone's
+/// approach pose ([`ArmReach::can_place`]).
+pub fn spot_is_reachable(arm: &ArmReach, zone: &Zone, placed: &Placed, xy: [f64; 2]) -> bool {
+    arm.can_place(zone, placed.half_height, placed.grasp_offset, xy)
+}
+
+/// A random free spot on the millimetre grid that the arm reaches from the zone's approach
+/// pose, or an error when the zone looks full.
 pub fn random_spot(
     rng: &mut SplitMix64,
+    arm: &ArmReach,
     zone: &Zone,
-    radius: f64,
+    placed: &Placed,
     others: &[Footprint],
 ) -> Result<[f64; 2], String> {
+    let radius = placed.radius;
     let half = |i: usize| ((zone.size[i] / 2.0 - ZONE_MARGIN - radius) * 1000.0).floor() as i64;
     let (hx, hy) = (half(0), half(1));
     if hx < 0 || hy < 0 {
@@ -172,22 +202,34 @@ pub fn random_spot(
             mm(zone.center[0] + rng.symmetric(hx) as f64 / 1000.0),
             mm(zone.center[1] + rng.symmetric(hy) as f64 / 1000.0),
         ];
-        if spot_is_free(zone, radius, others, xy) {
+        if spot_is_free(zone, radius, others, xy) && spot_is_reachable(arm, zone, placed, xy) {
             return Ok(xy);
         }
     }
-    Err(format!("no free spot left in the {} zone", zone.color))
+    Err(format!("no free spot in reach left in the {} zone", zone.color))
 }
 
 /// Run `plan` from the scene's start, choosing place spots with `rng`; the place targets.
+/// Reach is that of the committed robot ([`ArmReach::committed`]); see [`plan_targets_with`].
 pub fn plan_targets(
     scene: &Scene,
     catalogue: &Catalogue,
     plan: &[Step],
     rng: &mut SplitMix64,
 ) -> Result<Vec<[f64; 3]>, String> {
+    plan_targets_with(scene, catalogue, ArmReach::committed()?, plan, rng)
+}
+
+/// [`plan_targets`] for the arm `arm` (read from the `robot.toml` beside the scenes).
+pub fn plan_targets_with(
+    scene: &Scene,
+    catalogue: &Catalogue,
+    arm: &ArmReach,
+    plan: &[Step],
+    rng: &mut SplitMix64,
+) -> Result<Vec<[f64; 3]>, String> {
     let mut world = SymbolicWorld::new(scene, catalogue)?;
-    let mut spot = |z: &Zone, r: f64, others: &[Footprint]| random_spot(rng, z, r, others);
+    let mut spot = |z: &Zone, p: &Placed, others: &[Footprint]| random_spot(rng, arm, z, p, others);
     let mut targets = Vec::new();
     for s in plan {
         targets.extend(world.step(s, &mut spot)?);
@@ -196,11 +238,22 @@ pub fn plan_targets(
 }
 
 /// Check a ground-truth plan and its place targets against a scene: every step canonical, 4 to 8
-/// steps, executable from the start, and each target a free spot in the zone it is placed in at
-/// the right height.
+/// steps, executable from the start, and each target a free spot in the zone it is placed in,
+/// within the committed arm's reach ([`ArmReach::committed`]) and at the right height.
 pub fn check_plan(
     scene: &Scene,
     catalogue: &Catalogue,
+    plan: &[String],
+    targets: &[[f64; 3]],
+) -> Result<(), String> {
+    check_plan_with(scene, catalogue, ArmReach::committed()?, plan, targets)
+}
+
+/// [`check_plan`] for the arm `arm`.
+pub fn check_plan_with(
+    scene: &Scene,
+    catalogue: &Catalogue,
+    arm: &ArmReach,
     plan: &[String],
     targets: &[[f64; 3]],
 ) -> Result<(), String> {
@@ -213,12 +266,19 @@ pub fn check_plan(
     }
     let mut world = SymbolicWorld::new(scene, catalogue)?;
     let mut next = targets.iter();
-    let mut spot = |z: &Zone, r: f64, others: &[Footprint]| {
+    let mut spot = |z: &Zone, p: &Placed, others: &[Footprint]| {
         let t = next.next().ok_or("fewer place targets than place steps")?;
         let xy = [t[0], t[1]];
-        spot_is_free(z, r, others, xy)
-            .then_some(xy)
-            .ok_or_else(|| format!("target {t:?} is not a free spot in the {} zone", z.color))
+        if !spot_is_free(z, p.radius, others, xy) {
+            return Err(format!("target {t:?} is not a free spot in the {} zone", z.color));
+        }
+        if !spot_is_reachable(arm, z, p, xy) {
+            return Err(format!(
+                "target {t:?} is out of the arm's reach from the {} zone's approach pose",
+                z.color
+            ));
+        }
+        Ok(xy)
     };
     let mut produced = Vec::new();
     for s in &steps {
