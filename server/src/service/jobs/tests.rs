@@ -313,6 +313,48 @@ async fn an_integrated_run_recomputes_em_from_the_linked_plans() {
         .unwrap();
     assert_eq!(board.rows.len(), 1);
     assert_eq!(board.rows[0].scores.m, s.m);
+    assert!(
+        (s.em.unwrap() - em).abs() < 1e-12,
+        "integrated runs show their EM: {s:?}"
+    );
+
+    // A rescore recomputes M and P from the recorded episodes as a new run, episodes kept.
+    let report = f.state.rescore_all(Some(crate::testutil::ADMIN)).await.unwrap();
+    assert_eq!(
+        (report.rescored, report.policy_runs_rescored),
+        (1, 1),
+        "{report:?}"
+    );
+    let view = f.state.get_submission(Some(&token), id).await.unwrap();
+    assert_eq!(view.runs, 2);
+    let run2 = view.latest_run.unwrap();
+    assert_ne!(run2.id, run.id);
+    assert_eq!(run2.scores, s);
+    let eval = run2.evaluation.unwrap();
+    assert_eq!(eval.rescored_from_run, Some(run.id));
+    assert_eq!(
+        eval.episodes.len(),
+        4,
+        "the rescored run shows the episodes it was computed from"
+    );
+
+    // An instruction changed under the recorded episodes: flagged, scores kept, nothing added.
+    sqlx::query("UPDATE jobs SET spec = json_set(spec, '$.place_targets[0][0]', -1.0)")
+        .execute(f.state.pool())
+        .await
+        .unwrap();
+    let report = f.state.rescore_all(Some(crate::testutil::ADMIN)).await.unwrap();
+    assert_eq!(report.policy_runs_rescored, 0, "{report:?}");
+    assert_eq!(report.needs_resimulation.len(), 1, "{report:?}");
+    assert!(
+        report.needs_resimulation[0].error.contains("changed"),
+        "{report:?}"
+    );
+    let view = f.state.get_submission(Some(&token), id).await.unwrap();
+    assert_eq!(view.runs, 2);
+    let run2 = view.latest_run.unwrap();
+    assert_eq!(run2.scores, s);
+    assert!(run2.evaluation.unwrap().needs_resimulation);
 }
 
 #[tokio::test]
