@@ -4,15 +4,22 @@
 //! An orthographic view from above, north (+y) up, one pixel per `1 / px_per_m` metres, the image
 //! covering exactly the room's inner floor. Painted back to front: floor, furniture footprints in
 //! their colours with a darker outline (sinks and stoves get a basin and burners so a reader can
-//! tell them apart), zones in their `rgb` colour, key objects at their start positions, and the
-//! walls as a frame along the border. The zone colours exist only here: the robot's cameras never
+//! tell them apart), zones in their `rgb` colour, key objects at their start positions as glyphs
+//! (one silhouette per model type in the object's colour, with a dark outline and a light halo
+//! so type and colour read on any zone; see [`Glyph`]), and the walls as a frame along the
+//! border. The zone colours exist only here: the robot's cameras never
 //! see them. Pure pixel arithmetic, so the same scene always gives the same PNG bytes.
 
 use image::codecs::png::PngEncoder;
 use image::{ExtendedColorType, ImageEncoder, Rgb, RgbImage};
 
-use crate::catalogue::{Catalogue, Shape};
+use crate::catalogue::Catalogue;
 use crate::scene::{Furniture, FurnitureKind, Scene};
+
+mod glyph;
+
+pub use glyph::Glyph;
+use glyph::{HALO, OUTLINE, Paint};
 
 /// The resolution the CLI and server use unless told otherwise.
 pub const DEFAULT_PX_PER_M: u32 = 100;
@@ -66,11 +73,7 @@ pub fn render_image(scene: &Scene, catalogue: &Catalogue, px_per_m: u32) -> RgbI
             .and_then(|v| m.variants.get(v))
             .copied()
             .unwrap_or(m.color);
-        let (fill, edge) = (rgb8(colour, 1.0), rgb8(colour, OUTLINE_SHADE));
-        match &m.shape {
-            Shape::Cuboid { size } => c.rect([p[0], p[1], o.yaw], [size[0] / 2.0, size[1] / 2.0], fill, edge),
-            other => c.disc([p[0], p[1]], other.footprint_radius(), fill, edge),
-        }
+        c.glyph(&Glyph::of(&m.id, &m.shape), [p[0], p[1], o.yaw], colour);
     }
     c.walls(scene);
     c.img
@@ -134,6 +137,23 @@ impl Canvas {
         self.paint(centre, r, |p| {
             let d = (p[0] - centre[0]).hypot(p[1] - centre[1]);
             (d <= r).then_some(if d <= r - line { fill } else { edge })
+        });
+    }
+
+    /// A key object's glyph at `pose = [x, y, yaw]`, filled with `colour`.
+    fn glyph(&mut self, g: &Glyph, pose: [f64; 3], colour: [f32; 3]) {
+        // Outline and halo at least a pixel and a half each, so they survive small images.
+        let line = (1.5 / self.ppm).max(0.008);
+        let (s, c) = pose[2].sin_cos();
+        self.paint([pose[0], pose[1]], g.reach + 2.0 * line, |p| {
+            let (dx, dy) = (p[0] - pose[0], p[1] - pose[1]);
+            let local = [c * dx + s * dy, -s * dx + c * dy];
+            g.paint(local, line).map(|paint| match paint {
+                Paint::Fill => rgb8(colour, 1.0),
+                Paint::Shade(k) => rgb8(colour, k),
+                Paint::Outline => Rgb(OUTLINE),
+                Paint::Halo => Rgb(HALO),
+            })
         });
     }
 
@@ -221,21 +241,107 @@ mod tests {
         }
     }
 
+    /// Pixels within `r` metres of world point `p`.
+    fn around(img: &RgbImage, scene: &Scene, ppm: u32, p: [f64; 2], r: f64) -> Vec<Rgb<u8>> {
+        let steps = (r * f64::from(ppm)).ceil() as i32;
+        let mut out = Vec::new();
+        for dj in -steps..=steps {
+            for di in -steps..=steps {
+                let q = [
+                    p[0] + f64::from(di) / f64::from(ppm),
+                    p[1] + f64::from(dj) / f64::from(ppm),
+                ];
+                if (q[0] - p[0]).hypot(q[1] - p[1]) <= r {
+                    out.push(pixel(img, scene, ppm, q));
+                }
+            }
+        }
+        out
+    }
+
+    fn colour_of(cat: &Catalogue, o: &crate::scene::KeyObject) -> [f32; 3] {
+        let m = cat.model(&o.model).unwrap();
+        o.variant.as_ref().map_or(m.color, |v| m.variants[v])
+    }
+
     #[test]
     fn key_objects_are_drawn_at_their_start() {
         let (scenes, cat) = content();
         for scene in &scenes {
             let img = render_image(scene, &cat, 100);
             for o in &scene.key_objects {
-                let m = cat.model(&o.model).unwrap();
-                let colour = o.variant.as_ref().map_or(m.color, |v| m.variants[v]);
                 let p = scene.key_object_start(o, 0.0).unwrap();
-                assert_eq!(
-                    pixel(&img, scene, 100, [p[0], p[1]]),
-                    rgb8(colour, 1.0),
-                    "{}",
+                let near = around(&img, scene, 100, [p[0], p[1]], 0.03);
+                let fill = rgb8(colour_of(&cat, o), 1.0);
+                assert!(near.contains(&fill), "{} {}", scene.id, o.name());
+            }
+        }
+    }
+
+    /// An object on a zone painted in the object's own colour still stands out: its outline
+    /// and halo differ from the zone, and enough of them surround it.
+    #[test]
+    fn objects_stay_visible_on_a_zone_of_their_colour() {
+        let (scenes, cat) = content();
+        for scene in &scenes {
+            let mut same = scene.clone();
+            for o in &scene.key_objects {
+                let colour = colour_of(&cat, o);
+                let z = same.zones.iter_mut().find(|z| z.color == o.zone).unwrap();
+                z.rgb = colour;
+                let img = render_image(&same, &cat, 100);
+                let p = scene.key_object_start(o, 0.0).unwrap();
+                let near = around(&img, &same, 100, [p[0], p[1]], 0.16);
+                let zone = rgb8(colour, 1.0);
+                assert_ne!(Rgb(glyph::OUTLINE), zone);
+                assert_ne!(Rgb(glyph::HALO), zone);
+                let outline = near.iter().filter(|c| **c == Rgb(glyph::OUTLINE)).count();
+                let halo = near.iter().filter(|c| **c == Rgb(glyph::HALO)).count();
+                assert!(
+                    outline >= 20 && halo >= 20,
+                    "{} {}: {outline} {halo}",
+                    scene.id,
                     o.name()
                 );
+                same.zones.clone_from(&scene.zones);
+            }
+        }
+    }
+
+    /// Each key model type has its own silhouette (or inner detail), at one colour and size.
+    #[test]
+    fn key_object_types_differ_in_shape() {
+        let (_, cat) = content();
+        let grid = |g: &Glyph| -> Vec<Option<glyph::Paint>> {
+            let mut v = Vec::new();
+            for j in -50..=50 {
+                for i in -50..=50 {
+                    v.push(g.paint([f64::from(i) * 0.004, f64::from(j) * 0.004], 0.01));
+                }
+            }
+            v
+        };
+        let types = ["apple", "bowl", "cup", "fork", "plate"];
+        let masks: Vec<_> = (types.iter())
+            .map(|t| grid(&Glyph::of(t, &cat.model(t).unwrap().shape)))
+            .collect();
+        for a in 0..types.len() {
+            for b in a + 1..types.len() {
+                let differ = (masks[a].iter().zip(&masks[b])).filter(|(x, y)| x != y).count();
+                assert!(
+                    differ > 100,
+                    "{} and {} look alike ({differ})",
+                    types[a],
+                    types[b]
+                );
+            }
+        }
+        // Also at one common size: the silhouettes themselves differ, not only the scale.
+        let unit = crate::catalogue::Shape::Sphere { radius: 0.09 };
+        let masks: Vec<_> = types.iter().map(|t| grid(&Glyph::of(t, &unit))).collect();
+        for a in 0..types.len() {
+            for b in a + 1..types.len() {
+                assert_ne!(masks[a], masks[b], "{} and {}", types[a], types[b]);
             }
         }
     }
