@@ -9,7 +9,7 @@
 //!   sample; the digest of the private phrasings of a private set).
 //!
 //! Ids are `dev-NNNN` and `test-NNNN`. The generator ([`generate()`]) is deterministic: the same
-//! seed gives byte-identical files ([`write`]); `assets/dataset/` holds the output for
+//! seed gives byte-identical files ([`write()`]); `assets/dataset/` holds the output for
 //! [`COMMITTED_SEED`], and a test regenerates it byte for byte.
 //!
 //! Two kinds of set ([`DatasetKind`]): a *public sample* is generated from public files only

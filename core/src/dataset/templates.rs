@@ -315,10 +315,22 @@ struct PrivateEntry {
 /// Phrasings that replace the public ones in the test split of a private test set, by
 /// template id, with the SHA-256 digest of the file they came from. Their text must never be
 /// written anywhere public; a manifest records only [`PrivatePhrasings::summary`].
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Clone, PartialEq, Eq)]
 pub struct PrivatePhrasings {
     by_template: BTreeMap<String, Vec<String>>,
     sha256: String,
+}
+
+/// Shows the summary only, so that logging options never prints a private phrasing.
+impl std::fmt::Debug for PrivatePhrasings {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let s = self.summary();
+        f.debug_struct("PrivatePhrasings")
+            .field("templates", &s.templates)
+            .field("phrasings", &s.phrasings)
+            .field("sha256", &s.sha256)
+            .finish_non_exhaustive()
+    }
 }
 
 impl PrivatePhrasings {

@@ -287,6 +287,8 @@ fn private_manifest_has_digest_and_no_seed() {
     let p = m.private_phrasings.as_ref().unwrap();
     assert_eq!((p.templates, p.phrasings), (2, 3));
     assert_eq!(p.sha256, sha256_hex(PRIVATE.as_bytes()));
+    let debug = format!("{:?}", private_options(1));
+    assert!(!debug.contains("Kindly") && debug.contains(&p.sha256), "{debug}");
     assert!(
         m.tag()
             .starts_with(&format!("dataset-private-{}", &p.sha256[..12]))
