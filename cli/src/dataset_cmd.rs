@@ -71,6 +71,16 @@ fn generate(seed: u64, out: &Path, assets: Option<PathBuf>, phrasings: Option<&P
         }
         None => None,
     };
+    if private.is_some()
+        && let Some(repo) = enclosing_git_work_tree(out)
+    {
+        eprintln!(
+            "warning: {} is inside the git work tree {}; keep a private set (its answers and \
+             phrasings) out of any repository that is or may be published",
+            out.display(),
+            repo.display()
+        );
+    }
     let options = GenerateOptions { seed, private };
     let ds = dataset::generate_with(&options, &assets)
         .with_context(|| format!("generating from {}", assets.display()))?;
@@ -96,4 +106,12 @@ fn generate(seed: u64, out: &Path, assets: Option<PathBuf>, phrasings: Option<&P
         ),
     }
     Ok(())
+}
+
+/// The nearest ancestor of `path` (made absolute) that holds a `.git`, if any.
+fn enclosing_git_work_tree(path: &Path) -> Option<PathBuf> {
+    let abs = std::path::absolute(path).ok()?;
+    abs.ancestors()
+        .find(|dir| dir.join(".git").exists())
+        .map(Path::to_path_buf)
 }
