@@ -8,7 +8,8 @@
 //!   from a dev instruction reproduces the text ([`phrase`]), or the text is a dev text verbatim;
 //! - the EM of the built-in template-inversion attack ([`attack`]), scored with the contest's own
 //!   EM against the set's ground truth;
-//! - test instructions whose (scene, plan) pair also occurs in the public dev split;
+//! - test instructions whose (scene, plan) pair also occurs in the public dev split, or equals
+//!   the public sample's answer under the same id (the sign of a reused public seed);
 //! - optionally (the CLI runs the oracle, this crate has no simulator) the instructions the
 //!   privileged oracle cannot complete.
 //!
@@ -45,9 +46,10 @@ use crate::scene::Scene;
 pub const DEFAULT_MAX_ATTACK_EM: f64 = 0.75;
 /// Default limit on the share of test instructions phrased as a public phrasing.
 pub const DEFAULT_MAX_PUBLIC_PHRASING_SHARE: f64 = 0.0;
-/// Default limit on test (scene, plan) pairs that also occur in the public dev split (plans are
-/// short and scenes few, so some coincide by chance even in a well-made private set).
-pub const DEFAULT_MAX_SHARED_PLANS: usize = 40;
+/// Default limit on test (scene, plan) pairs that also occur in public material. Plans are short
+/// and scenes few, so some coincide by chance even in a well-made private set (25 to 38 of 400
+/// with the dev split for seeds 1 to 4); a reused public seed repeats nearly all 400.
+pub const DEFAULT_MAX_SHARED_PLANS: usize = 60;
 
 /// The limits a set must stay within.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -96,7 +98,9 @@ pub struct AttackScore {
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct SharedPlan {
     pub test_id: String,
-    pub dev_id: String,
+    /// The public record with the same scene and plan: a dev id, or `public sample test-NNNN`
+    /// when the public sample's answer under the same id is the same (a reused seed).
+    pub public_id: String,
     pub scene: String,
 }
 
@@ -178,6 +182,14 @@ pub fn audit(dir: &Path, public_assets: &Path) -> Result<AuditReport, ContentErr
     for d in dev.iter().rev() {
         dev_plans.insert((d.scene.as_str(), d.plan.as_slice()), d.id.as_str());
     }
+    // The public sample's answers: a set made with the public seed repeats them id for id.
+    let sample_path = public_assets.join("dataset/test_ground_truth.jsonl");
+    let sample: Vec<Record> = if sample_path.is_file() {
+        read_jsonl(&sample_path)?
+    } else {
+        Vec::new()
+    };
+    let sample: HashMap<&str, &Record> = sample.iter().map(|r| (r.id.as_str(), r)).collect();
     let (mut template_phrasing, mut dev_phrasing, mut dev_text) = (0, 0, 0);
     let mut leaks = Vec::new();
     let mut matches = Vec::new();
@@ -212,10 +224,17 @@ pub fn audit(dir: &Path, public_assets: &Path) -> Result<AuditReport, ContentErr
             matches.push(PlanMatch::of(Some(&guess.plan[..]), plan));
             let floor = attack.fallback_only(&r.scene, &r.instruction);
             fallback.push(PlanMatch::of(Some(&floor[..]), plan));
-            if let Some(dev_id) = dev_plans.get(&(r.scene.as_str(), plan.as_slice())) {
+            let same_answer = sample
+                .get(r.id.as_str())
+                .filter(|s| s.scene == r.scene && s.plan.as_ref() == Some(plan))
+                .map(|s| format!("public sample {}", s.id));
+            let public_id = (dev_plans.get(&(r.scene.as_str(), plan.as_slice())))
+                .map(|id| id.to_string())
+                .or(same_answer);
+            if let Some(public_id) = public_id {
                 shared.push(SharedPlan {
                     test_id: r.id.clone(),
-                    dev_id: dev_id.to_string(),
+                    public_id,
                     scene: r.scene.clone(),
                 });
             }

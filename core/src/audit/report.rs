@@ -23,8 +23,9 @@ const ATTACK_ADVICE: &str = "public templates and dev instructions invert this s
      FILE --out DIR`)";
 const PHRASING_ADVICE: &str = "some test instructions use a public phrasing (assets/templates.toml or the \
      public dev split): remove or reword those phrasings in the private phrasings file and regenerate";
-const SHARED_ADVICE: &str = "too many test plans repeat a public dev plan in the same scene: regenerate \
-     with another secret seed";
+const SHARED_ADVICE: &str = "too many test plans repeat a public plan in the same scene (a dev plan, or \
+     the public sample's answer under the same id, which a reused public seed gives): regenerate with \
+     another secret seed";
 const ORACLE_ADVICE: &str = "the oracle cannot complete the listed instructions: fix the scenes or \
      templates that produce them (see the reasons) and regenerate; a contest set must be executable";
 
@@ -109,11 +110,12 @@ impl AuditReport {
         if let Some(shared) = &self.shared_plans {
             let _ = writeln!(
                 s,
-                "\n(scene, plan) pairs also in the public dev split: {}",
+                "\n(scene, plan) pairs also in public material (dev split, or the public sample's answer \
+                 under the same id): {}",
                 shared.len()
             );
             for p in shared.iter().take(5) {
-                let _ = writeln!(s, "    {} = {} ({})", p.test_id, p.dev_id, p.scene);
+                let _ = writeln!(s, "    {} = {} ({})", p.test_id, p.public_id, p.scene);
             }
         }
         if let Some(o) = &self.oracle {

@@ -99,7 +99,7 @@ fn novel_phrasing(template: &crate::dataset::templates::Template) -> String {
 }
 
 /// The public sample with every test instruction reworded in phrasings unknown to the attack.
-fn reworded_sample() -> PathBuf {
+fn reworded_sample(name: &str) -> PathBuf {
     let templates = crate::dataset::templates::load_templates(&assets().join("templates.toml")).unwrap();
     let gt: Vec<Instruction> = read_jsonl(&assets().join("dataset/test_ground_truth.jsonl")).unwrap();
     let reworded: Vec<Instruction> = (gt.into_iter())
@@ -109,7 +109,7 @@ fn reworded_sample() -> PathBuf {
             ins
         })
         .collect();
-    let dir = scratch("reworded");
+    let dir = scratch(name);
     write_jsonl(&dir.join("test_ground_truth.jsonl"), &reworded);
     std::fs::write(
         dir.join("manifest.json"),
@@ -121,7 +121,7 @@ fn reworded_sample() -> PathBuf {
 
 #[test]
 fn attack_scores_low_on_unknown_phrasings() {
-    let dir = reworded_sample();
+    let dir = reworded_sample("reworded-low");
     let report = audit(&dir, &assets()).unwrap();
     let a = report.attack.clone().unwrap();
     assert_eq!(a.inverted, 0);
@@ -134,13 +134,20 @@ fn attack_scores_low_on_unknown_phrasings() {
     let attack = checks.iter().find(|c| c.name == "attack EM").unwrap();
     assert!(attack.passed);
     let text = report.render(&checks);
-    assert!(!text.contains("public sample"), "{text}");
+    assert!(!text.contains("note: this is a public sample"), "{text}");
+    // Its answers are the public sample's, id for id (as a reused public seed would give).
+    assert_eq!(report.shared_plans.unwrap().len(), report.test_instructions);
+    let shared = checks
+        .iter()
+        .find(|c| c.name == "shared (scene, plan) pairs")
+        .unwrap();
+    assert!(!shared.passed);
     let _ = std::fs::remove_dir_all(dir);
 }
 
 #[test]
 fn failed_thresholds_fail_the_audit() {
-    let dir = reworded_sample();
+    let dir = reworded_sample("reworded-thresholds");
     let mut report = audit(&dir, &assets()).unwrap();
     let all_pass = |r: &AuditReport, t: &Thresholds| r.checks(t).iter().all(|c| c.passed);
     let loose = Thresholds {
@@ -201,4 +208,36 @@ fn dev_phrasings_alone_invert_what_they_cover() {
     }
     assert!(inverted > gt.len() / 2, "{inverted} of {}", gt.len());
     assert!(right * 100 >= inverted * 95, "{right} of {inverted}");
+}
+
+/// A private set made by the generator from phrasings no public file contains: nothing is
+/// inverted, the manifest says `private`, and the attack is left its fallback.
+#[test]
+fn generated_private_set_passes_the_phrasing_checks() {
+    use crate::dataset::templates::{PrivatePhrasings, Template, load_templates};
+    use crate::dataset::{GenerateOptions, generate_with, write};
+    let templates: Vec<Template> = load_templates(&assets().join("templates.toml")).unwrap();
+    let mut file = String::new();
+    for t in &templates {
+        let phrasing = novel_phrasing(t);
+        file += &format!("[[template]]\nid = {:?}\ninstructions = [{phrasing:?}]\n\n", t.id);
+    }
+    let private = PrivatePhrasings::parse(&file, &templates).unwrap();
+    let options = GenerateOptions {
+        seed: 77,
+        private: Some(private),
+    };
+    let dir = scratch("private");
+    write(&generate_with(&options, &assets()).unwrap(), &dir).unwrap();
+    let report = audit(&dir, &assets()).unwrap();
+    assert_eq!(report.kind.as_deref(), Some("private"));
+    assert!(!report.public_sample);
+    assert_eq!(report.public_phrasing, 0, "{:?}", report.leaks.first());
+    let a = report.attack.clone().unwrap();
+    assert_eq!(a.inverted, 0);
+    assert!(a.em < DEFAULT_MAX_ATTACK_EM, "{a:?}");
+    let checks = report.checks(&Thresholds::default());
+    let failed: Vec<_> = checks.iter().filter(|c| !c.passed).map(|c| c.name).collect();
+    assert!(failed.is_empty(), "{failed:?}\n{}", report.render(&checks));
+    let _ = std::fs::remove_dir_all(dir);
 }
