@@ -1,5 +1,8 @@
-//! The oracle must be able to do what the benchmark asks: it completes at least 98 % of the
-//! tasks of at least 50 dev episodes through the same runner participants are scored by.
+//! The oracle must be able to do what the benchmark asks (DESIGN, Feasibility: every generated
+//! instruction is executable by the oracle): it completes every task of every instruction of the
+//! committed dev split through the same evaluation code path as `kitchen-r eval --policy
+//! builtin:oracle` and the runner participants are scored by. The whole check over all 563
+//! committed instructions is that command over both splits (see the README).
 
 use kitchen_r_core::dataset::Split;
 use kitchen_r_sim::{Action, Assets, SensorsConfig, Sim, SimConfig, StepInfo};
@@ -8,13 +11,8 @@ use kitchen_r_worker::oracle::OraclePolicy;
 use kitchen_r_worker::runner::{RunOptions, StepHook, run_episode};
 
 #[test]
-fn oracle_completes_at_least_98_percent_of_dev_tasks() {
-    let n = std::env::var("ORACLE_EPISODES")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(50);
+fn oracle_completes_every_task_of_the_dev_split() {
     let opts = EvalOptions {
-        episodes: Some(n),
         jobs: std::thread::available_parallelism().map_or(1, |n| n.get()),
         ..EvalOptions::default()
     };
@@ -35,19 +33,20 @@ fn oracle_completes_at_least_98_percent_of_dev_tasks() {
         })
         .collect();
     eprintln!(
-        "oracle SR {:.4} over {} tasks of {} episodes",
-        report.overall.sr,
+        "oracle: {} of {} tasks of {} dev instructions in {:.1} s wall ({} jobs)",
+        report.overall.succeeded,
         report.overall.tasks,
-        report.episodes.len()
+        report.episodes.len(),
+        report.total_wall_s,
+        report.jobs
     );
-    for f in &failures {
-        eprintln!("failed: {f}");
-    }
-    assert!(report.episodes.len() >= n);
+    let all = instructions(Split::Dev, None).unwrap();
+    assert_eq!(report.episodes.len(), all.len(), "every dev instruction runs");
     assert!(
-        report.overall.sr >= 0.98,
-        "oracle SR {:.3}; failures:\n{}",
-        report.overall.sr,
+        failures.is_empty(),
+        "the oracle failed {} of {} dev tasks:\n{}",
+        failures.len(),
+        report.overall.tasks,
         failures.join("\n")
     );
 }
