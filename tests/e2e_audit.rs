@@ -1,0 +1,155 @@
+//! `kitchen-r dataset audit` as an organiser runs it: a public sample fails with the reasons and
+//! a non-zero exit code; a set generated with private phrasings passes; `--oracle` runs the
+//! privileged oracle over the set's instructions with progress on stderr.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use kitchen_r_core::dataset::templates::{Template, load_templates, placeholders};
+use serde_json::Value;
+
+fn root() -> PathBuf {
+    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
+}
+
+fn kitchen_r(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_kitchen-r"))
+        .args(args)
+        .current_dir(root())
+        .env_remove("KITCHEN_R_ASSETS")
+        .env("RUST_BACKTRACE", "0")
+        .output()
+        .expect("run kitchen-r")
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+fn path(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// A phrasing no public file contains, mentioning what the template's first phrasing does.
+fn novel_phrasing(t: &Template) -> String {
+    let in_plan: Vec<&str> = t.plan.iter().flat_map(|p| placeholders(p)).collect();
+    let mut mentions: Vec<String> = Vec::new();
+    for v in placeholders(&t.instructions[0]) {
+        let m = match v {
+            "a" | "b" if in_plan.contains(&v) => format!("the {{{v}}}"),
+            "a" | "b" => format!("the {{z{v}}} zone"),
+            _ => format!("the {{{v}}} zone"),
+        };
+        if !mentions.contains(&m) {
+            mentions.push(m);
+        }
+    }
+    format!(
+        "Robot, here is a chore about {}: sort it out.",
+        mentions.join(" plus ")
+    )
+}
+
+#[test]
+fn a_public_sample_fails_the_audit_with_reasons() {
+    let dir = tempfile::tempdir().unwrap();
+    let set = dir.path().join("sample");
+    let out = kitchen_r(&["dataset", "generate", "--seed", "5", "--out", path(&set)]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+
+    let out = kitchen_r(&["dataset", "audit", path(&set)]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out.stdout));
+    let stdout = text(&out.stdout);
+    assert!(stdout.contains("FAIL  attack EM"), "{stdout}");
+    assert!(stdout.contains("the set FAILS the audit"), "{stdout}");
+    assert!(stdout.contains("note: this is a public sample"), "{stdout}");
+    assert!(
+        text(&out.stderr).contains("audit failed: attack EM"),
+        "{}",
+        text(&out.stderr)
+    );
+
+    let out = kitchen_r(&["dataset", "audit", path(&set), "--json"]);
+    assert_eq!(out.status.code(), Some(1));
+    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["passed"], false);
+    assert_eq!(v["report"]["attack"]["em"], 1.0);
+    assert_eq!(v["report"]["kind"], "public_sample");
+    assert_eq!(v["report"]["public_phrasing_share"], 1.0);
+
+    // Thresholds are the organiser's: loose enough, the same set passes.
+    let out = kitchen_r(&[
+        "dataset",
+        "audit",
+        path(&set),
+        "--max-attack-em",
+        "1",
+        "--max-public-phrasing-share",
+        "1",
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stdout));
+    assert!(text(&out.stdout).contains("the set passes the audit"));
+}
+
+#[test]
+fn a_private_set_passes_and_the_oracle_completes_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let templates = load_templates(&root().join("assets/templates.toml")).unwrap();
+    let file: String = (templates.iter())
+        .map(|t| {
+            format!(
+                "[[template]]\nid = {:?}\ninstructions = [{:?}]\n\n",
+                t.id,
+                novel_phrasing(t)
+            )
+        })
+        .collect();
+    let phrasings = dir.path().join("phrasings.toml");
+    std::fs::write(&phrasings, file).unwrap();
+    let set = dir.path().join("private");
+    let out = kitchen_r(&[
+        "dataset",
+        "generate",
+        "--seed",
+        "913",
+        "--phrasings",
+        path(&phrasings),
+        "--out",
+        path(&set),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+
+    let out = kitchen_r(&["dataset", "audit", path(&set), "--json"]);
+    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["report"]["kind"], "private");
+    assert_eq!(v["report"]["public_phrasing"], 0);
+    assert_eq!(v["report"]["attack"]["inverted"], 0);
+    assert_eq!(v["passed"], true, "{v:#}");
+    assert!(out.status.success());
+
+    // The oracle over the first three instructions (a whole set takes minutes).
+    let gt = std::fs::read_to_string(set.join("test_ground_truth.jsonl")).unwrap();
+    let head: String = gt.lines().take(3).map(|l| format!("{l}\n")).collect();
+    let small = dir.path().join("small");
+    std::fs::create_dir(&small).unwrap();
+    std::fs::write(small.join("test_ground_truth.jsonl"), head).unwrap();
+    std::fs::copy(set.join("manifest.json"), small.join("manifest.json")).unwrap();
+    let out = kitchen_r(&[
+        "dataset",
+        "audit",
+        path(&small),
+        "--oracle",
+        "--jobs",
+        "1",
+        "--max-attack-em",
+        "1",
+    ]);
+    let (stdout, stderr) = (text(&out.stdout), text(&out.stderr));
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    assert!(
+        stdout.contains("oracle: 0 of 3 instructions not completed"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("PASS  oracle failures"), "{stdout}");
+    assert!(stderr.contains("[3] test-"), "{stderr}");
+}
