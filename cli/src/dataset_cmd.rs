@@ -3,6 +3,8 @@
 //! - `generate`: regenerate the instruction set deterministically from the scenes, catalogue and
 //!   templates (the same seed and phrasings give byte-identical files); with `--phrasings` it
 //!   makes a private test set (docs/private-test-set.md).
+//! - `audit`: the leak and feasibility audit of a test set (`audit_cmd`, over
+//!   `kitchen_r_core::audit`).
 //!
 //! Each subcommand is one variant of [`DatasetCommand`] and one function below.
 
