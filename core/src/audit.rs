@@ -21,6 +21,7 @@ pub mod phrase;
 mod report;
 #[cfg(test)]
 mod tests;
+#[cfg(test)] mod private_example_tests;
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
