@@ -18,10 +18,11 @@
 
 pub mod attack;
 pub mod phrase;
+#[cfg(test)]
+mod private_example_tests;
 mod report;
 #[cfg(test)]
 mod tests;
-#[cfg(test)] mod private_example_tests;
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
@@ -38,13 +39,13 @@ use crate::dataset::{Instruction, read_jsonl};
 use crate::metrics::PlanMatch;
 use crate::scene::Scene;
 
-/// Default limit on the attack's EM. Even a set whose phrasings no public file contains leaves
-/// the attack its fallback, and that is not small: plans built from the public plan shapes
-/// mostly follow from which objects and places an instruction mentions (on the public sample
-/// reworded in unknown phrasings the fallback alone scores about 0.68). A set the public
-/// phrasings invert scores close to 1, so the limit sits between the two; organisers whose
-/// private templates also bring new plan shapes can tighten it.
-pub const DEFAULT_MAX_ATTACK_EM: f64 = 0.75;
+/// Default limit on the attack's EM (the contest bar: a set public material inverts scores close
+/// to 1). Even a set whose phrasings no public file contains leaves the attack its fallback, the
+/// most common public plan shape filled in the order objects and places are mentioned, so
+/// private phrasings must also vary that order (final place first, second object first, "before"
+/// and "once" clauses): the example in `docs/examples/` does and scores about 0.22, while
+/// phrasings that mention things in the public order score 0.4 to 0.7 and fail.
+pub const DEFAULT_MAX_ATTACK_EM: f64 = 0.3;
 /// Default limit on the share of test instructions phrased as a public phrasing.
 pub const DEFAULT_MAX_PUBLIC_PHRASING_SHARE: f64 = 0.0;
 /// Default limit on test (scene, plan) pairs that also occur in public material. Plans are short

@@ -19,13 +19,14 @@ use std::collections::BTreeSet;
 use std::path::Path;
 
 use super::rng::SplitMix64;
-use super::symbolic::plan_targets;
+use super::symbolic::plan_targets_with;
 use super::templates::{Binding, PrivatePhrasings, Template, fill_places, load_templates, start_zone_var};
 use super::{
     DEV_INSTRUCTIONS, Dataset, DatasetKind, Instruction, Manifest, PublicInstruction, TOTAL_INSTRUCTIONS,
 };
 use crate::ContentError;
 use crate::catalogue::Catalogue;
+use crate::reach::ArmReach;
 use crate::scene::Scene;
 
 /// Bumped whenever the same seed would give different files.
@@ -67,6 +68,8 @@ pub fn generate_with(options: &GenerateOptions, assets: &Path) -> Result<Dataset
     let scenes = Scene::load_all(&assets.join("scenes"), &catalogue)?;
     let templates_path = assets.join("templates.toml");
     let templates = load_templates(&templates_path)?;
+    // Place targets must be reachable by this robot's arm from the zone's approach pose.
+    let arm = ArmReach::load(&assets.join("robot.toml"))?;
     if let Some(private) = &options.private
         && let Some(id) = private
             .template_ids()
@@ -112,7 +115,7 @@ pub fn generate_with(options: &GenerateOptions, assets: &Path) -> Result<Dataset
         let first = rng.below(scenes.len());
         let found = (0..ATTEMPTS).find_map(|n| {
             let scene = &scenes[(first + n / SCENE_ATTEMPTS) % scenes.len()];
-            let inst = instantiate(template, phrasings, scene, &catalogue, &mut rng)?;
+            let inst = instantiate(template, phrasings, scene, &catalogue, &arm, &mut rng)?;
             used_texts
                 .insert((scene.id.clone(), inst.instruction.clone()))
                 .then_some(inst)
@@ -158,6 +161,7 @@ fn instantiate(
     phrasings: &[String],
     scene: &Scene,
     catalogue: &Catalogue,
+    arm: &ArmReach,
     rng: &mut SplitMix64,
 ) -> Option<Instruction> {
     let mut binding = Binding::new();
@@ -184,7 +188,7 @@ fn instantiate(
     let steps = (template.patterns().ok()?.iter())
         .map(|p| p.instantiate(&binding))
         .collect::<Option<Vec<_>>>()?;
-    let place_targets = plan_targets(scene, catalogue, &steps, rng).ok()?;
+    let place_targets = plan_targets_with(scene, catalogue, arm, &steps, rng).ok()?;
     let phrasing = rng.choose(phrasings)?;
     let instruction = fill_places(phrasing, &binding, |color| {
         let names = scene.zone(color).map_or(&[][..], |z| z.names.as_slice());
