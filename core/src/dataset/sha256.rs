@@ -4,10 +4,7 @@ use sha2::{Digest, Sha256};
 
 /// The digest of `data` as 64 lower-case hex digits.
 pub fn sha256_hex(data: &[u8]) -> String {
-    Sha256::digest(data)
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect()
+    Sha256::digest(data).iter().map(|b| format!("{b:02x}")).collect()
 }
 
 #[cfg(test)]
