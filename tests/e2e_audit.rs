@@ -5,7 +5,6 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use kitchen_r_core::dataset::templates::{Template, load_templates, placeholders};
 use serde_json::Value;
 
 fn root() -> PathBuf {
@@ -28,26 +27,6 @@ fn text(bytes: &[u8]) -> String {
 
 fn path(p: &Path) -> &str {
     p.to_str().unwrap()
-}
-
-/// A phrasing no public file contains, mentioning what the template's first phrasing does.
-fn novel_phrasing(t: &Template) -> String {
-    let in_plan: Vec<&str> = t.plan.iter().flat_map(|p| placeholders(p)).collect();
-    let mut mentions: Vec<String> = Vec::new();
-    for v in placeholders(&t.instructions[0]) {
-        let m = match v {
-            "a" | "b" if in_plan.contains(&v) => format!("the {{{v}}}"),
-            "a" | "b" => format!("the {{z{v}}} zone"),
-            _ => format!("the {{{v}}} zone"),
-        };
-        if !mentions.contains(&m) {
-            mentions.push(m);
-        }
-    }
-    format!(
-        "Robot, here is a chore about {}: sort it out.",
-        mentions.join(" plus ")
-    )
 }
 
 #[test]
@@ -94,24 +73,15 @@ fn a_public_sample_fails_the_audit_with_reasons() {
 #[test]
 fn a_private_set_passes_and_the_oracle_completes_it() {
     let dir = tempfile::tempdir().unwrap();
-    let templates = load_templates(&root().join("assets/templates.toml")).unwrap();
-    let file: String = (templates.iter())
-        .map(|t| {
-            format!(
-                "[[template]]\nid = {:?}\ninstructions = [{:?}]\n\n",
-                t.id,
-                novel_phrasing(t)
-            )
-        })
-        .collect();
-    let phrasings = dir.path().join("phrasings.toml");
-    std::fs::write(&phrasings, file).unwrap();
+    // The documented example: private phrasings for every template that also vary the order in
+    // which objects and places are mentioned (what the audit's 0.3 attack limit asks for).
+    let phrasings = root().join("docs/examples/private-phrasings.example.toml");
     let set = dir.path().join("private");
     let out = kitchen_r(&[
         "dataset",
         "generate",
         "--seed",
-        "913",
+        "913577",
         "--phrasings",
         path(&phrasings),
         "--out",
@@ -124,6 +94,7 @@ fn a_private_set_passes_and_the_oracle_completes_it() {
     assert_eq!(v["report"]["kind"], "private");
     assert_eq!(v["report"]["public_phrasing"], 0);
     assert_eq!(v["report"]["attack"]["inverted"], 0);
+    assert!(v["report"]["attack"]["em"].as_f64().unwrap() <= 0.3, "{v:#}");
     assert_eq!(v["passed"], true, "{v:#}");
     assert!(out.status.success());
 

@@ -121,3 +121,47 @@ async fn leaderboard_accepts_the_policy_tracks() {
         assert_eq!(v["track"], track);
     }
 }
+
+#[tokio::test]
+async fn downloads_say_the_test_split_is_a_public_sample_and_briefs_are_served() {
+    let f = fixture(FakeProbe::ok(1), |_| {}).await;
+    let app = router(f.state.clone());
+    let manifest = get(app.clone(), "/api/v1/dataset/manifest", "-").await;
+    assert_eq!(manifest["test"]["kind"], "public_sample", "{manifest}");
+    assert!(
+        manifest["test"]["notice"]
+            .as_str()
+            .unwrap()
+            .contains("public sample")
+    );
+    let resp = app
+        .clone()
+        .oneshot(Request::get("/api/v1/dataset/test").body(Body::empty()).unwrap())
+        .await
+        .unwrap();
+    assert_eq!(resp.headers()["x-kitchen-r-split-kind"], "public-sample");
+    let resp = app
+        .clone()
+        .oneshot(
+            Request::get("/api/v1/scenes/kitchen_a/brief")
+                .body(Body::empty())
+                .unwrap(),
+        )
+        .await
+        .unwrap();
+    assert_eq!(resp.status(), StatusCode::OK);
+    let brief = String::from_utf8(to_bytes(resp.into_body(), 1 << 20).await.unwrap().to_vec()).unwrap();
+    assert!(
+        brief.contains("also called"),
+        "the brief grounds furniture names: {brief}"
+    );
+    let resp = app
+        .oneshot(
+            Request::get("/api/v1/scenes/nowhere/brief")
+                .body(Body::empty())
+                .unwrap(),
+        )
+        .await
+        .unwrap();
+    assert_eq!(resp.status(), StatusCode::NOT_FOUND);
+}
