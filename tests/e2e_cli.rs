@@ -97,7 +97,7 @@ fn team_submit_leaderboard_rescore_from_the_command_line() {
     );
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(
-        stdout(&out).contains("rescored 1 submissions"),
+        stdout(&out).contains("rescored 1 plan submissions and 0 policy runs"),
         "{}",
         stdout(&out)
     );
