@@ -102,6 +102,15 @@ fn team_submit_leaderboard_rescore_from_the_command_line() {
         stdout(&out)
     );
 
+    // Re-simulation names a policy submission; a plan submission is not one.
+    let out = run(
+        &server,
+        &["rescore", "--resimulate", "1"],
+        &[("KITCHEN_R_ADMIN_TOKEN", ADMIN)],
+    );
+    assert_eq!(out.status.code(), Some(1));
+    assert!(stderr(&out).contains("policy submission 1"), "{}", stderr(&out));
+
     // Organiser commands refuse a participant's token.
     let out = run(&server, &["rescore", "--all", "--admin-token", &token], &[]);
     assert_eq!(out.status.code(), Some(1));

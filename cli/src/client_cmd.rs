@@ -89,9 +89,14 @@ pub struct LeaderboardArgs {
 
 #[derive(Args, Debug)]
 pub struct RescoreArgs {
-    /// Rescore every submission (required: rescoring is never implicit).
-    #[arg(long, required = true)]
+    /// Rescore every submission of every track (required unless --resimulate: rescoring is never
+    /// implicit).
+    #[arg(long, required_unless_present = "resimulate", conflicts_with = "resimulate")]
     all: bool,
+    /// Simulate this finished policy submission again against the current ground truth, as a
+    /// new run (for runs `rescore --all` reported as needing re-simulation). Needs the endpoint.
+    #[arg(long, value_name = "SUBMISSION_ID")]
+    resimulate: Option<i64>,
     #[command(flatten)]
     server: ServerArgs,
     /// Organiser token.
@@ -213,6 +218,20 @@ pub fn leaderboard(args: LeaderboardArgs) -> anyhow::Result<()> {
 }
 
 pub fn rescore(args: RescoreArgs) -> anyhow::Result<()> {
+    if let Some(id) = args.resimulate {
+        return runtime()?.block_on(async {
+            let req = reqwest::Client::new()
+                .post(url(&args.server, "/api/v1/admin/resimulate"))
+                .bearer_auth(&args.admin_token)
+                .json(&serde_json::json!({ "submission": id }));
+            let v = json(req).await?;
+            println!(
+                "submission {id}: run {} queued, {} episodes of {} instructions",
+                v["run_id"], v["episodes"], v["instructions"]
+            );
+            Ok(())
+        });
+    }
     runtime()?.block_on(async {
         let req = reqwest::Client::new()
             .post(url(&args.server, "/api/v1/admin/rescore"))

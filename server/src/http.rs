@@ -40,6 +40,7 @@ pub fn router(state: AppState) -> Router {
         .route("/api/v1/submissions/{id}", get(submission))
         .route("/api/v1/leaderboard", get(leaderboard))
         .route("/api/v1/admin/rescore", post(rescore))
+        .route("/api/v1/admin/resimulate", post(resimulate))
         .fallback(|| async { ServiceError::not_found("route") })
         .with_state(state)
 }
@@ -231,6 +232,24 @@ async fn leaderboard(State(s): State<AppState>, Query(q): Params) -> Result<Resp
 
 async fn rescore(State(s): State<AppState>, headers: HeaderMap) -> Result<Response, ServiceError> {
     Ok(axum::Json(s.rescore_all(bearer(&headers)).await?).into_response())
+}
+
+/// Organiser: `{"submission": ID}` → a new run simulating that policy submission again.
+async fn resimulate(
+    State(s): State<AppState>,
+    headers: HeaderMap,
+    body: Bytes,
+) -> Result<Response, ServiceError> {
+    let admin = bearer(&headers);
+    s.require_admin(admin)?;
+    let req: serde_json::Value = serde_json::from_slice(&body)
+        .map_err(|e| ServiceError::BadRequest(format!("expected {{\"submission\": ID}}: {e}")))?;
+    let id = req
+        .get("submission")
+        .and_then(serde_json::Value::as_i64)
+        .ok_or_else(|| ServiceError::BadRequest("expected {\"submission\": ID}".into()))?;
+    let done = s.resimulate(admin, id).await?;
+    Ok((StatusCode::CREATED, axum::Json(done)).into_response())
 }
 
 #[cfg(test)]

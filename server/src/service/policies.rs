@@ -189,6 +189,69 @@ impl AppState {
         })
     }
 
+    /// Organiser: simulate a finished policy submission again against the current ground truth
+    /// (after `rescore` flagged it `needs_resimulation`), as a new run on the same submission.
+    /// The endpoint is not probed and no quota is used: it is the organiser's request, and an
+    /// endpoint that is gone fails its tasks like any unreachable policy.
+    pub async fn resimulate(&self, admin: Option<&str>, id: i64) -> Result<Registered, ServiceError> {
+        self.require_admin(admin)?;
+        let sub = store::submission(self.pool(), id)
+            .await?
+            .filter(|s| s.kind == "policy")
+            .ok_or_else(|| ServiceError::not_found(format!("policy submission {id}")))?;
+        if let Some(run) = store::latest_run(self.pool(), id).await?
+            && run.state == "active"
+        {
+            return Err(ServiceError::Conflict(format!(
+                "submission {id} is still evaluating (run {}); re-simulate once it has finished",
+                run.id
+            )));
+        }
+        let split: Split = sub.split.parse().map_err(|e: String| anyhow::anyhow!(e))?;
+        let body = parse_body(&store::submission_body(self.pool(), id).await?.1)?;
+        let episodes = (split == Split::Dev).then_some(body.instructions as u32);
+        let instructions = self.run_instructions(split, episodes)?;
+        let cfg = self.config();
+        let endpoint = EndpointSpec {
+            url: body.endpoint.clone(),
+            bearer_token: body.token.clone().unwrap_or_default(),
+            call_deadline_ms: cfg.policy.call_deadline_ms,
+            startup_deadline_ms: cfg.policy.startup_deadline_ms,
+            episode_budget_ms: cfg.policy.episode_budget_ms,
+            max_successive_timeouts: cfg.policy.max_successive_timeouts,
+        };
+        let jobs = self.job_specs(instructions, &endpoint, body.reference)?;
+        let scorer = format!("{CONTROL_SCORER}+{}", self.content().dataset_tag());
+        let new = NewPolicyRun {
+            team: sub.team_id,
+            split,
+            body: "",
+            scorer_version: &scorer,
+            max_concurrency: body.max_concurrency,
+            max_attempts: cfg.control.max_attempts,
+            jobs: &jobs,
+        };
+        let run_id = run_store::insert_policy_run(self.pool(), id, &new, now_ms()).await?;
+        self.inner.jobs_ready.notify_waiters();
+        self.leaderboard_cache().invalidate();
+        tracing::info!(
+            submission = id,
+            run = run_id,
+            episodes = jobs.len(),
+            "policy run re-simulated"
+        );
+        Ok(Registered {
+            id,
+            run_id,
+            split,
+            instructions: instructions.len(),
+            episodes: jobs.len(),
+            max_concurrency: body.max_concurrency,
+            policy: body.spec,
+            state: "queued",
+        })
+    }
+
     /// The instructions a run evaluates: the whole test split; on dev, the first
     /// `control.dev_episodes` (0 = all), further limited by the request's `episodes`.
     fn run_instructions(&self, split: Split, episodes: Option<u32>) -> Result<&[Instruction], ServiceError> {

@@ -38,6 +38,31 @@ pub async fn insert_policy_submission(
     .bind(now)
     .fetch_one(&mut *tx)
     .await?;
+    let run = insert_run_with_jobs(&mut tx, sub, new, now).await?;
+    tx.commit().await?;
+    Ok((sub, run))
+}
+
+/// A new active run with its queued jobs on an existing policy submission (an organiser's
+/// re-simulation request), atomically. `new.team`, `new.split` and `new.body` are not used.
+pub async fn insert_policy_run(
+    pool: &SqlitePool,
+    submission: i64,
+    new: &NewPolicyRun<'_>,
+    now: i64,
+) -> sqlx::Result<i64> {
+    let mut tx = pool.begin_with("BEGIN IMMEDIATE").await?;
+    let run = insert_run_with_jobs(&mut tx, submission, new, now).await?;
+    tx.commit().await?;
+    Ok(run)
+}
+
+async fn insert_run_with_jobs(
+    tx: &mut sqlx::Transaction<'_, Sqlite>,
+    sub: i64,
+    new: &NewPolicyRun<'_>,
+    now: i64,
+) -> sqlx::Result<i64> {
     let run: i64 = sqlx::query_scalar(
         "INSERT INTO scoring_runs (submission_id, scorer_version, created_at, em, scores, state, episodes_total, max_concurrency)
          VALUES (?, ?, ?, NULL, '{}', 'active', ?, ?) RETURNING id",
@@ -47,7 +72,7 @@ pub async fn insert_policy_submission(
     .bind(now)
     .bind(new.jobs.len() as i64)
     .bind(i64::from(new.max_concurrency))
-    .fetch_one(&mut *tx)
+    .fetch_one(&mut **tx)
     .await?;
     // 6 parameters a row; 100 rows stay far below SQLite's parameter limit.
     for chunk in new.jobs.chunks(100) {
@@ -62,10 +87,9 @@ pub async fn insert_policy_submission(
                 .push_bind(now)
                 .push_bind(now);
         });
-        q.build().execute(&mut *tx).await?;
+        q.build().execute(&mut **tx).await?;
     }
-    tx.commit().await?;
-    Ok((sub, run))
+    Ok(run)
 }
 
 /// Policy runs of a team still evaluating.

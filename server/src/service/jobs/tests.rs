@@ -355,6 +355,40 @@ async fn an_integrated_run_recomputes_em_from_the_linked_plans() {
     let run2 = view.latest_run.unwrap();
     assert_eq!(run2.scores, s);
     assert!(run2.evaluation.unwrap().needs_resimulation);
+
+    // The organiser has it simulated again: a new run on the same submission, current specs.
+    let again = f
+        .state
+        .resimulate(Some(crate::testutil::ADMIN), id)
+        .await
+        .unwrap();
+    assert_eq!((again.id, again.episodes), (id, 4));
+    assert!(
+        f.state
+            .resimulate(Some(crate::testutil::ADMIN), id)
+            .await
+            .is_err(),
+        "still evaluating"
+    );
+    for job in f.lease("w2", 64).await {
+        assert_eq!(job.run_id, again.run_id);
+        let r = f.report("w2", &job, |_| true, 0.25);
+        f.state.report_result(Some(WORKER), r).await.unwrap();
+    }
+    let view = f.state.get_submission(Some(&token), id).await.unwrap();
+    let run3 = view.latest_run.unwrap();
+    assert_eq!(run3.id, again.run_id);
+    assert_eq!(run3.scores, s);
+    let eval = run3.evaluation.unwrap();
+    assert!(!eval.needs_resimulation && eval.state == "finished");
+    assert_eq!(
+        f.state
+            .rescore_all(Some(crate::testutil::ADMIN))
+            .await
+            .unwrap()
+            .policy_runs_rescored,
+        1
+    );
 }
 
 #[tokio::test]
