@@ -19,6 +19,7 @@ pub mod metrics;
 pub mod plan;
 pub mod reach;
 pub mod scene;
+pub mod scoring;
 pub mod topdown;
 
 pub use error::ContentError;

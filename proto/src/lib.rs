@@ -1,6 +1,7 @@
 //! Wire contracts (protobuf/gRPC) of Kitchen-R, generated at build time from `proto/kitchen_r/**`.
 //!
-//! This crate owns the `.proto` files and nothing else: no business rules, no I/O. The three
+//! This crate owns the `.proto` files and the conversions between wire messages and the domain
+//! types of `kitchen-r-core` ([`convert`]), and nothing else: no business rules, no I/O. The three
 //! packages are
 //! - [`policy::v1`]: what a participant's policy server implements (control track);
 //! - [`worker::v1`]: how simulation workers lease jobs from the server and report results;
@@ -9,6 +10,8 @@
 //!
 //! Generated code carries the `.proto` comments as docs; read the `.proto` files for the field
 //! by field contract.
+
+pub mod convert;
 
 /// Encoded `FileDescriptorSet` of all three packages, for gRPC server reflection.
 pub const FILE_DESCRIPTOR_SET: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/kitchen_r_descriptor.bin"));

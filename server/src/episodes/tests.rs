@@ -1,4 +1,5 @@
 use super::*;
+use kitchen_r_core::metrics::FAILED_PREDICTION_MSE;
 
 fn spec(mode: Mode, id: &str, plan: &[&str]) -> JobSpec {
     JobSpec {

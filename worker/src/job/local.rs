@@ -3,15 +3,18 @@
 //! seed, same settings, same episode key) and runs through [`execute_job`], so the numbers a
 //! participant gets here are the numbers the leaderboard will show for the same settings.
 //!
-//! Aggregation follows the server: SR is the mean over episodes of the mean over tasks of SR_j;
-//! MSE weights every prediction equally (Σ mse·samples / Σ samples). Episodes that hit a platform
-//! error (which the server would retry) are listed and left out of both.
+//! Aggregation is the server's own (`kitchen_r_core::scoring::aggregate`): SR is the mean over
+//! episodes of the mean over the plan's tasks of SR_j (an unreported task fails), MSE weights
+//! every prediction equally with a failed prediction for a task left without a sample. Episodes
+//! that hit a platform error (which the server would retry) are listed and left out.
 
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
 use kitchen_r_core::dataset::{Instruction, Split};
+pub use kitchen_r_core::scoring::Mode;
+use kitchen_r_core::scoring::{self, TaskOutcome};
 use kitchen_r_proto::worker::v1 as pb;
 use serde::{Deserialize, Serialize};
 
@@ -36,43 +39,17 @@ pub struct LocalSettings {
     pub jobs: usize,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Mode {
-    Online,
-    Offline,
-}
-
-impl std::str::FromStr for Mode {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Mode, String> {
-        match s {
-            "online" => Ok(Mode::Online),
-            "offline" => Ok(Mode::Offline),
-            o => Err(format!("mode {o:?}: accepted values are online, offline")),
-        }
-    }
-}
-
-/// One task as the server stores it.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct LocalTask {
-    pub index: u32,
-    pub step: String,
-    pub success: bool,
-    pub completion_time_s: f64,
-    pub failure_reason: String,
-    pub mse: f64,
-    pub mse_samples: u32,
-}
-
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LocalEpisode {
     pub episode_key: String,
     pub scene: String,
-    pub tasks: Vec<LocalTask>,
+    /// The tasks as the server would store them.
+    pub tasks: Vec<TaskOutcome>,
     pub platform_error: String,
     pub wall_s: f64,
+    /// What scoring needs of the job (not printed).
+    #[serde(skip)]
+    pub scoring: Option<scoring::Episode>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -109,10 +86,7 @@ pub enum LocalError {
 
 /// The job the server would lease for `ins` in `s.mode`.
 pub fn local_job(ins: &Instruction, url: &str, s: &LocalSettings, remote: &RemoteConfig) -> pb::Job {
-    let key = match s.mode {
-        Mode::Online => ins.id.clone(),
-        Mode::Offline => format!("{}/offline", ins.id),
-    };
+    let key = s.mode.episode_key(&ins.id);
     pb::Job {
         job_id: 0,
         attempt: 1,
@@ -124,10 +98,7 @@ pub fn local_job(ins: &Instruction, url: &str, s: &LocalSettings, remote: &Remot
             instruction_id: ins.id.clone(),
             plan: ins.plan.clone(),
             seed: s.seed,
-            mode: match s.mode {
-                Mode::Online => pb::EvalMode::Online,
-                Mode::Offline => pb::EvalMode::Offline,
-            } as i32,
+            mode: pb::EvalMode::from(s.mode) as i32,
             task_time_limit_s: s.run.task_time_limit,
             actions_executed_per_chunk: s.run.execute as u32,
             teleport_on_failure: s.teleport_on_failure,
@@ -210,26 +181,28 @@ pub fn evaluate_endpoint(
 }
 
 fn episode(job: &pb::Job, r: &pb::EpisodeResult, wall_s: f64) -> LocalEpisode {
+    let spec = job.episode.clone().unwrap_or_default();
+    let tasks: Vec<TaskOutcome> = r.tasks.iter().map(TaskOutcome::from).collect();
+    let mode = pb::EvalMode::try_from(spec.mode)
+        .ok()
+        .and_then(pb::EvalMode::mode)
+        .unwrap_or(Mode::Online);
+    let task_count = match spec.max_plan_steps {
+        0 => spec.plan.len(),
+        n => spec.plan.len().min(n as usize),
+    };
     LocalEpisode {
         episode_key: job.episode_key.clone(),
-        scene: job
-            .episode
-            .as_ref()
-            .map(|e| e.scene_id.clone())
-            .unwrap_or_default(),
-        tasks: r
-            .tasks
-            .iter()
-            .map(|t| LocalTask {
-                index: t.index,
-                step: t.step.clone(),
-                success: t.success,
-                completion_time_s: t.completion_time_s,
-                failure_reason: t.failure_reason.clone(),
-                mse: t.mse,
-                mse_samples: t.mse_samples,
-            })
-            .collect(),
+        scene: spec.scene_id.clone(),
+        scoring: Some(scoring::Episode {
+            mode,
+            instruction_id: spec.instruction_id,
+            plan: spec.plan,
+            task_count,
+            tasks: tasks.clone(),
+            failure: None,
+        }),
+        tasks,
         platform_error: r.platform_error.clone(),
         wall_s,
     }
@@ -264,21 +237,8 @@ fn report(
         mean_task_sim_time: if ok == 0 { 0.0 } else { time / ok as f64 },
     };
     let online = s.mode == Mode::Online;
-    let per_episode: Vec<f64> = scored
-        .iter()
-        .filter(|e| !e.tasks.is_empty())
-        .map(|e| e.tasks.iter().filter(|t| t.success).count() as f64 / e.tasks.len() as f64)
-        .collect();
-    let samples: u64 = scored
-        .iter()
-        .flat_map(|e| &e.tasks)
-        .map(|t| u64::from(t.mse_samples))
-        .sum();
-    let weighted: f64 = scored
-        .iter()
-        .flat_map(|e| &e.tasks)
-        .map(|t| t.mse * f64::from(t.mse_samples))
-        .sum();
+    let scoring: Vec<scoring::Episode> = scored.iter().filter_map(|e| e.scoring.clone()).collect();
+    let scores = scoring::aggregate(&scoring, None);
     LocalReport {
         policy: url.to_string(),
         spec,
@@ -291,13 +251,123 @@ fn report(
         } else {
             BTreeMap::new()
         },
-        sr: (online && !per_episode.is_empty())
-            .then(|| per_episode.iter().sum::<f64>() / per_episode.len() as f64),
-        mse: (!online && samples > 0).then(|| weighted / samples as f64),
-        mse_samples: samples,
+        sr: scores.sr,
+        mse: scores.mse,
+        mse_samples: scoring::mse_sample_count(&scoring),
         platform_errors: episodes.len() - scored.len(),
         jobs,
         total_wall_s: started.elapsed().as_secs_f64(),
         episodes,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use proptest::prelude::*;
+
+    use super::*;
+
+    /// `(plan length, max_plan_steps, reported tasks: (index, success, mse, samples, failed))`.
+    type Case = (usize, u32, Vec<(u32, bool, f64, u32, bool)>);
+
+    fn case() -> impl Strategy<Value = Case> {
+        (
+            4usize..=8,
+            0u32..=9,
+            prop::collection::vec(
+                (0u32..9, any::<bool>(), 0.0f64..4.0, 0u32..5, any::<bool>()),
+                0..9,
+            ),
+        )
+    }
+
+    fn settings(mode: Mode) -> LocalSettings {
+        LocalSettings {
+            mode,
+            seed: 0,
+            run: RunOptions::default(),
+            teleport_on_failure: false,
+            bearer_token: None,
+            privileged: false,
+            jobs: 1,
+        }
+    }
+
+    /// The local report of `cases` run in `mode`, and the server's view of the same outcomes
+    /// (tasks = the plan's steps capped by `max_plan_steps`, as `JobSpec::task_count` says).
+    fn both(mode: Mode, cases: &[Case]) -> (LocalReport, scoring::RunScores) {
+        let mut local = Vec::new();
+        let mut server = Vec::new();
+        for (n, (len, cap, reported)) in cases.iter().enumerate() {
+            let ins = Instruction {
+                id: format!("dev-{n:04}"),
+                scene: "kitchen_a".into(),
+                instruction: String::new(),
+                plan: (0..*len).map(|j| format!("move to the zone {j}")).collect(),
+                template: String::new(),
+                place_targets: Vec::new(),
+            };
+            let s = LocalSettings {
+                run: RunOptions {
+                    max_tasks: (*cap > 0).then_some(*cap as usize),
+                    ..RunOptions::default()
+                },
+                ..settings(mode)
+            };
+            let job = local_job(&ins, "http://127.0.0.1:1", &s, &RemoteConfig::default());
+            let tasks: Vec<TaskOutcome> = (reported.iter())
+                .map(|&(index, success, mse, samples, failed)| TaskOutcome {
+                    index,
+                    step: String::new(),
+                    success: mode == Mode::Online && success,
+                    completion_time_s: 1.0,
+                    failure_reason: if failed { "bad chunk".into() } else { String::new() },
+                    mse: if mode == Mode::Offline { mse } else { 0.0 },
+                    mse_samples: if mode == Mode::Offline { samples } else { 0 },
+                })
+                .collect();
+            let result = pb::EpisodeResult {
+                tasks: tasks.iter().map(pb::TaskResult::from).collect(),
+                ..Default::default()
+            };
+            local.push(episode(&job, &result, 0.1));
+            let task_count = match cap {
+                0 => *len,
+                c => (*len).min(*c as usize),
+            };
+            server.push(scoring::Episode {
+                mode,
+                instruction_id: ins.id.clone(),
+                plan: ins.plan.clone(),
+                task_count,
+                tasks,
+                failure: None,
+            });
+        }
+        let r = report(
+            "x",
+            String::new(),
+            Split::Dev,
+            &settings(mode),
+            1,
+            local,
+            Instant::now(),
+        );
+        (r, scoring::aggregate(&server, None))
+    }
+
+    proptest! {
+        /// Local evaluation gives the leaderboard's numbers on any outcome set, including
+        /// episodes that report fewer (or other) tasks than their plan has.
+        #[test]
+        fn local_eval_and_the_server_aggregate_alike(
+            cases in prop::collection::vec(case(), 1..6),
+        ) {
+            let (online, server) = both(Mode::Online, &cases);
+            prop_assert_eq!(online.sr, server.sr);
+            let (offline, server) = both(Mode::Offline, &cases);
+            prop_assert_eq!(offline.mse, server.mse);
+            prop_assert_eq!(offline.sr, None);
+        }
     }
 }
