@@ -3,7 +3,7 @@
 //! huge answer each fail tasks with the right reason while the run completes; a private address
 //! is refused before any packet is sent.
 
-mod remote_support;
+use crate::remote_support;
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};

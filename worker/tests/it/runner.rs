@@ -2,7 +2,7 @@
 //! time limit, a bad chunk fails its task with the reason, successive timeouts abort the episode,
 //! and the run always completes with one outcome per plan step.
 
-mod remote_support;
+use crate::remote_support;
 
 use kitchen_r_worker::policy::{HORIZON, Policy, PolicyError, PolicyInput, PolicySpec};
 use kitchen_r_worker::runner::{RunOptions, run_episode};

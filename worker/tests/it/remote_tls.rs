@@ -1,7 +1,7 @@
 //! A policy served over TLS is called over `https://` with the endpoint's CA and the bearer
 //! token; a client that does not trust the certificate is refused with a TLS reason.
 
-mod remote_support;
+use crate::remote_support;
 
 use kitchen_r_worker::policy::Policy;
 use kitchen_r_worker::remote::server::{ServeOptions, TlsIdentity};

@@ -1,7 +1,7 @@
 //! The gRPC twin of the submission API: same service layer, same scores and refusals as HTTP,
 //! plus the standard health service.
 
-mod support;
+use crate::support;
 
 use kitchen_r_proto::submission::v1 as pb;
 use pb::submissions_client::SubmissionsClient;

@@ -4,8 +4,6 @@
 //! The fixture is small and hand-made so expected scores can be computed by hand; its scenes and
 //! catalogue are the committed ones, so it validates against the real schemas.
 
-#![allow(dead_code)]
-
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};

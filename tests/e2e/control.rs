@@ -7,10 +7,8 @@
 //! restarted mid-run resumes it; a participant's starter kit completes a run with a score; a
 //! private address is refused at registration.
 
-mod support;
-// The worker crate's scripted policies served over real sockets (`TestServer`, `factory`).
-#[path = "../worker/tests/remote_support/mod.rs"]
-mod remote_support;
+use crate::remote_support;
+use crate::support;
 
 use std::collections::BTreeSet;
 use std::process::Command;

@@ -1,6 +1,6 @@
 //! Episode configurations, dataset instructions and task checks.
 
-mod common;
+use crate::common;
 
 use common::*;
 use kitchen_r_core::dataset::Instruction;

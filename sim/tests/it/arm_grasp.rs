@@ -1,6 +1,6 @@
 //! The arm under the RMP controller in the world, and grasping.
 
-mod common;
+use crate::common;
 
 use common::*;
 

@@ -1,6 +1,6 @@
 //! Physics, determinism, snapshots, sensors and base limits of the kitchen twin.
 
-mod common;
+use crate::common;
 
 use common::*;
 use kitchen_r_sim::bench::wobble_action;

@@ -1,7 +1,7 @@
 //! Planning track end to end: the real `kitchen-r serve` process on a temporary database,
 //! driven over HTTP (and gRPC for the submission service).
 
-mod support;
+use crate::support;
 
 use serde_json::Value;
 use support::*;

@@ -1,7 +1,7 @@
 //! The client commands of the `kitchen-r` binary against a real server: readable output on
 //! success, the server's message and a non-zero exit code on failure.
 
-mod support;
+use crate::support;
 
 use std::process::{Command, Output};
 

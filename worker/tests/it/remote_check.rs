@@ -1,7 +1,7 @@
 //! `check-policy` logic: a good endpoint passes every check; each bad one fails the check that
 //! names what is wrong.
 
-mod remote_support;
+use crate::remote_support;
 
 use std::sync::Arc;
 use std::time::Duration;

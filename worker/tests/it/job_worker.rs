@@ -2,7 +2,7 @@
 //! two jobs handed out, heartbeats while they run, the first report failed by the server and
 //! retried, the token checked, and a clean stop on shutdown.
 
-mod remote_support;
+use crate::remote_support;
 
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};

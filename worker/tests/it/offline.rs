@@ -2,7 +2,7 @@
 //! recorded actions, the oracle served over gRPC scoring (almost) zero against the expert it
 //! is, failed predictions charged the documented penalty, and bit-identical reruns.
 
-mod remote_support;
+use crate::remote_support;
 
 use std::sync::Arc;
 

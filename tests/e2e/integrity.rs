@@ -7,9 +7,8 @@
 //! never saw an instruction id or run number; the later plan file is scored but not ranked and
 //! cannot be linked for an integrated run; and no test-split page carries per-instruction data.
 
-#[path = "../worker/tests/remote_support/mod.rs"]
-mod remote_support;
-mod support;
+use crate::remote_support;
+use crate::support;
 
 use std::sync::{Arc, Mutex};
 

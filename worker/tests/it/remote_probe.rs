@@ -1,7 +1,7 @@
 //! The registration probe: a good endpoint is accepted with its spec, and each refusal says
 //! what failed (private address with the config key, health not SERVING, unusable GetSpec).
 
-mod remote_support;
+use crate::remote_support;
 
 use std::time::Duration;
 

@@ -3,7 +3,7 @@
 //! required (`pip install -r scripts/test-requirements.txt`); elsewhere the test is skipped
 //! when grpcio is missing.
 
-mod remote_support;
+use crate::remote_support;
 
 use std::io::{BufRead, BufReader};
 use std::path::PathBuf;

@@ -1,5 +1,4 @@
 //! Shared fixtures for the twin's integration tests.
-#![allow(dead_code)]
 
 use kitchen_r_sim::config::{SensorsConfig, SimConfig};
 use kitchen_r_sim::episode::{EpisodeConfig, ObjectPlacement};

@@ -2,7 +2,7 @@
 //! in-process oracle (privileged state and chunks cross the wire in full precision); without
 //! privileged state it refuses with FAILED_PRECONDITION and a reason.
 
-mod remote_support;
+use crate::remote_support;
 
 use std::sync::Arc;
 

@@ -2,7 +2,7 @@
 //! policy (a privileged reference run), online and offline; policy faults as task failures with
 //! reasons, platform faults as `platform_error`.
 
-mod remote_support;
+use crate::remote_support;
 
 use std::sync::{Arc, OnceLock};
 
