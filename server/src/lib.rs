@@ -22,6 +22,7 @@ pub mod leaderboard;
 pub mod plans;
 pub mod probe;
 pub mod service;
+pub mod states;
 pub mod store;
 #[cfg(test)]
 pub(crate) mod testutil;
@@ -145,7 +146,8 @@ impl Server {
     }
 }
 
-pub(crate) async fn grpc_routes(state: AppState) -> anyhow::Result<tonic::transport::server::Router> {
+/// The gRPC server's routes under its tower stack ([`grpc::GrpcStackLayer`]).
+pub(crate) async fn grpc_routes(state: AppState) -> anyhow::Result<GrpcRouter> {
     let (health_reporter, health) = tonic_health::server::health_reporter();
     health_reporter
         .set_serving::<kitchen_r_proto::submission::v1::submissions_server::SubmissionsServer<grpc::SubmissionsService>>()
@@ -159,11 +161,16 @@ pub(crate) async fn grpc_routes(state: AppState) -> anyhow::Result<tonic::transp
         .build_v1()
         .context("building gRPC reflection")?;
     Ok(tonic::transport::Server::builder()
+        .layer(grpc::GrpcStackLayer::new(state.config()))
         .add_service(health)
         .add_service(reflection)
         .add_service(grpc::SubmissionsService::new(state.clone()).into_server())
         .add_service(grpc_worker::WorkerService::new(state).into_server()))
 }
+
+type GrpcRouter = tonic::transport::server::Router<
+    tower::layer::util::Stack<grpc::GrpcStackLayer, tower::layer::util::Identity>,
+>;
 
 /// Requeues expired leases every `control.reaper_interval_s` until shutdown. Leases held by
 /// workers that died (or by a previous server process) simply expire and come back here.

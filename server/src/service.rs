@@ -24,6 +24,7 @@ use crate::error::ServiceError;
 use crate::leaderboard::LeaderboardCache;
 use crate::plans::{self, InstructionScore};
 use crate::probe::PolicyProbe;
+use crate::states::SubmissionKind;
 use crate::store::{self, NewRun, Team};
 
 pub use policies::{PolicyInfo, RegisterPolicy, Registered};
@@ -296,7 +297,7 @@ impl AppState {
             .filter(|s| viewer.as_ref().is_none_or(|t| t.id == s.team_id))
             .ok_or_else(|| ServiceError::not_found(format!("submission {id}")))?;
         let hidden = sub.split == Split::Test.as_str();
-        let is_policy = sub.kind == "policy";
+        let is_policy = sub.kind == SubmissionKind::Policy;
         let latest_run = match store::latest_run(self.pool(), id).await? {
             None => None,
             Some(run) => {
@@ -335,7 +336,7 @@ impl AppState {
             id: sub.id,
             team: sub.team,
             split: sub.split,
-            kind: sub.kind,
+            kind: sub.kind.as_str().to_string(),
             created_at: rfc3339(sub.created_at),
             runs: sub.runs,
             policy,
@@ -348,7 +349,7 @@ impl AppState {
     /// Why a submission cannot appear on the leaderboard (the rule [`store::planning_leaderboard`]
     /// applies), or `None` when it can.
     async fn unranked_reason(&self, sub: &store::SubmissionRow) -> Result<Option<String>, ServiceError> {
-        if sub.kind != "plans" || sub.split != Split::Test.as_str() {
+        if sub.kind != SubmissionKind::Plans || sub.split != Split::Test.as_str() {
             return Ok(None);
         }
         Ok(match store::first_test_policy(self.pool(), sub.team_id).await? {

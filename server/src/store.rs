@@ -24,6 +24,7 @@ use sqlx::{QueryBuilder, Row, Sqlite};
 
 use crate::plans::InstructionScore;
 use crate::service::Scores;
+use crate::states::{RunState, SubmissionKind};
 
 /// Open (creating file and directory if missing) and migrate the database.
 pub async fn connect(url: &str) -> anyhow::Result<SqlitePool> {
@@ -185,7 +186,7 @@ pub struct SubmissionRow {
     pub team_id: i64,
     pub team: String,
     pub split: String,
-    pub kind: String,
+    pub kind: SubmissionKind,
     pub created_at: i64,
     pub runs: i64,
 }
@@ -228,8 +229,7 @@ pub struct RunRow {
     pub scorer_version: String,
     pub created_at: i64,
     pub scores: Scores,
-    /// `active`, `finished` or `platform_failed`.
-    pub state: String,
+    pub state: RunState,
     pub episodes_total: i64,
     pub finished_at: Option<i64>,
     /// A rescore of a policy run: the run whose recorded episodes it was computed from.

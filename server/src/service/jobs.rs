@@ -21,6 +21,7 @@ use kitchen_r_core::dataset::Split;
 use super::{AppState, hash_token, now_ms};
 use crate::episodes::{JobSpec, TaskOutcome};
 use crate::error::ServiceError;
+use crate::states::JobState;
 use crate::store::queue::{self, JobRow, NewResult};
 
 /// Most jobs one Lease call hands out, and the longest it is held open.
@@ -213,8 +214,7 @@ impl AppState {
         }
         // A requeued job keeps its attempt until leased again, so its last holder may still
         // hand the result in; any other state or attempt is stale.
-        let current =
-            i64::from(r.attempt) == job.attempt && matches!(job.state.as_str(), "leased" | "queued");
+        let current = i64::from(r.attempt) == job.attempt && job.state.is_open();
         if !current {
             tracing::info!(job = job.id, attempt = r.attempt, current = job.attempt, state = %job.state, "stale report refused");
             return Ok(ReportOutcome {
@@ -234,7 +234,7 @@ impl AppState {
                 worker_id: &r.worker_id,
             };
             queue::insert_result(&mut tx, &result, now).await?;
-            queue::close_job(&mut tx, job.id, "done", None, now).await?;
+            queue::close_job(&mut tx, job.id, JobState::Done, None, now).await?;
         } else {
             let reason = format!(
                 "platform error: {}",

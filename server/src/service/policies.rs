@@ -13,6 +13,7 @@ use serde::{Deserialize, Serialize};
 use super::{AppState, now_ms};
 use crate::episodes::{EndpointSpec, JobSpec, Mode};
 use crate::error::ServiceError;
+use crate::states::{RunState, SubmissionKind};
 use crate::store::runs::{self as run_store, NewPolicyRun};
 use crate::store::{self, Team};
 
@@ -197,10 +198,10 @@ impl AppState {
         self.require_admin(admin)?;
         let sub = store::submission(self.pool(), id)
             .await?
-            .filter(|s| s.kind == "policy")
+            .filter(|s| s.kind == SubmissionKind::Policy)
             .ok_or_else(|| ServiceError::not_found(format!("policy submission {id}")))?;
         if let Some(run) = store::latest_run(self.pool(), id).await?
-            && run.state == "active"
+            && run.state == RunState::Active
         {
             return Err(ServiceError::Conflict(format!(
                 "submission {id} is still evaluating (run {}); re-simulate once it has finished",
@@ -322,10 +323,10 @@ impl AppState {
             .await?
             .filter(|s| any_team || s.team_id == team.id)
             .ok_or_else(|| ServiceError::not_found(format!("plans submission {id}")))?;
-        if sub.kind != "plans" {
+        if sub.kind != SubmissionKind::Plans {
             return Err(ServiceError::BadRequest(format!(
                 "submission {id} is a {} submission; `plans` must name a plan file submission",
-                sub.kind
+                sub.kind.as_str()
             )));
         }
         if sub.split != split.as_str() {

@@ -11,6 +11,7 @@ use serde::Serialize;
 use super::AppState;
 use crate::episodes::TaskOutcome;
 use crate::error::ServiceError;
+use crate::states::RunState;
 use crate::store::RunRow;
 use crate::store::runs::{self as run_store, ResultRow};
 
@@ -92,10 +93,10 @@ impl AppState {
         let source = run.episodes_run();
         let counts = run_store::job_counts(self.pool(), source).await?;
         let results = run_store::results(self.pool(), source).await?;
-        let state = match run.state.as_str() {
-            "finished" => "finished",
-            "platform_failed" => "platform_failed",
-            _ if counts.started == 0 => "queued",
+        let state = match run.state {
+            RunState::Finished => "finished",
+            RunState::PlatformFailed => "platform_failed",
+            RunState::Active if counts.started == 0 => "queued",
             _ => "running",
         };
         let episodes = results

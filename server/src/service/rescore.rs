@@ -19,6 +19,7 @@ use crate::episodes;
 use crate::error::ServiceError;
 use crate::plans;
 use crate::service::policies::{CONTROL_SCORER, parse_body};
+use crate::states::RunState;
 use crate::store::queue;
 use crate::store::runs as run_store;
 use crate::store::{self, NewRun};
@@ -111,8 +112,12 @@ impl AppState {
         let Some(run) = store::latest_run(self.pool(), id).await? else {
             return Ok(PolicyRescore::Skipped("no scoring run".into()));
         };
-        if run.state != "finished" {
-            return Ok(PolicyRescore::Skipped(format!("run {} is {}", run.id, run.state)));
+        if run.state != RunState::Finished {
+            return Ok(PolicyRescore::Skipped(format!(
+                "run {} is {}",
+                run.id,
+                run.state.as_str()
+            )));
         }
         if run.needs_resimulation {
             return Ok(PolicyRescore::Stale(format!("run {} was flagged before", run.id)));

@@ -11,6 +11,7 @@ use sqlx::sqlite::SqlitePool;
 use sqlx::{Row, SqliteConnection};
 
 use crate::episodes::{Episode, JobSpec, TaskOutcome};
+use crate::states::JobState;
 
 /// A job handed to a worker.
 #[derive(Debug, Clone, PartialEq)]
@@ -107,7 +108,7 @@ pub struct JobRow {
     pub run_id: i64,
     pub episode_key: String,
     pub spec: String,
-    pub state: String,
+    pub state: JobState,
     pub lease_owner: Option<String>,
     pub attempt: i64,
     pub max_attempts: i64,
@@ -206,7 +207,7 @@ pub async fn insert_result(conn: &mut SqliteConnection, r: &NewResult<'_>, now: 
 pub async fn close_job(
     conn: &mut SqliteConnection,
     id: i64,
-    state: &str,
+    state: JobState,
     error: Option<&str>,
     now: i64,
 ) -> sqlx::Result<()> {
@@ -225,7 +226,7 @@ pub async fn close_job(
 
 /// Put a job back in the queue after a platform failure or an expired lease.
 pub async fn requeue(conn: &mut SqliteConnection, id: i64, error: &str, now: i64) -> sqlx::Result<()> {
-    close_job(conn, id, "queued", Some(error), now).await
+    close_job(conn, id, JobState::Queued, Some(error), now).await
 }
 
 /// Jobs of a run still queued or leased.

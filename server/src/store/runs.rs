@@ -6,6 +6,7 @@ use sqlx::sqlite::SqlitePool;
 use sqlx::{QueryBuilder, Row, Sqlite, SqliteConnection};
 
 use crate::episodes::RunScores;
+use crate::states::RunState;
 
 /// A policy submission to insert with its run and jobs.
 #[derive(Debug, Clone, PartialEq)]
@@ -139,9 +140,9 @@ pub async fn finish_run(
          WHERE id = ? AND state = 'active'",
     )
     .bind(if platform_failed {
-        "platform_failed"
+        RunState::PlatformFailed
     } else {
-        "finished"
+        RunState::Finished
     })
     .bind(json.to_string())
     .bind(scores.em)

@@ -12,6 +12,7 @@ use crate::episodes::{self, JobSpec};
 use crate::error::ServiceError;
 use crate::service::AppState;
 use crate::service::policies::parse_body;
+use crate::states::JobState;
 use crate::store::queue::{self, JobRow, NewResult};
 use crate::store::runs;
 
@@ -47,7 +48,7 @@ impl AppState {
             worker_id: worker,
         };
         queue::insert_result(conn, &result, now).await?;
-        queue::close_job(conn, job.id, "failed", Some(&attempt_reason), now).await?;
+        queue::close_job(conn, job.id, JobState::Failed, Some(&attempt_reason), now).await?;
         tracing::warn!(job = job.id, run = job.run_id, %failure, "job failed");
         Ok(true)
     }
