@@ -5,6 +5,7 @@
 
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 use figment::Figment;
 use figment::providers::{Env, Format, Serialized, Toml};
@@ -12,7 +13,7 @@ use serde::{Deserialize, Serialize};
 
 /// Environment variables read into the configuration (`KITCHEN_R_<KEY>`). Listed explicitly so
 /// the client-side variables (`KITCHEN_R_SERVER`, `KITCHEN_R_TOKEN`) are not mistaken for keys.
-const ENV_KEYS: [&str; 10] = [
+const ENV_KEYS: [&str; 11] = [
     "http",
     "grpc",
     "db",
@@ -23,6 +24,7 @@ const ENV_KEYS: [&str; 10] = [
     "admin_token",
     "worker_token",
     "max_body_bytes",
+    "request_timeout_ms",
 ];
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -54,6 +56,11 @@ pub struct Config {
     pub worker_token: String,
     /// Largest accepted request body (a plan file), bytes.
     pub max_body_bytes: usize,
+    /// Budget of one HTTP or gRPC request, milliseconds; past it the request is abandoned and
+    /// answered 503 / UNAVAILABLE (code `timeout`). Calls that wait by design get more on top:
+    /// policy registration `policy.startup_deadline_ms` (it probes the endpoint), a worker's
+    /// long-polling Lease its longest wait (30 s); the organiser's rescore has no budget.
+    pub request_timeout_ms: u64,
     pub plans: PlanLimits,
     pub quota: Quota,
     pub control: ControlConfig,
@@ -136,6 +143,7 @@ impl Default for Config {
             admin_token: String::new(),
             worker_token: String::new(),
             max_body_bytes: 4 << 20,
+            request_timeout_ms: 30_000,
             plans: PlanLimits::default(),
             quota: Quota::default(),
             control: ControlConfig::default(),
@@ -245,6 +253,12 @@ impl Config {
         if !(1024..=(256 << 20)).contains(&self.max_body_bytes) {
             return invalid("max_body_bytes", "must be between 1 KiB and 256 MiB".into());
         }
+        if !(100..=3_600_000).contains(&self.request_timeout_ms) {
+            return invalid(
+                "request_timeout_ms",
+                "must be between 100 ms and 3600000 ms (one hour)".into(),
+            );
+        }
         if self.plans.max_step_chars == 0 || self.plans.max_steps == 0 {
             return invalid("plans", "max_step_chars and max_steps must be at least 1".into());
         }
@@ -296,6 +310,17 @@ impl Config {
         Ok(())
     }
 
+    /// The budget of one HTTP or gRPC request (`request_timeout_ms`).
+    pub fn request_timeout(&self) -> Duration {
+        Duration::from_millis(self.request_timeout_ms)
+    }
+
+    /// The budget of a policy registration: a request's plus the endpoint probe's
+    /// (`policy.startup_deadline_ms`), so a slow but healthy endpoint is not cut off.
+    pub fn registration_timeout(&self) -> Duration {
+        self.request_timeout() + Duration::from_millis(self.policy.startup_deadline_ms.into())
+    }
+
     /// The private test set directory, if one is configured.
     pub fn test_set_dir(&self) -> Option<&Path> {
         (!self.test_set.as_os_str().is_empty()).then_some(self.test_set.as_path())
@@ -339,6 +364,7 @@ mod tests {
             .unwrap();
         assert_eq!(c, Config::default());
         assert_eq!(c.quota.concurrent_runs, 2);
+        assert_eq!(c.request_timeout_ms, 30_000);
         assert!(c.control.offline_mse);
         assert_eq!(c.policy.allow_networks, ["127.0.0.0/8", "::1/128"]);
     }
@@ -362,6 +388,26 @@ mod tests {
             ..Config::default()
         };
         assert!(c.validate().is_err());
+    }
+
+    #[test]
+    fn the_request_timeout_is_checked() {
+        for bad in [0, 99, 3_600_001] {
+            let c = Config {
+                request_timeout_ms: bad,
+                ..Config::default()
+            };
+            assert!(
+                matches!(
+                    c.validate(),
+                    Err(ConfigError::Invalid {
+                        key: "request_timeout_ms",
+                        ..
+                    })
+                ),
+                "{bad}"
+            );
+        }
     }
 
     #[test]

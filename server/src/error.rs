@@ -4,8 +4,16 @@
 //! Participants must always learn *why* something was refused: every variant's message is meant
 //! to be shown to them as is; internal failures are logged in full and answered with a generic
 //! message instead of leaking paths or SQL.
+//!
+//! Every error also carries the id of the request that caused it (DESIGN.md: "request ids in
+//! every error"): the transport stacks ([`crate::http::stack`], [`crate::grpc::GrpcStackLayer`])
+//! run each request inside [`with_request_id`], and the conversions below read it back with
+//! [`current_request_id`], so a participant can quote the id and an organiser find the log line.
 
-use axum::http::StatusCode;
+use std::future::Future;
+use std::sync::Arc;
+
+use axum::http::{HeaderMap, StatusCode};
 use axum::response::{IntoResponse, Response};
 use serde_json::{Value, json};
 
@@ -50,8 +58,49 @@ pub enum ServiceError {
         "quota exceeded: at most {limit} policy runs of a team evaluate at the same time; wait for one to finish"
     )]
     ConcurrentRuns { limit: u32 },
+    /// The request ran past its budget (`request_timeout_ms`) and was abandoned.
+    #[error("the request took longer than {after_ms} ms and was abandoned; try again")]
+    Timeout { after_ms: u64 },
     #[error("internal error")]
     Internal(#[from] anyhow::Error),
+}
+
+/// The header that carries the request id, both ways, on HTTP and gRPC.
+pub const REQUEST_ID_HEADER: &str = "x-request-id";
+
+tokio::task_local! {
+    static REQUEST_ID: Arc<str>;
+}
+
+/// Run `fut` as the handling of the request `id`: errors built inside it carry that id.
+pub async fn with_request_id<F: Future>(id: Arc<str>, fut: F) -> F::Output {
+    REQUEST_ID.scope(id, fut).await
+}
+
+/// The id of the request being handled, if any (none outside the transport stacks, e.g. in
+/// service-level tests or background tasks).
+pub fn current_request_id() -> Option<Arc<str>> {
+    REQUEST_ID.try_with(Arc::clone).ok()
+}
+
+/// The caller's `x-request-id` when it is sane (1 to 64 characters of `[A-Za-z0-9._:-]`, so it
+/// can be logged and echoed without escaping), else a fresh random one.
+pub fn request_id_from(headers: &HeaderMap) -> Arc<str> {
+    let given = headers
+        .get(REQUEST_ID_HEADER)
+        .and_then(|v| v.to_str().ok())
+        .filter(|v| {
+            (1..=64).contains(&v.len())
+                && v.bytes()
+                    .all(|b| b.is_ascii_alphanumeric() || matches!(b, b'-' | b'_' | b'.' | b':'))
+        });
+    match given {
+        Some(v) => Arc::from(v),
+        None => {
+            let bytes: [u8; 8] = rand::random();
+            Arc::from(hex::encode(bytes))
+        }
+    }
 }
 
 impl From<sqlx::Error> for ServiceError {
@@ -81,6 +130,7 @@ impl ServiceError {
             ServiceError::ProbeFailed(_) => "policy_probe_failed",
             ServiceError::PolicyDisabled(_) => "policy_evaluation_disabled",
             ServiceError::ConcurrentRuns { .. } => "concurrent_runs_exceeded",
+            ServiceError::Timeout { .. } => "timeout",
             ServiceError::Internal(_) => "internal",
         }
     }
@@ -99,13 +149,18 @@ impl ServiceError {
             ServiceError::EndpointRefused(_) => StatusCode::BAD_REQUEST,
             ServiceError::ProbeFailed(_) => StatusCode::UNPROCESSABLE_ENTITY,
             ServiceError::ConcurrentRuns { .. } => StatusCode::TOO_MANY_REQUESTS,
+            ServiceError::Timeout { .. } => StatusCode::SERVICE_UNAVAILABLE,
             ServiceError::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
         }
     }
 
-    /// The JSON body: `{"error": message, "code": ..., ...details}`.
+    /// The JSON body: `{"error": message, "code": ..., "request_id": ...?, ...details}`
+    /// (`request_id` whenever the error is built while a request is being handled).
     pub fn body(&self) -> Value {
         let mut body = json!({ "error": self.to_string(), "code": self.code() });
+        if let Some(id) = current_request_id() {
+            body["request_id"] = json!(&*id);
+        }
         match self {
             ServiceError::PlanFile(e) => {
                 if let Some(line) = e.line() {
@@ -126,8 +181,10 @@ impl ServiceError {
     }
 
     fn log(&self) {
-        if let ServiceError::Internal(e) = self {
-            tracing::error!(error = format!("{e:#}"), "internal error");
+        match self {
+            ServiceError::Internal(e) => tracing::error!(error = format!("{e:#}"), "internal error"),
+            ServiceError::Timeout { after_ms } => tracing::warn!(after_ms, "request timed out"),
+            _ => {}
         }
     }
 }
@@ -149,7 +206,14 @@ impl IntoResponse for ServiceError {
 impl From<ServiceError> for tonic::Status {
     fn from(e: ServiceError) -> Self {
         e.log();
-        let msg = e.to_string();
+        let mut msg = e.to_string();
+        // gRPC has no JSON body: the id is in the `x-request-id` metadata (set by the stack), and
+        // in the message of the errors a participant would have to report.
+        if let (ServiceError::Internal(_) | ServiceError::Timeout { .. }, Some(id)) =
+            (&e, current_request_id())
+        {
+            msg = format!("{msg} (request id {id})");
+        }
         match e {
             ServiceError::MissingToken | ServiceError::BadToken => tonic::Status::unauthenticated(msg),
             ServiceError::NotAdmin => tonic::Status::permission_denied(msg),
@@ -162,6 +226,7 @@ impl From<ServiceError> for tonic::Status {
             ServiceError::Unavailable(_) | ServiceError::PolicyDisabled(_) => tonic::Status::unavailable(msg),
             ServiceError::EndpointRefused(_) => tonic::Status::invalid_argument(msg),
             ServiceError::ProbeFailed(_) => tonic::Status::failed_precondition(msg),
+            ServiceError::Timeout { .. } => tonic::Status::unavailable(msg),
             ServiceError::Internal(_) => tonic::Status::internal(msg),
         }
     }

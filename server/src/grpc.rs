@@ -1,13 +1,27 @@
 //! The gRPC adapter (tonic) for `kitchen_r.submission.v1.Submissions`: converts messages and
 //! calls the same service functions as the HTTP routes, so both transports apply one set of rules.
+//!
+//! [`GrpcStackLayer`] is the tower stack of the whole gRPC server (every service, health and
+//! reflection included), the counterpart of [`crate::http::stack`].
 
+use std::any::Any;
+use std::future::Future;
+use std::panic::AssertUnwindSafe;
+use std::pin::Pin;
+use std::task::{Context, Poll};
+use std::time::Duration;
+
+use axum::http::{self, HeaderValue};
 use kitchen_r_core::dataset::Split;
 use kitchen_r_proto::submission::v1 as pb;
 use pb::submissions_server::Submissions;
 use tonic::{Request, Response, Status};
 
-use crate::error::ServiceError;
+use crate::config::Config;
+use crate::error::{REQUEST_ID_HEADER, ServiceError, request_id_from, with_request_id};
 use crate::leaderboard::Track;
+use crate::probe::BoxFuture;
+use crate::service::jobs::MAX_LEASE_WAIT_MS;
 use crate::service::{AppState, EpisodeView, RegisterPolicy, Scores, SubmissionView};
 
 #[derive(Debug, Clone)]
@@ -194,5 +208,250 @@ impl Submissions for SubmissionsService {
                 })
                 .collect(),
         }))
+    }
+}
+
+/// The tower stack around every gRPC call, in one layer: the request id (the caller's
+/// `x-request-id` metadata when sane, else a fresh one; current while the call runs, so
+/// `INTERNAL` and `UNAVAILABLE` messages name it, and echoed as `x-request-id` response
+/// metadata), a trace span with the gRPC path and the id, a budget (past it `UNAVAILABLE`, code
+/// `timeout`) and catch-panic (a handler that panics answers `INTERNAL` with the id; the panic
+/// message is logged, never sent).
+///
+/// Not tonic's own `Server::timeout`: it has one budget for every call, which would either cut
+/// a worker's long-polling `Lease` (up to [`MAX_LEASE_WAIT_MS`]) and a `RegisterPolicy` that
+/// probes the endpoint, or be far too long for everything else. Not tower-http's catch-panic
+/// either: its answer is an HTTP 500, which a gRPC client reads as a transport failure rather
+/// than a status. The budget covers the call up to its response headers (streamed bodies, as in
+/// reflection or health `Watch`, are not cut).
+#[derive(Debug, Clone)]
+pub struct GrpcStackLayer {
+    default: Duration,
+    registration: Duration,
+    lease: Duration,
+}
+
+impl GrpcStackLayer {
+    pub fn new(cfg: &Config) -> Self {
+        GrpcStackLayer {
+            default: cfg.request_timeout(),
+            registration: cfg.registration_timeout(),
+            lease: cfg.request_timeout() + Duration::from_millis(MAX_LEASE_WAIT_MS.into()),
+        }
+    }
+
+    /// The budget of the call at `path` (`/package.Service/Method`).
+    fn budget(&self, path: &str) -> Duration {
+        let (service, method) = path.trim_start_matches('/').split_once('/').unwrap_or_default();
+        match (service, method) {
+            (kitchen_r_proto::worker::v1::worker_server::SERVICE_NAME, "Lease") => self.lease,
+            (pb::submissions_server::SERVICE_NAME, "RegisterPolicy") => self.registration,
+            _ => self.default,
+        }
+    }
+}
+
+impl<S> tower::Layer<S> for GrpcStackLayer {
+    type Service = GrpcStack<S>;
+
+    fn layer(&self, inner: S) -> GrpcStack<S> {
+        GrpcStack {
+            inner,
+            layer: self.clone(),
+        }
+    }
+}
+
+/// The service [`GrpcStackLayer`] wraps around the gRPC routes.
+#[derive(Debug, Clone)]
+pub struct GrpcStack<S> {
+    inner: S,
+    layer: GrpcStackLayer,
+}
+
+impl<S, ReqBody, ResBody> tower::Service<http::Request<ReqBody>> for GrpcStack<S>
+where
+    S: tower::Service<http::Request<ReqBody>, Response = http::Response<ResBody>>,
+    S::Future: Send + 'static,
+    S::Error: Send + 'static,
+    ResBody: Default + Send + 'static,
+{
+    type Response = http::Response<ResBody>;
+    type Error = S::Error;
+    type Future = BoxFuture<'static, Result<Self::Response, Self::Error>>;
+
+    fn poll_ready(&mut self, cx: &mut Context<'_>) -> Poll<Result<(), Self::Error>> {
+        self.inner.poll_ready(cx)
+    }
+
+    fn call(&mut self, req: http::Request<ReqBody>) -> Self::Future {
+        use tracing::Instrument;
+        let id = request_id_from(req.headers());
+        let path = req.uri().path().to_owned();
+        let budget = self.layer.budget(&path);
+        let span = tracing::info_span!("grpc", path = %path, request_id = %id);
+        let call = CatchUnwind(Box::pin(self.inner.call(req)));
+        let answer = async move {
+            let result = match tokio::time::timeout(budget, call).await {
+                Ok(Ok(done)) => done,
+                Ok(Err(panic)) => Ok(status_response(panic_error(&*panic))),
+                Err(_) => Ok(status_response(ServiceError::Timeout {
+                    after_ms: u64::try_from(budget.as_millis()).unwrap_or(u64::MAX),
+                })),
+            };
+            result.map(|mut resp| {
+                if let Some(id) = crate::error::current_request_id()
+                    && let Ok(v) = HeaderValue::from_str(&id)
+                {
+                    resp.headers_mut().insert(REQUEST_ID_HEADER, v);
+                }
+                resp
+            })
+        };
+        Box::pin(with_request_id(id, answer).instrument(span))
+    }
+}
+
+/// A trailers-only gRPC answer for `e` (built inside the request id's scope).
+fn status_response<B: Default>(e: ServiceError) -> http::Response<B> {
+    Status::from(e).into_http()
+}
+
+fn panic_error(panic: &(dyn Any + Send)) -> ServiceError {
+    let what = panic
+        .downcast_ref::<&str>()
+        .map(|s| (*s).to_string())
+        .or_else(|| panic.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "a non-string payload".into());
+    ServiceError::Internal(anyhow::anyhow!("handler panicked: {what}"))
+}
+
+/// A future that turns a panic while polling `F` into `Err(payload)`.
+struct CatchUnwind<F>(Pin<Box<F>>);
+
+impl<F: Future> Future for CatchUnwind<F> {
+    type Output = Result<F::Output, Box<dyn Any + Send>>;
+
+    fn poll(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<Self::Output> {
+        let inner = self.0.as_mut();
+        // The future is never polled again after a panic, so no broken state is observed.
+        match std::panic::catch_unwind(AssertUnwindSafe(|| inner.poll(cx))) {
+            Ok(Poll::Pending) => Poll::Pending,
+            Ok(Poll::Ready(v)) => Poll::Ready(Ok(v)),
+            Err(panic) => Poll::Ready(Err(panic)),
+        }
+    }
+}
+
+#[cfg(test)]
+mod stack_tests {
+    use std::convert::Infallible;
+
+    use tower::{Layer, ServiceExt};
+
+    use super::*;
+
+    type Reply = Result<http::Response<tonic::body::Body>, Infallible>;
+
+    fn stack<F, Fut>(
+        cfg: &Config,
+        f: F,
+    ) -> impl tower::Service<
+        http::Request<()>,
+        Response = http::Response<tonic::body::Body>,
+        Error = Infallible,
+    > + use<F, Fut>
+    where
+        F: FnMut(http::Request<()>) -> Fut,
+        Fut: Future<Output = Reply> + Send + 'static,
+    {
+        GrpcStackLayer::new(cfg).layer(tower::service_fn(f))
+    }
+
+    fn call_to(path: &str, id: Option<&str>) -> http::Request<()> {
+        let mut req = http::Request::post(path);
+        if let Some(id) = id {
+            req = req.header(REQUEST_ID_HEADER, id);
+        }
+        req.body(()).unwrap()
+    }
+
+    fn grpc_status(resp: &http::Response<tonic::body::Body>) -> (Option<&str>, String) {
+        let status = Status::from_header_map(resp.headers()).expect("a trailers-only status");
+        (
+            resp.headers()
+                .get(REQUEST_ID_HEADER)
+                .and_then(|v| v.to_str().ok()),
+            format!("{:?}: {}", status.code(), status.message()),
+        )
+    }
+
+    #[tokio::test]
+    async fn a_panicking_call_is_internal_with_the_request_id_and_no_internals() {
+        let svc = stack(&Config::default(), |_| async { panic!("secret internals") });
+        let resp = svc
+            .oneshot(call_to(
+                "/kitchen_r.submission.v1.Submissions/GetSubmission",
+                Some("req-7"),
+            ))
+            .await
+            .unwrap();
+        let (id, status) = grpc_status(&resp);
+        assert_eq!(id, Some("req-7"));
+        assert_eq!(status, "Internal: internal error (request id req-7)");
+    }
+
+    #[tokio::test]
+    async fn a_call_past_its_budget_is_unavailable_but_a_long_poll_lease_is_not_cut() {
+        let cfg = Config {
+            request_timeout_ms: 100,
+            ..Config::default()
+        };
+        let slow = |_| async {
+            // Past the 100 ms budget, well within a Lease's (100 ms + 30 s).
+            tokio::time::sleep(Duration::from_millis(400)).await;
+            Ok(Status::ok("").into_http())
+        };
+        let resp = stack(&cfg, slow)
+            .oneshot(call_to(
+                "/kitchen_r.submission.v1.Submissions/GetLeaderboard",
+                None,
+            ))
+            .await
+            .unwrap();
+        let (id, status) = grpc_status(&resp);
+        assert_eq!(id.map(str::len), Some(16), "a generated id: {id:?}");
+        assert!(
+            status.starts_with("Unavailable: the request took longer than 100 ms"),
+            "{status}"
+        );
+        let resp = stack(&cfg, slow)
+            .oneshot(call_to("/kitchen_r.worker.v1.Worker/Lease", None))
+            .await
+            .unwrap();
+        assert_eq!(grpc_status(&resp).1, "Ok: ");
+    }
+
+    /// Through the real server and a real client: errors carry the caller's id as metadata.
+    #[tokio::test]
+    async fn grpc_errors_carry_the_request_id_metadata() {
+        use crate::testutil::{FakeProbe, fixture};
+        let f = fixture(FakeProbe::ok(1), |_| {}).await;
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let addr = listener.local_addr().unwrap();
+        let routes = crate::grpc_routes(f.state.clone()).await.unwrap();
+        tokio::spawn(routes.serve_with_incoming(tokio_stream::wrappers::TcpListenerStream::new(listener)));
+        let mut client = pb::submissions_client::SubmissionsClient::connect(format!("http://{addr}"))
+            .await
+            .unwrap();
+        let mut req = Request::new(pb::GetSubmissionRequest { id: 1 });
+        req.metadata_mut()
+            .insert(REQUEST_ID_HEADER, "grpc-req-9".parse().unwrap());
+        let e = client.get_submission(req).await.unwrap_err();
+        assert_eq!(e.code(), tonic::Code::Unauthenticated);
+        assert_eq!(
+            e.metadata().get(REQUEST_ID_HEADER).map(|v| v.to_str().unwrap()),
+            Some("grpc-req-9")
+        );
     }
 }

@@ -2,7 +2,8 @@
 //!
 //! Handlers only extract, call one service function and shape the answer; every rule is in
 //! [`crate::service`]. Errors are always JSON (`{"error", "code", ...}`), including bad query
-//! parameters and unknown routes.
+//! parameters and unknown routes, and carry the request id; [`stack`] is the tower stack
+//! (request id, trace, catch-panic, timeout) every route runs in.
 
 use std::collections::HashMap;
 
@@ -24,8 +25,11 @@ use crate::service::{AppState, RegisterPolicy};
 
 type Params = Query<HashMap<String, String>>;
 
+pub mod stack;
+
 pub fn router(state: AppState) -> Router {
-    Router::new()
+    let cfg = state.config();
+    let quick = Router::new()
         .route("/", get(index))
         .route("/healthz", get(healthz))
         .route("/api/v1/teams", post(create_team))
@@ -36,13 +40,19 @@ pub fn router(state: AppState) -> Router {
         .route("/api/v1/scenes/{id}/topdown.png", get(topdown))
         .route("/api/v1/scenes/{id}/brief", get(brief))
         .route("/api/v1/submissions/plans", post(submit_plans))
-        .route("/api/v1/submissions/policies", post(register_policy))
         .route("/api/v1/submissions/{id}", get(submission))
         .route("/api/v1/leaderboard", get(leaderboard))
-        .route("/api/v1/admin/rescore", post(rescore))
-        .route("/api/v1/admin/resimulate", post(resimulate))
-        .fallback(|| async { ServiceError::not_found("route") })
-        .with_state(state)
+        .route("/api/v1/admin/resimulate", post(resimulate));
+    // Registration probes the endpoint first, which may take up to `policy.startup_deadline_ms`.
+    let probing = Router::new().route("/api/v1/submissions/policies", post(register_policy));
+    // The organiser's rescore walks every stored submission, so its length grows with the
+    // contest; abandoning it would leave it half done. It is organiser-only, so no budget.
+    let unbounded = Router::new().route("/api/v1/admin/rescore", post(rescore));
+    let routes = stack::with_timeout(quick, cfg.request_timeout())
+        .merge(stack::with_timeout(probing, cfg.registration_timeout()))
+        .merge(unbounded)
+        .fallback(|| async { ServiceError::not_found("route") });
+    stack::layered(routes).with_state(state)
 }
 
 fn bearer(headers: &HeaderMap) -> Option<&str> {
@@ -252,5 +262,7 @@ async fn resimulate(
     Ok((StatusCode::CREATED, axum::Json(done)).into_response())
 }
 
+#[cfg(test)]
+mod stack_tests;
 #[cfg(test)]
 mod tests;
