@@ -52,6 +52,10 @@ pub struct TaskOutcome {
     pub sim_time: f64,
     /// Why the task failed; `None` when it succeeded.
     pub failure: Option<String>,
+    /// The failure ends the whole episode (wall budget, successive timeouts, the hook's abort):
+    /// every later task fails with the same reason.
+    #[serde(default)]
+    pub aborts_episode: bool,
     pub policy_calls: u32,
 }
 
@@ -164,12 +168,15 @@ pub fn run_episode(
     for j in 0..n_tasks {
         let step_text = episode.plan[j].clone();
         if let Some(reason) = &aborted {
-            out.tasks.push(failed(j, step_text, 0.0, reason.clone(), 0));
+            out.tasks.push(TaskOutcome {
+                aborts_episode: true,
+                ..failed(j, step_text, 0.0, reason.clone(), 0)
+            });
             continue;
         }
         let task = run_task(sim, policy, opts, j, &mut timeouts, hook, started)?;
         out.policy_calls += task.policy_calls;
-        if task.failure.as_deref().is_some_and(|f| f.starts_with(ABORT)) {
+        if task.aborts_episode {
             aborted = task.failure.clone();
         }
         let failed_task = !task.success;
@@ -186,7 +193,8 @@ pub fn run_episode(
     Ok(out)
 }
 
-/// Prefix of failure reasons that end the whole episode.
+/// How the reason of a failure that ends the whole episode starts, for the reader (the runner
+/// itself goes by [`TaskOutcome::aborts_episode`]).
 const ABORT: &str = "episode aborted: ";
 
 fn failed(index: usize, step: String, sim_time: f64, reason: String, calls: u32) -> TaskOutcome {
@@ -196,6 +204,7 @@ fn failed(index: usize, step: String, sim_time: f64, reason: String, calls: u32)
         success: false,
         sim_time,
         failure: Some(reason),
+        aborts_episode: false,
         policy_calls: calls,
     }
 }
@@ -221,6 +230,14 @@ fn run_task(
         sim.end_task();
         Ok(failed(j, step_text.clone(), elapsed, reason, calls))
     };
+    let abort = |sim: &mut Sim, reason: String, calls: u32| {
+        let elapsed = sim.time() - t0;
+        sim.end_task();
+        Ok(TaskOutcome {
+            aborts_episode: true,
+            ..failed(j, step_text.clone(), elapsed, format!("{ABORT}{reason}"), calls)
+        })
+    };
     if let Err(e) = policy.reset(&episode_id, j, &step_text) {
         return fail(sim, format!("reset: {e}"), calls);
     }
@@ -231,7 +248,7 @@ fn run_task(
     };
     loop {
         if opts.wall_budget.is_some_and(|b| episode_started.elapsed() > b) {
-            return fail(sim, format!("{ABORT}wall-clock budget exceeded"), calls);
+            return abort(sim, "wall-clock budget exceeded".into(), calls);
         }
         let privileged = opts.privileged.then(|| privileged(sim, target.clone()));
         let input = PolicyInput {
@@ -255,9 +272,9 @@ fn run_task(
                 *timeouts += 1;
                 let reason = PolicyError::Timeout(s).to_string();
                 if *timeouts >= opts.max_consecutive_timeouts {
-                    return fail(
+                    return abort(
                         sim,
-                        format!("{ABORT}{} successive timeouts ({reason})", *timeouts),
+                        format!("{} successive timeouts ({reason})", *timeouts),
                         calls,
                     );
                 }
@@ -279,7 +296,7 @@ fn run_task(
                 hook.observation(o);
             }
             if let Err(reason) = hook.on_step(sim, &action, &info) {
-                return fail(sim, format!("{ABORT}{reason}"), calls);
+                return abort(sim, reason, calls);
             }
             let elapsed = sim.time() - t0;
             if info.task.as_ref().is_some_and(|t| t.success) {
@@ -290,6 +307,7 @@ fn run_task(
                     success: true,
                     sim_time: elapsed,
                     failure: None,
+                    aborts_episode: false,
                     policy_calls: calls,
                 });
             }
