@@ -54,7 +54,7 @@ pub fn task_target(episode: &EpisodeConfig, scene: &Scene, index: usize) -> Resu
         Step::Place { object: name } => {
             let nth = episode.plan[..index]
                 .iter()
-                .filter(|s| s.starts_with("place the "))
+                .filter(|s| matches!(s.parse::<Step>(), Ok(Step::Place { .. })))
                 .count();
             let target = *episode
                 .place_targets

@@ -195,14 +195,14 @@ pub struct EvalReport {
     pub episodes: Vec<EpisodeOutcome>,
 }
 
-/// The kinds a plan step counts under.
+/// The kinds a plan step counts under (none for a step that is not canonical).
 pub fn task_kinds(step: &str) -> &'static [&'static str] {
-    if step.starts_with("move to ") {
-        &["navigation"]
-    } else if step.starts_with("pick ") {
-        &["manipulation", "pick"]
-    } else {
-        &["manipulation", "place"]
+    use kitchen_r_core::plan::Step;
+    match step.parse::<Step>() {
+        Ok(Step::MoveTo { .. }) => &["navigation"],
+        Ok(Step::Pick { .. }) => &["manipulation", "pick"],
+        Ok(Step::Place { .. }) => &["manipulation", "place"],
+        Err(_) => &[],
     }
 }
 
