@@ -1,5 +1,5 @@
 //! Runs the policy-call overhead benchmark; ignored by default because it measures, it does not
-//! test. `cargo test --release -p kitchen-r-worker --test remote_bench -- --ignored --nocapture`
+//! test. `cargo test --release -p kitchen-r-worker --test it remote_bench -- --ignored --nocapture`
 //! (`REMOTE_BENCH_CALLS` sets the number of calls, 2000 by default).
 
 #[test]
