@@ -25,7 +25,7 @@
 //! (`worker/src/oracle/task.rs`, ~1.5 cm at the arm's reach). [`ALLOWANCE`] is what the arm
 //! gains over the straight top-down chain by tilting the tool (the RMP controller weighs the
 //! position attractor ten times the orientation one) and what the 5 cm place tolerance absorbs;
-//! it is measured in the twin (`worker/tests/place_reach.rs`).
+//! it is measured in the twin (`worker/tests/it/place_reach.rs`).
 //!
 //! Everything here is `+ − × ÷` and `sqrt`, correctly rounded on every platform; the approach
 //! yaw's cosine and sine are exact for quarter turns (every committed approach pose), so the
@@ -45,7 +45,7 @@ pub const RELEASE_HEIGHT: f64 = 0.01;
 /// How far the base may stand from the approach pose when it places, m.
 pub const BASE_SLACK: f64 = 0.045;
 /// Reach beyond the straight top-down chain that the twin's arm and the place tolerance
-/// provide, m; validated in the twin by `worker/tests/place_reach.rs`: at the rule's limit,
+/// provide, m; validated in the twin by `worker/tests/it/place_reach.rs`: at the rule's limit,
 /// with the base the whole [`BASE_SLACK`] away and the grasp point on the far side, the oracle
 /// lets objects go within 4.6 cm of the target (plates; 3.4 cm the others), inside the 5 cm
 /// place tolerance. From the nominal pose the rule's limit sits at about the straight chain
