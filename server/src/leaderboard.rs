@@ -6,6 +6,9 @@
 //! failed entries last. Organiser reference runs are baseline rows (`baseline: true`, no rank):
 //! each one is shown, none is a team's best.
 //!
+//! Below the service: this module holds the ranking types, the renderings and the cache; the
+//! service (`service/board.rs`) reads the store and fills them.
+//!
 //! Policy: rendered bodies are cached per (track, split, format) and dropped on every write that
 //! can change a ranking (a new submission, a rescore, a policy run finishing), so reads under
 //! load are a hash lookup and a reference-count increment. A generation counter makes a render
@@ -22,8 +25,7 @@ use kitchen_r_core::dataset::Split;
 use serde::Serialize;
 
 use crate::error::ServiceError;
-use crate::service::{AppState, Scores, rfc3339};
-use crate::store;
+use crate::scores::Scores;
 
 /// The ranked tracks.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
@@ -91,7 +93,7 @@ pub struct Row {
 }
 
 /// Key of a cached body: `None` track is the all-tracks page at `/`.
-type CacheKey = (Option<Track>, Split, Format);
+pub(crate) type CacheKey = (Option<Track>, Split, Format);
 
 #[derive(Debug, Default)]
 pub struct LeaderboardCache {
@@ -105,7 +107,7 @@ impl LeaderboardCache {
         self.rendered.write().unwrap_or_else(|p| p.into_inner()).clear();
     }
 
-    fn get(&self, key: CacheKey) -> (u64, Option<Bytes>) {
+    pub(crate) fn get(&self, key: CacheKey) -> (u64, Option<Bytes>) {
         let generation = self.generation.load(Ordering::SeqCst);
         let map = self.rendered.read().unwrap_or_else(|p| p.into_inner());
         let hit = map
@@ -115,7 +117,7 @@ impl LeaderboardCache {
         (generation, hit)
     }
 
-    fn put(&self, key: CacheKey, generation: u64, body: &Bytes) {
+    pub(crate) fn put(&self, key: CacheKey, generation: u64, body: &Bytes) {
         let mut map = self.rendered.write().unwrap_or_else(|p| p.into_inner());
         if self.generation.load(Ordering::SeqCst) == generation {
             map.insert(key, (generation, body.clone()));
@@ -124,7 +126,7 @@ impl LeaderboardCache {
 }
 
 /// Give teams' rows their ranks in order; baseline rows get none.
-fn ranked(rows: impl IntoIterator<Item = Row>) -> Vec<Row> {
+pub(crate) fn ranked(rows: impl IntoIterator<Item = Row>) -> Vec<Row> {
     let mut next = 0;
     rows.into_iter()
         .map(|mut r| {
@@ -135,100 +137,6 @@ fn ranked(rows: impl IntoIterator<Item = Row>) -> Vec<Row> {
             r
         })
         .collect()
-}
-
-impl AppState {
-    /// The ranking of one track and split.
-    pub async fn leaderboard(&self, track: Track, split: Split) -> Result<Leaderboard, ServiceError> {
-        let rows: Vec<Row> = match track {
-            Track::Planning => store::planning_leaderboard(self.pool(), split)
-                .await?
-                .into_iter()
-                .map(|r| Row {
-                    rank: None,
-                    team: r.team,
-                    submission_id: r.submission_id,
-                    scores: Scores::em(r.em),
-                    submitted_at: rfc3339(r.submitted_at),
-                    state: None,
-                    baseline: false,
-                })
-                .collect(),
-            Track::Control | Track::Integrated => {
-                store::runs::policy_leaderboard(self.pool(), split, track == Track::Integrated)
-                    .await?
-                    .into_iter()
-                    .map(|r| {
-                        let integrated = track == Track::Integrated;
-                        Row {
-                            rank: None,
-                            team: r.team,
-                            submission_id: r.submission_id,
-                            scores: Scores {
-                                em: None,
-                                sr: r.sr,
-                                mse: r.mse,
-                                m: r.m.filter(|_| integrated),
-                                p: r.p.filter(|_| integrated),
-                            },
-                            submitted_at: rfc3339(r.submitted_at),
-                            state: r.state,
-                            baseline: r.baseline,
-                        }
-                    })
-                    .collect()
-            }
-        };
-        Ok(Leaderboard {
-            track,
-            split,
-            rows: ranked(rows),
-        })
-    }
-
-    /// The leaderboard rendered in `format`, from the cache when nothing was written since.
-    pub async fn leaderboard_rendered(
-        &self,
-        track: Track,
-        split: Split,
-        format: Format,
-    ) -> Result<Bytes, ServiceError> {
-        let key = (Some(track), split, format);
-        let cache = self.leaderboard_cache();
-        let (generation, hit) = cache.get(key);
-        if let Some(body) = hit {
-            return Ok(body);
-        }
-        let board = self.leaderboard(track, split).await?;
-        let body: Bytes = match format {
-            Format::Json => serde_json::to_vec(&board).map_err(anyhow::Error::from)?.into(),
-            Format::Csv => render::csv(&board).into(),
-            Format::Html => render::page(split, &[board], self.public_sample()).into(),
-        };
-        cache.put(key, generation, &body);
-        Ok(body)
-    }
-
-    fn public_sample(&self) -> bool {
-        self.content().test_set.kind == crate::content::TestSetKind::PublicSample
-    }
-
-    /// The public page at `/`: all three tracks of `split`.
-    pub async fn leaderboard_page(&self, split: Split) -> Result<Bytes, ServiceError> {
-        let key = (None, split, Format::Html);
-        let cache = self.leaderboard_cache();
-        let (generation, hit) = cache.get(key);
-        if let Some(body) = hit {
-            return Ok(body);
-        }
-        let mut boards = Vec::with_capacity(Track::ALL.len());
-        for track in Track::ALL {
-            boards.push(self.leaderboard(track, split).await?);
-        }
-        let body: Bytes = render::page(split, &boards, self.public_sample()).into();
-        cache.put(key, generation, &body);
-        Ok(body)
-    }
 }
 
 #[cfg(test)]

@@ -9,8 +9,14 @@
 //! adapters; [`store`] is every SQL statement (including the job queue); [`plans`] parses and
 //! scores plan files; [`episodes`] defines policy-run episodes and their scoring; [`probe`] is
 //! the seam through which the binary supplies the policy endpoint probe; [`content`] holds the
-//! dataset.
+//! dataset; [`leaderboard`] the ranking types, renderings and cache.
+//!
+//! Imports go one way: adapters ([`http`], [`grpc`], [`grpc_worker`]) → [`service`] →
+//! [`store`], [`leaderboard`], [`content`], [`episodes`] → [`error`] → [`plans`] → the leaf
+//! modules [`scores`], [`clock`], [`states`], [`config`]. Nothing below the service imports the
+//! service or an adapter (tests aside).
 
+pub mod clock;
 pub mod config;
 pub mod content;
 pub mod episodes;
@@ -21,6 +27,7 @@ pub mod http;
 pub mod leaderboard;
 pub mod plans;
 pub mod probe;
+pub mod scores;
 pub mod service;
 pub mod states;
 pub mod store;

@@ -5,11 +5,11 @@
 //! Submodules: [`policies`] registers policy endpoints and shows their runs; [`jobs`] is the
 //! worker-facing queue (lease, heartbeat, report, reaper); [`scores`] is how scores are shown.
 
+mod board;
 pub mod jobs;
 pub mod policies;
 mod progress;
 mod rescore;
-mod scores;
 
 use std::sync::Arc;
 
@@ -27,10 +27,11 @@ use crate::probe::PolicyProbe;
 use crate::states::SubmissionKind;
 use crate::store::{self, NewRun, Team};
 
+pub use crate::clock::{now_ms, rfc3339};
+pub use crate::scores::{Scores, fmt_score};
 pub use policies::{PolicyInfo, RegisterPolicy, Registered};
 pub use progress::{EpisodeView, PolicyRunView};
 pub use rescore::{RescoreFailure, RescoreReport};
-pub use scores::{Scores, fmt_score};
 
 /// Version of the planning scorer; part of every scoring run's `scorer_version`.
 pub const PLANNING_SCORER: &str = "planning-em/1";
@@ -396,18 +397,6 @@ pub fn new_token() -> String {
 
 pub fn hash_token(token: &str) -> String {
     hex::encode(Sha256::digest(token.as_bytes()))
-}
-
-pub fn now_ms() -> i64 {
-    (time::OffsetDateTime::now_utc().unix_timestamp_nanos() / 1_000_000) as i64
-}
-
-/// Unix milliseconds as RFC 3339 UTC.
-pub fn rfc3339(ms: i64) -> String {
-    time::OffsetDateTime::from_unix_timestamp_nanos(i128::from(ms) * 1_000_000)
-        .ok()
-        .and_then(|t| t.format(&time::format_description::well_known::Rfc3339).ok())
-        .unwrap_or_default()
 }
 
 #[cfg(test)]

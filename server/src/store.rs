@@ -23,7 +23,7 @@ use sqlx::sqlite::{
 use sqlx::{QueryBuilder, Row, Sqlite};
 
 use crate::plans::InstructionScore;
-use crate::service::Scores;
+use crate::scores::Scores;
 use crate::states::{RunState, SubmissionKind};
 
 /// Open (creating file and directory if missing) and migrate the database.

@@ -6,7 +6,7 @@ use std::fmt::Write as _;
 use kitchen_r_core::dataset::Split;
 
 use super::{Leaderboard, Row, Track};
-use crate::service::fmt_score;
+use crate::scores::fmt_score;
 
 /// A score column: its header and how to read it from a row.
 type Column = (&'static str, fn(&Row) -> Option<f64>);

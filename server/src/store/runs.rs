@@ -134,7 +134,7 @@ pub async fn finish_run(
     platform_failed: bool,
     now: i64,
 ) -> sqlx::Result<bool> {
-    let json = crate::service::Scores::from(*scores).to_json();
+    let json = crate::scores::Scores::from(*scores).to_json();
     let done = sqlx::query(
         "UPDATE scoring_runs SET state = ?, scores = ?, em = ?, sr = ?, mse = ?, m = ?, p = ?, finished_at = ?
          WHERE id = ? AND state = 'active'",
@@ -167,7 +167,7 @@ pub async fn insert_derived_run(
     scores: &RunScores,
     now: i64,
 ) -> sqlx::Result<i64> {
-    let json = crate::service::Scores::from(*scores).to_json();
+    let json = crate::scores::Scores::from(*scores).to_json();
     sqlx::query_scalar(
         "INSERT INTO scoring_runs (submission_id, scorer_version, created_at, em, scores, state,
              episodes_total, max_concurrency, sr, mse, m, p, finished_at, source_run_id)

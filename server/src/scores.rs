@@ -5,11 +5,14 @@
 //! the string `"inf"` (`"-inf"`, `null` for NaN) rather than failing or turning into `null`,
 //! which would read as "not scored". Scores that do not apply to a run are left out, except
 //! `em`, which the planning track always showed.
+//!
+//! A leaf module: it imports nothing of this crate, so the store, the leaderboard and the
+//! service can all use it without importing each other.
 
 use serde::{Serialize, Serializer};
 use serde_json::Value;
 
-use crate::episodes::RunScores;
+use kitchen_r_core::scoring::RunScores;
 
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
 pub struct Scores {
