@@ -66,8 +66,8 @@ with con:
         cur = con.execute("INSERT INTO submissions (team_id, split, kind, body, created_at) VALUES (?, 'test', 'plans', ?, ?)",
                           (ids[i % teams], body, now + i * 1000))
         em = round(rng.random(), 6)
-        con.execute("INSERT INTO scoring_runs (submission_id, scorer_version, created_at, em, scores) VALUES (?, 'seed', ?, ?, ?)",
-                    (cur.lastrowid, now + i * 1000, em, json.dumps({"em": em})))
+        con.execute("INSERT INTO scoring_runs (submission_id, scorer_version, created_at, em) VALUES (?, 'seed', ?, ?)",
+                    (cur.lastrowid, now + i * 1000, em))
 print(f"seeded {teams} teams and {subs} submissions", file=sys.stderr)
 PY
 start

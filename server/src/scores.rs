@@ -1,5 +1,4 @@
-//! The scores of a run as every answer shows them (submission page, leaderboard, stored
-//! `scoring_runs.scores` JSON).
+//! The scores of a run as every answer shows them (submission page, leaderboard).
 //!
 //! Policy: P is +inf when EM = 0, and JSON has no infinity, so a non-finite score is written as
 //! the string `"inf"` (`"-inf"`, `null` for NaN) rather than failing or turning into `null`,
@@ -10,7 +9,6 @@
 //! service can all use it without importing each other.
 
 use serde::{Serialize, Serializer};
-use serde_json::Value;
 
 use kitchen_r_core::scoring::RunScores;
 
@@ -35,10 +33,6 @@ impl Scores {
             em,
             ..Scores::default()
         }
-    }
-
-    pub fn to_json(&self) -> Value {
-        serde_json::to_value(self).unwrap_or(Value::Null)
     }
 }
 
@@ -87,8 +81,14 @@ mod tests {
             p: Some(f64::INFINITY),
             ..Scores::default()
         };
-        assert_eq!(s.to_json().to_string(), r#"{"em":null,"m":0.5,"p":"inf"}"#);
-        assert_eq!(Scores::em(Some(0.25)).to_json().to_string(), r#"{"em":0.25}"#);
+        assert_eq!(
+            serde_json::to_string(&s).unwrap(),
+            r#"{"em":null,"m":0.5,"p":"inf"}"#
+        );
+        assert_eq!(
+            serde_json::to_string(&Scores::em(Some(0.25))).unwrap(),
+            r#"{"em":0.25}"#
+        );
         assert_eq!(fmt_score(Some(f64::INFINITY)), "inf");
         assert_eq!(fmt_score(Some(0.5)), "0.500000");
     }

@@ -152,15 +152,13 @@ async fn insert_run_in(
     now: i64,
     run: &NewRun<'_>,
 ) -> sqlx::Result<i64> {
-    let scores = serde_json::json!({ "em": run.em }).to_string();
     let run_id: i64 = sqlx::query_scalar(
-        "INSERT INTO scoring_runs (submission_id, scorer_version, created_at, em, scores) VALUES (?, ?, ?, ?, ?) RETURNING id",
+        "INSERT INTO scoring_runs (submission_id, scorer_version, created_at, em) VALUES (?, ?, ?, ?) RETURNING id",
     )
     .bind(submission)
     .bind(run.scorer_version)
     .bind(now)
     .bind(run.em)
-    .bind(scores)
     .fetch_one(&mut **tx)
     .await?;
     // 5 parameters a row; 400 rows stay far below SQLite's parameter limit.

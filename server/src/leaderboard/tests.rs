@@ -66,8 +66,8 @@ async fn policy(
     .await
     .unwrap();
     sqlx::query(
-        "INSERT INTO scoring_runs (submission_id, scorer_version, created_at, scores, state, sr, mse, m, p)
-         VALUES (?, 'test', ?, '{}', ?, ?, ?, ?, ?)",
+        "INSERT INTO scoring_runs (submission_id, scorer_version, created_at, state, sr, mse, m, p)
+         VALUES (?, 'test', ?, ?, ?, ?, ?, ?)",
     )
     .bind(sub)
     .bind(at)

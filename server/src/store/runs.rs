@@ -65,8 +65,8 @@ async fn insert_run_with_jobs(
     now: i64,
 ) -> sqlx::Result<i64> {
     let run: i64 = sqlx::query_scalar(
-        "INSERT INTO scoring_runs (submission_id, scorer_version, created_at, em, scores, state, episodes_total, max_concurrency)
-         VALUES (?, ?, ?, NULL, '{}', 'active', ?, ?) RETURNING id",
+        "INSERT INTO scoring_runs (submission_id, scorer_version, created_at, em, state, episodes_total, max_concurrency)
+         VALUES (?, ?, ?, NULL, 'active', ?, ?) RETURNING id",
     )
     .bind(sub)
     .bind(new.scorer_version)
@@ -134,9 +134,8 @@ pub async fn finish_run(
     platform_failed: bool,
     now: i64,
 ) -> sqlx::Result<bool> {
-    let json = crate::scores::Scores::from(*scores).to_json();
     let done = sqlx::query(
-        "UPDATE scoring_runs SET state = ?, scores = ?, em = ?, sr = ?, mse = ?, m = ?, p = ?, finished_at = ?
+        "UPDATE scoring_runs SET state = ?, em = ?, sr = ?, mse = ?, m = ?, p = ?, finished_at = ?
          WHERE id = ? AND state = 'active'",
     )
     .bind(if platform_failed {
@@ -144,7 +143,6 @@ pub async fn finish_run(
     } else {
         RunState::Finished
     })
-    .bind(json.to_string())
     .bind(scores.em)
     .bind(scores.sr)
     .bind(scores.mse)
@@ -167,18 +165,16 @@ pub async fn insert_derived_run(
     scores: &RunScores,
     now: i64,
 ) -> sqlx::Result<i64> {
-    let json = crate::scores::Scores::from(*scores).to_json();
     sqlx::query_scalar(
-        "INSERT INTO scoring_runs (submission_id, scorer_version, created_at, em, scores, state,
+        "INSERT INTO scoring_runs (submission_id, scorer_version, created_at, em, state,
              episodes_total, max_concurrency, sr, mse, m, p, finished_at, source_run_id)
-         SELECT ?, ?, ?, ?, ?, 'finished', episodes_total, max_concurrency, ?, ?, ?, ?, ?, ?
+         SELECT ?, ?, ?, ?, 'finished', episodes_total, max_concurrency, ?, ?, ?, ?, ?, ?
          FROM scoring_runs WHERE id = ? RETURNING id",
     )
     .bind(submission)
     .bind(scorer_version)
     .bind(now)
     .bind(scores.em)
-    .bind(json.to_string())
     .bind(scores.sr)
     .bind(scores.mse)
     .bind(scores.m)
