@@ -44,7 +44,8 @@ pub struct TestSetInfo {
     /// sha256 of the private phrasings file the set was generated with (never the phrasings).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub phrasings_sha256: Option<String>,
-    /// Identifies the exact ground truth scores were computed against (a digest of it).
+    /// Identifies the set scores were computed against (a digest; for a private set, of its
+    /// public parts only: see `ground_truth_digest`).
     pub version: String,
 }
 
@@ -90,24 +91,19 @@ impl Content {
                 dataset_dir.display()
             )
         })?;
-        let manifest_dir = match test_set {
-            None => dataset_dir,
-            Some(dir) => {
-                let private = Dataset::load(dir).with_context(|| {
-                    format!(
-                        "reading the test set {} (it needs test_ground_truth.jsonl and \
-                         manifest.json as `kitchen-r dataset generate --out DIR` writes them)",
-                        dir.display()
-                    )
-                })?;
-                dataset.test = private.test;
-                dir.to_path_buf()
-            }
-        };
-        let manifest = read_manifest(&manifest_dir.join("manifest.json"))?;
-        let mut content = Content::new(dataset, scenes, catalogue)?;
-        content.test_set = test_set_info(&manifest, &content.dataset);
-        Ok(content)
+        if let Some(dir) = test_set {
+            let private = Dataset::load(dir).with_context(|| {
+                format!(
+                    "reading the test set {} (it needs test_ground_truth.jsonl and \
+                     manifest.json as `kitchen-r dataset generate --out DIR` writes them)",
+                    dir.display()
+                )
+            })?;
+            // The manifest describes where the test split came from.
+            dataset.test = private.test;
+            dataset.manifest = private.manifest;
+        }
+        Content::new(dataset, scenes, catalogue)
     }
 
     pub fn new(dataset: Dataset, scenes: Vec<Scene>, catalogue: Catalogue) -> anyhow::Result<Content> {
@@ -122,7 +118,7 @@ impl Content {
         let index = IdIndex::new(&dataset.dev, &dataset.test);
         let dev_jsonl = jsonl(dataset.dev.iter())?;
         let test_jsonl = jsonl(dataset.test.iter().map(PublicInstruction::from))?;
-        let test_set = test_set_info(&serde_json::Value::Null, &dataset);
+        let test_set = test_set_info(&dataset);
         Ok(Content {
             dataset,
             test_set,
@@ -200,32 +196,19 @@ impl Content {
             .collect()
     }
 
-    /// Identifies the ground truth a score was computed against, for the scoring run's version:
-    /// a digest of both splits' instructions, plans and place targets, so any change to them (a
-    /// regenerated set, a feasibility fix) gives a new tag and a rescore records it.
+    /// Identifies the ground truth a score was computed against, for the scoring run's version
+    /// ([`ground_truth_digest`]): a regenerated or fixed set gives a new tag, which a rescore
+    /// records.
     pub fn dataset_tag(&self) -> String {
         format!("dataset-{}", self.test_set.version)
     }
 }
 
-/// `manifest.json` as loose JSON: older and newer generators write different fields, and only
-/// the provenance ones matter here.
-fn read_manifest(path: &Path) -> anyhow::Result<serde_json::Value> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))
-}
-
-/// The provenance of the test split from its manifest: private only when the generator says so,
-/// recorded private phrasings, and recorded no seed (a private set never records its seed).
-fn test_set_info(manifest: &serde_json::Value, dataset: &Dataset) -> TestSetInfo {
-    let phrasings = manifest
-        .pointer("/private_phrasings/sha256")
-        .and_then(|v| v.as_str())
-        .map(str::to_string);
-    let private = manifest.get("kind").and_then(|k| k.as_str()) == Some("private")
-        && phrasings.is_some()
-        && manifest.get("seed").is_none_or(|s| s.is_null());
-    let (kind, notice) = match private {
+/// The provenance of the test split from the manifest (`Dataset::load` has checked that a
+/// private set records its phrasings' digest and no seed).
+fn test_set_info(dataset: &Dataset) -> TestSetInfo {
+    let m = &dataset.manifest;
+    let (kind, notice) = match m.is_private() {
         true => (
             TestSetKind::Private,
             "private test set: generated outside the repository with private phrasings".to_string(),
@@ -233,23 +216,31 @@ fn test_set_info(manifest: &serde_json::Value, dataset: &Dataset) -> TestSetInfo
         false => (TestSetKind::PublicSample, PUBLIC_SAMPLE_NOTICE.to_string()),
     };
     TestSetInfo {
+        phrasings_sha256: m.private_phrasings.as_ref().map(|p| p.sha256.clone()),
+        version: ground_truth_digest(dataset, kind == TestSetKind::PublicSample),
         kind,
         instructions: dataset.test.len(),
         notice,
-        phrasings_sha256: phrasings,
-        version: ground_truth_digest(dataset),
     }
 }
 
-/// First 16 hex digits of the sha256 of both splits' ground truth.
-fn ground_truth_digest(dataset: &Dataset) -> String {
+/// First 16 hex digits of the sha256 of the dev ground truth and the test split. The test plans
+/// and place targets go in only when they are public anyway: every team sees this digest (in
+/// the manifest route and in scorer versions), and a digest of hidden answers would let anyone
+/// confirm a guessed answer set offline. A private set's tag still changes with its instructions.
+fn ground_truth_digest(dataset: &Dataset, test_answers_public: bool) -> String {
     use sha2::{Digest, Sha256};
     let mut h = Sha256::new();
-    for i in dataset.dev.iter().chain(&dataset.test) {
+    for i in &dataset.dev {
         h.update(
             serde_json::to_vec(&(&i.id, &i.scene, &i.instruction, &i.plan, &i.place_targets))
                 .unwrap_or_default(),
         );
+        h.update(b"\n");
+    }
+    for i in &dataset.test {
+        let answers = test_answers_public.then_some((&i.plan, &i.place_targets));
+        h.update(serde_json::to_vec(&(&i.id, &i.scene, &i.instruction, answers)).unwrap_or_default());
         h.update(b"\n");
     }
     hex::encode(h.finalize())[..16].to_string()

@@ -103,7 +103,7 @@ impl AppState {
             .into_iter()
             .map(episode_view)
             .collect::<Result<Vec<_>, _>>()?;
-        let failure_counts = failure_counts(&episodes);
+        let failure_counts = failure_counts(&episodes, hidden);
         let retrying: Vec<RetryView> = run_store::retrying(self.pool(), source)
             .await?
             .into_iter()
@@ -131,13 +131,24 @@ impl AppState {
     }
 }
 
+/// What a test-split page says of an episode the platform gave up on.
+const PLATFORM_GAVE_UP: &str = "the platform gave up on the episode after its retries";
+
 /// Every task failure and platform give-up of the run, grouped by [`reason_kind`].
-fn failure_counts(episodes: &[EpisodeView]) -> Vec<ReasonCount> {
+///
+/// On the test split (`hidden`) a platform give-up counts under one generic kind: its message
+/// comes from the platform and may name the instruction or its plan (a job a worker refused says
+/// which instruction and how many place steps it has).
+fn failure_counts(episodes: &[EpisodeView], hidden: bool) -> Vec<ReasonCount> {
     let mut counts: std::collections::BTreeMap<String, usize> = Default::default();
     for e in episodes {
-        let tasks = e.tasks.iter().flatten().map(|t| t.failure_reason.as_str());
-        for reason in tasks.chain(e.failure.as_deref()).filter(|r| !r.is_empty()) {
-            *counts.entry(reason_kind(reason)).or_default() += 1;
+        let tasks = e.tasks.iter().flatten().map(|t| reason_kind(&t.failure_reason));
+        let platform = e.failure.as_deref().map(|f| match hidden {
+            true => PLATFORM_GAVE_UP.to_string(),
+            false => reason_kind(f),
+        });
+        for kind in tasks.chain(platform).filter(|r| !r.is_empty()) {
+            *counts.entry(kind).or_default() += 1;
         }
     }
     let mut out: Vec<ReasonCount> = (counts.into_iter())
