@@ -217,6 +217,26 @@ mod tests {
     use super::*;
 
     #[test]
+    fn test_split_counts_do_not_quote_platform_messages() {
+        let given_up = EpisodeView {
+            key: "test-0001".into(),
+            mode: "online".into(),
+            success_rate: None,
+            mse: None,
+            failure: Some("the platform gave up: instruction \"test-0001\": 2 place steps".into()),
+            failure_reasons: Vec::new(),
+            wall_ms: 0,
+            attempt: 3,
+            tasks: Some(Vec::new()),
+            log_tail: None,
+        };
+        let hidden = failure_counts(std::slice::from_ref(&given_up), true);
+        assert_eq!(hidden[0].reason, PLATFORM_GAVE_UP);
+        let shown = failure_counts(&[given_up], false);
+        assert!(shown[0].reason.contains("test-N"), "{shown:?}");
+    }
+
+    #[test]
     fn reasons_group_by_kind_with_numbers_masked() {
         assert_eq!(
             reason_kind("time limit of 120 s reached"),
