@@ -64,6 +64,15 @@ impl std::str::FromStr for Mode {
     }
 }
 
+/// Tasks an episode of a `plan_len`-step plan has: all of them, or the first `max_plan_steps`
+/// when that is set (0 = no cap).
+pub fn task_count(plan_len: usize, max_plan_steps: u32) -> usize {
+    match max_plan_steps {
+        0 => plan_len,
+        n => plan_len.min(n as usize),
+    }
+}
+
 /// The outcome of one task, as a worker reports it and the server stores it.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct TaskOutcome {

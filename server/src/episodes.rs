@@ -50,10 +50,7 @@ pub struct JobSpec {
 impl JobSpec {
     /// Tasks the episode has: the plan's steps, capped by `max_plan_steps` (0 = no cap).
     pub fn task_count(&self) -> usize {
-        match self.max_plan_steps {
-            0 => self.plan.len(),
-            n => self.plan.len().min(n as usize),
-        }
+        scoring::task_count(self.plan.len(), self.max_plan_steps)
     }
 
     /// The episode as a worker gets it; `policy_episode_id` is the opaque name the endpoint sees.

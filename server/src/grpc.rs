@@ -7,11 +7,11 @@
 use std::any::Any;
 use std::future::Future;
 use std::panic::AssertUnwindSafe;
-use std::pin::Pin;
 use std::task::{Context, Poll};
 use std::time::Duration;
 
 use axum::http::{self, HeaderValue};
+use futures_util::FutureExt;
 use kitchen_r_core::dataset::Split;
 use kitchen_r_proto::submission::v1 as pb;
 use pb::submissions_server::Submissions;
@@ -290,7 +290,8 @@ where
         let path = req.uri().path().to_owned();
         let budget = self.layer.budget(&path);
         let span = tracing::info_span!("grpc", path = %path, request_id = %id);
-        let call = CatchUnwind(Box::pin(self.inner.call(req)));
+        // The future is never polled again after a panic, so no broken state is observed.
+        let call = AssertUnwindSafe(self.inner.call(req)).catch_unwind();
         let answer = async move {
             let result = match tokio::time::timeout(budget, call).await {
                 Ok(Ok(done)) => done,
@@ -324,23 +325,6 @@ fn panic_error(panic: &(dyn Any + Send)) -> ServiceError {
         .or_else(|| panic.downcast_ref::<String>().cloned())
         .unwrap_or_else(|| "a non-string payload".into());
     ServiceError::Internal(anyhow::anyhow!("handler panicked: {what}"))
-}
-
-/// A future that turns a panic while polling `F` into `Err(payload)`.
-struct CatchUnwind<F>(Pin<Box<F>>);
-
-impl<F: Future> Future for CatchUnwind<F> {
-    type Output = Result<F::Output, Box<dyn Any + Send>>;
-
-    fn poll(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<Self::Output> {
-        let inner = self.0.as_mut();
-        // The future is never polled again after a panic, so no broken state is observed.
-        match std::panic::catch_unwind(AssertUnwindSafe(|| inner.poll(cx))) {
-            Ok(Poll::Pending) => Poll::Pending,
-            Ok(Poll::Ready(v)) => Poll::Ready(Ok(v)),
-            Err(panic) => Poll::Ready(Err(panic)),
-        }
-    }
 }
 
 #[cfg(test)]

@@ -91,6 +91,20 @@ async fn index(State(s): State<AppState>, Query(q): Params) -> Result<Response, 
     Ok(Html(body).into_response())
 }
 
+/// The field `key` of a small JSON body shaped like `shape`. Organiser routes check the token
+/// before reading the body, so a caller without one learns nothing from body errors.
+fn body_field<T: serde::de::DeserializeOwned>(
+    body: &[u8],
+    key: &str,
+    shape: &str,
+) -> Result<T, ServiceError> {
+    let req: serde_json::Value = serde_json::from_slice(body)
+        .map_err(|e| ServiceError::BadRequest(format!("expected {shape}: {e}")))?;
+    req.get(key)
+        .and_then(|v| T::deserialize(v).ok())
+        .ok_or_else(|| ServiceError::BadRequest(format!("expected {shape}")))
+}
+
 async fn create_team(
     State(s): State<AppState>,
     headers: HeaderMap,
@@ -98,13 +112,8 @@ async fn create_team(
 ) -> Result<Response, ServiceError> {
     let admin = bearer(&headers);
     s.require_admin(admin)?;
-    let req: serde_json::Value = serde_json::from_slice(&body)
-        .map_err(|e| ServiceError::BadRequest(format!("expected {{\"name\": \"...\"}}: {e}")))?;
-    let name = req
-        .get("name")
-        .and_then(|n| n.as_str())
-        .ok_or_else(|| ServiceError::BadRequest("expected {\"name\": \"...\"}".into()))?;
-    let team = s.create_team(admin, name).await?;
+    let name: String = body_field(&body, "name", r#"{"name": "..."}"#)?;
+    let team = s.create_team(admin, &name).await?;
     Ok((StatusCode::CREATED, axum::Json(team)).into_response())
 }
 
@@ -252,12 +261,7 @@ async fn resimulate(
 ) -> Result<Response, ServiceError> {
     let admin = bearer(&headers);
     s.require_admin(admin)?;
-    let req: serde_json::Value = serde_json::from_slice(&body)
-        .map_err(|e| ServiceError::BadRequest(format!("expected {{\"submission\": ID}}: {e}")))?;
-    let id = req
-        .get("submission")
-        .and_then(serde_json::Value::as_i64)
-        .ok_or_else(|| ServiceError::BadRequest("expected {\"submission\": ID}".into()))?;
+    let id: i64 = body_field(&body, "submission", r#"{"submission": ID}"#)?;
     let done = s.resimulate(admin, id).await?;
     Ok((StatusCode::CREATED, axum::Json(done)).into_response())
 }

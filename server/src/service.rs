@@ -249,11 +249,9 @@ impl AppState {
         self.inner.leaderboard.invalidate();
         tracing::info!(submission = id, team = %team.name, %split, em = score.em, "plans submitted");
         let mut warnings = plans::warnings(&score);
-        let row = store::submission(self.pool(), id).await?;
-        if let Some(why) = match row {
-            Some(row) => self.unranked_reason(&row).await?,
-            None => None,
-        } {
+        if split == Split::Test
+            && let Some(why) = self.unranked_reason(team.id, id).await?
+        {
             warnings.push(format!("not ranked: {why}"));
         }
         Ok(Submitted {
@@ -332,7 +330,11 @@ impl AppState {
             )?),
             false => None,
         };
-        let unranked_reason = self.unranked_reason(&sub).await?;
+        let test_plans = sub.kind == SubmissionKind::Plans && sub.split == Split::Test.as_str();
+        let unranked_reason = match test_plans {
+            true => self.unranked_reason(sub.team_id, sub.id).await?,
+            false => None,
+        };
         Ok(SubmissionView {
             id: sub.id,
             team: sub.team,
@@ -347,14 +349,11 @@ impl AppState {
         })
     }
 
-    /// Why a submission cannot appear on the leaderboard (the rule [`store::planning_leaderboard`]
-    /// applies), or `None` when it can.
-    async fn unranked_reason(&self, sub: &store::SubmissionRow) -> Result<Option<String>, ServiceError> {
-        if sub.kind != SubmissionKind::Plans || sub.split != Split::Test.as_str() {
-            return Ok(None);
-        }
-        Ok(match store::first_test_policy(self.pool(), sub.team_id).await? {
-            Some(first) if first < sub.id => Some(format!(
+    /// Why the test plan submission `id` of `team` cannot appear on the leaderboard (the rule
+    /// [`store::planning_leaderboard`] applies), or `None` when it can.
+    async fn unranked_reason(&self, team: i64, id: i64) -> Result<Option<String>, ServiceError> {
+        Ok(match store::first_test_policy(self.pool(), team).await? {
+            Some(first) if first < id => Some(format!(
                 "created after the team's first test-split policy run (submission {first}), whose \
                  endpoint received the test plans' steps as sub-tasks: scored, not ranked"
             )),

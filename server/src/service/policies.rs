@@ -136,14 +136,7 @@ impl AppState {
         // policy.proto: 0 is read as 1.
         let max_concurrency = probed.max_concurrency.max(1);
         let cfg = self.config();
-        let endpoint_spec = EndpointSpec {
-            url: endpoint.clone(),
-            bearer_token: bearer.clone().unwrap_or_default(),
-            call_deadline_ms: cfg.policy.call_deadline_ms,
-            startup_deadline_ms: cfg.policy.startup_deadline_ms,
-            episode_budget_ms: cfg.policy.episode_budget_ms,
-            max_successive_timeouts: cfg.policy.max_successive_timeouts,
-        };
+        let endpoint_spec = self.endpoint_spec(&endpoint, bearer.as_deref());
         let jobs = self.job_specs(instructions, &endpoint_spec, req.reference)?;
         let body = PolicyBody {
             endpoint,
@@ -213,14 +206,7 @@ impl AppState {
         let episodes = (split == Split::Dev).then_some(body.instructions as u32);
         let instructions = self.run_instructions(split, episodes)?;
         let cfg = self.config();
-        let endpoint = EndpointSpec {
-            url: body.endpoint.clone(),
-            bearer_token: body.token.clone().unwrap_or_default(),
-            call_deadline_ms: cfg.policy.call_deadline_ms,
-            startup_deadline_ms: cfg.policy.startup_deadline_ms,
-            episode_budget_ms: cfg.policy.episode_budget_ms,
-            max_successive_timeouts: cfg.policy.max_successive_timeouts,
-        };
+        let endpoint = self.endpoint_spec(&body.endpoint, body.token.as_deref());
         let jobs = self.job_specs(instructions, &endpoint, body.reference)?;
         let scorer = format!("{CONTROL_SCORER}+{}", self.content().dataset_tag());
         let new = NewPolicyRun {
@@ -251,6 +237,19 @@ impl AppState {
             policy: body.spec,
             state: "queued",
         })
+    }
+
+    /// Where a run's jobs call the policy, with the deadlines configured now.
+    fn endpoint_spec(&self, url: &str, bearer: Option<&str>) -> EndpointSpec {
+        let p = &self.config().policy;
+        EndpointSpec {
+            url: url.to_string(),
+            bearer_token: bearer.unwrap_or_default().to_string(),
+            call_deadline_ms: p.call_deadline_ms,
+            startup_deadline_ms: p.startup_deadline_ms,
+            episode_budget_ms: p.episode_budget_ms,
+            max_successive_timeouts: p.max_successive_timeouts,
+        }
     }
 
     /// The instructions a run evaluates: the whole test split; on dev, the first

@@ -18,7 +18,7 @@ use super::spec;
 use super::{JobContext, JobError};
 use crate::offline::{OfflineOutcome, run_offline};
 use crate::oracle::{OraclePolicy, expert_options};
-use crate::policy::Unreachable;
+use crate::policy::{Policy, Unreachable};
 use crate::remote::{Credentials, RemoteConfig, RemotePolicy, SimCamera};
 use crate::runner::{EpisodeOutcome, StepHook, run_episode};
 
@@ -197,35 +197,37 @@ fn run(
         token: Some(ep.bearer_token.clone()).filter(|t| !t.is_empty()),
         ca_pem: None,
     };
-    let mut policy = match RemotePolicy::connect(
+    let mut remote;
+    let mut dead;
+    let policy: &mut dyn Policy = match RemotePolicy::connect(
         &ep.url,
         &creds,
         &remote_cfg,
         &SimCamera::from_sensors(&ctx.sensors),
     ) {
-        Ok(p) => p,
+        Ok(p) => {
+            remote = p;
+            remote.set_scene(&cfg.scene);
+            log.line(format!("policy {:?} connected", remote.wire_spec().name));
+            &mut remote
+        }
         Err(e) => {
             let reason = format!("policy unreachable: {e}");
             log.line(&reason);
-            if mode == pb::EvalMode::Offline {
-                // The expert still drives and every decision point is a failed prediction, so
-                // an endpoint that refuses its MSE episodes pays as much as one answering badly.
-                let mut expert = OraclePolicy::new(&ctx.assets);
-                let opts = spec::offline_options(&run, ctx.sample_every);
-                let mut dead = Unreachable::new(reason);
-                let out = run_offline(&mut sim, &mut expert, &mut dead, &opts, &mut Watch(control))?;
-                return Ok(offline_results(&out, log));
+            if mode != pb::EvalMode::Offline {
+                return Ok(all_failed(&cfg, n_tasks, &reason));
             }
-            return Ok(all_failed(&cfg, n_tasks, &reason));
+            // The expert still drives and every decision point is a failed prediction, so an
+            // endpoint that refuses its MSE episodes pays as much as one answering badly.
+            dead = Unreachable::new(reason);
+            &mut dead
         }
     };
-    policy.set_scene(&cfg.scene);
-    log.line(format!("policy {:?} connected", policy.wire_spec().name));
     let watch = &mut Watch(control);
     if mode == pb::EvalMode::Offline {
         let mut expert = OraclePolicy::new(&ctx.assets);
         let opts = spec::offline_options(&run, ctx.sample_every);
-        let out = run_offline(&mut sim, &mut expert, &mut policy, &opts, watch)?;
+        let out = run_offline(&mut sim, &mut expert, policy, &opts, watch)?;
         return Ok(offline_results(&out, log));
     }
     let starts = if spec.teleport_on_failure {
@@ -233,7 +235,7 @@ fn run(
     } else {
         None
     };
-    let out = run_episode(&mut sim, &mut policy, &run, starts.as_deref(), watch)?;
+    let out = run_episode(&mut sim, policy, &run, starts.as_deref(), watch)?;
     Ok(online_results(&out, log))
 }
 

@@ -187,18 +187,14 @@ fn episode(job: &pb::Job, r: &pb::EpisodeResult, wall_s: f64) -> LocalEpisode {
         .ok()
         .and_then(pb::EvalMode::mode)
         .unwrap_or(Mode::Online);
-    let task_count = match spec.max_plan_steps {
-        0 => spec.plan.len(),
-        n => spec.plan.len().min(n as usize),
-    };
     LocalEpisode {
         episode_key: job.episode_key.clone(),
         scene: spec.scene_id.clone(),
         scoring: Some(scoring::Episode {
             mode,
             instruction_id: spec.instruction_id,
+            task_count: scoring::task_count(spec.plan.len(), spec.max_plan_steps),
             plan: spec.plan,
-            task_count,
             tasks: tasks.clone(),
             failure: None,
         }),
