@@ -52,6 +52,13 @@ impl Step {
     }
 }
 
+/// How many steps of `plan` are canonical `place` steps: each has one place target, in order.
+pub fn place_steps<S: AsRef<str>>(plan: &[S]) -> usize {
+    (plan.iter())
+        .filter(|s| matches!(s.as_ref().parse::<Step>(), Ok(Step::Place { .. })))
+        .count()
+}
+
 impl fmt::Display for Step {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {

@@ -5,7 +5,6 @@
 //! reflection included), the counterpart of [`crate::http::stack`].
 
 use std::any::Any;
-use std::future::Future;
 use std::panic::AssertUnwindSafe;
 use std::task::{Context, Poll};
 use std::time::Duration;

@@ -52,10 +52,7 @@ pub fn task_target(episode: &EpisodeConfig, scene: &Scene, index: usize) -> Resu
             object: object(name)?,
         }),
         Step::Place { object: name } => {
-            let nth = episode.plan[..index]
-                .iter()
-                .filter(|s| matches!(s.parse::<Step>(), Ok(Step::Place { .. })))
-                .count();
+            let nth = kitchen_r_core::plan::place_steps(&episode.plan[..index]);
             let target = *episode
                 .place_targets
                 .get(nth)

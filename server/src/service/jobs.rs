@@ -17,7 +17,7 @@ use serde::Serialize;
 use tokio::time::Instant;
 
 use kitchen_r_core::dataset::Split;
-use kitchen_r_core::plan::Step;
+use kitchen_r_core::plan::place_steps;
 
 use super::{AppState, hash_token, now_ms};
 use crate::episodes::{JobSpec, TaskOutcome};
@@ -304,10 +304,7 @@ impl AppState {
     fn leased_job(&self, c: queue::Claimed) -> Result<LeasedJob, ServiceError> {
         let mut spec: JobSpec =
             serde_json::from_str(&c.spec).map_err(|e| anyhow::anyhow!("job {} spec: {e}", c.id))?;
-        let places = (spec.plan.iter())
-            .filter(|s| matches!(s.parse::<Step>(), Ok(Step::Place { .. })))
-            .count();
-        if spec.place_targets.len() != places {
+        if spec.place_targets.len() != place_steps(&spec.plan) {
             // A job queued before specs carried their targets.
             let content = self.content();
             let found = [Split::Dev, Split::Test]

@@ -10,7 +10,7 @@
 use std::time::Duration;
 
 use kitchen_r_core::dataset::Instruction;
-use kitchen_r_core::plan::Step;
+use kitchen_r_core::plan::place_steps;
 use kitchen_r_proto::worker::v1 as pb;
 use kitchen_r_sim::{Assets, EpisodeConfig, EpisodeParams};
 
@@ -22,9 +22,7 @@ use crate::runner::RunOptions;
 
 /// The instruction a job's spec describes: its plan and place targets as the server sent them.
 pub fn instruction(spec: &pb::EpisodeSpec) -> Result<Instruction, JobError> {
-    let places = (spec.plan.iter())
-        .filter(|s| matches!(s.parse::<Step>(), Ok(Step::Place { .. })))
-        .count();
+    let places = place_steps(&spec.plan);
     if spec.place_targets.len() != places {
         return Err(JobError::Spec(format!(
             "instruction {:?}: {} place steps but {} place targets in the job (the server and \
