@@ -2,7 +2,12 @@
 //! calls the same service functions as the HTTP routes, so both transports apply one set of rules.
 //!
 //! [`GrpcStackLayer`] is the tower stack of the whole gRPC server (every service, health and
-//! reflection included), the counterpart of [`crate::http::stack`].
+//! reflection included), the counterpart of [`crate::http::stack`]; [`CallerLayer`] under it
+//! resolves each call's bearer token once, for every method of every service.
+
+mod caller;
+
+pub use caller::{CallerLayer, caller};
 
 use std::any::Any;
 use std::panic::AssertUnwindSafe;
@@ -39,15 +44,6 @@ impl SubmissionsService {
         let cap = self.state.config().max_body_bytes.saturating_mul(2);
         pb::submissions_server::SubmissionsServer::new(self).max_decoding_message_size(cap)
     }
-}
-
-pub(crate) fn bearer<T>(req: &Request<T>) -> Option<String> {
-    let v = req.metadata().get("authorization")?.to_str().ok()?;
-    let t = v
-        .strip_prefix("Bearer ")
-        .or_else(|| v.strip_prefix("bearer "))?
-        .trim();
-    (!t.is_empty()).then(|| t.to_string())
 }
 
 fn split(s: &str, default: Option<Split>) -> Result<Split, Status> {
@@ -132,13 +128,11 @@ impl Submissions for SubmissionsService {
         &self,
         req: Request<pb::SubmitPlansRequest>,
     ) -> Result<Response<pb::SubmitPlansResponse>, Status> {
-        let token = bearer(&req);
+        let caller = caller(&req)?;
+        let team = caller.team()?;
         let msg = req.into_inner();
         let split = split(&msg.split, None)?;
-        let done = self
-            .state
-            .submit_plans(token.as_deref(), split, &msg.body)
-            .await?;
+        let done = self.state.submit_plans(team, split, &msg.body).await?;
         Ok(Response::new(pb::SubmitPlansResponse {
             id: done.id,
             scores: Some(scores(done.scores)),
@@ -150,7 +144,7 @@ impl Submissions for SubmissionsService {
         &self,
         req: Request<pb::RegisterPolicyRequest>,
     ) -> Result<Response<pb::RegisterPolicyResponse>, Status> {
-        let token = bearer(&req);
+        let caller = caller(&req)?;
         let m = req.into_inner();
         let request = RegisterPolicy {
             endpoint: m.endpoint,
@@ -160,7 +154,7 @@ impl Submissions for SubmissionsService {
             episodes: m.episodes,
             reference: m.reference,
         };
-        let done = self.state.register_policy(token.as_deref(), request).await?;
+        let done = self.state.register_policy(&caller, request).await?;
         Ok(Response::new(pb::RegisterPolicyResponse {
             id: done.id,
             episodes: done.episodes as u32,
@@ -175,11 +169,8 @@ impl Submissions for SubmissionsService {
         &self,
         req: Request<pb::GetSubmissionRequest>,
     ) -> Result<Response<pb::Submission>, Status> {
-        let token = bearer(&req);
-        let view = self
-            .state
-            .get_submission(token.as_deref(), req.into_inner().id)
-            .await?;
+        let caller = caller(&req)?;
+        let view = self.state.get_submission(&caller, req.into_inner().id).await?;
         Ok(Response::new(submission(view)))
     }
 

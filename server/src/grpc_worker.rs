@@ -9,7 +9,7 @@ use pb::worker_server::Worker;
 use tonic::{Request, Response, Status};
 
 use crate::episodes::TaskOutcome;
-use crate::grpc::bearer;
+use crate::grpc::caller;
 use crate::service::AppState;
 use crate::service::jobs::{LeasedJob, Report};
 
@@ -44,11 +44,10 @@ fn job(j: LeasedJob) -> pb::Job {
 #[tonic::async_trait]
 impl Worker for WorkerService {
     async fn lease(&self, req: Request<pb::LeaseRequest>) -> Result<Response<pb::LeaseResponse>, Status> {
-        let token = bearer(&req);
+        let worker = caller(&req)?.worker()?;
         let m = req.into_inner();
-        let jobs = self
-            .state
-            .lease(token.as_deref(), &m.worker_id, m.max_jobs, m.wait_ms)
+        let jobs = (self.state)
+            .lease(worker, &m.worker_id, m.max_jobs, m.wait_ms)
             .await?;
         Ok(Response::new(pb::LeaseResponse {
             jobs: jobs.into_iter().map(job).collect(),
@@ -59,11 +58,10 @@ impl Worker for WorkerService {
         &self,
         req: Request<pb::HeartbeatRequest>,
     ) -> Result<Response<pb::HeartbeatResponse>, Status> {
-        let token = bearer(&req);
+        let worker = caller(&req)?.worker()?;
         let m = req.into_inner();
-        let out = self
-            .state
-            .heartbeat(token.as_deref(), &m.worker_id, m.job_id, m.attempt)
+        let out = (self.state)
+            .heartbeat(worker, &m.worker_id, m.job_id, m.attempt)
             .await?;
         Ok(Response::new(pb::HeartbeatResponse {
             lease_expires_at_ms: out.lease_expires_at_ms.unwrap_or(0),
@@ -75,7 +73,7 @@ impl Worker for WorkerService {
         &self,
         req: Request<pb::ReportResultRequest>,
     ) -> Result<Response<pb::ReportResultResponse>, Status> {
-        let token = bearer(&req);
+        let worker = caller(&req)?.worker()?;
         let m = req.into_inner();
         let result = m.result.unwrap_or_default();
         let report = Report {
@@ -89,7 +87,7 @@ impl Worker for WorkerService {
             log_tail: result.log_tail,
             wall_ms: result.wall_ms,
         };
-        let out = self.state.report_result(token.as_deref(), report).await?;
+        let out = self.state.report_result(worker, report).await?;
         Ok(Response::new(pb::ReportResultResponse {
             accepted: out.accepted,
             duplicate: out.duplicate,

@@ -9,8 +9,9 @@ use std::collections::HashMap;
 
 use axum::Router;
 use axum::body::Body;
-use axum::extract::{Path, Query, State};
-use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
+use axum::extract::{FromRequestParts, Path, Query, State};
+use axum::http::request::Parts;
+use axum::http::{HeaderValue, StatusCode, header};
 use axum::response::{Html, IntoResponse, Response};
 use axum::routing::{get, post};
 use bytes::Bytes;
@@ -21,7 +22,8 @@ use tokio_stream::StreamExt;
 use crate::content::TestSetKind;
 use crate::error::ServiceError;
 use crate::leaderboard::{Format, Track};
-use crate::service::{AppState, RegisterPolicy};
+use crate::service::auth::bearer_token;
+use crate::service::{AppState, Caller, RegisterPolicy};
 
 type Params = Query<HashMap<String, String>>;
 
@@ -55,12 +57,16 @@ pub fn router(state: AppState) -> Router {
     stack::layered(routes).with_state(state)
 }
 
-fn bearer(headers: &HeaderMap) -> Option<&str> {
-    let value = headers.get(header::AUTHORIZATION)?.to_str().ok()?;
-    let token = value
-        .strip_prefix("Bearer ")
-        .or_else(|| value.strip_prefix("bearer "))?;
-    Some(token.trim()).filter(|t| !t.is_empty())
+/// The caller of every route that declares one, resolved once from the `authorization` header
+/// before the body is read (so a bad token is refused without reading a large upload).
+impl FromRequestParts<AppState> for Caller {
+    type Rejection = ServiceError;
+
+    async fn from_request_parts(parts: &mut Parts, state: &AppState) -> Result<Self, ServiceError> {
+        let header = parts.headers.get(header::AUTHORIZATION);
+        let token = header.and_then(|v| v.to_str().ok()).and_then(bearer_token);
+        state.caller(token).await
+    }
 }
 
 fn split_param(value: Option<&String>, default: Option<Split>) -> Result<Split, ServiceError> {
@@ -107,11 +113,10 @@ fn body_field<T: serde::de::DeserializeOwned>(
 
 async fn create_team(
     State(s): State<AppState>,
-    headers: HeaderMap,
+    caller: Caller,
     body: Bytes,
 ) -> Result<Response, ServiceError> {
-    let admin = bearer(&headers);
-    s.require_admin(admin)?;
+    let admin = caller.organiser()?;
     let name: String = body_field(&body, "name", r#"{"name": "..."}"#)?;
     let team = s.create_team(admin, &name).await?;
     Ok((StatusCode::CREATED, axum::Json(team)).into_response())
@@ -195,21 +200,20 @@ async fn read_limited(body: Body, limit: usize) -> Result<Vec<u8>, ServiceError>
 async fn submit_plans(
     State(s): State<AppState>,
     Query(q): Params,
-    headers: HeaderMap,
+    caller: Caller,
     body: Body,
 ) -> Result<Response, ServiceError> {
-    let token = bearer(&headers);
     // Refuse bad credentials and parameters before reading a possibly large body.
-    s.authenticate(token).await?;
+    let team = caller.team()?;
     let split = split_param(q.get("split"), None)?;
     let body = read_limited(body, s.config().max_body_bytes).await?;
-    let done = s.submit_plans(token, split, &body).await?;
+    let done = s.submit_plans(team, split, &body).await?;
     Ok((StatusCode::CREATED, axum::Json(done)).into_response())
 }
 
 async fn register_policy(
     State(s): State<AppState>,
-    headers: HeaderMap,
+    caller: Caller,
     body: Bytes,
 ) -> Result<Response, ServiceError> {
     let req: RegisterPolicy = serde_json::from_slice(&body).map_err(|e| {
@@ -217,19 +221,19 @@ async fn register_policy(
             "expected {{\"endpoint\": \"http://HOST:PORT\", \"split\": \"dev\"|\"test\", \"token\"?, \"plans\"?, \"episodes\"?, \"reference\"?}}: {e}"
         ))
     })?;
-    let done = s.register_policy(bearer(&headers), req).await?;
+    let done = s.register_policy(&caller, req).await?;
     Ok((StatusCode::CREATED, axum::Json(done)).into_response())
 }
 
 async fn submission(
     State(s): State<AppState>,
     Path(id): Path<String>,
-    headers: HeaderMap,
+    caller: Caller,
 ) -> Result<Response, ServiceError> {
     let id: i64 = id
         .parse()
         .map_err(|_| ServiceError::not_found(format!("submission {id:?}")))?;
-    Ok(axum::Json(s.get_submission(bearer(&headers), id).await?).into_response())
+    Ok(axum::Json(s.get_submission(&caller, id).await?).into_response())
 }
 
 async fn leaderboard(State(s): State<AppState>, Query(q): Params) -> Result<Response, ServiceError> {
@@ -249,18 +253,17 @@ async fn leaderboard(State(s): State<AppState>, Query(q): Params) -> Result<Resp
     Ok(typed(content_type, body))
 }
 
-async fn rescore(State(s): State<AppState>, headers: HeaderMap) -> Result<Response, ServiceError> {
-    Ok(axum::Json(s.rescore_all(bearer(&headers)).await?).into_response())
+async fn rescore(State(s): State<AppState>, caller: Caller) -> Result<Response, ServiceError> {
+    Ok(axum::Json(s.rescore_all(caller.organiser()?).await?).into_response())
 }
 
 /// Organiser: `{"submission": ID}` → a new run simulating that policy submission again.
 async fn resimulate(
     State(s): State<AppState>,
-    headers: HeaderMap,
+    caller: Caller,
     body: Bytes,
 ) -> Result<Response, ServiceError> {
-    let admin = bearer(&headers);
-    s.require_admin(admin)?;
+    let admin = caller.organiser()?;
     let id: i64 = body_field(&body, "submission", r#"{"submission": ID}"#)?;
     let done = s.resimulate(admin, id).await?;
     Ok((StatusCode::CREATED, axum::Json(done)).into_response())

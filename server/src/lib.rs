@@ -169,6 +169,7 @@ pub(crate) async fn grpc_routes(state: AppState) -> anyhow::Result<GrpcRouter> {
         .context("building gRPC reflection")?;
     Ok(tonic::transport::Server::builder()
         .layer(grpc::GrpcStackLayer::new(state.config()))
+        .layer(grpc::CallerLayer::new(state.clone()))
         .add_service(health)
         .add_service(reflection)
         .add_service(grpc::SubmissionsService::new(state.clone()).into_server())
@@ -176,7 +177,10 @@ pub(crate) async fn grpc_routes(state: AppState) -> anyhow::Result<GrpcRouter> {
 }
 
 type GrpcRouter = tonic::transport::server::Router<
-    tower::layer::util::Stack<grpc::GrpcStackLayer, tower::layer::util::Identity>,
+    tower::layer::util::Stack<
+        grpc::CallerLayer,
+        tower::layer::util::Stack<grpc::GrpcStackLayer, tower::layer::util::Identity>,
+    >,
 >;
 
 /// Requeues expired leases every `control.reaper_interval_s` until shutdown. Leases held by

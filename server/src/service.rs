@@ -5,6 +5,7 @@
 //! Submodules: [`policies`] registers policy endpoints and shows their runs; [`jobs`] is the
 //! worker-facing queue (lease, heartbeat, report, reaper); [`scores`] is how scores are shown.
 
+pub mod auth;
 mod board;
 pub mod jobs;
 pub mod policies;
@@ -15,7 +16,6 @@ use std::sync::Arc;
 
 use kitchen_r_core::dataset::Split;
 use serde::Serialize;
-use sha2::{Digest, Sha256};
 use sqlx::sqlite::SqlitePool;
 
 use crate::config::Config;
@@ -29,6 +29,7 @@ use crate::store::{self, NewRun, Team};
 
 pub use crate::clock::{now_ms, rfc3339};
 pub use crate::scores::{Scores, fmt_score};
+pub use auth::{Caller, Organiser, WorkerCred, hash_token, new_token};
 pub use policies::{PolicyInfo, RegisterPolicy, Registered};
 pub use progress::{EpisodeView, PolicyRunView};
 pub use rescore::{RescoreFailure, RescoreReport};
@@ -182,29 +183,8 @@ impl AppState {
         &self.inner.leaderboard
     }
 
-    fn is_admin(&self, token: &str) -> bool {
-        hash_token(token) == self.inner.admin_hash
-    }
-
-    /// The team a bearer token belongs to.
-    pub async fn authenticate(&self, token: Option<&str>) -> Result<Team, ServiceError> {
-        let token = token.ok_or(ServiceError::MissingToken)?;
-        store::team_by_token_hash(self.pool(), &hash_token(token))
-            .await?
-            .ok_or(ServiceError::BadToken)
-    }
-
-    pub fn require_admin(&self, token: Option<&str>) -> Result<(), ServiceError> {
-        match token {
-            None => Err(ServiceError::MissingToken),
-            Some(t) if self.is_admin(t) => Ok(()),
-            Some(_) => Err(ServiceError::NotAdmin),
-        }
-    }
-
     /// Organiser: make a team and its token.
-    pub async fn create_team(&self, admin: Option<&str>, name: &str) -> Result<NewTeam, ServiceError> {
-        self.require_admin(admin)?;
+    pub async fn create_team(&self, _: Organiser, name: &str) -> Result<NewTeam, ServiceError> {
         let name = validate_team_name(name)?;
         let token = new_token();
         let id = store::insert_team(self.pool(), &name, &hash_token(&token), now_ms())
@@ -214,14 +194,13 @@ impl AppState {
         Ok(NewTeam { id, name, token })
     }
 
-    /// Validate, score and store a plan file for the token's team.
+    /// Validate, score and store a plan file for `team`.
     pub async fn submit_plans(
         &self,
-        token: Option<&str>,
+        team: &Team,
         split: Split,
         body: &[u8],
     ) -> Result<Submitted, ServiceError> {
-        let team = self.authenticate(token).await?;
         let limit = self.config().max_body_bytes;
         if body.len() > limit {
             let line = plans::line_at(body, limit);
@@ -241,7 +220,7 @@ impl AppState {
         let id = {
             let _guard = self.inner.submit_lock.lock().await;
             let now = now_ms();
-            self.check_quota(&team, split, now).await?;
+            self.check_quota(team, split, now).await?;
             store::insert_plan_submission(self.pool(), team.id, split, &text, now, &run)
                 .await?
                 .0
@@ -286,10 +265,10 @@ impl AppState {
     }
 
     /// A submission with its latest run, for its own team or the organiser.
-    pub async fn get_submission(&self, token: Option<&str>, id: i64) -> Result<SubmissionView, ServiceError> {
-        let viewer = match token {
-            Some(t) if self.is_admin(t) => None,
-            _ => Some(self.authenticate(token).await?),
+    pub async fn get_submission(&self, caller: &Caller, id: i64) -> Result<SubmissionView, ServiceError> {
+        let viewer = match caller {
+            Caller::Organiser(_) => None,
+            _ => Some(caller.team()?),
         };
         let sub = store::submission(self.pool(), id)
             .await?
@@ -326,7 +305,7 @@ impl AppState {
         };
         let policy = match is_policy {
             true => Some(policies::policy_info(
-                &store::submission_body(self.pool(), id).await?.1,
+                &store::submission_body(self.pool(), id).await?.body,
             )?),
             false => None,
         };
@@ -388,16 +367,6 @@ fn validate_team_name(name: &str) -> Result<String, ServiceError> {
     Ok(name.to_string())
 }
 
-/// A fresh bearer token: 32 random bytes, hex, with a prefix that makes leaks greppable.
-pub fn new_token() -> String {
-    let bytes: [u8; 32] = rand::random();
-    format!("kr_{}", hex::encode(bytes))
-}
-
-pub fn hash_token(token: &str) -> String {
-    hex::encode(Sha256::digest(token.as_bytes()))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -408,15 +377,6 @@ mod tests {
         for bad in ["", "   ", "a<b>", "x\ny", &"n".repeat(65)] {
             assert!(validate_team_name(bad).is_err(), "{bad:?}");
         }
-    }
-
-    #[test]
-    fn tokens_are_random_and_hashes_stable() {
-        let (a, b) = (new_token(), new_token());
-        assert_ne!(a, b);
-        assert_eq!(a.len(), 3 + 64);
-        assert_eq!(hash_token("x"), hash_token("x"));
-        assert_ne!(hash_token(&a), hash_token(&b));
     }
 
     #[test]

@@ -5,6 +5,11 @@
 //! in one transaction, so a crash never leaves an unscored submission or an orphan run.
 //! Times are Unix milliseconds (UTC) in INTEGER columns.
 //!
+//! Rows are read by column name into `FromRow` structs, states as [`crate::states`] enums. The
+//! JSON columns `jobs.spec` and `episode_results.tasks` are decoded here, once, into typed
+//! values (and written with `serde_json`, the text existing databases hold). `submissions.body`
+//! stays text: by kind it is a plan file or a policy endpoint's JSON.
+//!
 //! Submodules: [`runs`] (policy submissions, their runs, results, policy leaderboards) and
 //! [`queue`] (the job queue).
 
@@ -20,7 +25,7 @@ use kitchen_r_core::dataset::Split;
 use sqlx::sqlite::{
     SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions, SqliteSynchronous,
 };
-use sqlx::{QueryBuilder, Row, Sqlite};
+use sqlx::{FromRow, QueryBuilder, Sqlite};
 
 use crate::plans::InstructionScore;
 use crate::scores::Scores;
@@ -52,7 +57,7 @@ pub async fn connect(url: &str) -> anyhow::Result<SqlitePool> {
     Ok(pool)
 }
 
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, FromRow)]
 pub struct Team {
     pub id: i64,
     pub name: String,
@@ -65,24 +70,19 @@ pub async fn insert_team(
     token_hash: &str,
     now: i64,
 ) -> sqlx::Result<Option<i64>> {
-    let res = sqlx::query("INSERT INTO teams (name, token_hash, created_at) VALUES (?, ?, ?) ON CONFLICT (name) DO NOTHING RETURNING id")
+    sqlx::query_scalar("INSERT INTO teams (name, token_hash, created_at) VALUES (?, ?, ?) ON CONFLICT (name) DO NOTHING RETURNING id")
         .bind(name)
         .bind(token_hash)
         .bind(now)
         .fetch_optional(pool)
-        .await?;
-    Ok(res.map(|r| r.get(0)))
+        .await
 }
 
 pub async fn team_by_token_hash(pool: &SqlitePool, token_hash: &str) -> sqlx::Result<Option<Team>> {
-    let row = sqlx::query("SELECT id, name FROM teams WHERE token_hash = ?")
+    sqlx::query_as("SELECT id, name FROM teams WHERE token_hash = ?")
         .bind(token_hash)
         .fetch_optional(pool)
-        .await?;
-    Ok(row.map(|r| Team {
-        id: r.get(0),
-        name: r.get(1),
-    }))
+        .await
 }
 
 /// A team's submissions to `split` received at or after `since` (ms). Policy runs the platform
@@ -178,7 +178,7 @@ async fn insert_run_in(
     Ok(run_id)
 }
 
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, FromRow)]
 pub struct SubmissionRow {
     pub id: i64,
     pub team_id: i64,
@@ -190,23 +190,14 @@ pub struct SubmissionRow {
 }
 
 pub async fn submission(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<SubmissionRow>> {
-    let row = sqlx::query(
-        "SELECT s.id, s.team_id, t.name, s.split, s.kind, s.created_at,
-                (SELECT COUNT(*) FROM scoring_runs r WHERE r.submission_id = s.id)
+    sqlx::query_as(
+        "SELECT s.id, s.team_id, t.name AS team, s.split, s.kind, s.created_at,
+                (SELECT COUNT(*) FROM scoring_runs r WHERE r.submission_id = s.id) AS runs
          FROM submissions s JOIN teams t ON t.id = s.team_id WHERE s.id = ?",
     )
     .bind(id)
     .fetch_optional(pool)
-    .await?;
-    Ok(row.map(|r| SubmissionRow {
-        id: r.get(0),
-        team_id: r.get(1),
-        team: r.get(2),
-        split: r.get(3),
-        kind: r.get(4),
-        created_at: r.get(5),
-        runs: r.get(6),
-    }))
+    .await
 }
 
 /// The id of a team's first test-split policy submission, if any. Test plan files created after
@@ -221,11 +212,12 @@ pub async fn first_test_policy(pool: &SqlitePool, team: i64) -> sqlx::Result<Opt
     .await
 }
 
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, FromRow)]
 pub struct RunRow {
     pub id: i64,
     pub scorer_version: String,
     pub created_at: i64,
+    #[sqlx(flatten, try_from = "ScoreColumns")]
     pub scores: Scores,
     pub state: RunState,
     pub episodes_total: i64,
@@ -237,6 +229,23 @@ pub struct RunRow {
     pub needs_resimulation: bool,
 }
 
+/// The score columns of `scoring_runs`, as [`RunRow`] reads them into its [`Scores`].
+#[derive(FromRow)]
+struct ScoreColumns {
+    em: Option<f64>,
+    sr: Option<f64>,
+    mse: Option<f64>,
+    m: Option<f64>,
+    p: Option<f64>,
+}
+
+impl From<ScoreColumns> for Scores {
+    fn from(c: ScoreColumns) -> Scores {
+        let ScoreColumns { em, sr, mse, m, p } = c;
+        Scores { em, sr, mse, m, p }
+    }
+}
+
 impl RunRow {
     /// The run whose episodes (jobs and results) this run's scores come from.
     pub fn episodes_run(&self) -> i64 {
@@ -245,49 +254,46 @@ impl RunRow {
 }
 
 pub async fn latest_run(pool: &SqlitePool, submission: i64) -> sqlx::Result<Option<RunRow>> {
-    let row = sqlx::query(
+    sqlx::query_as(
         "SELECT id, scorer_version, created_at, em, sr, mse, m, p, state, episodes_total, finished_at,
                 source_run_id, needs_resimulation
          FROM scoring_runs WHERE submission_id = ? ORDER BY id DESC LIMIT 1",
     )
     .bind(submission)
     .fetch_optional(pool)
-    .await?;
-    Ok(row.map(|r| RunRow {
-        id: r.get(0),
-        scorer_version: r.get(1),
-        created_at: r.get(2),
-        scores: Scores {
-            em: r.get(3),
-            sr: r.get(4),
-            mse: r.get(5),
-            m: r.get(6),
-            p: r.get(7),
-        },
-        state: r.get(8),
-        episodes_total: r.get(9),
-        finished_at: r.get(10),
-        source_run_id: r.get(11),
-        needs_resimulation: r.get::<i64, _>(12) != 0,
-    }))
+    .await
 }
 
 pub async fn instruction_results(pool: &SqlitePool, run: i64) -> sqlx::Result<Vec<InstructionScore>> {
-    let rows = sqlx::query(
+    let rows: Vec<InstructionRow> = sqlx::query_as(
         "SELECT instruction_id, present, correct_steps, total_steps FROM instruction_results WHERE run_id = ? ORDER BY instruction_id",
     )
     .bind(run)
     .fetch_all(pool)
     .await?;
-    Ok(rows
-        .into_iter()
-        .map(|r| InstructionScore {
-            id: r.get(0),
-            present: r.get(1),
-            correct: r.get::<i64, _>(2) as usize,
-            total: r.get::<i64, _>(3) as usize,
-        })
-        .collect())
+    Ok(rows.into_iter().map(InstructionScore::from).collect())
+}
+
+/// A row of `instruction_results`.
+#[derive(FromRow)]
+struct InstructionRow {
+    instruction_id: String,
+    present: bool,
+    #[sqlx(try_from = "i64")]
+    correct_steps: usize,
+    #[sqlx(try_from = "i64")]
+    total_steps: usize,
+}
+
+impl From<InstructionRow> for InstructionScore {
+    fn from(r: InstructionRow) -> InstructionScore {
+        InstructionScore {
+            id: r.instruction_id,
+            present: r.present,
+            correct: r.correct_steps,
+            total: r.total_steps,
+        }
+    }
 }
 
 /// Ids of every plan submission, oldest first (for rescoring).
@@ -303,16 +309,23 @@ pub async fn plan_submission_ids(pool: &SqlitePool) -> sqlx::Result<Vec<i64>> {
         .await
 }
 
-/// `(split, body)` of one submission.
-pub async fn submission_body(pool: &SqlitePool, id: i64) -> sqlx::Result<(String, String)> {
-    let r = sqlx::query("SELECT split, body FROM submissions WHERE id = ?")
-        .bind(id)
-        .fetch_one(pool)
-        .await?;
-    Ok((r.get(0), r.get(1)))
+/// What a submission holds: its split and its immutable body (the plan file, or a policy
+/// submission's endpoint JSON).
+#[derive(Debug, Clone, PartialEq, Eq, FromRow)]
+pub struct SubmissionBody {
+    pub split: String,
+    pub body: String,
 }
 
-#[derive(Debug, Clone, PartialEq)]
+/// The split and body of one submission.
+pub async fn submission_body(pool: &SqlitePool, id: i64) -> sqlx::Result<SubmissionBody> {
+    sqlx::query_as("SELECT split, body FROM submissions WHERE id = ?")
+        .bind(id)
+        .fetch_one(pool)
+        .await
+}
+
+#[derive(Debug, Clone, PartialEq, FromRow)]
 pub struct LeaderboardRow {
     pub team: String,
     pub submission_id: i64,
@@ -325,7 +338,7 @@ pub struct LeaderboardRow {
 /// plan file created after the team's first test policy submission is left out
 /// ([`first_test_policy`]).
 pub async fn planning_leaderboard(pool: &SqlitePool, split: Split) -> sqlx::Result<Vec<LeaderboardRow>> {
-    let rows = sqlx::query(
+    sqlx::query_as(
         "WITH latest AS (
             SELECT r.submission_id, r.em FROM scoring_runs r
             WHERE r.id = (SELECT MAX(id) FROM scoring_runs WHERE submission_id = r.submission_id)
@@ -339,20 +352,15 @@ pub async fn planning_leaderboard(pool: &SqlitePool, split: Split) -> sqlx::Resu
               AND (s.split <> 'test' OR s.id < COALESCE((SELECT MIN(p.id) FROM submissions p
                    WHERE p.team_id = s.team_id AND p.split = 'test' AND p.kind = 'policy'), s.id + 1))
          )
-         SELECT t.name, k.id, k.em, k.created_at FROM ranked k JOIN teams t ON t.id = k.team_id
+         SELECT t.name AS team, k.id AS submission_id, k.em, k.created_at AS submitted_at
+         FROM ranked k JOIN teams t ON t.id = k.team_id
          WHERE k.rn = 1
          ORDER BY k.em IS NULL, k.em DESC, k.created_at, k.id",
     )
     .bind(split.as_str())
     .fetch_all(pool)
-    .await?;
-    Ok(rows
-        .into_iter()
-        .map(|r| LeaderboardRow {
-            team: r.get(0),
-            submission_id: r.get(1),
-            em: r.get(2),
-            submitted_at: r.get(3),
-        })
-        .collect())
+    .await
 }
+
+#[cfg(test)]
+mod tests;

@@ -11,7 +11,8 @@ use crate::content::Content;
 use crate::episodes::TaskOutcome;
 use crate::probe::{BoxFuture, PolicyProbe, ProbeError, ProbedSpec};
 use crate::service::jobs::{LeasedJob, Report};
-use crate::service::{AppState, RegisterPolicy, Tokens};
+use crate::service::{AppState, Caller, Organiser, RegisterPolicy, Tokens, WorkerCred};
+use crate::store::Team;
 
 pub const ADMIN: &str = "admin-token-for-tests-0123456789";
 pub const WORKER: &str = "worker-token-for-tests-012345678";
@@ -96,7 +97,29 @@ impl Fixture {
     }
 
     pub async fn team(&self, name: &str) -> String {
-        self.state.create_team(Some(ADMIN), name).await.unwrap().token
+        self.state
+            .create_team(self.admin().await, name)
+            .await
+            .unwrap()
+            .token
+    }
+
+    /// The caller a request with this bearer token resolves to (the adapters' path).
+    pub async fn caller(&self, token: &str) -> Caller {
+        self.state.caller(Some(token)).await.unwrap()
+    }
+
+    pub async fn admin(&self) -> Organiser {
+        self.caller(ADMIN).await.organiser().unwrap()
+    }
+
+    pub async fn worker(&self) -> WorkerCred {
+        self.caller(WORKER).await.worker().unwrap()
+    }
+
+    /// The team a team token belongs to.
+    pub async fn team_of(&self, token: &str) -> Team {
+        self.caller(token).await.team().unwrap().clone()
     }
 
     pub fn request(&self, split: Split) -> RegisterPolicy {
@@ -111,7 +134,10 @@ impl Fixture {
     }
 
     pub async fn lease(&self, worker: &str, max: u32) -> Vec<LeasedJob> {
-        self.state.lease(Some(WORKER), worker, max, 0).await.unwrap()
+        self.state
+            .lease(self.worker().await, worker, max, 0)
+            .await
+            .unwrap()
     }
 
     /// A report of `job` where task j succeeds when `success(j)`, with MSE `mse` on 2 samples

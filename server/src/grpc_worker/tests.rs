@@ -57,7 +57,10 @@ async fn lease_heartbeat_and_report_over_grpc() {
     let token = f.team("alpha").await;
     let mut reference = f.request(Split::Dev);
     reference.token = Some("participant-secret".into());
-    f.state.register_policy(Some(&token), reference).await.unwrap();
+    f.state
+        .register_policy(&f.caller(&token).await, reference)
+        .await
+        .unwrap();
 
     let empty = client
         .lease(with_token(
@@ -164,7 +167,7 @@ async fn lease_heartbeat_and_report_over_grpc() {
     }
     let run = f
         .state
-        .get_submission(Some(&token), 1)
+        .get_submission(&f.caller(&token).await, 1)
         .await
         .unwrap()
         .latest_run
@@ -190,7 +193,7 @@ async fn reference_runs_reach_workers_as_privileged() {
     let mut reference = f.request(Split::Dev);
     reference.reference = true;
     f.state
-        .register_policy(Some(crate::testutil::ADMIN), reference)
+        .register_policy(&f.caller(crate::testutil::ADMIN).await, reference)
         .await
         .unwrap();
     let jobs = client

@@ -235,7 +235,6 @@ async fn control_and_integrated_order_with_baselines_and_infinite_p() {
 
 #[tokio::test]
 async fn the_cache_is_dropped_when_a_run_finishes() {
-    use crate::testutil::WORKER;
     let f = fixture(FakeProbe::ok(8), |c| {
         c.control.dev_episodes = 1;
         c.control.offline_mse = false;
@@ -243,7 +242,7 @@ async fn the_cache_is_dropped_when_a_run_finishes() {
     .await;
     let token = f.team("alpha").await;
     f.state
-        .register_policy(Some(&token), f.request(Split::Dev))
+        .register_policy(&f.caller(&token).await, f.request(Split::Dev))
         .await
         .unwrap();
     let before = f
@@ -257,7 +256,7 @@ async fn the_cache_is_dropped_when_a_run_finishes() {
     );
     let job = f.lease("w", 1).await.remove(0);
     f.state
-        .report_result(Some(WORKER), f.report("w", &job, |_| true, 0.0))
+        .report_result(f.worker().await, f.report("w", &job, |_| true, 0.0))
         .await
         .unwrap();
     let after = f
@@ -276,7 +275,6 @@ async fn the_cache_is_dropped_when_a_run_finishes() {
 /// costs the failure penalty, so it ranks below on both boards.
 #[tokio::test]
 async fn a_policy_dodging_its_mse_episodes_ranks_below_an_honest_one() {
-    use crate::testutil::WORKER;
     let f = fixture(FakeProbe::ok(8), |c| {
         c.control.dev_episodes = 2;
         c.quota.concurrent_runs = 0;
@@ -291,12 +289,16 @@ async fn a_policy_dodging_its_mse_episodes_ranks_below_an_honest_one() {
         let token = f.team(name).await;
         let sub = f
             .state
-            .submit_plans(Some(&token), Split::Dev, plans.as_bytes())
+            .submit_plans(&f.team_of(&token).await, Split::Dev, plans.as_bytes())
             .await
             .unwrap();
         let mut req = f.request(Split::Dev);
         req.plans = Some(sub.id);
-        let reg = f.state.register_policy(Some(&token), req).await.unwrap();
+        let reg = f
+            .state
+            .register_policy(&f.caller(&token).await, req)
+            .await
+            .unwrap();
         runs.push((name, reg.run_id));
     }
     loop {
@@ -313,7 +315,7 @@ async fn a_policy_dodging_its_mse_episodes_ranks_below_an_honest_one() {
                     t.failure_reason = "policy unreachable: GetSpec: UNAVAILABLE".into();
                 }
             }
-            f.state.report_result(Some(WORKER), report).await.unwrap();
+            f.state.report_result(f.worker().await, report).await.unwrap();
         }
     }
     for track in [Track::Control, Track::Integrated] {

@@ -45,7 +45,7 @@ impl AppState {
                                 p: r.p.filter(|_| integrated),
                             },
                             submitted_at: rfc3339(r.submitted_at),
-                            state: r.state,
+                            state: r.state.map(|s| s.as_str().to_string()),
                             baseline: r.baseline,
                         }
                     })

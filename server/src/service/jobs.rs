@@ -19,11 +19,11 @@ use tokio::time::Instant;
 use kitchen_r_core::dataset::Split;
 use kitchen_r_core::plan::place_steps;
 
-use super::{AppState, hash_token, now_ms};
+use super::{AppState, WorkerCred, now_ms};
 use crate::episodes::{JobSpec, TaskOutcome};
 use crate::error::ServiceError;
 use crate::states::JobState;
-use crate::store::queue::{self, JobRow, NewResult};
+use crate::store::queue::{self, NewResult};
 
 /// Most jobs one Lease call hands out, and the longest it is held open.
 pub const MAX_JOBS_PER_LEASE: u32 = 64;
@@ -84,14 +84,6 @@ pub struct ReapReport {
 }
 
 impl AppState {
-    pub fn require_worker(&self, token: Option<&str>) -> Result<(), ServiceError> {
-        match token {
-            None => Err(ServiceError::MissingToken),
-            Some(t) if hash_token(t) == self.inner.worker_hash => Ok(()),
-            Some(_) => Err(ServiceError::BadToken),
-        }
-    }
-
     /// The server is shutting down: answer waiting leases now, empty, and lease nothing more.
     pub fn begin_shutdown(&self) {
         self.inner
@@ -107,12 +99,11 @@ impl AppState {
     /// Claim up to `max_jobs` jobs for `worker_id`, waiting up to `wait_ms` for work.
     pub async fn lease(
         &self,
-        token: Option<&str>,
+        _: WorkerCred,
         worker_id: &str,
         max_jobs: u32,
         wait_ms: u32,
     ) -> Result<Vec<LeasedJob>, ServiceError> {
-        self.require_worker(token)?;
         let worker = validate_worker_id(worker_id)?;
         if !(1..=MAX_JOBS_PER_LEASE).contains(&max_jobs) {
             return Err(ServiceError::BadRequest(format!(
@@ -136,10 +127,7 @@ impl AppState {
                 false => Vec::new(),
             };
             if !claimed.is_empty() || Instant::now() >= deadline {
-                let jobs = claimed
-                    .into_iter()
-                    .map(|c| self.leased_job(c))
-                    .collect::<Result<Vec<_>, _>>()?;
+                let jobs: Vec<LeasedJob> = claimed.into_iter().map(|c| self.leased_job(c)).collect();
                 for j in &jobs {
                     tracing::info!(job = j.id, run = j.run_id, episode = %j.episode_key, attempt = j.attempt, worker, "job leased");
                 }
@@ -152,12 +140,11 @@ impl AppState {
     /// Extend a lease the worker still holds.
     pub async fn heartbeat(
         &self,
-        token: Option<&str>,
+        _: WorkerCred,
         worker_id: &str,
         job_id: i64,
         attempt: u32,
     ) -> Result<HeartbeatOutcome, ServiceError> {
-        self.require_worker(token)?;
         let worker = validate_worker_id(worker_id)?;
         let now = now_ms();
         let until = queue::heartbeat(
@@ -183,12 +170,7 @@ impl AppState {
     }
 
     /// Record one episode's result (idempotent on `(run, episode)`).
-    pub async fn report_result(
-        &self,
-        token: Option<&str>,
-        mut r: Report,
-    ) -> Result<ReportOutcome, ServiceError> {
-        self.require_worker(token)?;
+    pub async fn report_result(&self, _: WorkerCred, mut r: Report) -> Result<ReportOutcome, ServiceError> {
         validate_worker_id(&r.worker_id)?;
         if r.tasks.len() > MAX_TASKS {
             return Err(ServiceError::BadRequest(format!(
@@ -223,11 +205,10 @@ impl AppState {
                 duplicate: false,
             });
         }
-        let spec = job_spec(&job)?;
         if r.platform_error.trim().is_empty() {
             let result = NewResult {
                 job: &job,
-                mode: spec.mode.as_str(),
+                mode: job.spec.mode.as_str(),
                 tasks: &r.tasks,
                 failure: None,
                 wall_ms: i64::try_from(r.wall_ms).unwrap_or(i64::MAX),
@@ -241,7 +222,7 @@ impl AppState {
                 "platform error: {}",
                 clip(r.platform_error.trim(), MAX_REASON_CHARS)
             );
-            self.retry_or_fail(&mut tx, &job, &spec, &reason, &r.worker_id, now)
+            self.retry_or_fail(&mut tx, &job, &reason, &r.worker_id, now)
                 .await?;
         }
         let finished = self.finish_if_done(&mut tx, job.run_id, now).await?;
@@ -270,11 +251,7 @@ impl AppState {
         for job in queue::expired(&mut tx, now).await? {
             let owner = job.lease_owner.clone().unwrap_or_default();
             let reason = format!("lease expired: worker {owner:?} stopped reporting");
-            let spec = job_spec(&job)?;
-            if self
-                .retry_or_fail(&mut tx, &job, &spec, &reason, &owner, now)
-                .await?
-            {
+            if self.retry_or_fail(&mut tx, &job, &reason, &owner, now).await? {
                 report.failed += 1;
                 runs.insert(job.run_id);
             } else {
@@ -301,9 +278,8 @@ impl AppState {
 }
 
 impl AppState {
-    fn leased_job(&self, c: queue::Claimed) -> Result<LeasedJob, ServiceError> {
-        let mut spec: JobSpec =
-            serde_json::from_str(&c.spec).map_err(|e| anyhow::anyhow!("job {} spec: {e}", c.id))?;
+    fn leased_job(&self, c: queue::Claimed) -> LeasedJob {
+        let mut spec = c.spec;
         if spec.place_targets.len() != place_steps(&spec.plan) {
             // A job queued before specs carried their targets.
             let content = self.content();
@@ -315,7 +291,7 @@ impl AppState {
                 spec.place_targets = i.place_targets.clone();
             }
         }
-        Ok(LeasedJob {
+        LeasedJob {
             id: c.id,
             attempt: u32::try_from(c.attempt).unwrap_or(u32::MAX),
             lease_expires_at_ms: c.lease_expires_at,
@@ -323,7 +299,7 @@ impl AppState {
             episode_key: c.episode_key,
             spec,
             policy_episode_id: opaque_episode_id(),
-        })
+        }
     }
 }
 
@@ -331,10 +307,6 @@ impl AppState {
 fn opaque_episode_id() -> String {
     let bytes: [u8; 12] = rand::random();
     format!("ep-{}", hex::encode(bytes))
-}
-
-fn job_spec(job: &JobRow) -> Result<JobSpec, ServiceError> {
-    Ok(serde_json::from_str(&job.spec).map_err(|e| anyhow::anyhow!("job {} spec: {e}", job.id))?)
 }
 
 fn validate_worker_id(id: &str) -> Result<&str, ServiceError> {

@@ -10,7 +10,7 @@
 use kitchen_r_core::dataset::{Instruction, Split};
 use serde::{Deserialize, Serialize};
 
-use super::{AppState, now_ms};
+use super::{AppState, Caller, Organiser, now_ms};
 use crate::episodes::{EndpointSpec, JobSpec, Mode};
 use crate::error::ServiceError;
 use crate::states::{RunState, SubmissionKind};
@@ -106,14 +106,14 @@ impl AppState {
     /// Probe and register a policy endpoint, queueing its episodes.
     pub async fn register_policy(
         &self,
-        token: Option<&str>,
+        caller: &Caller,
         req: RegisterPolicy,
     ) -> Result<Registered, ServiceError> {
         let team = if req.reference {
-            self.require_admin(token)?;
+            caller.organiser()?;
             run_store::baseline_team(self.pool(), now_ms()).await?
         } else {
-            self.authenticate(token).await?
+            caller.team()?.clone()
         };
         let endpoint = validate_endpoint(&req.endpoint)?;
         let bearer = validate_bearer(req.token.as_deref())?;
@@ -187,8 +187,7 @@ impl AppState {
     /// (after `rescore` flagged it `needs_resimulation`), as a new run on the same submission.
     /// The endpoint is not probed and no quota is used: it is the organiser's request, and an
     /// endpoint that is gone fails its tasks like any unreachable policy.
-    pub async fn resimulate(&self, admin: Option<&str>, id: i64) -> Result<Registered, ServiceError> {
-        self.require_admin(admin)?;
+    pub async fn resimulate(&self, _: Organiser, id: i64) -> Result<Registered, ServiceError> {
         let sub = store::submission(self.pool(), id)
             .await?
             .filter(|s| s.kind == SubmissionKind::Policy)
@@ -202,7 +201,7 @@ impl AppState {
             )));
         }
         let split: Split = sub.split.parse().map_err(|e: String| anyhow::anyhow!(e))?;
-        let body = parse_body(&store::submission_body(self.pool(), id).await?.1)?;
+        let body = parse_body(&store::submission_body(self.pool(), id).await?.body)?;
         let episodes = (split == Split::Dev).then_some(body.instructions as u32);
         let instructions = self.run_instructions(split, episodes)?;
         let cfg = self.config();

@@ -99,18 +99,15 @@ impl AppState {
             RunState::Active if counts.started == 0 => "queued",
             _ => "running",
         };
-        let episodes = results
-            .into_iter()
-            .map(episode_view)
-            .collect::<Result<Vec<_>, _>>()?;
+        let episodes: Vec<EpisodeView> = results.into_iter().map(episode_view).collect();
         let failure_counts = failure_counts(&episodes, hidden);
         let retrying: Vec<RetryView> = run_store::retrying(self.pool(), source)
             .await?
             .into_iter()
-            .map(|(key, attempt, last_error)| RetryView {
-                key,
-                attempt,
-                last_error,
+            .map(|j| RetryView {
+                key: j.episode_key,
+                attempt: j.attempt,
+                last_error: j.last_error,
             })
             .collect();
         let episodes_done = episodes.len() as i64;
@@ -178,9 +175,8 @@ pub fn reason_kind(reason: &str) -> String {
     out
 }
 
-fn episode_view(r: ResultRow) -> Result<EpisodeView, ServiceError> {
-    let tasks: Vec<TaskOutcome> = serde_json::from_str(&r.tasks)
-        .map_err(|e| anyhow::anyhow!("stored tasks of {}: {e}", r.episode_key))?;
+fn episode_view(r: ResultRow) -> EpisodeView {
+    let tasks = r.tasks;
     let online = r.mode == "online";
     let success_rate = (online && !tasks.is_empty())
         .then(|| tasks.iter().filter(|t| t.success).count() as f64 / tasks.len() as f64);
@@ -198,7 +194,7 @@ fn episode_view(r: ResultRow) -> Result<EpisodeView, ServiceError> {
             failure_reasons.push(t.failure_reason.clone());
         }
     }
-    Ok(EpisodeView {
+    EpisodeView {
         key: r.episode_key,
         mode: r.mode,
         success_rate,
@@ -209,7 +205,7 @@ fn episode_view(r: ResultRow) -> Result<EpisodeView, ServiceError> {
         attempt: r.attempt,
         tasks: Some(tasks),
         log_tail: Some(r.log_tail),
-    })
+    }
 }
 
 #[cfg(test)]

@@ -13,7 +13,7 @@
 use kitchen_r_core::dataset::Split;
 use serde::Serialize;
 
-use super::{AppState, now_ms};
+use super::{AppState, Organiser, now_ms};
 use crate::config::PlanLimits;
 use crate::episodes;
 use crate::error::ServiceError;
@@ -47,8 +47,7 @@ pub struct RescoreFailure {
 
 impl AppState {
     /// Organiser: a new scoring run for every plan submission.
-    pub async fn rescore_all(&self, admin: Option<&str>) -> Result<RescoreReport, ServiceError> {
-        self.require_admin(admin)?;
+    pub async fn rescore_all(&self, _: Organiser) -> Result<RescoreReport, ServiceError> {
         let scorer = self.scorer_version();
         let mut report = RescoreReport {
             rescored: 0,
@@ -88,7 +87,7 @@ impl AppState {
     }
 
     async fn rescore_one(&self, id: i64, scorer: &str) -> Result<(), ServiceError> {
-        let (split, body) = store::submission_body(self.pool(), id).await?;
+        let store::SubmissionBody { split, body } = store::submission_body(self.pool(), id).await?;
         let (split, file) = self.stored_plans(&split, &body)?;
         let score = plans::score(&file, self.content().ground_truth(split));
         let run = NewRun {
@@ -122,7 +121,7 @@ impl AppState {
         if run.needs_resimulation {
             return Ok(PolicyRescore::Stale(format!("run {} was flagged before", run.id)));
         }
-        let (split, body) = store::submission_body(self.pool(), id).await?;
+        let store::SubmissionBody { split, body } = store::submission_body(self.pool(), id).await?;
         let split: Split = split.parse().map_err(|e: String| anyhow::anyhow!(e))?;
         let mut conn = self.pool().acquire().await.map_err(anyhow::Error::from)?;
         let episodes = queue::episodes(&mut conn, run.episodes_run()).await?;

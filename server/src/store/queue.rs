@@ -8,19 +8,21 @@
 //! result, move the job and finish the run atomically).
 
 use sqlx::sqlite::SqlitePool;
-use sqlx::{Row, SqliteConnection};
+use sqlx::types::Json;
+use sqlx::{FromRow, SqliteConnection};
 
 use crate::episodes::{Episode, JobSpec, TaskOutcome};
 use crate::states::JobState;
 
 /// A job handed to a worker.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, FromRow)]
 pub struct Claimed {
     pub id: i64,
     pub attempt: i64,
     pub run_id: i64,
     pub episode_key: String,
-    pub spec: String,
+    #[sqlx(json)]
+    pub spec: JobSpec,
     pub lease_expires_at: i64,
 }
 
@@ -33,7 +35,7 @@ pub async fn claim(
     until: i64,
     limit: u32,
 ) -> sqlx::Result<Vec<Claimed>> {
-    let rows = sqlx::query(
+    let mut jobs: Vec<Claimed> = sqlx::query_as(
         "WITH busy AS (
             SELECT run_id, COUNT(*) AS n FROM jobs WHERE state = 'leased' GROUP BY run_id
          ), candidates AS (
@@ -54,17 +56,6 @@ pub async fn claim(
     .bind(i64::from(limit))
     .fetch_all(pool)
     .await?;
-    let mut jobs: Vec<Claimed> = rows
-        .into_iter()
-        .map(|r| Claimed {
-            id: r.get(0),
-            attempt: r.get(1),
-            run_id: r.get(2),
-            episode_key: r.get(3),
-            spec: r.get(4),
-            lease_expires_at: r.get(5),
-        })
-        .collect();
     // RETURNING order is unspecified; hand jobs out oldest first.
     jobs.sort_by_key(|j| j.id);
     Ok(jobs)
@@ -102,12 +93,13 @@ pub async fn heartbeat(
 }
 
 /// A job as the report and reaper paths see it.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, FromRow)]
 pub struct JobRow {
     pub id: i64,
     pub run_id: i64,
     pub episode_key: String,
-    pub spec: String,
+    #[sqlx(json)]
+    pub spec: JobSpec,
     pub state: JobState,
     pub lease_owner: Option<String>,
     pub attempt: i64,
@@ -115,46 +107,30 @@ pub struct JobRow {
     pub last_error: Option<String>,
 }
 
-/// The columns [`job_row`] reads, as a macro so queries stay `&'static str` literals.
+/// The columns of a [`JobRow`], as a macro so queries stay `&'static str` literals.
 macro_rules! job_columns {
     () => {
         "id, run_id, episode_key, spec, state, lease_owner, attempt, max_attempts, last_error"
     };
 }
 
-fn job_row(r: &sqlx::sqlite::SqliteRow) -> JobRow {
-    JobRow {
-        id: r.get(0),
-        run_id: r.get(1),
-        episode_key: r.get(2),
-        spec: r.get(3),
-        state: r.get(4),
-        lease_owner: r.get(5),
-        attempt: r.get(6),
-        max_attempts: r.get(7),
-        last_error: r.get(8),
-    }
-}
-
 pub async fn job(conn: &mut SqliteConnection, id: i64) -> sqlx::Result<Option<JobRow>> {
-    let row = sqlx::query(concat!("SELECT ", job_columns!(), " FROM jobs WHERE id = ?"))
+    sqlx::query_as(concat!("SELECT ", job_columns!(), " FROM jobs WHERE id = ?"))
         .bind(id)
         .fetch_optional(&mut *conn)
-        .await?;
-    Ok(row.as_ref().map(job_row))
+        .await
 }
 
 /// Leased jobs whose lease ended before `now`.
 pub async fn expired(conn: &mut SqliteConnection, now: i64) -> sqlx::Result<Vec<JobRow>> {
-    let rows = sqlx::query(concat!(
+    sqlx::query_as(concat!(
         "SELECT ",
         job_columns!(),
         " FROM jobs WHERE state = 'leased' AND lease_expires_at < ? ORDER BY id"
     ))
     .bind(now)
     .fetch_all(&mut *conn)
-    .await?;
-    Ok(rows.iter().map(job_row).collect())
+    .await
 }
 
 pub async fn result_exists(conn: &mut SqliteConnection, run: i64, key: &str) -> sqlx::Result<bool> {
@@ -181,7 +157,6 @@ pub struct NewResult<'a> {
 
 /// Record a result; `false` when `(run, episode)` was already recorded (nothing changes).
 pub async fn insert_result(conn: &mut SqliteConnection, r: &NewResult<'_>, now: i64) -> sqlx::Result<bool> {
-    let tasks = serde_json::to_string(r.tasks).map_err(|e| sqlx::Error::Encode(e.into()))?;
     let done = sqlx::query(
         "INSERT INTO episode_results (run_id, episode_key, job_id, mode, tasks, failure, wall_ms, log_tail,
                                       attempt, worker_id, recorded_at)
@@ -191,7 +166,8 @@ pub async fn insert_result(conn: &mut SqliteConnection, r: &NewResult<'_>, now: 
     .bind(&r.job.episode_key)
     .bind(r.job.id)
     .bind(r.mode)
-    .bind(tasks)
+    // Json encodes with serde_json::to_string: the same text as rows written before it.
+    .bind(Json(r.tasks))
     .bind(r.failure)
     .bind(r.wall_ms)
     .bind(r.log_tail)
@@ -238,23 +214,30 @@ pub async fn open_jobs(conn: &mut SqliteConnection, run: i64) -> sqlx::Result<i6
 }
 
 /// Every recorded episode of a run with the spec it ran under, in key order.
-pub async fn episodes(conn: &mut SqliteConnection, run: i64) -> anyhow::Result<Vec<Episode>> {
-    let rows = sqlx::query(
+pub async fn episodes(conn: &mut SqliteConnection, run: i64) -> sqlx::Result<Vec<Episode>> {
+    let rows: Vec<EpisodeRow> = sqlx::query_as(
         "SELECT j.spec, e.tasks, e.failure FROM episode_results e JOIN jobs j ON j.id = e.job_id
          WHERE e.run_id = ? ORDER BY e.episode_key",
     )
     .bind(run)
     .fetch_all(&mut *conn)
     .await?;
-    rows.iter()
-        .map(|r| {
-            let spec: JobSpec = serde_json::from_str(r.get::<&str, _>(0))?;
-            let tasks: Vec<TaskOutcome> = serde_json::from_str(r.get::<&str, _>(1))?;
-            Ok(Episode {
-                spec,
-                tasks,
-                failure: r.get(2),
-            })
-        })
-        .collect()
+    Ok(rows.into_iter().map(Episode::from).collect())
+}
+
+/// A recorded episode joined with its job's spec.
+#[derive(FromRow)]
+struct EpisodeRow {
+    #[sqlx(json)]
+    spec: JobSpec,
+    #[sqlx(json)]
+    tasks: Vec<TaskOutcome>,
+    failure: Option<String>,
+}
+
+impl From<EpisodeRow> for Episode {
+    fn from(r: EpisodeRow) -> Episode {
+        let EpisodeRow { spec, tasks, failure } = r;
+        Episode { spec, tasks, failure }
+    }
 }

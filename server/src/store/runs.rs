@@ -3,10 +3,11 @@
 
 use kitchen_r_core::dataset::Split;
 use sqlx::sqlite::SqlitePool;
-use sqlx::{QueryBuilder, Row, Sqlite, SqliteConnection};
+use sqlx::{FromRow, QueryBuilder, Sqlite, SqliteConnection};
 
-use crate::episodes::RunScores;
+use crate::episodes::{RunScores, TaskOutcome};
 use crate::states::RunState;
+use crate::store::{SubmissionBody, Team};
 
 /// A policy submission to insert with its run and jobs.
 #[derive(Debug, Clone, PartialEq)]
@@ -104,25 +105,23 @@ pub async fn active_runs(pool: &SqlitePool, team: i64) -> sqlx::Result<i64> {
     .await
 }
 
-/// `(split, body)` of the submission a run belongs to.
-pub async fn run_submission(conn: &mut SqliteConnection, run: i64) -> sqlx::Result<(String, String)> {
-    let r = sqlx::query("SELECT s.split, s.body FROM scoring_runs r JOIN submissions s ON s.id = r.submission_id WHERE r.id = ?")
+/// The split and body of the submission a run belongs to.
+pub async fn run_submission(conn: &mut SqliteConnection, run: i64) -> sqlx::Result<SubmissionBody> {
+    sqlx::query_as("SELECT s.split, s.body FROM scoring_runs r JOIN submissions s ON s.id = r.submission_id WHERE r.id = ?")
         .bind(run)
         .fetch_one(&mut *conn)
-        .await?;
-    Ok((r.get(0), r.get(1)))
+        .await
 }
 
-/// `(split, body)` of any submission, inside a transaction.
+/// The split and body of any submission, inside a transaction.
 pub async fn submission_body_in(
     conn: &mut SqliteConnection,
     id: i64,
-) -> sqlx::Result<Option<(String, String)>> {
-    let r = sqlx::query("SELECT split, body FROM submissions WHERE id = ?")
+) -> sqlx::Result<Option<SubmissionBody>> {
+    sqlx::query_as("SELECT split, body FROM submissions WHERE id = ?")
         .bind(id)
         .fetch_optional(&mut *conn)
-        .await?;
-    Ok(r.map(|r| (r.get(0), r.get(1))))
+        .await
 }
 
 /// Store a finished run's scores; only an `active` run is finished (a second call is a no-op).
@@ -196,7 +195,7 @@ pub async fn mark_needs_resimulation(pool: &SqlitePool, run: i64) -> sqlx::Resul
 }
 
 /// Job counts of a run by state.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, FromRow)]
 pub struct JobCounts {
     pub queued: i64,
     pub leased: i64,
@@ -207,30 +206,24 @@ pub struct JobCounts {
 }
 
 pub async fn job_counts(pool: &SqlitePool, run: i64) -> sqlx::Result<JobCounts> {
-    let r = sqlx::query(
-        "SELECT COALESCE(SUM(state = 'queued'), 0), COALESCE(SUM(state = 'leased'), 0),
-                COALESCE(SUM(state = 'done'), 0), COALESCE(SUM(state = 'failed'), 0),
-                COALESCE(SUM(attempt > 0), 0)
+    sqlx::query_as(
+        "SELECT COALESCE(SUM(state = 'queued'), 0) AS queued, COALESCE(SUM(state = 'leased'), 0) AS leased,
+                COALESCE(SUM(state = 'done'), 0) AS done, COALESCE(SUM(state = 'failed'), 0) AS failed,
+                COALESCE(SUM(attempt > 0), 0) AS started
          FROM jobs WHERE run_id = ?",
     )
     .bind(run)
     .fetch_one(pool)
-    .await?;
-    Ok(JobCounts {
-        queued: r.get(0),
-        leased: r.get(1),
-        done: r.get(2),
-        failed: r.get(3),
-        started: r.get(4),
-    })
+    .await
 }
 
 /// One recorded episode as the submission page shows it.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, FromRow)]
 pub struct ResultRow {
     pub episode_key: String,
     pub mode: String,
-    pub tasks: String,
+    #[sqlx(json)]
+    pub tasks: Vec<TaskOutcome>,
     pub failure: Option<String>,
     pub wall_ms: i64,
     pub log_tail: String,
@@ -238,34 +231,23 @@ pub struct ResultRow {
 }
 
 pub async fn results(pool: &SqlitePool, run: i64) -> sqlx::Result<Vec<ResultRow>> {
-    let rows = sqlx::query(
+    sqlx::query_as(
         "SELECT episode_key, mode, tasks, failure, wall_ms, log_tail, attempt FROM episode_results
          WHERE run_id = ? ORDER BY episode_key",
     )
     .bind(run)
     .fetch_all(pool)
-    .await?;
-    Ok(rows
-        .into_iter()
-        .map(|r| ResultRow {
-            episode_key: r.get(0),
-            mode: r.get(1),
-            tasks: r.get(2),
-            failure: r.get(3),
-            wall_ms: r.get(4),
-            log_tail: r.get(5),
-            attempt: r.get(6),
-        })
-        .collect())
+    .await
 }
 
 /// A control or integrated leaderboard row (best entry per team, or a baseline).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, FromRow)]
 pub struct PolicyBoardRow {
     pub team: String,
     pub submission_id: i64,
     pub submitted_at: i64,
-    pub state: Option<String>,
+    /// `None` for a submission without a run.
+    pub state: Option<RunState>,
     pub sr: Option<f64>,
     pub mse: Option<f64>,
     pub m: Option<f64>,
@@ -305,29 +287,16 @@ pub async fn policy_leaderboard(
             FROM submissions s LEFT JOIN latest l ON l.submission_id = s.id
             WHERE s.split = ? AND s.kind = 'policy' {linked}
          )
-         SELECT t.name, k.id, k.created_at, k.state, k.sr, k.mse, k.m, k.p, k.baseline
+         SELECT t.name AS team, k.id AS submission_id, k.created_at AS submitted_at, k.state,
+                k.sr, k.mse, k.m, k.p, k.baseline
          FROM ranked k JOIN teams t ON t.id = k.team_id
          WHERE k.rn = 1
          ORDER BY k.k1 IS NULL, k.k1 DESC, k.k2 IS NULL, k.k2, k.created_at, k.id"
     );
-    let rows = sqlx::query(sqlx::AssertSqlSafe(sql))
+    sqlx::query_as(sqlx::AssertSqlSafe(sql))
         .bind(split.as_str())
         .fetch_all(pool)
-        .await?;
-    Ok(rows
-        .into_iter()
-        .map(|r| PolicyBoardRow {
-            team: r.get(0),
-            submission_id: r.get(1),
-            submitted_at: r.get(2),
-            state: r.get(3),
-            sr: r.get(4),
-            mse: r.get(5),
-            m: r.get(6),
-            p: r.get(7),
-            baseline: r.get::<i64, _>(8) != 0,
-        })
-        .collect())
+        .await
 }
 
 /// Name of the reserved team organiser reference runs are filed under. Team names cannot
@@ -336,29 +305,33 @@ pub const BASELINE_TEAM: &str = "(baseline)";
 
 /// The reserved baseline team, created on first use. Its token hash is not a hex digest, so no
 /// bearer token ever authenticates as it.
-pub async fn baseline_team(pool: &SqlitePool, now: i64) -> sqlx::Result<crate::store::Team> {
-    let row = sqlx::query(
+pub async fn baseline_team(pool: &SqlitePool, now: i64) -> sqlx::Result<Team> {
+    sqlx::query_as(
         "INSERT INTO teams (name, token_hash, created_at) VALUES (?, '!baseline: no token', ?)
          ON CONFLICT (name) DO UPDATE SET name = excluded.name RETURNING id, name",
     )
     .bind(BASELINE_TEAM)
     .bind(now)
     .fetch_one(pool)
-    .await?;
-    Ok(crate::store::Team {
-        id: row.get(0),
-        name: row.get(1),
-    })
+    .await
 }
 
-/// Unfinished jobs of a run that already failed an attempt: `(episode_key, attempt, last_error)`.
-pub async fn retrying(pool: &SqlitePool, run: i64) -> sqlx::Result<Vec<(String, i64, String)>> {
-    let rows = sqlx::query(
+/// An unfinished job that already failed an attempt.
+#[derive(Debug, Clone, PartialEq, Eq, FromRow)]
+pub struct RetryingJob {
+    pub episode_key: String,
+    /// Leases so far.
+    pub attempt: i64,
+    pub last_error: String,
+}
+
+/// Unfinished jobs of a run that already failed an attempt, in key order.
+pub async fn retrying(pool: &SqlitePool, run: i64) -> sqlx::Result<Vec<RetryingJob>> {
+    sqlx::query_as(
         "SELECT episode_key, attempt, last_error FROM jobs
          WHERE run_id = ? AND state IN ('queued', 'leased') AND last_error IS NOT NULL ORDER BY episode_key",
     )
     .bind(run)
     .fetch_all(pool)
-    .await?;
-    Ok(rows.into_iter().map(|r| (r.get(0), r.get(1), r.get(2))).collect())
+    .await
 }

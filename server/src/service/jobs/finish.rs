@@ -8,7 +8,7 @@ use std::collections::HashMap;
 
 use sqlx::SqliteConnection;
 
-use crate::episodes::{self, JobSpec};
+use crate::episodes;
 use crate::error::ServiceError;
 use crate::service::AppState;
 use crate::service::policies::parse_body;
@@ -23,7 +23,6 @@ impl AppState {
         &self,
         conn: &mut SqliteConnection,
         job: &JobRow,
-        spec: &JobSpec,
         reason: &str,
         worker: &str,
         now: i64,
@@ -40,7 +39,7 @@ impl AppState {
         );
         let result = NewResult {
             job,
-            mode: spec.mode.as_str(),
+            mode: job.spec.mode.as_str(),
             tasks: &[],
             failure: Some(&failure),
             wall_ms: 0,
@@ -64,7 +63,7 @@ impl AppState {
             return Ok(false);
         }
         let eps = queue::episodes(conn, run).await?;
-        let (_, body) = runs::run_submission(conn, run).await?;
+        let body = runs::run_submission(conn, run).await?.body;
         let plans = match parse_body(&body)?.plans {
             Some(id) => Some(self.linked_plans(conn, id).await?),
             None => None,
@@ -85,10 +84,10 @@ impl AppState {
         conn: &mut SqliteConnection,
         id: i64,
     ) -> Result<HashMap<String, Vec<String>>, ServiceError> {
-        let (split, body) = runs::submission_body_in(conn, id)
+        let linked = runs::submission_body_in(conn, id)
             .await?
             .ok_or_else(|| anyhow::anyhow!("linked plans submission {id} is missing"))?;
-        let (split, file) = self.stored_plans(&split, &body)?;
+        let (split, file) = self.stored_plans(&linked.split, &linked.body)?;
         Ok(self
             .content()
             .ground_truth(split)

@@ -1,42 +1,36 @@
 use kitchen_r_core::dataset::Split;
 
 use super::*;
-use crate::testutil::{FakeProbe, Fixture, WORKER, fixture};
+use crate::testutil::{ADMIN, FakeProbe, Fixture, WORKER, fixture};
 
 async fn registered(f: &Fixture) -> (String, i64) {
     let token = f.team("alpha").await;
     let done = f
         .state
-        .register_policy(Some(&token), f.request(Split::Dev))
+        .register_policy(&f.caller(&token).await, f.request(Split::Dev))
         .await
         .unwrap();
     (token, done.id)
 }
 
 async fn run_state(f: &Fixture, token: &str, id: i64) -> crate::service::PolicyRunView {
-    let view = f.state.get_submission(Some(token), id).await.unwrap();
+    let view = f.state.get_submission(&f.caller(token).await, id).await.unwrap();
     view.latest_run.unwrap().evaluation.unwrap()
 }
 
 #[tokio::test]
 async fn workers_must_present_the_worker_token() {
     let f = fixture(FakeProbe::ok(1), |_| {}).await;
-    assert_eq!(
-        f.state.lease(None, "w", 1, 0).await.unwrap_err().code(),
-        "missing_token"
-    );
-    assert_eq!(
-        f.state.lease(Some("nope"), "w", 1, 0).await.unwrap_err().code(),
-        "bad_token"
-    );
-    assert_eq!(
-        f.state.lease(Some(WORKER), "w", 0, 0).await.unwrap_err().code(),
-        "bad_request"
-    );
-    assert_eq!(
-        f.state.lease(Some(WORKER), "", 1, 0).await.unwrap_err().code(),
-        "bad_request"
-    );
+    let lease = async |token: Option<&str>, worker: &str, max: u32| {
+        let cred = f.state.caller(token).await?.worker()?;
+        f.state.lease(cred, worker, max, 0).await
+    };
+    let code = |r: Result<Vec<LeasedJob>, ServiceError>| r.unwrap_err().code();
+    assert_eq!(code(lease(None, "w", 1).await), "missing_token");
+    assert_eq!(code(lease(Some("nope"), "w", 1).await), "bad_token");
+    assert_eq!(code(lease(Some(ADMIN), "w", 1).await), "bad_token");
+    assert_eq!(code(lease(Some(WORKER), "w", 0).await), "bad_request");
+    assert_eq!(code(lease(Some(WORKER), "", 1).await), "bad_request");
 }
 
 #[tokio::test]
@@ -50,7 +44,7 @@ async fn claims_never_exceed_the_policys_max_concurrency() {
     assert_eq!(job.attempt, 1);
     assert_eq!(job.spec.endpoint.url, "http://127.0.0.1:50099");
     let r = f.report("w1", job, |_| true, 0.0);
-    assert!(f.state.report_result(Some(WORKER), r).await.unwrap().accepted);
+    assert!(f.state.report_result(f.worker().await, r).await.unwrap().accepted);
     let next = f.lease("w2", 64).await;
     assert_eq!(next.len(), 1, "one slot freed");
     assert!(next[0].id > first[1].id, "oldest queued job first");
@@ -61,12 +55,12 @@ async fn long_poll_wakes_up_when_a_slot_frees() {
     let f = fixture(FakeProbe::ok(1), |_| {}).await;
     registered(&f).await;
     let job = f.lease("w1", 1).await.remove(0);
-    let state = f.state.clone();
-    let waiter = tokio::spawn(async move { state.lease(Some(WORKER), "w2", 1, 10_000).await.unwrap() });
+    let (state, cred) = (f.state.clone(), f.worker().await);
+    let waiter = tokio::spawn(async move { state.lease(cred, "w2", 1, 10_000).await.unwrap() });
     tokio::time::sleep(Duration::from_millis(50)).await;
     let started = std::time::Instant::now();
     f.state
-        .report_result(Some(WORKER), f.report("w1", &job, |_| true, 0.0))
+        .report_result(f.worker().await, f.report("w1", &job, |_| true, 0.0))
         .await
         .unwrap();
     let got = waiter.await.unwrap();
@@ -81,19 +75,19 @@ async fn heartbeats_extend_only_the_current_lease() {
     let job = f.lease("w1", 1).await.remove(0);
     let hb = f
         .state
-        .heartbeat(Some(WORKER), "w1", job.id, job.attempt)
+        .heartbeat(f.worker().await, "w1", job.id, job.attempt)
         .await
         .unwrap();
     assert!(hb.lease_expires_at_ms.unwrap() >= job.lease_expires_at_ms);
     let other = f
         .state
-        .heartbeat(Some(WORKER), "w2", job.id, job.attempt)
+        .heartbeat(f.worker().await, "w2", job.id, job.attempt)
         .await
         .unwrap();
     assert_eq!(other.lease_expires_at_ms, None, "another owner is told to stop");
     let stale = f
         .state
-        .heartbeat(Some(WORKER), "w1", job.id, job.attempt + 1)
+        .heartbeat(f.worker().await, "w1", job.id, job.attempt + 1)
         .await
         .unwrap();
     assert_eq!(stale.lease_expires_at_ms, None);
@@ -115,7 +109,7 @@ async fn expired_lease_is_requeued_and_a_stale_attempt_refused_then_duplicates_c
     // The worker that lost the lease reports late: refused, nothing recorded.
     let late = f
         .state
-        .report_result(Some(WORKER), f.report("w1", &first, |_| true, 0.0))
+        .report_result(f.worker().await, f.report("w1", &first, |_| true, 0.0))
         .await
         .unwrap();
     assert_eq!(
@@ -127,14 +121,14 @@ async fn expired_lease_is_requeued_and_a_stale_attempt_refused_then_duplicates_c
     );
     assert!(
         f.state
-            .heartbeat(Some(WORKER), "w1", first.id, 1)
+            .heartbeat(f.worker().await, "w1", first.id, 1)
             .await
             .unwrap()
             .lease_expires_at_ms
             .is_none()
     );
     let r = f.report("w2", &again, |_| true, 0.0);
-    let ok = f.state.report_result(Some(WORKER), r.clone()).await.unwrap();
+    let ok = f.state.report_result(f.worker().await, r.clone()).await.unwrap();
     assert_eq!(
         ok,
         ReportOutcome {
@@ -142,7 +136,7 @@ async fn expired_lease_is_requeued_and_a_stale_attempt_refused_then_duplicates_c
             duplicate: false
         }
     );
-    let dup = f.state.report_result(Some(WORKER), r).await.unwrap();
+    let dup = f.state.report_result(f.worker().await, r).await.unwrap();
     assert_eq!(
         dup,
         ReportOutcome {
@@ -179,10 +173,10 @@ async fn platform_errors_requeue_then_fail_after_max_attempts_and_the_run_still_
         assert_eq!(job.attempt, attempt);
         let mut r = f.report("w1", &job, |_| true, 0.0);
         r.platform_error = "simulator crashed".into();
-        assert!(f.state.report_result(Some(WORKER), r).await.unwrap().accepted);
+        assert!(f.state.report_result(f.worker().await, r).await.unwrap().accepted);
     }
     assert!(f.lease("w1", 8).await.is_empty());
-    let view = f.state.get_submission(Some(&token), id).await.unwrap();
+    let view = f.state.get_submission(&f.caller(&token).await, id).await.unwrap();
     let run = view.latest_run.unwrap();
     let eval = run.evaluation.unwrap();
     assert_eq!(eval.state, "platform_failed");
@@ -214,12 +208,12 @@ async fn expired_leases_fail_after_max_attempts() {
         .find(|j| !j.episode_key.ends_with("/offline"))
         .unwrap();
     let r = f.report("w1", online, |_| true, 0.0);
-    f.state.report_result(Some(WORKER), r).await.unwrap();
+    f.state.report_result(f.worker().await, r).await.unwrap();
     let reaped = f.state.reap_expired(now_ms() + 3_600_000).await.unwrap();
     assert_eq!((reaped.requeued, reaped.failed, reaped.runs_finished), (0, 1, 1));
     let run = f
         .state
-        .get_submission(Some(&token), id)
+        .get_submission(&f.caller(&token).await, id)
         .await
         .unwrap()
         .latest_run
@@ -238,13 +232,13 @@ async fn a_finished_run_is_scored_once_with_sr_and_mse() {
         // Instruction 0 succeeds on its first task only; instruction 1 on every task.
         let first = job.spec.instruction_id == f.state.content().ground_truth(Split::Dev)[0].id;
         let r = f.report("w1", job, |j| !first || j == 0, 0.5 * (i as f64 + 1.0));
-        f.state.report_result(Some(WORKER), r).await.unwrap();
+        f.state.report_result(f.worker().await, r).await.unwrap();
     }
     let dev = f.state.content().ground_truth(Split::Dev);
     let expected_sr = (1.0 / dev[0].plan.len() as f64 + 1.0) / 2.0;
     let run = f
         .state
-        .get_submission(Some(&token), id)
+        .get_submission(&f.caller(&token).await, id)
         .await
         .unwrap()
         .latest_run
@@ -277,17 +271,22 @@ async fn an_integrated_run_recomputes_em_from_the_linked_plans() {
     );
     let plans = f
         .state
-        .submit_plans(Some(&token), Split::Dev, lines.as_bytes())
+        .submit_plans(&f.team_of(&token).await, Split::Dev, lines.as_bytes())
         .await
         .unwrap()
         .id;
     let mut req = f.request(Split::Dev);
     req.plans = Some(plans);
-    let id = f.state.register_policy(Some(&token), req).await.unwrap().id;
+    let id = f
+        .state
+        .register_policy(&f.caller(&token).await, req)
+        .await
+        .unwrap()
+        .id;
     for job in f.lease("w1", 64).await {
         // Every task succeeds online; offline MSE 0.25 everywhere.
         let r = f.report("w1", &job, |_| true, 0.25);
-        f.state.report_result(Some(WORKER), r).await.unwrap();
+        f.state.report_result(f.worker().await, r).await.unwrap();
     }
     let (n0, n1) = (dev[0].plan.len() as f64, dev[1].plan.len() as f64);
     let em = (1.0 + 1.0 / n1) / 2.0;
@@ -296,7 +295,7 @@ async fn an_integrated_run_recomputes_em_from_the_linked_plans() {
     let p = 1.0 / em + 0.25;
     let run = f
         .state
-        .get_submission(Some(&token), id)
+        .get_submission(&f.caller(&token).await, id)
         .await
         .unwrap()
         .latest_run
@@ -319,13 +318,13 @@ async fn an_integrated_run_recomputes_em_from_the_linked_plans() {
     );
 
     // A rescore recomputes M and P from the recorded episodes as a new run, episodes kept.
-    let report = f.state.rescore_all(Some(crate::testutil::ADMIN)).await.unwrap();
+    let report = f.state.rescore_all(f.admin().await).await.unwrap();
     assert_eq!(
         (report.rescored, report.policy_runs_rescored),
         (1, 1),
         "{report:?}"
     );
-    let view = f.state.get_submission(Some(&token), id).await.unwrap();
+    let view = f.state.get_submission(&f.caller(&token).await, id).await.unwrap();
     assert_eq!(view.runs, 2);
     let run2 = view.latest_run.unwrap();
     assert_ne!(run2.id, run.id);
@@ -343,39 +342,32 @@ async fn an_integrated_run_recomputes_em_from_the_linked_plans() {
         .execute(f.state.pool())
         .await
         .unwrap();
-    let report = f.state.rescore_all(Some(crate::testutil::ADMIN)).await.unwrap();
+    let report = f.state.rescore_all(f.admin().await).await.unwrap();
     assert_eq!(report.policy_runs_rescored, 0, "{report:?}");
     assert_eq!(report.needs_resimulation.len(), 1, "{report:?}");
     assert!(
         report.needs_resimulation[0].error.contains("changed"),
         "{report:?}"
     );
-    let view = f.state.get_submission(Some(&token), id).await.unwrap();
+    let view = f.state.get_submission(&f.caller(&token).await, id).await.unwrap();
     assert_eq!(view.runs, 2);
     let run2 = view.latest_run.unwrap();
     assert_eq!(run2.scores, s);
     assert!(run2.evaluation.unwrap().needs_resimulation);
 
     // The organiser has it simulated again: a new run on the same submission, current specs.
-    let again = f
-        .state
-        .resimulate(Some(crate::testutil::ADMIN), id)
-        .await
-        .unwrap();
+    let again = f.state.resimulate(f.admin().await, id).await.unwrap();
     assert_eq!((again.id, again.episodes), (id, 4));
     assert!(
-        f.state
-            .resimulate(Some(crate::testutil::ADMIN), id)
-            .await
-            .is_err(),
+        f.state.resimulate(f.admin().await, id).await.is_err(),
         "still evaluating"
     );
     for job in f.lease("w2", 64).await {
         assert_eq!(job.run_id, again.run_id);
         let r = f.report("w2", &job, |_| true, 0.25);
-        f.state.report_result(Some(WORKER), r).await.unwrap();
+        f.state.report_result(f.worker().await, r).await.unwrap();
     }
-    let view = f.state.get_submission(Some(&token), id).await.unwrap();
+    let view = f.state.get_submission(&f.caller(&token).await, id).await.unwrap();
     let run3 = view.latest_run.unwrap();
     assert_eq!(run3.id, again.run_id);
     assert_eq!(run3.scores, s);
@@ -383,7 +375,7 @@ async fn an_integrated_run_recomputes_em_from_the_linked_plans() {
     assert!(!eval.needs_resimulation && eval.state == "finished");
     assert_eq!(
         f.state
-            .rescore_all(Some(crate::testutil::ADMIN))
+            .rescore_all(f.admin().await)
             .await
             .unwrap()
             .policy_runs_rescored,
@@ -394,9 +386,9 @@ async fn an_integrated_run_recomputes_em_from_the_linked_plans() {
 #[tokio::test]
 async fn shutdown_ends_long_polls_at_once() {
     let f = fixture(FakeProbe::ok(1), |_| {}).await;
-    let state = f.state.clone();
+    let (state, cred) = (f.state.clone(), f.worker().await);
     let started = std::time::Instant::now();
-    let waiter = tokio::spawn(async move { state.lease(Some(WORKER), "w", 1, 30_000).await.unwrap() });
+    let waiter = tokio::spawn(async move { state.lease(cred, "w", 1, 30_000).await.unwrap() });
     tokio::time::sleep(Duration::from_millis(50)).await;
     f.state.begin_shutdown();
     assert!(waiter.await.unwrap().is_empty());
@@ -421,14 +413,18 @@ async fn a_restarted_server_resumes_the_run_from_sqlite() {
     let restarted = f.reopen(FakeProbe::ok(8)).await;
     let reaped = restarted.reap_expired(now_ms() + 3_600_000).await.unwrap();
     assert_eq!(reaped.requeued, 1);
-    let job = restarted.lease(Some(WORKER), "w2", 8, 0).await.unwrap().remove(0);
+    let job = restarted
+        .lease(f.worker().await, "w2", 8, 0)
+        .await
+        .unwrap()
+        .remove(0);
     assert_eq!((job.id, job.attempt), (lost.id, 2));
     restarted
-        .report_result(Some(WORKER), f.report("w2", &job, |_| true, 0.0))
+        .report_result(f.worker().await, f.report("w2", &job, |_| true, 0.0))
         .await
         .unwrap();
     let run = restarted
-        .get_submission(Some(&token), id)
+        .get_submission(&f.caller(&token).await, id)
         .await
         .unwrap()
         .latest_run

@@ -13,7 +13,7 @@ async fn accepted_registration_queues_online_and_offline_jobs_in_one_go() {
     let token = f.team("alpha").await;
     let done = f
         .state
-        .register_policy(Some(&token), f.request(Split::Dev))
+        .register_policy(&f.caller(&token).await, f.request(Split::Dev))
         .await
         .unwrap();
     assert_eq!(
@@ -21,7 +21,11 @@ async fn accepted_registration_queues_online_and_offline_jobs_in_one_go() {
         (3, 6, 4)
     );
     assert_eq!(probe.calls(), 1);
-    let view = f.state.get_submission(Some(&token), done.id).await.unwrap();
+    let view = f
+        .state
+        .get_submission(&f.caller(&token).await, done.id)
+        .await
+        .unwrap();
     assert_eq!(view.kind, "policy");
     let info = view.policy.unwrap();
     assert_eq!(
@@ -37,7 +41,11 @@ async fn accepted_registration_queues_online_and_offline_jobs_in_one_go() {
     let mut fewer = f.request(Split::Dev);
     fewer.episodes = Some(1);
     fewer.token = Some("secret".into());
-    let fewer = f.state.register_policy(Some(&token), fewer).await.unwrap();
+    let fewer = f
+        .state
+        .register_policy(&f.caller(&token).await, fewer)
+        .await
+        .unwrap();
     assert_eq!((fewer.instructions, fewer.episodes), (1, 2));
 }
 
@@ -51,7 +59,7 @@ async fn offline_jobs_can_be_switched_off_and_the_test_split_runs_whole() {
     let token = f.team("alpha").await;
     let done = f
         .state
-        .register_policy(Some(&token), f.request(Split::Test))
+        .register_policy(&f.caller(&token).await, f.request(Split::Test))
         .await
         .unwrap();
     let n = f.state.content().ground_truth(Split::Test).len();
@@ -61,7 +69,11 @@ async fn offline_jobs_can_be_switched_off_and_the_test_split_runs_whole() {
     );
     let mut bad = f.request(Split::Test);
     bad.episodes = Some(2);
-    let e = f.state.register_policy(Some(&token), bad).await.unwrap_err();
+    let e = f
+        .state
+        .register_policy(&f.caller(&token).await, bad)
+        .await
+        .unwrap_err();
     assert_eq!(e.code(), "bad_request", "{e}");
 }
 
@@ -70,7 +82,7 @@ async fn refused(probe: Arc<dyn crate::probe::PolicyProbe>) -> ServiceError {
     let token = f.team("alpha").await;
     let e = f
         .state
-        .register_policy(Some(&token), f.request(Split::Dev))
+        .register_policy(&f.caller(&token).await, f.request(Split::Dev))
         .await
         .unwrap_err();
     // Nothing was stored, so a refusal never uses quota.
@@ -125,7 +137,7 @@ async fn bad_requests_are_refused_before_probing() {
     let line = format!("{{\"id\": \"{}\", \"plan\": []}}\n", dev[0].id);
     let plans = f
         .state
-        .submit_plans(Some(&beta), Split::Dev, line.as_bytes())
+        .submit_plans(&f.team_of(&beta).await, Split::Dev, line.as_bytes())
         .await
         .unwrap()
         .id;
@@ -149,7 +161,7 @@ async fn bad_requests_are_refused_before_probing() {
     for (req, code) in cases {
         let e = f
             .state
-            .register_policy(Some(&alpha), req.clone())
+            .register_policy(&f.caller(&alpha).await, req.clone())
             .await
             .unwrap_err();
         assert_eq!(e.code(), code, "{req:?}: {e}");
@@ -161,19 +173,19 @@ async fn bad_requests_are_refused_before_probing() {
     );
     let test_plans = f
         .state
-        .submit_plans(Some(&alpha), Split::Test, test_line.as_bytes())
+        .submit_plans(&f.team_of(&alpha).await, Split::Test, test_line.as_bytes())
         .await
         .unwrap()
         .id;
     let e = f
         .state
-        .register_policy(Some(&alpha), with(&|r| r.plans = Some(test_plans)))
+        .register_policy(&f.caller(&alpha).await, with(&|r| r.plans = Some(test_plans)))
         .await
         .unwrap_err();
     assert!(e.to_string().contains("test split"), "{e}");
     assert_eq!(
         f.state
-            .register_policy(None, f.request(Split::Dev))
+            .register_policy(&f.state.caller(None).await.unwrap(), f.request(Split::Dev))
             .await
             .unwrap_err()
             .code(),
@@ -192,13 +204,13 @@ async fn concurrent_runs_and_daily_quota_are_enforced_but_reference_runs_are_exe
     let token = f.team("alpha").await;
     for _ in 0..2 {
         f.state
-            .register_policy(Some(&token), f.request(Split::Dev))
+            .register_policy(&f.caller(&token).await, f.request(Split::Dev))
             .await
             .unwrap();
     }
     let e = f
         .state
-        .register_policy(Some(&token), f.request(Split::Dev))
+        .register_policy(&f.caller(&token).await, f.request(Split::Dev))
         .await
         .unwrap_err();
     assert_eq!(e.code(), "concurrent_runs_exceeded");
@@ -209,12 +221,12 @@ async fn concurrent_runs_and_daily_quota_are_enforced_but_reference_runs_are_exe
         f.state.content().ground_truth(Split::Dev)[0].id
     );
     f.state
-        .submit_plans(Some(&token), Split::Dev, line.as_bytes())
+        .submit_plans(&f.team_of(&token).await, Split::Dev, line.as_bytes())
         .await
         .unwrap();
     let e = f
         .state
-        .submit_plans(Some(&token), Split::Dev, line.as_bytes())
+        .submit_plans(&f.team_of(&token).await, Split::Dev, line.as_bytes())
         .await
         .unwrap_err();
     assert_eq!(e.code(), "quota_exceeded");
@@ -224,10 +236,14 @@ async fn concurrent_runs_and_daily_quota_are_enforced_but_reference_runs_are_exe
     for _ in 0..3 {
         let done = f
             .state
-            .register_policy(Some(ADMIN), reference.clone())
+            .register_policy(&f.caller(ADMIN).await, reference.clone())
             .await
             .unwrap();
-        let view = f.state.get_submission(Some(ADMIN), done.id).await.unwrap();
+        let view = f
+            .state
+            .get_submission(&f.caller(ADMIN).await, done.id)
+            .await
+            .unwrap();
         assert_eq!(view.team, crate::store::runs::BASELINE_TEAM);
         assert!(view.policy.unwrap().reference);
     }

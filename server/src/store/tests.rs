@@ -1,0 +1,115 @@
+//! The typed rows against a real SQLite file: JSON columns keep the text earlier builds wrote,
+//! and read back as typed values.
+
+use kitchen_r_core::dataset::Split;
+
+use super::queue::{self, NewResult};
+use super::runs::{self, NewPolicyRun};
+use crate::episodes::{EndpointSpec, JobSpec, Mode, TaskOutcome};
+use crate::states::{JobState, RunState, SubmissionKind};
+
+fn spec() -> JobSpec {
+    JobSpec {
+        mode: Mode::Online,
+        scene_id: "kitchen_a".into(),
+        instruction_id: "dev-0001".into(),
+        plan: vec!["pick the bowl".into(), "place the bowl on the table".into()],
+        seed: 7,
+        task_time_limit_s: 120.0,
+        actions_executed_per_chunk: 8,
+        teleport_on_failure: true,
+        max_plan_steps: 0,
+        privileged: false,
+        endpoint: EndpointSpec {
+            url: "http://127.0.0.1:1".into(),
+            bearer_token: String::new(),
+            call_deadline_ms: 1,
+            startup_deadline_ms: 1,
+            episode_budget_ms: 1,
+            max_successive_timeouts: 1,
+        },
+        place_targets: vec![[0.5, -0.25, 0.9]],
+    }
+}
+
+#[tokio::test]
+async fn json_columns_round_trip_as_typed_values_in_the_stored_text() {
+    let dir = tempfile::tempdir().unwrap();
+    let pool = super::connect(&format!("sqlite://{}", dir.path().join("t.db").display()))
+        .await
+        .unwrap();
+    let team = super::insert_team(&pool, "a", "hash", 1).await.unwrap().unwrap();
+    assert_eq!(super::insert_team(&pool, "a", "other", 1).await.unwrap(), None);
+    let spec = spec();
+    // A spec written before `place_targets` existed still reads.
+    let mut legacy = serde_json::to_value(&spec).unwrap();
+    legacy.as_object_mut().unwrap().remove("place_targets");
+    let jobs = [
+        ("dev-0001".to_string(), serde_json::to_string(&spec).unwrap()),
+        ("dev-0002".to_string(), legacy.to_string()),
+    ];
+    let new = NewPolicyRun {
+        team,
+        split: Split::Dev,
+        body: "{}",
+        scorer_version: "v",
+        max_concurrency: 0,
+        max_attempts: 3,
+        jobs: &jobs,
+    };
+    let (sub, run) = runs::insert_policy_submission(&pool, &new, 10).await.unwrap();
+
+    let row = super::submission(&pool, sub).await.unwrap().unwrap();
+    assert_eq!(
+        (row.team.as_str(), row.kind, row.runs),
+        ("a", SubmissionKind::Policy, 1)
+    );
+    let latest = super::latest_run(&pool, sub).await.unwrap().unwrap();
+    assert_eq!(
+        (latest.id, latest.state, latest.scores.em),
+        (run, RunState::Active, None)
+    );
+    assert!(!latest.needs_resimulation);
+
+    let claimed = queue::claim(&pool, "w", 20, 1000, 2).await.unwrap();
+    assert_eq!(claimed.len(), 2);
+    assert_eq!(claimed[0].spec, spec);
+    assert!(claimed[1].spec.place_targets.is_empty());
+    let counts = runs::job_counts(&pool, run).await.unwrap();
+    assert_eq!((counts.queued, counts.leased, counts.started), (0, 2, 2));
+
+    let mut conn = pool.acquire().await.unwrap();
+    let job = queue::job(&mut conn, claimed[0].id).await.unwrap().unwrap();
+    assert_eq!((job.state, job.attempt, &job.spec), (JobState::Leased, 1, &spec));
+    let tasks = vec![TaskOutcome {
+        index: 0,
+        step: "pick the bowl".into(),
+        success: true,
+        completion_time_s: 3.5,
+        ..TaskOutcome::default()
+    }];
+    let result = NewResult {
+        job: &job,
+        mode: "online",
+        tasks: &tasks,
+        failure: None,
+        wall_ms: 5,
+        log_tail: "",
+        worker_id: "w",
+    };
+    assert!(queue::insert_result(&mut conn, &result, 30).await.unwrap());
+    let text: String = sqlx::query_scalar("SELECT tasks FROM episode_results")
+        .fetch_one(&mut *conn)
+        .await
+        .unwrap();
+    assert_eq!(text, serde_json::to_string(&tasks).unwrap());
+
+    let episodes = queue::episodes(&mut conn, run).await.unwrap();
+    assert_eq!(episodes.len(), 1);
+    assert_eq!((&episodes[0].spec, &episodes[0].tasks), (&spec, &tasks));
+    let results = runs::results(&pool, run).await.unwrap();
+    assert_eq!(
+        (results[0].episode_key.as_str(), &results[0].tasks),
+        ("dev-0001", &tasks)
+    );
+}
