@@ -1,6 +1,6 @@
 //! `kitchen-r dataset audit DIR`: the leak and feasibility audit an organiser runs on a test set
 //! before a contest. The figures come from `kitchen_r_core::audit`; `--oracle` adds a run of the
-//! privileged oracle over every test instruction through `kitchen_r_worker::eval`, the code path
+//! privileged oracle over every test instruction through `kitchen_r_episode::eval`, the code path
 //! of `kitchen-r eval --policy builtin:oracle --ground-truth FILE`.
 
 use std::path::PathBuf;
@@ -9,7 +9,7 @@ use anyhow::{Context, bail};
 use clap::Args;
 use kitchen_r_core::audit::{self, OracleCheck, OracleFailure, Thresholds};
 use kitchen_r_core::dataset::Split;
-use kitchen_r_worker::eval::{EvalConfig, EvalOptions, PolicyChoice, evaluate};
+use kitchen_r_episode::eval::{EvalConfig, EvalOptions, PolicyChoice, evaluate};
 
 #[derive(Args, Debug)]
 pub struct AuditArgs {

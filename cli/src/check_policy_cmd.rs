@@ -9,9 +9,9 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::Args;
+use kitchen_r_contract::check::{self, Verdict};
+use kitchen_r_contract::{AllowedNetworks, Credentials, RemoteConfig, SimCamera};
 use kitchen_r_sim::SensorsConfig;
-use kitchen_r_worker::remote::check::{self, Verdict};
-use kitchen_r_worker::remote::{AllowedNetworks, Credentials, RemoteConfig, SimCamera};
 
 #[derive(Args, Debug)]
 pub struct CheckPolicyArgs {

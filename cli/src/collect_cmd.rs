@@ -1,13 +1,13 @@
 //! `kitchen-r collect`: expert trajectory collection into MCAP and/or HDF5 with the Monitoring
 //! Module's checks. Argument parsing and printing only; the work is in
-//! `kitchen_r_worker::collect`.
+//! `kitchen_r_record::collect`.
 
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use clap::Args;
 use kitchen_r_core::dataset::Split;
-use kitchen_r_worker::collect::{CollectConfig, CollectOptions, Formats, collect};
+use kitchen_r_record::collect::{CollectConfig, CollectOptions, Formats, collect};
 
 #[derive(Args, Debug)]
 pub struct CollectArgs {

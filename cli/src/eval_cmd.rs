@@ -1,6 +1,6 @@
 //! `kitchen-r eval`: local evaluation through the workers' episode runner, with SR per task kind
 //! and overall (online) or MSE against the expert (offline), and sim and wall times. Argument
-//! parsing and printing only; the work is in `kitchen_r_worker::eval` (built-in policies) and
+//! parsing and printing only; the work is in `kitchen_r_episode::eval` (built-in policies) and
 //! `kitchen_r_worker::job::local` (a policy endpoint, run as the server's workers run it).
 
 use std::path::PathBuf;
@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 use kitchen_r_core::dataset::Split;
-use kitchen_r_worker::eval::{EvalConfig, EvalOptions, EvalReport, PolicyChoice, evaluate, instructions};
+use kitchen_r_episode::eval::{EvalConfig, EvalOptions, EvalReport, PolicyChoice, evaluate, instructions};
 use kitchen_r_worker::job::local::{LocalEpisode, LocalReport, LocalSettings, Mode, evaluate_endpoint};
 
 #[derive(Args, Debug)]

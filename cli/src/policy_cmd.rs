@@ -10,10 +10,10 @@ use std::sync::Arc;
 
 use anyhow::Context;
 use clap::{Args, Subcommand};
+use kitchen_r_contract::server::{PolicyFactory, ServeOptions, TlsIdentity, serve_policy};
+use kitchen_r_episode::oracle::OraclePolicy;
+use kitchen_r_episode::policy::Policy;
 use kitchen_r_sim::Assets;
-use kitchen_r_worker::oracle::OraclePolicy;
-use kitchen_r_worker::policy::Policy;
-use kitchen_r_worker::remote::server::{PolicyFactory, ServeOptions, TlsIdentity, serve_policy};
 
 #[derive(Args, Debug)]
 pub struct PolicyArgs {

@@ -2,9 +2,9 @@
 //! worker crate's endpoint check, so registration contacts an endpoint exactly as a worker will.
 //! It lives in the binary because the server must not depend on the worker crate.
 
+use kitchen_r_contract::probe::{ProbeFailure, probe_endpoint};
+use kitchen_r_contract::{AllowedNetworks, RemoteConfig};
 use kitchen_r_server::{BoxFuture, PolicyProbe, ProbeError, ProbedSpec};
-use kitchen_r_worker::remote::probe::{ProbeFailure, probe_endpoint};
-use kitchen_r_worker::remote::{AllowedNetworks, RemoteConfig};
 
 pub struct WorkerProbe {
     pub allow: AllowedNetworks,

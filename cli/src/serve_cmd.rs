@@ -12,10 +12,10 @@ use std::sync::Arc;
 
 use anyhow::Context;
 use clap::Args;
+use kitchen_r_contract::{AllowedNetworks, RemoteConfig};
 use kitchen_r_server::Config;
 use kitchen_r_worker::job::WorkerConfig;
 use kitchen_r_worker::job::client::Worker;
-use kitchen_r_worker::remote::{AllowedNetworks, RemoteConfig};
 use tokio::sync::watch;
 
 use crate::probe_glue::WorkerProbe;
@@ -120,7 +120,7 @@ pub fn serve(args: ServeArgs) -> anyhow::Result<()> {
                 "worker token (generated for this run; set KITCHEN_R_WORKER_TOKEN for remote workers): {token}"
             )?;
         }
-        let test_set = &server.state().content().test_set;
+        let test_set = server.test_set();
         writeln!(out, "test set: {} ({} instructions)", test_set.notice, test_set.instructions)?;
         writeln!(out, "listening http={h} grpc={g} workers={slots}")?;
         out.flush()?;

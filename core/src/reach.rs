@@ -22,7 +22,7 @@
 //! offset is taken in its worst direction (straight away from the waist): the yaw an object is
 //! carried with depends on how it was picked up. [`BASE_SLACK`] covers where the base really
 //! stops: the oracle squares up on the approach point to 3 cm and its heading to 0.015 rad
-//! (`worker/src/oracle/task.rs`, ~1.5 cm at the arm's reach). [`ALLOWANCE`] is what the arm
+//! (`episode/src/oracle/task.rs`, ~1.5 cm at the arm's reach). [`ALLOWANCE`] is what the arm
 //! gains over the straight top-down chain by tilting the tool (the RMP controller weighs the
 //! position attractor ten times the orientation one) and what the 5 cm place tolerance absorbs;
 //! it is measured in the twin (`worker/tests/it/place_reach.rs`).

@@ -14,7 +14,7 @@ use std::collections::BTreeSet;
 use std::process::Command;
 use std::sync::Arc;
 
-use kitchen_r_worker::remote::server::ServeOptions;
+use kitchen_r_contract::server::ServeOptions;
 
 use serde_json::{Value, json};
 use support::*;
@@ -214,7 +214,7 @@ async fn a_private_address_endpoint_is_refused_at_registration() {
 
 #[test]
 fn misbehaving_policies_fail_their_tasks_with_the_reason_while_the_runs_complete() {
-    use kitchen_r_worker::policy::HORIZON as H;
+    use kitchen_r_episode::policy::HORIZON as H;
     use remote_support::{STILL, TestServer, factory};
     let scripted = |answer: fn() -> Vec<[f64; 10]>| {
         TestServer::start(

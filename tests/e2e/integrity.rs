@@ -12,9 +12,9 @@ use crate::support;
 
 use std::sync::{Arc, Mutex};
 
+use kitchen_r_contract::server::ServeOptions;
 use kitchen_r_core::dataset::Instruction;
-use kitchen_r_worker::policy::HORIZON;
-use kitchen_r_worker::remote::server::ServeOptions;
+use kitchen_r_episode::policy::HORIZON;
 use remote_support::{STILL, TestServer, factory};
 use serde_json::{Value, json};
 use support::*;

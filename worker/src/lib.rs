@@ -1,18 +1,12 @@
-//! Simulation worker: runs episodes on the kitchen twin, talks to policies and the server, and
-//! records expert trajectories.
+//! Simulation worker: the job loop that leases `kitchen_r.worker.v1.Job`s from the server, runs
+//! each through the episode runner with the job's policy, heartbeats and reports the result
+//! ([`job`]), and local evaluation of an endpoint the way those jobs run it.
 //!
-//! It owns everything that turns simulator output into artefacts (trajectory files), the oracle
-//! expert ([`oracle`]), local evaluation ([`eval`]), trajectory collection ([`collect`]) and, in
-//! later issues, job leasing and policy calls. It must not score submissions or touch the
-//! database: results go back to the server, which owns scoring and storage.
+//! Episodes, policies and the oracle live in kitchen-r-episode, the policy transport in
+//! kitchen-r-contract, trajectory recording in kitchen-r-record. This crate must not score
+//! submissions or touch the database: results go back to the server, which owns scoring and
+//! storage.
 
-pub mod bench;
-pub mod collect;
-pub mod eval;
+#![warn(unreachable_pub)]
+
 pub mod job;
-pub mod offline;
-pub mod oracle;
-pub mod policy;
-pub mod record;
-pub mod remote;
-pub mod runner;

@@ -82,8 +82,8 @@ impl Worker {
         Worker::with_context(cfg, Arc::new(ctx))
     }
 
-    /// As [`Worker::build`] with an already loaded context (the server's in-process slots).
-    pub fn with_context(cfg: WorkerConfig, ctx: Arc<JobContext>) -> Result<Worker, WorkerError> {
+    /// As [`Worker::build`] with an already loaded context.
+    pub(crate) fn with_context(cfg: WorkerConfig, ctx: Arc<JobContext>) -> Result<Worker, WorkerError> {
         cfg.validate()?;
         let bad = |e: String| WorkerError::Config(format!("`server` {:?}: {e}", cfg.server));
         let mut ep = Endpoint::from_shared(cfg.server.clone())

@@ -16,11 +16,11 @@ use kitchen_r_sim::{Action, EpisodeConfig, Sim, Snapshot, StepInfo};
 
 use super::spec;
 use super::{JobContext, JobError};
-use crate::offline::{OfflineOutcome, run_offline};
-use crate::oracle::{OraclePolicy, expert_options};
-use crate::policy::{Policy, Unreachable};
-use crate::remote::{Credentials, RemoteConfig, RemotePolicy, SimCamera};
-use crate::runner::{EpisodeOutcome, StepHook, run_episode};
+use kitchen_r_contract::{Credentials, RemoteConfig, RemotePolicy, SimCamera};
+use kitchen_r_episode::offline::{OfflineOutcome, run_offline};
+use kitchen_r_episode::oracle::{OraclePolicy, expert_options};
+use kitchen_r_episode::policy::{Policy, Unreachable};
+use kitchen_r_episode::runner::{EpisodeOutcome, StepHook, run_episode};
 
 /// The log tail kept with a result (the contract's cap).
 const LOG_CAP: usize = 64 << 10;
@@ -44,7 +44,7 @@ impl JobControl {
         self.cancelled.store(true, Ordering::SeqCst);
     }
 
-    pub fn is_cancelled(&self) -> bool {
+    pub(crate) fn is_cancelled(&self) -> bool {
         self.cancelled.load(Ordering::SeqCst)
     }
 
@@ -53,7 +53,7 @@ impl JobControl {
     }
 
     /// Tasks finished so far, for heartbeats.
-    pub fn tasks_done(&self) -> u32 {
+    pub(crate) fn tasks_done(&self) -> u32 {
         self.tasks_done.load(Ordering::Relaxed)
     }
 }
@@ -120,7 +120,7 @@ impl Log {
 /// a participant's server serving two runs (or a retried attempt) never mixes their state, and
 /// it names neither the instruction nor the run: an endpoint that logs its traffic learns nothing
 /// it could map back to the hidden test split.
-pub fn policy_episode_id(job: &pb::Job) -> String {
+pub(crate) fn policy_episode_id(job: &pb::Job) -> String {
     match job.episode.as_ref().map(|e| e.policy_episode_id.as_str()) {
         Some(id) if !id.is_empty() => id.to_string(),
         _ => random_episode_id(),
@@ -128,7 +128,7 @@ pub fn policy_episode_id(job: &pb::Job) -> String {
 }
 
 /// `ep-` and 24 random hex digits.
-pub fn random_episode_id() -> String {
+pub(crate) fn random_episode_id() -> String {
     let bytes: [u8; 12] = rand::random();
     let hex: String = bytes.iter().map(|b| format!("{b:02x}")).collect();
     format!("ep-{hex}")

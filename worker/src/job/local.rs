@@ -20,10 +20,10 @@ use serde::{Deserialize, Serialize};
 
 use super::execute::{JobControl, execute_job};
 use super::{JobContext, JobError};
-use crate::eval::{Sr, task_kinds};
-use crate::remote::probe::{ProbeFailure, probe_endpoint};
-use crate::remote::{AllowedNetworks, RemoteConfig};
-use crate::runner::RunOptions;
+use kitchen_r_contract::probe::{ProbeFailure, probe_endpoint};
+use kitchen_r_contract::{AllowedNetworks, RemoteConfig};
+use kitchen_r_episode::eval::{Sr, task_kinds};
+use kitchen_r_episode::runner::RunOptions;
 
 /// Server-side settings a local run reproduces (the server's `[control]` and `[policy]`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -85,7 +85,7 @@ pub enum LocalError {
 }
 
 /// The job the server would lease for `ins` in `s.mode`.
-pub fn local_job(ins: &Instruction, url: &str, s: &LocalSettings, remote: &RemoteConfig) -> pb::Job {
+pub(crate) fn local_job(ins: &Instruction, url: &str, s: &LocalSettings, remote: &RemoteConfig) -> pb::Job {
     let key = s.mode.episode_key(&ins.id);
     pb::Job {
         job_id: 0,

@@ -6,7 +6,7 @@
 //! with jobs built the way the server builds them, so local and leaderboard numbers agree.
 
 pub mod client;
-pub mod execute;
+mod execute;
 pub mod local;
 pub mod spec;
 
@@ -19,8 +19,8 @@ use serde::{Deserialize, Serialize};
 pub use client::run_worker;
 pub use execute::{JobControl, execute_job};
 
-use crate::remote::{AllowedNetworks, RemoteConfig};
-use crate::runner::RunError;
+use kitchen_r_contract::{AllowedNetworks, RemoteConfig};
+use kitchen_r_episode::runner::RunError;
 
 /// Why a job could not be run; every variant is a platform error (retried, never charged).
 #[derive(Debug, thiserror::Error)]
@@ -59,7 +59,7 @@ pub struct WorkerConfig {
     /// Lease owner name; empty = `hostname-pid`.
     pub worker_id: String,
     /// Address classes a policy endpoint may resolve to besides public ones, as CIDR ranges
-    /// (see `remote::endpoint::CLASS_RANGES`); the default allows loopback only.
+    /// (see `kitchen_r_contract::endpoint::CLASS_RANGES`); the default allows loopback only.
     pub allow_networks: Vec<String>,
     /// Longest long-poll of one Lease call, milliseconds (the server caps it at 30000).
     pub lease_wait_ms: u32,
@@ -102,7 +102,7 @@ impl WorkerConfig {
     }
 
     /// Check every value; the message names the key.
-    pub fn validate(&self) -> Result<(), WorkerError> {
+    pub(crate) fn validate(&self) -> Result<(), WorkerError> {
         let bad = |k: &str, m: &str| Err(WorkerError::Config(format!("`{k}`: {m}")));
         if !(self.server.starts_with("http://") || self.server.starts_with("https://")) {
             return bad("server", "must be http://HOST:PORT or https://HOST:PORT");
@@ -125,12 +125,12 @@ impl WorkerConfig {
         self.allowed().map(drop)
     }
 
-    pub fn allowed(&self) -> Result<AllowedNetworks, WorkerError> {
+    pub(crate) fn allowed(&self) -> Result<AllowedNetworks, WorkerError> {
         AllowedNetworks::from_cidrs(&self.allow_networks).map_err(WorkerError::Config)
     }
 
     /// The configured id, or `hostname-pid`.
-    pub fn worker_id(&self) -> String {
+    pub(crate) fn worker_id(&self) -> String {
         if !self.worker_id.is_empty() {
             return self.worker_id.clone();
         }
@@ -143,7 +143,7 @@ impl WorkerConfig {
         format!("{host}-{}", std::process::id())
     }
 
-    pub fn lease_wait(&self) -> Duration {
+    pub(crate) fn lease_wait(&self) -> Duration {
         Duration::from_millis(u64::from(self.lease_wait_ms))
     }
 }
@@ -183,7 +183,7 @@ impl JobContext {
     }
 
     /// The context a [`WorkerConfig`] describes.
-    pub fn from_worker_config(cfg: &WorkerConfig) -> Result<JobContext, WorkerError> {
+    pub(crate) fn from_worker_config(cfg: &WorkerConfig) -> Result<JobContext, WorkerError> {
         Ok(JobContext::load(
             cfg.policy.clone(),
             cfg.allowed()?,

@@ -15,13 +15,13 @@ use kitchen_r_proto::worker::v1 as pb;
 use kitchen_r_sim::{Assets, EpisodeConfig, EpisodeParams};
 
 use super::JobError;
-use crate::eval::instruction_seed;
-use crate::offline::OfflineOptions;
-use crate::policy::HORIZON;
-use crate::runner::RunOptions;
+use kitchen_r_episode::eval::instruction_seed;
+use kitchen_r_episode::offline::OfflineOptions;
+use kitchen_r_episode::policy::HORIZON;
+use kitchen_r_episode::runner::RunOptions;
 
 /// The instruction a job's spec describes: its plan and place targets as the server sent them.
-pub fn instruction(spec: &pb::EpisodeSpec) -> Result<Instruction, JobError> {
+pub(crate) fn instruction(spec: &pb::EpisodeSpec) -> Result<Instruction, JobError> {
     let places = place_steps(&spec.plan);
     if spec.place_targets.len() != places {
         return Err(JobError::Spec(format!(
@@ -54,7 +54,7 @@ pub fn place_targets(ins: &Instruction) -> Vec<pb::PlaceTarget> {
 }
 
 /// The simulator configuration of the job's episode; `episode_id` names it towards the policy.
-pub fn episode_config(
+pub(crate) fn episode_config(
     spec: &pb::EpisodeSpec,
     assets: &Assets,
     params: &EpisodeParams,
@@ -73,7 +73,7 @@ pub fn episode_config(
 
 /// The runner's options for the job: the spec's settings, the endpoint's limits; a zero means
 /// "not set" and takes the default.
-pub fn run_options(spec: &pb::EpisodeSpec, ep: &pb::PolicyEndpoint) -> Result<RunOptions, JobError> {
+pub(crate) fn run_options(spec: &pb::EpisodeSpec, ep: &pb::PolicyEndpoint) -> Result<RunOptions, JobError> {
     let d = RunOptions::default();
     let limit = spec.task_time_limit_s;
     if limit.is_nan() || limit < 0.0 {
@@ -100,7 +100,7 @@ pub fn run_options(spec: &pb::EpisodeSpec, ep: &pb::PolicyEndpoint) -> Result<Ru
 }
 
 /// Offline options for the job: the online ones plus the worker's sampling period.
-pub fn offline_options(run: &RunOptions, sample_every: usize) -> OfflineOptions {
+pub(crate) fn offline_options(run: &RunOptions, sample_every: usize) -> OfflineOptions {
     OfflineOptions {
         sample_every: sample_every.max(1),
         ..OfflineOptions::from_run(run)

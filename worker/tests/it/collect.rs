@@ -5,8 +5,8 @@
 use std::path::Path;
 use std::process::Command;
 
+use kitchen_r_record::collect::{CollectConfig, CollectOptions, ManifestEntry, collect};
 use kitchen_r_sim::SensorsConfig;
-use kitchen_r_worker::collect::{CollectConfig, CollectOptions, ManifestEntry, collect};
 
 /// Small cameras keep the test quick; the layout is what is checked, not the pixels.
 fn small_sensors() -> SensorsConfig {

@@ -6,13 +6,13 @@ use crate::remote_support;
 
 use std::sync::{Arc, OnceLock};
 
+use kitchen_r_contract::server::{PolicyFactory, ServeOptions};
+use kitchen_r_contract::{AllowedNetworks, RemoteConfig};
+use kitchen_r_episode::oracle::OraclePolicy;
+use kitchen_r_episode::policy::Policy;
 use kitchen_r_proto::worker::v1 as pb;
 use kitchen_r_sim::Assets;
 use kitchen_r_worker::job::{JobContext, JobControl, execute_job};
-use kitchen_r_worker::oracle::OraclePolicy;
-use kitchen_r_worker::policy::Policy;
-use kitchen_r_worker::remote::server::{PolicyFactory, ServeOptions};
-use kitchen_r_worker::remote::{AllowedNetworks, RemoteConfig};
 use remote_support::*;
 
 fn ctx() -> &'static JobContext {
@@ -102,7 +102,7 @@ fn an_offline_job_reports_mse_per_task() {
         &JobControl::default(),
     );
     let t = &r.tasks[0];
-    assert_eq!(t.mse, kitchen_r_worker::offline::FAILED_PREDICTION_MSE);
+    assert_eq!(t.mse, kitchen_r_episode::offline::FAILED_PREDICTION_MSE);
     assert!(t.failure_reason.contains("FailedPrecondition"), "{t:?}");
 }
 
@@ -133,7 +133,7 @@ fn policy_faults_fail_tasks_and_platform_faults_do_not() {
     assert_eq!(r.tasks.len(), 2);
     for t in &r.tasks {
         assert!(t.mse_samples > 1, "{t:?}");
-        assert_eq!(t.mse, kitchen_r_worker::offline::FAILED_PREDICTION_MSE, "{t:?}");
+        assert_eq!(t.mse, kitchen_r_episode::offline::FAILED_PREDICTION_MSE, "{t:?}");
         assert!(t.failure_reason.contains("policy unreachable"), "{t:?}");
     }
 
@@ -185,7 +185,7 @@ fn local_eval_of_an_endpoint_gives_the_workers_numbers() {
     let s = LocalSettings {
         mode: Mode::Online,
         seed: 0,
-        run: kitchen_r_worker::runner::RunOptions {
+        run: kitchen_r_episode::runner::RunOptions {
             max_tasks: Some(2),
             ..Default::default()
         },

@@ -7,9 +7,9 @@ use crate::remote_support;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
+use kitchen_r_episode::policy::HORIZON;
 use kitchen_r_proto::worker::v1 as pb;
 use kitchen_r_worker::job::{WorkerConfig, WorkerError, run_worker};
-use kitchen_r_worker::policy::HORIZON;
 use pb::worker_server::{Worker, WorkerServer};
 use remote_support::*;
 use tonic::{Request, Response, Status};

@@ -6,12 +6,12 @@ use crate::remote_support;
 
 use std::sync::Arc;
 
+use kitchen_r_contract::server::{PolicyFactory, ServeOptions};
+use kitchen_r_episode::offline::{FAILED_PREDICTION_MSE, OfflineOptions, OfflineOutcome, run_offline};
+use kitchen_r_episode::oracle::{OraclePolicy, expert_options};
+use kitchen_r_episode::policy::{HORIZON, Policy};
+use kitchen_r_episode::runner::{RunOptions, StepHook, run_episode};
 use kitchen_r_sim::{Action, Assets, Sim, StepInfo};
-use kitchen_r_worker::offline::{FAILED_PREDICTION_MSE, OfflineOptions, OfflineOutcome, run_offline};
-use kitchen_r_worker::oracle::{OraclePolicy, expert_options};
-use kitchen_r_worker::policy::{HORIZON, Policy};
-use kitchen_r_worker::remote::server::{PolicyFactory, ServeOptions};
-use kitchen_r_worker::runner::{RunOptions, StepHook, run_episode};
 use remote_support::*;
 
 const TASKS: usize = 2;

@@ -5,10 +5,10 @@
 //! committed instructions is that command over both splits (see the README).
 
 use kitchen_r_core::dataset::Split;
+use kitchen_r_episode::eval::{EvalOptions, EvalReport, episode_configs, evaluate, instructions};
+use kitchen_r_episode::oracle::OraclePolicy;
+use kitchen_r_episode::runner::{RunOptions, StepHook, run_episode};
 use kitchen_r_sim::{Action, Assets, SensorsConfig, Sim, SimConfig, StepInfo};
-use kitchen_r_worker::eval::{EvalOptions, EvalReport, episode_configs, evaluate, instructions};
-use kitchen_r_worker::oracle::OraclePolicy;
-use kitchen_r_worker::runner::{RunOptions, StepHook, run_episode};
 
 #[test]
 fn oracle_completes_every_task_of_the_dev_split() {

@@ -14,10 +14,10 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use kitchen_r_core::dataset::symbolic::{Placed, fits_in_zone};
 use kitchen_r_core::reach::{ArmReach, BASE_SLACK};
+use kitchen_r_episode::oracle::OraclePolicy;
+use kitchen_r_episode::runner::{RunOptions, run_episode};
 use kitchen_r_sim::world::Style;
 use kitchen_r_sim::{Assets, EpisodeConfig, ObjectPlacement, SensorsConfig, Sim, SimConfig};
-use kitchen_r_worker::oracle::OraclePolicy;
-use kitchen_r_worker::runner::{RunOptions, run_episode};
 
 /// The place tolerance of the paper's success criterion, m.
 const PLACE_TOLERANCE: f64 = 0.05;

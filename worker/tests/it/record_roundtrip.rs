@@ -4,10 +4,10 @@
 use std::collections::BTreeMap;
 use std::process::Command;
 
-use kitchen_r_worker::record::hdf5_aloha::Hdf5Recorder;
-use kitchen_r_worker::record::mcap_ros2::McapRecorder;
-use kitchen_r_worker::record::rate::RateMonitor;
-use kitchen_r_worker::record::{CameraFrame, EpisodeMeta, Frame, StaticTransform, TaskSpan};
+use kitchen_r_record::hdf5_aloha::Hdf5Recorder;
+use kitchen_r_record::mcap_ros2::McapRecorder;
+use kitchen_r_record::rate::RateMonitor;
+use kitchen_r_record::{CameraFrame, EpisodeMeta, Frame, StaticTransform, TaskSpan};
 
 fn frame(i: usize) -> Frame {
     let cam = |name: &str| CameraFrame {

@@ -9,7 +9,7 @@ fn policy_call_overhead_on_loopback() {
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(2000);
-    let r = kitchen_r_worker::remote::bench::call_overhead(n).unwrap();
+    let r = kitchen_r_contract::bench::call_overhead(n).unwrap();
     println!(
         "policy call overhead, 2x128x128 RAW_RGB8, loopback: p50 {:.0} us, p99 {:.0} us, mean {:.0} us over {} calls",
         r.p50_us, r.p99_us, r.mean_us, r.calls

@@ -6,11 +6,11 @@ use crate::remote_support;
 use std::sync::Arc;
 use std::time::Duration;
 
+use kitchen_r_contract::check::{Report, Verdict, check_policy};
+use kitchen_r_contract::server::ServeOptions;
+use kitchen_r_contract::{AllowedNetworks, Credentials, RemoteConfig};
+use kitchen_r_episode::policy::HORIZON;
 use kitchen_r_proto::policy::v1 as pb;
-use kitchen_r_worker::policy::HORIZON;
-use kitchen_r_worker::remote::check::{Report, Verdict, check_policy};
-use kitchen_r_worker::remote::server::ServeOptions;
-use kitchen_r_worker::remote::{AllowedNetworks, Credentials, RemoteConfig};
 use remote_support::*;
 
 fn probe(url: &str) -> Report {

@@ -6,11 +6,11 @@ use crate::remote_support;
 
 use std::sync::Arc;
 
+use kitchen_r_contract::server::{PolicyFactory, ServeOptions};
+use kitchen_r_episode::oracle::{OraclePolicy, expert_options};
+use kitchen_r_episode::policy::Policy;
+use kitchen_r_episode::runner::{RunOptions, run_episode};
 use kitchen_r_sim::Assets;
-use kitchen_r_worker::oracle::{OraclePolicy, expert_options};
-use kitchen_r_worker::policy::Policy;
-use kitchen_r_worker::remote::server::{PolicyFactory, ServeOptions};
-use kitchen_r_worker::runner::{RunOptions, run_episode};
 use remote_support::*;
 
 fn oracle_server() -> TestServer {

@@ -5,8 +5,8 @@ use crate::remote_support;
 
 use std::time::Duration;
 
-use kitchen_r_worker::remote::probe::{ProbeFailure, probe_endpoint};
-use kitchen_r_worker::remote::{AllowedNetworks, RemoteConfig};
+use kitchen_r_contract::probe::{ProbeFailure, probe_endpoint};
+use kitchen_r_contract::{AllowedNetworks, RemoteConfig};
 use remote_support::*;
 use tonic_health::ServingStatus;
 

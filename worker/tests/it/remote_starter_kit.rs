@@ -9,8 +9,8 @@ use std::io::{BufRead, BufReader};
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 
-use kitchen_r_worker::remote::check::{Verdict, check_policy};
-use kitchen_r_worker::remote::{AllowedNetworks, Credentials, RemoteConfig};
+use kitchen_r_contract::check::{Verdict, check_policy};
+use kitchen_r_contract::{AllowedNetworks, Credentials, RemoteConfig};
 use remote_support::cameras;
 
 fn kit() -> PathBuf {

@@ -3,9 +3,9 @@
 
 use crate::remote_support;
 
-use kitchen_r_worker::policy::Policy;
-use kitchen_r_worker::remote::server::{ServeOptions, TlsIdentity};
-use kitchen_r_worker::remote::{Credentials, RemoteConfig, RemotePolicy};
+use kitchen_r_contract::server::{ServeOptions, TlsIdentity};
+use kitchen_r_contract::{Credentials, RemoteConfig, RemotePolicy};
+use kitchen_r_episode::policy::Policy;
 use remote_support::*;
 
 /// A self-signed certificate for `localhost`: (cert PEM, key PEM).
@@ -45,12 +45,12 @@ fn a_tls_endpoint_is_called_over_https_with_its_ca() {
     assert_eq!(p.spec().horizon, 16);
     let mut sim = sim();
     p.set_scene(&sim.episode().scene.clone());
-    let opts = kitchen_r_worker::runner::RunOptions {
+    let opts = kitchen_r_episode::runner::RunOptions {
         task_time_limit: 1.0,
         max_tasks: Some(1),
         ..Default::default()
     };
-    let out = kitchen_r_worker::runner::run_episode(&mut sim, &mut p, &opts, None, &mut ()).unwrap();
+    let out = kitchen_r_episode::runner::run_episode(&mut sim, &mut p, &opts, None, &mut ()).unwrap();
     // The still policy never succeeds, but every call went through: the task ran to its limit.
     assert_eq!(out.tasks[0].failure.as_deref(), Some("time limit of 1 s reached"));
     assert!(out.policy_calls >= 2);

@@ -9,10 +9,10 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Duration;
 
-use kitchen_r_worker::policy::{HORIZON, Policy};
-use kitchen_r_worker::remote::server::ServeOptions;
-use kitchen_r_worker::remote::{Credentials, RemoteConfig, RemoteError, RemotePolicy};
-use kitchen_r_worker::runner::{EpisodeOutcome, RunOptions, run_episode};
+use kitchen_r_contract::server::ServeOptions;
+use kitchen_r_contract::{Credentials, RemoteConfig, RemoteError, RemotePolicy};
+use kitchen_r_episode::policy::{HORIZON, Policy};
+use kitchen_r_episode::runner::{EpisodeOutcome, RunOptions, run_episode};
 use remote_support::*;
 
 fn opts() -> RunOptions {

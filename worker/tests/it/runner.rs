@@ -4,8 +4,8 @@
 
 use crate::remote_support;
 
-use kitchen_r_worker::policy::{HORIZON, Policy, PolicyError, PolicyInput, PolicySpec};
-use kitchen_r_worker::runner::{RunOptions, run_episode};
+use kitchen_r_episode::policy::{HORIZON, Policy, PolicyError, PolicyInput, PolicySpec};
+use kitchen_r_episode::runner::{RunOptions, run_episode};
 use remote_support::sim;
 
 struct Scripted {

@@ -8,11 +8,11 @@ use std::io::{Read, Write};
 use std::net::{Shutdown, SocketAddr, TcpListener, TcpStream};
 use std::sync::Arc;
 
+use kitchen_r_contract::server::PolicyFactory;
+use kitchen_r_contract::{Credentials, RemoteConfig, RemotePolicy, SimCamera};
 use kitchen_r_core::dataset::Dataset;
+use kitchen_r_episode::policy::HORIZON;
 use kitchen_r_sim::{Assets, EpisodeConfig, EpisodeParams, SensorsConfig, Sim, SimConfig};
-use kitchen_r_worker::policy::HORIZON;
-use kitchen_r_worker::remote::server::PolicyFactory;
-use kitchen_r_worker::remote::{Credentials, RemoteConfig, RemotePolicy, SimCamera};
 
 pub use scripted::*;
 

@@ -5,8 +5,8 @@ use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::Duration;
 
-use kitchen_r_worker::policy::{Policy, PolicyError, PolicyInput, PolicySpec};
-use kitchen_r_worker::remote::server::{PolicyFactory, ServeOptions, serve_policy};
+use kitchen_r_contract::server::{PolicyFactory, ServeOptions, serve_policy};
+use kitchen_r_episode::policy::{Policy, PolicyError, PolicyInput, PolicySpec};
 
 /// Stand still with the gripper open: valid, never succeeds.
 pub const STILL: [f64; 10] = [0.0, 0.0, 0.35, 0.0, 0.95, 0.0, 1.0, 0.0, 0.0, 1.0];

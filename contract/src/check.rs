@@ -1,0 +1,311 @@
+//! The conformance probe behind `kitchen-r check-policy ENDPOINT`: the checks a worker makes of
+//! a participant's endpoint, each reported PASS or FAIL with what is wrong, so a participant
+//! finds out before registering rather than from a failed run.
+//!
+//! Checks run in order; one whose prerequisite failed is reported SKIP (it cannot be judged),
+//! and the probe fails when any check fails.
+
+use std::time::Instant;
+
+use kitchen_r_proto::POLICY_PROTOCOL_VERSION;
+use kitchen_r_proto::policy::v1 as pb;
+use kitchen_r_sim::Observation;
+use kitchen_r_sim::sensors::CameraImage;
+use kitchen_r_sim::types::Odometry;
+use tonic_health::pb::health_check_response::ServingStatus;
+
+use crate::conn::{Conn, describe};
+use crate::convert::{self, CameraPlan, MAX_SIDE};
+use crate::{Credentials, RemoteConfig, SimCamera, client, endpoint};
+use kitchen_r_episode::policy::{HORIZON, PolicyInput, validate_chunk};
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Verdict {
+    Pass,
+    Fail,
+    Skip,
+}
+
+/// One line of the report.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Check {
+    pub name: &'static str,
+    pub verdict: Verdict,
+    pub detail: String,
+}
+
+impl std::fmt::Display for Check {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let v = match self.verdict {
+            Verdict::Pass => "PASS",
+            Verdict::Fail => "FAIL",
+            Verdict::Skip => "SKIP",
+        };
+        write!(f, "{v}  {:<12} {}", self.name, self.detail)
+    }
+}
+
+/// Every check in order, with its verdict.
+#[derive(Debug, Clone, Default)]
+pub struct Report {
+    pub checks: Vec<Check>,
+}
+
+impl Report {
+    pub fn passed(&self) -> bool {
+        self.checks.iter().all(|c| c.verdict != Verdict::Fail)
+    }
+
+    /// The named check, if it ran.
+    pub fn get(&self, name: &str) -> Option<&Check> {
+        self.checks.iter().find(|c| c.name == name)
+    }
+
+    fn push(&mut self, name: &'static str, r: Result<String, String>) -> bool {
+        let ok = r.is_ok();
+        let (verdict, detail) = match r {
+            Ok(d) => (Verdict::Pass, d),
+            Err(d) => (Verdict::Fail, d),
+        };
+        self.checks.push(Check {
+            name,
+            verdict,
+            detail,
+        });
+        ok
+    }
+
+    fn skip_rest(&mut self, from: usize, because: &str) {
+        for name in &NAMES[from..] {
+            self.checks.push(Check {
+                name,
+                verdict: Verdict::Skip,
+                detail: format!("not run: {because}"),
+            });
+        }
+    }
+}
+
+/// Check names, in the order they run.
+pub(crate) const NAMES: [&str; 9] = [
+    "reachable",
+    "health",
+    "protocol",
+    "shape",
+    "cameras",
+    "reset",
+    "act",
+    "act-again",
+    "large-image",
+];
+
+/// Probe `endpoint`; never panics on what the endpoint does.
+pub fn check_policy(endpoint: &str, creds: &Credentials, cfg: &RemoteConfig, sim: &[SimCamera]) -> Report {
+    let mut report = Report::default();
+    let rt = match tokio::runtime::Builder::new_current_thread().enable_all().build() {
+        Ok(rt) => rt,
+        Err(e) => {
+            report.push(NAMES[0], Err(format!("cannot start a runtime: {e}")));
+            return report;
+        }
+    };
+    rt.block_on(probe(&mut report, endpoint, creds, cfg, sim));
+    report
+}
+
+async fn probe(
+    report: &mut Report,
+    endpoint: &str,
+    creds: &Credentials,
+    cfg: &RemoteConfig,
+    sim: &[SimCamera],
+) {
+    let conn = endpoint::resolve(endpoint, &cfg.allowed_networks)
+        .map_err(|e| e.to_string())
+        .and_then(|ep| Conn::new(ep, creds, cfg).map_err(|e| e.to_string()));
+    let mut conn = match conn {
+        Ok(c) => c,
+        Err(e) => {
+            report.push(NAMES[0], Err(e));
+            return report.skip_rest(1, "the endpoint is not usable");
+        }
+    };
+    // Reachable: anything answered (even an error status), within the startup deadline.
+    let started = Instant::now();
+    let mut health = conn.health().await;
+    while health.as_ref().is_err_and(is_unreachable) && started.elapsed() < cfg.startup_deadline() {
+        tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+        health = conn.health().await;
+    }
+    let reachable = match &health {
+        Err(s) if is_unreachable(s) => Err(describe("connect", s, cfg.max_answer_bytes)),
+        _ => Ok(format!("{} answered", conn.endpoint.uri)),
+    };
+    if !report.push(NAMES[0], reachable) {
+        return report.skip_rest(1, "the endpoint is unreachable");
+    }
+    report.push(
+        NAMES[1],
+        match health {
+            Ok(ServingStatus::Serving) => Ok("grpc.health.v1 reports SERVING".into()),
+            Ok(s) => Err(format!("grpc.health.v1 reports {}, not SERVING", s.as_str_name())),
+            Err(s) => Err(describe("grpc.health.v1 Check", &s, cfg.max_answer_bytes)),
+        },
+    );
+    let spec = match conn.get_spec(cfg).await {
+        Ok(s) => s,
+        Err(e) => {
+            report.push(NAMES[2], Err(e.to_string()));
+            return report.skip_rest(3, "GetSpec failed");
+        }
+    };
+    let version = spec.protocol_version;
+    report.push(
+        NAMES[2],
+        if version == POLICY_PROTOCOL_VERSION {
+            Ok(format!("protocol version {version}; policy {:?}", spec.name))
+        } else {
+            Err(format!(
+                "protocol version {version}, this worker speaks {POLICY_PROTOCOL_VERSION}"
+            ))
+        },
+    );
+    let shape = (spec.horizon, spec.action_dim);
+    report.push(
+        NAMES[3],
+        if shape == (HORIZON as u32, 10) {
+            Ok(format!(
+                "horizon 16, action_dim 10, max_concurrency {}",
+                spec.max_concurrency.max(1)
+            ))
+        } else {
+            Err(format!(
+                "horizon {} and action_dim {}, must be 16 and 10",
+                shape.0, shape.1
+            ))
+        },
+    );
+    let plans = match convert::plan_cameras(&spec, sim) {
+        Ok(p) => p,
+        Err(e) => {
+            report.push(NAMES[4], Err(e));
+            return report.skip_rest(5, "the camera request is invalid");
+        }
+    };
+    report.push(NAMES[4], Ok(describe_cameras(&plans)));
+    if client::check_spec(&spec, sim).is_err() {
+        return report.skip_rest(5, "the handshake failed");
+    }
+    acts(report, &mut conn, cfg, &plans).await;
+}
+
+async fn acts(report: &mut Report, conn: &mut Conn, cfg: &RemoteConfig, plans: &[CameraPlan]) {
+    let episode = "check-policy";
+    let reset = pb::ResetRequest {
+        episode_id: episode.into(),
+        task_index: 0,
+        sub_task: "move to the blue zone".into(),
+        scene_id: "kitchen_a".into(),
+    };
+    if !report.push(
+        NAMES[5],
+        conn.reset(reset)
+            .await
+            .map(|()| "Reset accepted".into())
+            .map_err(|e| e.to_string()),
+    ) {
+        return report.skip_rest(6, "Reset failed");
+    }
+    let deadline = cfg.call_deadline().as_secs_f64();
+    for (name, step) in [(NAMES[6], 0), (NAMES[7], 8)] {
+        let r = one_act(conn, episode, step, plans).await;
+        report.push(
+            name,
+            r.map(|ms| format!("valid 16x10 chunk for step {step} in {ms:.1} ms (deadline {deadline} s)")),
+        );
+    }
+    let large: Vec<CameraPlan> = plans
+        .iter()
+        .map(|p| CameraPlan {
+            width: MAX_SIDE,
+            height: MAX_SIDE,
+            ..p.clone()
+        })
+        .collect();
+    let r = one_act(conn, episode, 16, &large).await;
+    report.push(
+        NAMES[8],
+        r.map(|ms| format!("{} camera(s) at {MAX_SIDE}x{MAX_SIDE} accepted in {ms:.1} ms", large.len()))
+            .map_err(|e| format!("{e} (the worker may send images up to {MAX_SIDE}x{MAX_SIDE}: raise the server's receive limit)")),
+    );
+}
+
+/// One Act on a synthetic observation; the elapsed milliseconds when the chunk is valid.
+async fn one_act(conn: &mut Conn, episode: &str, step: u64, plans: &[CameraPlan]) -> Result<f64, String> {
+    let obs = synthetic(plans);
+    let input = PolicyInput {
+        episode_id: episode,
+        step,
+        task_index: 0,
+        sub_task: "move to the blue zone",
+        observation: &obs,
+        privileged: None,
+    };
+    let wire = convert::observation(&input, plans).map_err(|e| e.to_string())?;
+    let t = Instant::now();
+    let answer = conn.act(wire).await.map_err(|e| e.to_string())?;
+    let ms = t.elapsed().as_secs_f64() * 1e3;
+    let chunk = convert::chunk_from_wire(&answer, HORIZON).map_err(|e| e.to_string())?;
+    validate_chunk(&chunk, HORIZON).map_err(|e| e.to_string())?;
+    Ok(ms)
+}
+
+/// A grey-gradient frame per camera at exactly the planned size (no resampling).
+fn synthetic(plans: &[CameraPlan]) -> Observation {
+    let images = plans
+        .iter()
+        .map(|p| {
+            let n = (p.width * p.height) as usize;
+            CameraImage {
+                name: p.name.clone(),
+                width: p.width,
+                height: p.height,
+                rgb: (0..n * 3).map(|i| (i / 3 % 251) as u8).collect(),
+                depth: vec![1.5; n],
+            }
+        })
+        .collect();
+    Observation {
+        time: 0.0,
+        images,
+        lidar: None,
+        odometry: Odometry {
+            pose: [0.0; 3],
+            velocity: [0.0; 2],
+        },
+        joints: [0.0; 6],
+        gripper: 1.0,
+        task: Some("move to the blue zone".into()),
+    }
+}
+
+fn describe_cameras(plans: &[CameraPlan]) -> String {
+    plans
+        .iter()
+        .map(|p| {
+            let enc = if p.encoding == pb::ImageEncoding::Jpeg {
+                "JPEG"
+            } else {
+                "RAW_RGB8"
+            };
+            let depth = if p.depth { " + depth" } else { "" };
+            format!("{} {}x{} {enc}{depth}", p.name, p.width, p.height)
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+fn is_unreachable(s: &tonic::Status) -> bool {
+    s.code() == tonic::Code::Unavailable
+        || s.code() == tonic::Code::Unknown && s.message().contains("transport")
+}

@@ -1,0 +1,165 @@
+//! The registration probe: before the server accepts a policy endpoint (and queues episodes
+//! for it), it checks what a worker will need: an allowed address, `grpc.health.v1` SERVING
+//! within the startup deadline, and a GetSpec answer this worker can drive. Each refusal says
+//! exactly what failed, because the participant sees it as the reason of a 4xx.
+//!
+//! Async and short (no Act call: that is `check-policy`'s job), so the server awaits it inside
+//! the registration request.
+
+use std::net::IpAddr;
+
+use kitchen_r_proto::policy::v1 as pb;
+use kitchen_r_sim::SensorsConfig;
+
+use crate::conn::Conn;
+use crate::endpoint::{self, EndpointError, class_range};
+use crate::{AllowedNetworks, Credentials, RemoteConfig, RemoteError, SimCamera, client};
+
+/// What the endpoint announced, accepted.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ProbedSpec {
+    /// The endpoint as checked, `scheme://host:port`.
+    pub endpoint: String,
+    pub protocol_version: u32,
+    /// Parallel episodes the endpoint accepts (at least 1); the queue honours it.
+    pub max_concurrency: u32,
+    /// The policy's self-declared name.
+    pub name: String,
+    /// One line for the participant: name, version, shape, cameras, concurrency.
+    pub summary: String,
+}
+
+/// Why an endpoint was refused at registration.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ProbeFailure {
+    #[error("{0}")]
+    Malformed(String),
+    #[error("{0}")]
+    Resolve(String),
+    #[error(
+        "policy endpoint {endpoint} resolves to {addr}, a {kind} address, which this server \
+         refuses; an organiser allows it by adding {range} to `policy.allow_networks` in the \
+         server config"
+    )]
+    Refused {
+        endpoint: String,
+        addr: IpAddr,
+        kind: String,
+        range: String,
+    },
+    #[error("{0}")]
+    Unreachable(String),
+    #[error("{0}")]
+    NotServing(String),
+    #[error("{0}")]
+    Handshake(String),
+    #[error("{0}")]
+    Tls(String),
+    #[error("the probe could not run: {0}")]
+    Internal(String),
+}
+
+impl From<EndpointError> for ProbeFailure {
+    fn from(e: EndpointError) -> Self {
+        match e {
+            EndpointError::Malformed { .. } => ProbeFailure::Malformed(e.to_string()),
+            EndpointError::Resolve { .. } => ProbeFailure::Resolve(e.to_string()),
+            EndpointError::Refused {
+                endpoint, addr, kind, ..
+            } => ProbeFailure::Refused {
+                endpoint,
+                addr,
+                kind: kind.to_string(),
+                range: class_range(addr).map_or_else(|| "its range".to_string(), |r| format!("\"{r}\"")),
+            },
+        }
+    }
+}
+
+impl From<RemoteError> for ProbeFailure {
+    fn from(e: RemoteError) -> Self {
+        let text = e.to_string();
+        match e {
+            RemoteError::Endpoint(e) => e.into(),
+            RemoteError::Unreachable { .. } => ProbeFailure::Unreachable(text),
+            RemoteError::Health { .. } => ProbeFailure::NotServing(text),
+            RemoteError::Handshake { .. } => ProbeFailure::Handshake(text),
+            RemoteError::Tls { .. } => ProbeFailure::Tls(text),
+            RemoteError::Runtime(_) => ProbeFailure::Internal(text),
+        }
+    }
+}
+
+/// Probe `url` as a worker would call it: allow-list (`allow`), health SERVING within
+/// `cfg.startup_deadline_s`, GetSpec (protocol version, horizon 16, action dim 10, cameras the
+/// simulator has). `cfg.allowed_networks` is ignored in favour of `allow`.
+pub async fn probe_endpoint(
+    url: &str,
+    bearer: Option<&str>,
+    allow: &AllowedNetworks,
+    cfg: &RemoteConfig,
+) -> Result<ProbedSpec, ProbeFailure> {
+    let cameras = SensorsConfig::load_default()
+        .map(|s| SimCamera::from_sensors(&s))
+        .map_err(|e| ProbeFailure::Internal(format!("simulator cameras: {e}")))?;
+    probe_with_cameras(url, bearer, allow, cfg, &cameras).await
+}
+
+/// [`probe_endpoint`] against an explicit camera set.
+async fn probe_with_cameras(
+    url: &str,
+    bearer: Option<&str>,
+    allow: &AllowedNetworks,
+    cfg: &RemoteConfig,
+    cameras: &[SimCamera],
+) -> Result<ProbedSpec, ProbeFailure> {
+    let (owned_url, allow_copy) = (url.to_string(), *allow);
+    // Name resolution blocks: keep it off the server's async threads.
+    let ep = tokio::task::spawn_blocking(move || endpoint::resolve(&owned_url, &allow_copy))
+        .await
+        .map_err(|e| ProbeFailure::Internal(e.to_string()))??;
+    let creds = Credentials {
+        token: bearer.filter(|t| !t.is_empty()).map(str::to_string),
+        ca_pem: None,
+    };
+    let mut conn = Conn::new(ep, &creds, cfg)?;
+    conn.wait_serving(cfg.startup_deadline()).await?;
+    let spec = conn.get_spec(cfg).await?;
+    let (checked, plans) = client::check_spec(&spec, cameras).map_err(|reason| {
+        ProbeFailure::Handshake(format!("GetSpec answer of {}: {reason}", conn.endpoint.uri))
+    })?;
+    let cams: Vec<String> = plans
+        .iter()
+        .map(|p| {
+            let enc = if p.encoding == pb::ImageEncoding::Jpeg {
+                "jpeg"
+            } else {
+                "raw"
+            };
+            format!(
+                "{} {}x{} {enc}{}",
+                p.name,
+                p.width,
+                p.height,
+                if p.depth { "+depth" } else { "" }
+            )
+        })
+        .collect();
+    let summary = format!(
+        "{:?} at {}: protocol v{}, horizon {}, action dim {}, cameras [{}], max concurrency {}",
+        spec.name,
+        conn.endpoint.uri,
+        spec.protocol_version,
+        checked.horizon,
+        checked.action_dim,
+        cams.join(", "),
+        checked.max_concurrency
+    );
+    Ok(ProbedSpec {
+        endpoint: conn.endpoint.uri.clone(),
+        protocol_version: spec.protocol_version,
+        max_concurrency: checked.max_concurrency,
+        name: spec.name,
+        summary,
+    })
+}

@@ -1,0 +1,363 @@
+//! Local online evaluation (`kitchen-r eval`): one episode per split instruction, each run
+//! through [`run_episode`](crate::runner::run_episode), the same code path the server's workers
+//! use, and the paper's SR per task kind and overall with sim and wall times.
+//!
+//! Episode configurations come from [`EpisodeConfig::from_instruction`] with a seed derived from
+//! the run seed and the instruction id, so an instruction gets the same robot start and
+//! background objects in every run with the same seed, whatever `--episodes` or `--jobs` are.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::mpsc;
+use std::time::Instant;
+
+use kitchen_r_core::dataset::{Instruction, Split, read_jsonl};
+use kitchen_r_sim::generator::splitmix;
+use kitchen_r_sim::{Assets, EpisodeConfig, EpisodeParams, SensorsConfig, Sim, SimConfig, SimError};
+use serde::{Deserialize, Serialize};
+
+use crate::oracle::{ORACLE_NAME, OraclePolicy};
+use crate::runner::{EpisodeOutcome, RunError, RunOptions, run_episode};
+
+/// The policies `eval` can run in this build.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum PolicyChoice {
+    /// The privileged oracle expert (organiser reference).
+    Oracle,
+}
+
+/// Every accepted `--policy` value.
+pub(crate) const ACCEPTED_POLICIES: &[&str] = &[ORACLE_NAME];
+
+impl std::str::FromStr for PolicyChoice {
+    type Err = EvalError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            ORACLE_NAME => Ok(PolicyChoice::Oracle),
+            other => Err(EvalError::UnknownPolicy(other.to_string())),
+        }
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum EvalError {
+    #[error(
+        "unknown policy {0:?}; accepted values: {list}, http://HOST:PORT, https://HOST:PORT",
+        list = ACCEPTED_POLICIES.join(", ")
+    )]
+    UnknownPolicy(String),
+    #[error(
+        "the test split's plans are not public: pass the organiser's ground-truth file with \
+         --ground-truth FILE (test_ground_truth.jsonl), or submit to the server to be scored on test"
+    )]
+    NoGroundTruth,
+    #[error("dataset: {0}")]
+    Content(#[from] kitchen_r_core::ContentError),
+    #[error("{0}")]
+    Sim(#[from] SimError),
+    #[error("{0}")]
+    Run(#[from] RunError),
+    #[error("eval config: {0}")]
+    Config(String),
+    #[error("an evaluation thread panicked")]
+    Panicked,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct EvalOptions {
+    pub policy: PolicyChoice,
+    pub split: Split,
+    /// Evaluate the first N instructions of the split; `None` = all.
+    pub episodes: Option<usize>,
+    pub seed: u64,
+    /// Parallel episodes (each thread owns a simulator).
+    pub jobs: usize,
+    /// Ground truth for the test split (JSON Lines of instructions with plans).
+    pub ground_truth: Option<PathBuf>,
+    pub run: RunOptions,
+}
+
+impl Default for EvalOptions {
+    fn default() -> Self {
+        EvalOptions {
+            policy: PolicyChoice::Oracle,
+            split: Split::Dev,
+            episodes: None,
+            seed: 0,
+            jobs: 1,
+            ground_truth: None,
+            run: RunOptions::default(),
+        }
+    }
+}
+
+/// `configs/eval.toml`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct EvalConfig {
+    /// Sim seconds each plan step may take (the paper: 120).
+    pub task_time_limit: f64,
+    /// Actions of each chunk executed before the policy is asked again.
+    pub execute: usize,
+    /// Default run seed.
+    pub seed: u64,
+    /// Endpoint runs (`--policy http://…`): after a failed task, teleport to the expert's state
+    /// at the start of the next one (the server's `control.teleport_on_failure`).
+    pub teleport_on_failure: bool,
+    /// Execute at most this many plan steps per episode; 0 = all.
+    pub max_plan_steps: usize,
+    /// Wall-clock budget of one episode, seconds; 0 = none.
+    pub episode_budget_s: f64,
+    /// Abort an episode after this many successive policy timeouts.
+    pub max_successive_timeouts: u32,
+}
+
+impl Default for EvalConfig {
+    fn default() -> Self {
+        let r = RunOptions::default();
+        EvalConfig {
+            task_time_limit: r.task_time_limit,
+            execute: r.execute,
+            seed: 0,
+            teleport_on_failure: true,
+            max_plan_steps: 0,
+            episode_budget_s: 600.0,
+            max_successive_timeouts: r.max_consecutive_timeouts,
+        }
+    }
+}
+
+impl EvalConfig {
+    pub fn load(path: &std::path::Path) -> Result<EvalConfig, EvalError> {
+        let bad = |m: String| EvalError::Config(format!("{}: {m}", path.display()));
+        let text = std::fs::read_to_string(path).map_err(|e| bad(e.to_string()))?;
+        let c: EvalConfig = toml::from_str(&text).map_err(|e| bad(e.to_string()))?;
+        if c.task_time_limit.is_nan()
+            || c.task_time_limit <= 0.0
+            || c.execute == 0
+            || c.execute > crate::policy::HORIZON
+            || c.episode_budget_s.is_nan()
+            || c.episode_budget_s < 0.0
+        {
+            return Err(bad(format!(
+                "task_time_limit > 0, execute in 1..={} and episode_budget_s >= 0",
+                crate::policy::HORIZON
+            )));
+        }
+        Ok(c)
+    }
+
+    /// `configs/eval.toml` when present, else the defaults.
+    pub fn load_default() -> Result<EvalConfig, EvalError> {
+        let path = kitchen_r_sim::config::configs_dir().join("eval.toml");
+        if path.is_file() {
+            EvalConfig::load(&path)
+        } else {
+            Ok(EvalConfig::default())
+        }
+    }
+
+    pub fn run_options(&self) -> RunOptions {
+        RunOptions {
+            task_time_limit: self.task_time_limit,
+            execute: self.execute,
+            max_tasks: (self.max_plan_steps > 0).then_some(self.max_plan_steps),
+            max_consecutive_timeouts: self.max_successive_timeouts.max(1),
+            wall_budget: (self.episode_budget_s > 0.0)
+                .then(|| std::time::Duration::from_secs_f64(self.episode_budget_s)),
+            ..RunOptions::default()
+        }
+    }
+}
+
+/// SR and mean sim time over a set of tasks.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Sr {
+    pub tasks: usize,
+    pub succeeded: usize,
+    pub sr: f64,
+    /// Mean sim seconds per task (to success, or until failing).
+    pub mean_task_sim_time: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EvalReport {
+    pub policy: String,
+    pub split: Split,
+    pub seed: u64,
+    pub overall: Sr,
+    /// `navigation`, `manipulation`, `pick`, `place`.
+    pub by_kind: BTreeMap<String, Sr>,
+    pub mean_episode_wall_s: f64,
+    pub total_wall_s: f64,
+    pub jobs: usize,
+    pub episodes: Vec<EpisodeOutcome>,
+}
+
+/// The kinds a plan step counts under (none for a step that is not canonical).
+pub fn task_kinds(step: &str) -> &'static [&'static str] {
+    use kitchen_r_core::plan::Step;
+    match step.parse::<Step>() {
+        Ok(Step::MoveTo { .. }) => &["navigation"],
+        Ok(Step::Pick { .. }) => &["manipulation", "pick"],
+        Ok(Step::Place { .. }) => &["manipulation", "place"],
+        Err(_) => &[],
+    }
+}
+
+/// The instructions of `split` with their plans.
+pub fn instructions(split: Split, ground_truth: Option<&PathBuf>) -> Result<Vec<Instruction>, EvalError> {
+    match (split, ground_truth) {
+        (_, Some(path)) => Ok(read_jsonl(path)?),
+        (Split::Dev, None) => Ok(read_jsonl(
+            &kitchen_r_core::assets::assets_dir().join("dataset/dev.jsonl"),
+        )?),
+        (Split::Test, None) => Err(EvalError::NoGroundTruth),
+    }
+}
+
+/// The seed of an instruction's episode: stable per (run seed, instruction id).
+pub fn instruction_seed(seed: u64, id: &str) -> u64 {
+    let fnv = id.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
+    });
+    splitmix(seed ^ fnv)
+}
+
+/// One episode configuration per instruction (the first `n`, if given).
+pub fn episode_configs(
+    assets: &Assets,
+    instructions: &[Instruction],
+    seed: u64,
+    n: Option<usize>,
+) -> Result<Vec<EpisodeConfig>, EvalError> {
+    let params = EpisodeParams::load_default()?;
+    instructions
+        .iter()
+        .take(n.unwrap_or(usize::MAX))
+        .map(|ins| {
+            let scene = assets.scene(&ins.scene)?;
+            let s = instruction_seed(seed, &ins.id);
+            Ok(EpisodeConfig::from_instruction(
+                ins,
+                scene,
+                &assets.catalogue,
+                &params,
+                s,
+            )?)
+        })
+        .collect()
+}
+
+/// Run `configs` over `jobs` threads; `progress(index, outcome)` is called on the calling
+/// thread as each episode finishes. Outcomes come back in config order.
+pub(crate) fn run_all(
+    assets: &Assets,
+    configs: &[EpisodeConfig],
+    policy: PolicyChoice,
+    run: &RunOptions,
+    jobs: usize,
+    progress: &mut dyn FnMut(usize, &EpisodeOutcome),
+) -> Result<Vec<EpisodeOutcome>, EvalError> {
+    let next = AtomicUsize::new(0);
+    let (tx, rx) = mpsc::channel::<(usize, Result<EpisodeOutcome, EvalError>)>();
+    let mut run = run.clone();
+    run.privileged = policy == PolicyChoice::Oracle;
+    let (sim_cfg, sensors) = (SimConfig::load_default()?, SensorsConfig::load_default()?);
+    let mut out: Vec<Option<EpisodeOutcome>> = vec![None; configs.len()];
+    std::thread::scope(|scope| -> Result<(), EvalError> {
+        for _ in 0..jobs.clamp(1, configs.len().max(1)) {
+            let (tx, next, run) = (tx.clone(), &next, &run);
+            let (sim_cfg, sensors) = (sim_cfg.clone(), sensors.clone());
+            scope.spawn(move || {
+                let mut oracle = OraclePolicy::new(assets);
+                let mut sim: Option<Sim> = None;
+                loop {
+                    let i = next.fetch_add(1, Ordering::SeqCst);
+                    let Some(cfg) = configs.get(i) else { break };
+                    let r = one(assets, &mut sim, &sim_cfg, &sensors, cfg, &mut oracle, run);
+                    if tx.send((i, r)).is_err() {
+                        break;
+                    }
+                }
+            });
+        }
+        drop(tx);
+        for (i, r) in rx {
+            let o = r?;
+            progress(i, &o);
+            out[i] = Some(o);
+        }
+        Ok(())
+    })?;
+    out.into_iter().map(|o| o.ok_or(EvalError::Panicked)).collect()
+}
+
+fn one(
+    assets: &Assets,
+    sim: &mut Option<Sim>,
+    sim_cfg: &SimConfig,
+    sensors: &SensorsConfig,
+    cfg: &EpisodeConfig,
+    policy: &mut OraclePolicy,
+    run: &RunOptions,
+) -> Result<EpisodeOutcome, EvalError> {
+    let started = Instant::now();
+    match sim {
+        Some(s) => {
+            s.reset(cfg)?;
+        }
+        None => *sim = Some(Sim::new(assets.clone(), sim_cfg.clone(), sensors.clone(), cfg)?.0),
+    }
+    let s = sim.as_mut().ok_or(EvalError::Panicked)?;
+    let mut o = run_episode(s, policy, run, None, &mut ())?;
+    // Count the reset (world build) in the episode's wall time too.
+    o.wall_time_s = started.elapsed().as_secs_f64();
+    Ok(o)
+}
+
+/// Aggregate outcomes into SR per kind and overall.
+pub(crate) fn summarize(episodes: &[EpisodeOutcome]) -> (Sr, BTreeMap<String, Sr>) {
+    let mut kinds: BTreeMap<String, (usize, usize, f64)> = BTreeMap::new();
+    let mut all = (0, 0, 0.0);
+    for t in episodes.iter().flat_map(|e| &e.tasks) {
+        for k in task_kinds(&t.step) {
+            let e = kinds.entry((*k).to_string()).or_default();
+            *e = (e.0 + 1, e.1 + usize::from(t.success), e.2 + t.sim_time);
+        }
+        all = (all.0 + 1, all.1 + usize::from(t.success), all.2 + t.sim_time);
+    }
+    let sr = |(n, ok, time): (usize, usize, f64)| Sr {
+        tasks: n,
+        succeeded: ok,
+        sr: if n == 0 { 0.0 } else { ok as f64 / n as f64 },
+        mean_task_sim_time: if n == 0 { 0.0 } else { time / n as f64 },
+    };
+    (sr(all), kinds.into_iter().map(|(k, v)| (k, sr(v))).collect())
+}
+
+/// The whole `kitchen-r eval` run.
+pub fn evaluate(
+    opts: &EvalOptions,
+    progress: &mut dyn FnMut(usize, &EpisodeOutcome),
+) -> Result<EvalReport, EvalError> {
+    let started = Instant::now();
+    let assets = Assets::load_default()?;
+    let ins = instructions(opts.split, opts.ground_truth.as_ref())?;
+    let configs = episode_configs(&assets, &ins, opts.seed, opts.episodes)?;
+    let episodes = run_all(&assets, &configs, opts.policy, &opts.run, opts.jobs, progress)?;
+    let (overall, by_kind) = summarize(&episodes);
+    let n = episodes.len().max(1) as f64;
+    Ok(EvalReport {
+        policy: ORACLE_NAME.to_string(),
+        split: opts.split,
+        seed: opts.seed,
+        overall,
+        by_kind,
+        mean_episode_wall_s: episodes.iter().map(|e| e.wall_time_s).sum::<f64>() / n,
+        total_wall_s: started.elapsed().as_secs_f64(),
+        jobs: opts.jobs,
+        episodes,
+    })
+}

@@ -1,0 +1,16 @@
+//! Episodes on the kitchen twin: the policy interface ([`policy`]), the single episode runner
+//! every evaluation uses ([`runner`]), the oracle expert ([`oracle`]), offline MSE ([`offline`])
+//! and local evaluation of a split ([`eval`]).
+//!
+//! It owns how a policy drives the simulator and what an episode's outcome is. It must not touch
+//! the network, a database or an async runtime (no tokio, tonic, prost or kitchen-r-proto):
+//! transports wrap a policy from outside (kitchen-r-contract), the job loop leases and reports
+//! (kitchen-r-worker), and scoring and storage belong to the server.
+
+#![warn(unreachable_pub)]
+
+pub mod eval;
+pub mod offline;
+pub mod oracle;
+pub mod policy;
+pub mod runner;

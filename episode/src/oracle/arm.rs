@@ -1,0 +1,146 @@
+//! Arm motions outside the pick-and-place state machine: getting the tool clear of the work
+//! surface and back to the stow pose before the base drives, blended with the same raised
+//! cosine as the machine's phases so the commanded pose never jumps.
+
+use kitchen_r_sim::oracle::manip::{alpha, slerp};
+use nalgebra::{Isometry3, UnitQuaternion, Vector3};
+
+/// Tool speed used to size a blend's duration, m/s (about the machine's phase speeds).
+const TOOL_SPEED: f64 = 0.15;
+/// Wrist turn rate used to size a blend's duration, rad/s.
+const TOOL_TURN: f64 = 0.8;
+/// Shortest blend, s: even a tiny correction gets a smooth start and stop.
+const MIN_BLEND: f64 = 0.5;
+/// A tool this far below the stow height is near a work surface: it rises first.
+const LOW: f64 = 0.05;
+/// How far a low tool rises before moving sideways, m (the machine's retreat height).
+const RISE: f64 = 0.10;
+
+/// A sequence of tool poses (base frame) visited with raised-cosine blends.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct ArmPath {
+    start: Isometry3<f64>,
+    legs: Vec<(Isometry3<f64>, f64)>,
+}
+
+fn blend_time(a: &Isometry3<f64>, b: &Isometry3<f64>) -> f64 {
+    let d = (b.translation.vector - a.translation.vector).norm();
+    (d / TOOL_SPEED)
+        .max(a.rotation.angle_to(&b.rotation) / TOOL_TURN)
+        .max(MIN_BLEND)
+}
+
+impl ArmPath {
+    /// The motion before a task: a low tool rises by [`RISE`] (it may be around an object it
+    /// just released, or hold one just lifted off a surface), capped at `here_max` under a
+    /// board; under a board it then pulls back horizontally to the stow position; a move then
+    /// goes to `stow`, a manipulation lowers the tool to `target_max` when the work is under a
+    /// board.
+    pub(super) fn prelude(
+        from: Isometry3<f64>,
+        stow: Isometry3<f64>,
+        here_max: Option<f64>,
+        target_max: Option<f64>,
+        is_move: bool,
+    ) -> ArmPath {
+        let mut path = ArmPath {
+            start: from,
+            legs: Vec::new(),
+        };
+        let z = from.translation.z;
+        if z < stow.translation.z - LOW {
+            let up = (z + RISE).min(here_max.unwrap_or(f64::INFINITY));
+            path.go(from.rotation, [from.translation.x, from.translation.y, up]);
+        }
+        let s = stow.translation.vector;
+        let at = path.end().translation.vector;
+        if here_max.is_some() && (at.xy() - s.xy()).norm() > 0.05 {
+            path.go(stow.rotation, [s.x, s.y, at.z]);
+        }
+        if is_move {
+            path.go(stow.rotation, [s.x, s.y, s.z]);
+        } else if let Some(m) = target_max {
+            let at = path.end();
+            if at.translation.z > m {
+                path.go(at.rotation, [at.translation.x, at.translation.y, m]);
+            }
+        }
+        path
+    }
+
+    fn end(&self) -> Isometry3<f64> {
+        self.legs.last().map_or(self.start, |l| l.0)
+    }
+
+    /// Append a leg to `p` with orientation `rot`, unless it is already there.
+    fn go(&mut self, rot: UnitQuaternion<f64>, p: [f64; 3]) {
+        let at = self.end();
+        let to = Isometry3::from_parts(Vector3::from(p).into(), rot);
+        if (to.translation.vector - at.translation.vector).norm() > 0.005
+            || to.rotation.angle_to(&at.rotation) > 0.02
+        {
+            let d = blend_time(&at, &to);
+            self.legs.push((to, d));
+        }
+    }
+
+    pub(super) fn duration(&self) -> f64 {
+        self.legs.iter().map(|l| l.1).sum()
+    }
+
+    /// The blended pose `t` seconds after the start (clamped to the last pose).
+    pub(super) fn at(&self, t: f64) -> Isometry3<f64> {
+        let (mut from, mut t0) = (self.start, 0.0);
+        for &(to, dur) in &self.legs {
+            if t < t0 + dur {
+                let a = alpha((t - t0) / dur);
+                let pos = from.translation.vector.lerp(&to.translation.vector, a);
+                return Isometry3::from_parts(pos.into(), slerp(&from.rotation, &to.rotation, a));
+            }
+            (from, t0) = (to, t0 + dur);
+        }
+        from
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use kitchen_r_sim::oracle::manip::top_down;
+    use nalgebra::Translation3;
+
+    use super::*;
+
+    #[test]
+    fn a_low_tool_rises_before_going_to_stow_and_ends_there() {
+        let low = Isometry3::from_parts(Translation3::new(0.6, 0.0, 0.95), top_down(0.3));
+        let stow = Isometry3::from_parts(Translation3::new(0.30, -0.12, 1.10), top_down(0.0));
+        let p = ArmPath::prelude(low, stow, None, None, true);
+        let mid = p.at(p.legs[0].1);
+        assert!((mid.translation.z - 1.05).abs() < 1e-9 && (mid.translation.x - 0.6).abs() < 1e-9);
+        assert!((p.at(p.duration() + 1.0).translation.vector - stow.translation.vector).norm() < 1e-12);
+        assert_eq!(p.at(0.0), low);
+    }
+
+    #[test]
+    fn under_a_board_the_tool_rises_only_to_the_cap_and_pulls_back_level() {
+        let low = Isometry3::from_parts(Translation3::new(0.6, 0.0, 0.95), top_down(0.0));
+        let stow = Isometry3::from_parts(Translation3::new(0.30, -0.12, 1.10), top_down(0.0));
+        let p = ArmPath::prelude(low, stow, Some(1.0), None, true);
+        let legs: Vec<[f64; 3]> = p.legs.iter().map(|l| l.0.translation.vector.into()).collect();
+        assert_eq!(
+            legs,
+            vec![[0.6, 0.0, 1.0], [0.30, -0.12, 1.0], [0.30, -0.12, 1.10]]
+        );
+        // Reaching into a shelf from stow: straight down to the cap first.
+        let p = ArmPath::prelude(stow, stow, None, Some(1.0), false);
+        assert_eq!(p.end().translation.vector, Vector3::new(0.30, -0.12, 1.0));
+    }
+
+    #[test]
+    fn a_tool_already_at_stow_needs_no_motion() {
+        let stow = Isometry3::from_parts(Translation3::new(0.24, -0.12, 0.81), top_down(0.0));
+        let p = ArmPath::prelude(stow, stow, None, None, true);
+        assert_eq!(p.duration(), 0.0);
+        assert_eq!(p.at(3.0), stow);
+    }
+}

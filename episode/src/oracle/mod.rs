@@ -1,0 +1,260 @@
+//! The oracle expert as a [`Policy`]: the organisers' reference, driving any ground-truth plan
+//! from privileged world state (paper, §Navigation Module and §Manipulation Module; the
+//! algorithms themselves live in `kitchen_r_sim::oracle`).
+//!
+//! It answers each query with a chunk of 16 actions that is a coherent plan, not one action
+//! repeated: the task controller ([`task::TaskCtl`]) is stepped along a base trajectory predicted
+//! with a unicycle model under the base's speed and acceleration limits from
+//! `assets/robot.toml`. The runner executes the first k of them; at the next query the oracle
+//! adopts the controller state it predicted for exactly the steps executed and re-anchors on the
+//! measured pose, so the chunks join up however many actions the runner executes.
+//!
+//! Queried every control step with k = 1 (see [`expert_options`]) it is the closed-loop expert
+//! driver used for trajectory collection and for the expert trajectories MSE compares against.
+
+mod arm;
+mod headroom;
+mod task;
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use kitchen_r_core::catalogue::Catalogue;
+use kitchen_r_core::scene::Scene;
+use kitchen_r_sim::Assets;
+use kitchen_r_sim::oracle::follow::{FollowParams, PathFollower};
+use kitchen_r_sim::oracle::grid::{GridParams, OccupancyGrid};
+use kitchen_r_sim::oracle::theta_star::{PlannerParams, theta_star};
+use kitchen_r_sim::robot::desc::BaseDesc;
+use kitchen_r_sim::task::TaskTarget;
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
+
+use crate::policy::{ACTION_DIM, HORIZON, Policy, PolicyError, PolicyInput, PolicySpec, Privileged};
+use crate::runner::RunOptions;
+use task::{Goal, Now, TaskCtl, World};
+
+/// Name the oracle announces and `--policy builtin:oracle` selects.
+pub(crate) const ORACLE_NAME: &str = "builtin:oracle";
+/// Extra clearance the planner tries first (it falls back to the plain robot radius): the
+/// follower cuts corners by up to ~0.15 m, and the twin ejects a base driven into furniture.
+const CLEARANCE_MARGIN: f64 = 0.2;
+/// The base squares up on the last move's goal only when it stands this close to it, m.
+const SETTLE_RANGE: f64 = 0.5;
+
+/// Run options for the closed-loop expert: privileged, one action per query.
+pub fn expert_options() -> RunOptions {
+    RunOptions {
+        execute: 1,
+        privileged: true,
+        ..RunOptions::default()
+    }
+}
+
+/// The task being driven and the controller states predicted for the last chunk.
+#[derive(Debug)]
+struct Active {
+    ctl: TaskCtl,
+    queried_at: u64,
+    predicted: Vec<TaskCtl>,
+}
+
+pub struct OraclePolicy {
+    spec: PolicySpec,
+    scenes: Vec<Scene>,
+    catalogue: Catalogue,
+    base: BaseDesc,
+    grids: HashMap<String, Arc<OccupancyGrid>>,
+    active: Option<Active>,
+    /// The approach pose of the last move, kept across the tasks of an episode.
+    last_goal: Option<[f64; 3]>,
+    episode: String,
+    /// Whether to have the runner render for each query; the oracle itself reads only
+    /// privileged state, but reference runs and the benchmark render as for any policy.
+    images: bool,
+}
+
+impl OraclePolicy {
+    pub fn new(assets: &Assets) -> OraclePolicy {
+        OraclePolicy {
+            spec: PolicySpec {
+                name: ORACLE_NAME.into(),
+                horizon: HORIZON,
+                action_dim: ACTION_DIM,
+                cameras: Vec::new(),
+                max_concurrency: 1,
+            },
+            scenes: assets.scenes.clone(),
+            catalogue: assets.catalogue.clone(),
+            base: assets.robot.base.clone(),
+            grids: HashMap::new(),
+            active: None,
+            last_goal: None,
+            episode: String::new(),
+            images: true,
+        }
+    }
+
+    /// The oracle as an expert nobody watches: no rendering for its queries (offline
+    /// replays and teleport pre-runs, where only its actions and states matter).
+    pub fn without_images(mut self) -> OraclePolicy {
+        self.images = false;
+        self
+    }
+
+    fn scene(&self, id: &str) -> Result<&Scene, PolicyError> {
+        self.scenes
+            .iter()
+            .find(|s| s.id == id)
+            .ok_or_else(|| PolicyError::Call(format!("oracle: unknown scene {id:?}")))
+    }
+
+    /// The scene's occupancy grid, inflated by the base's footprint radius; built once per scene.
+    fn grid(&mut self, scene: &str) -> Result<Arc<OccupancyGrid>, PolicyError> {
+        if let Some(g) = self.grids.get(scene) {
+            return Ok(g.clone());
+        }
+        let s = self.scene(scene)?;
+        let params = GridParams {
+            robot_radius: self.base.radius,
+            ..GridParams::default()
+        };
+        let g = Arc::new(OccupancyGrid::from_scene(s, params).map_err(|e| PolicyError::Call(e.to_string()))?);
+        self.grids.insert(scene.to_string(), g.clone());
+        Ok(g)
+    }
+
+    fn start_task(&mut self, p: &Privileged) -> Result<TaskCtl, PolicyError> {
+        let tool = iso(&p.ee_pose);
+        let holding = p.held.is_some();
+        let here = [p.base_pose[0], p.base_pose[1]];
+        let goal = match p.target {
+            TaskTarget::Base { x, y, yaw } => {
+                let grid = self.grid(&p.scene)?;
+                let params = PlannerParams {
+                    clearance_margin: CLEARANCE_MARGIN,
+                    ..PlannerParams::default()
+                };
+                let path = theta_star(&grid, here, [x, y], &params)
+                    .map_err(|e| PolicyError::Call(format!("oracle: no path: {e}")))?;
+                self.last_goal = Some([x, y, yaw]);
+                let follower = Box::new(PathFollower::new(path.waypoints, yaw, FollowParams::default()));
+                Goal::Move { follower }
+            }
+            TaskTarget::Pick { .. } => Goal::Pick,
+            TaskTarget::Place { target, .. } => Goal::Place { target },
+        };
+        let approach = self
+            .last_goal
+            .filter(|g| (g[0] - here[0]).hypot(g[1] - here[1]) < SETTLE_RANGE);
+        let scene = self.scene(&p.scene)?;
+        let tool_world = kitchen_r_sim::oracle::manip::base_isometry(p.base_pose) * tool;
+        let t = tool_world.translation;
+        // The board that matters is the first one above the hand.
+        let here_max = headroom::max_tool_z(scene, [t.x, t.y], t.z);
+        let work = match p.target {
+            TaskTarget::Pick { object } => p.objects.get(object).map(|o| [o.pose[0], o.pose[1], o.pose[2]]),
+            TaskTarget::Place { target, .. } => Some(target),
+            TaskTarget::Base { .. } => None,
+        };
+        let target_max = work.and_then(|w| headroom::max_tool_z(scene, [w[0], w[1]], w[2]));
+        Ok(TaskCtl::new(goal, tool, holding, approach, here_max, target_max))
+    }
+
+    fn world(&self, p: &Privileged) -> World {
+        let object = match p.target {
+            TaskTarget::Pick { object } | TaskTarget::Place { object, .. } => p.objects.get(object),
+            TaskTarget::Base { .. } => None,
+        };
+        let pose = object.map(|o| iso(&o.pose));
+        let tool_world = kitchen_r_sim::oracle::manip::base_isometry(p.base_pose) * iso(&p.ee_pose);
+        let held = object.is_some_and(|o| p.held.as_deref() == Some(o.name.as_str()));
+        World {
+            object: pose,
+            held_in_tool: pose.filter(|_| held).map(|o| tool_world.inverse() * o),
+            model: object.and_then(|o| self.catalogue.model(&o.model).cloned()),
+        }
+    }
+
+    /// Unicycle prediction of one control step under the base's limits (the twin slews the
+    /// commanded velocities every physics substep; 10 substeps here too).
+    fn predict(&self, now: Now, v_cmd: f64, w_cmd: f64) -> Now {
+        let b = &self.base;
+        let [mut x, mut y, mut th] = now.base;
+        let [mut v, mut w] = now.velocity;
+        let h = task::DT / 10.0;
+        for _ in 0..10 {
+            v += (v_cmd.clamp(-b.max_v, b.max_v) - v).clamp(-b.acc_v * h, b.acc_v * h);
+            w += (w_cmd.clamp(-b.max_omega, b.max_omega) - w).clamp(-b.acc_omega * h, b.acc_omega * h);
+            x += v * th.cos() * h;
+            y += v * th.sin() * h;
+            th += w * h;
+        }
+        Now {
+            base: [x, y, th],
+            velocity: [v, w],
+        }
+    }
+}
+
+/// `[x, y, z, qw, qx, qy, qz]` as an isometry.
+fn iso(p: &[f64; 7]) -> Isometry3<f64> {
+    let q = UnitQuaternion::from_quaternion(Quaternion::new(p[3], p[4], p[5], p[6]));
+    Isometry3::from_parts(Translation3::new(p[0], p[1], p[2]), q)
+}
+
+impl Policy for OraclePolicy {
+    fn spec(&self) -> &PolicySpec {
+        &self.spec
+    }
+
+    fn wants_images(&self) -> bool {
+        self.images
+    }
+
+    fn reset(&mut self, episode_id: &str, task_index: usize, _: &str) -> Result<(), PolicyError> {
+        if episode_id != self.episode || task_index == 0 {
+            self.last_goal = None;
+            self.episode = episode_id.to_string();
+        }
+        self.active = None;
+        Ok(())
+    }
+
+    fn act(&mut self, input: &PolicyInput<'_>) -> Result<Vec<[f64; ACTION_DIM]>, PolicyError> {
+        let p = input.privileged.ok_or(PolicyError::NeedsPrivileged)?;
+        let world = self.world(p);
+        let mut ctl = match self.active.take() {
+            None => self.start_task(p)?,
+            Some(a) => {
+                let done = input.step.saturating_sub(a.queried_at) as usize;
+                match done {
+                    0 => a.ctl,
+                    n => a.predicted.into_iter().nth(n.min(HORIZON) - 1).unwrap_or(a.ctl),
+                }
+            }
+        };
+        // A pick that closed on nothing goes round again from where the tool is.
+        if matches!(ctl.goal, Goal::Pick) && ctl.manipulation_finished() && p.held.is_none() {
+            ctl.restart_manipulation();
+        }
+        let mut now = Now {
+            base: p.base_pose,
+            velocity: input.observation.odometry.velocity,
+        };
+        let mut chunk = Vec::with_capacity(HORIZON);
+        let mut predicted = Vec::with_capacity(HORIZON);
+        let mut sim_ctl = ctl.clone();
+        for _ in 0..HORIZON {
+            let a = sim_ctl.step(&now, &world);
+            now = self.predict(now, a[0], a[1]);
+            chunk.push(a);
+            predicted.push(sim_ctl.clone());
+        }
+        self.active = Some(Active {
+            ctl,
+            queried_at: input.step,
+            predicted,
+        });
+        Ok(chunk)
+    }
+}

@@ -1,0 +1,262 @@
+//! One plan step under the oracle: a small state machine stepped once per 10 Hz control step.
+//!
+//! - move: clear the tool off the work surface and stow it, then the paper's Theta* path and
+//!   rule-based follower (`kitchen_r_sim::oracle::follow`) to the zone's approach point.
+//! - pick / place: clear the tool, square the base up on the approach pose the last move aimed
+//!   for (the follower arrives anywhere inside its 0.09 m circle and the task ends at 0.10 m, so
+//!   the base can stand 10 cm short of the pose the arm's reach was checked from), then the
+//!   10-phase pick-and-place machine (`kitchen_r_sim::oracle::manip`).
+//!
+//! The controller reads only a [`Now`] (base pose, measured velocity) and the [`World`] facts
+//! taken at the last query, so the oracle can step clones of it along a predicted base
+//! trajectory to fill a whole chunk.
+
+use std::f64::consts::{FRAC_PI_2, PI};
+
+use kitchen_r_core::catalogue::ObjectModel;
+use kitchen_r_sim::oracle::action::action;
+use kitchen_r_sim::oracle::follow::{PathFollower, wrap};
+use kitchen_r_sim::oracle::manip::{ManipParams, PhasePlan, PickPlan, PlacePlan, base_isometry};
+use nalgebra::{Isometry3, Vector3};
+
+use super::arm::ArmPath;
+
+/// Control period, s (the paper's 10 Hz).
+pub(super) const DT: f64 = 0.1;
+
+/// The robot as the controller sees it at one control step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct Now {
+    /// World `[x, y, yaw]`.
+    pub base: [f64; 3],
+    /// Measured `[v, ω]`.
+    pub velocity: [f64; 2],
+}
+
+/// World facts read from privileged state at a query; constant over one chunk.
+#[derive(Debug, Clone)]
+pub(super) struct World {
+    /// World pose of the task's object (pick, place).
+    pub object: Option<Isometry3<f64>>,
+    /// Object pose in the tool frame while held (rigid, so exact for the whole carry).
+    pub held_in_tool: Option<Isometry3<f64>>,
+    pub model: Option<ObjectModel>,
+}
+
+#[derive(Debug, Clone)]
+pub(super) enum Goal {
+    Move { follower: Box<PathFollower> },
+    Pick,
+    Place { target: [f64; 3] },
+}
+
+/// Where the arm is in its sequence.
+#[derive(Debug, Clone)]
+enum Stage {
+    /// Prelude motion, with the time spent on it.
+    Arm(ArmPath, f64),
+    /// Square the base up on the approach pose (manipulation only).
+    Settle {
+        positioned: bool,
+    },
+    /// Driving (moves only).
+    Drive,
+    /// The pick-and-place machine and the time into it.
+    Manip(PhasePlan, f64),
+    Done,
+}
+
+#[derive(Debug, Clone)]
+pub(super) struct TaskCtl {
+    pub goal: Goal,
+    stage: Stage,
+    /// The approach pose the base squares up on before manipulating.
+    approach: Option<[f64; 3]>,
+    /// The last commanded tool pose (base frame) and gripper: held while the base moves.
+    tool: Isometry3<f64>,
+    gripper: f64,
+    params: ManipParams,
+    /// Highest tool height over the work (under a shelf board).
+    ceiling: Option<f64>,
+}
+
+impl TaskCtl {
+    /// `tool`: the current tool pose (base frame); `holding`: an object is in the gripper;
+    /// `here_max` / `target_max`: the highest the tool may be where it is and where the task
+    /// works (under a shelf board, see [`super::headroom`]).
+    pub(super) fn new(
+        goal: Goal,
+        tool: Isometry3<f64>,
+        holding: bool,
+        approach: Option<[f64; 3]>,
+        here_max: Option<f64>,
+        target_max: Option<f64>,
+    ) -> TaskCtl {
+        let params = ManipParams::default();
+        let stow = if holding { params.carry } else { params.home };
+        let is_move = matches!(goal, Goal::Move { .. });
+        let arm = ArmPath::prelude(tool, stow, here_max, target_max, is_move);
+        TaskCtl {
+            goal,
+            stage: Stage::Arm(arm, 0.0),
+            approach,
+            tool,
+            gripper: if holding { 0.0 } else { 1.0 },
+            params,
+            ceiling: target_max,
+        }
+    }
+
+    /// Whether the pick-and-place machine ran to its end.
+    pub(super) fn manipulation_finished(&self) -> bool {
+        let capped = self.ceiling.is_some();
+        matches!(&self.stage, Stage::Manip(p, t)
+            if *t >= p.duration() - if capped { p.targets().last().map_or(0.0, |l| l.duration) } else { 0.0 } - 1e-9)
+    }
+
+    /// Start the machine over from the current tool pose (a pick that closed on nothing).
+    pub(super) fn restart_manipulation(&mut self) {
+        self.stage = Stage::Settle { positioned: true };
+    }
+
+    /// One control step: the action to apply.
+    pub(super) fn step(&mut self, now: &Now, world: &World) -> [f64; 10] {
+        let (mut v, mut w) = (0.0, 0.0);
+        loop {
+            match &mut self.stage {
+                Stage::Arm(path, t) => {
+                    *t += DT;
+                    self.tool = path.at(*t);
+                    if *t < path.duration() {
+                        break;
+                    }
+                    self.stage = match self.goal {
+                        Goal::Move { .. } => Stage::Drive,
+                        _ => Stage::Settle { positioned: false },
+                    };
+                    break;
+                }
+                Stage::Drive => {
+                    let Goal::Move { follower, .. } = &mut self.goal else {
+                        unreachable!()
+                    };
+                    let (fv, fw, _) = follower.step(now.base);
+                    (v, w) = (fv, fw);
+                    break;
+                }
+                Stage::Settle { positioned } => {
+                    if let Some(goal) = self.approach
+                        && let Some(cmd) = settle(goal, now.base, positioned)
+                    {
+                        (v, w) = cmd;
+                        break;
+                    }
+                    match self.plan(now, world) {
+                        Some(plan) => self.stage = Stage::Manip(plan, 0.0),
+                        None => self.stage = Stage::Done,
+                    }
+                }
+                Stage::Manip(plan, t) => {
+                    *t += DT;
+                    if self.ceiling.is_some() {
+                        // The last phase (carry or home) heads for the stow pose on a slant that
+                        // would catch the board; the next task's prelude pulls back level.
+                        let last = plan.targets().last().map_or(0.0, |p| p.duration);
+                        *t = t.min(plan.duration() - last);
+                    }
+                    let (tool, g, _) = plan.target_at(*t);
+                    (self.tool, self.gripper) = (tool, g);
+                    break;
+                }
+                Stage::Done => break,
+            }
+        }
+        action(v, w, &self.tool, self.gripper)
+    }
+
+    fn plan(&self, now: &Now, world: &World) -> Option<PhasePlan> {
+        let model = world.model.as_ref()?;
+        let mut params = self.params.clone();
+        if let Some(m) = self.ceiling {
+            let surface_grasp = match self.goal {
+                Goal::Place { target } => target[2] + model.grasp_offset[2],
+                _ => world.object?.translation.z + model.grasp_offset[2],
+            };
+            let room = (m - surface_grasp).max(0.0);
+            params.approach_height = params.approach_height.min(room);
+            params.lift_height = params.lift_height.min(room);
+            params.retreat_height = params.retreat_height.min(room);
+        }
+        let p = &params;
+        match self.goal {
+            Goal::Move { .. } => None,
+            Goal::Pick => {
+                let pick = PickPlan::new(world.object.as_ref()?, model, now.base, p);
+                Some(pick.plan.starting_from(self.tool, self.gripper))
+            }
+            Goal::Place { target } => {
+                let object = world.object?;
+                let base = base_isometry(now.base);
+                let yaw_in_base = yaw(&(base.inverse() * object).rotation);
+                let plan_for = |c: [f64; 3]| {
+                    let pose = PlacePlan::target_keeping_grip(c, yaw_in_base, now.base);
+                    PlacePlan::new(&pose, model, now.base, p)
+                };
+                let mut centre = target;
+                // Where the centre would be let go with the nominal grasp; the difference to the
+                // real grip shifts the target once (the correction is exact: the tool
+                // orientation does not depend on the target position).
+                if let Some(held) = world.held_in_tool {
+                    let lower = plan_for(centre).plan.targets()[1].ee_in_base;
+                    let released = (base * lower * held).translation.vector;
+                    let want = Vector3::from(target) + Vector3::z() * p.release_height;
+                    let err = released - want;
+                    centre = [target[0] - err.x, target[1] - err.y, target[2] - err.z];
+                }
+                Some(plan_for(centre).plan.starting_from(self.tool, self.gripper))
+            }
+        }
+    }
+}
+
+fn yaw(q: &nalgebra::UnitQuaternion<f64>) -> f64 {
+    let x = q * Vector3::x();
+    x.y.atan2(x.x)
+}
+
+/// Closer than this to the approach point, the base is positioned, m.
+const POSITIONED: f64 = 0.03;
+/// A sideways offset below this is not worth turning for, m.
+const SIDEWAYS_OK: f64 = 0.06;
+/// Heading tolerance before manipulating, rad.
+const HEADING_OK: f64 = 0.015;
+
+/// A slow go-to-pose for the last centimetres before manipulating (not the paper's follower,
+/// whose arrival circle is 9 cm): drive straight (forwards or backwards) onto the point, then
+/// turn onto its heading. `None` once both are good.
+fn settle(goal: [f64; 3], pose: [f64; 3], positioned: &mut bool) -> Option<(f64, f64)> {
+    let (dx, dy) = (goal[0] - pose[0], goal[1] - pose[1]);
+    let d = dx.hypot(dy);
+    if !*positioned && d > POSITIONED {
+        let mut e = wrap(dy.atan2(dx) - pose[2]);
+        let mut dir = 1.0;
+        if e.abs() > FRAC_PI_2 {
+            e = wrap(e - PI);
+            dir = -1.0;
+        }
+        if e.abs() > 0.5 && d < SIDEWAYS_OK {
+            *positioned = true;
+        } else if e.abs() > 0.25 {
+            return Some((0.0, (1.2 * e).clamp(-0.5, 0.5)));
+        } else {
+            return Some((dir * (0.6 * d).clamp(0.02, 0.12), e));
+        }
+    }
+    *positioned = true;
+    let e = wrap(goal[2] - pose[2]);
+    if e.abs() > HEADING_OK {
+        let w = (1.5 * e).clamp(-0.4, 0.4);
+        return Some((0.0, if w.abs() < 0.04 { 0.04f64.copysign(e) } else { w }));
+    }
+    None
+}

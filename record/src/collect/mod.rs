@@ -1,0 +1,128 @@
+//! Expert trajectory collection (`kitchen-r collect`; paper, Logging, Monitoring and
+//! Customization and Randomization modules).
+//!
+//! Episode `i` takes dev instruction `i mod n` with a seed drawn from `(seed, i)`: the robot start
+//! and background objects from the episode-configuration generator, and (with
+//! `randomize_style`) the floor and wall colours and floor tile. The oracle expert drives it
+//! closed-loop, one action per query, through the evaluation runner; every control step is
+//! recorded (both cameras RGB + depth, LiDAR, odometry, TF, cmd_vel, the action) to MCAP and/or
+//! HDF5 by [`crate::mcap_ros2`] and [`crate::hdf5_aloha`]. An episode that trips a monitor of
+//! `configs/collect.toml`, fails a task, or fails the simulator's preflight collider check is
+//! discarded: its files are removed and the reason counted.
+//!
+//! Output directory: `ep00000.mcap`, `ep00000.hdf5`, ... written as `*.partial` and renamed when
+//! complete, plus `manifest.jsonl` (one line per finished episode, kept or discarded). A rerun
+//! skips episodes whose final files exist, so an interrupted collection resumes.
+
+mod config;
+mod hook;
+mod run;
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use serde::{Deserialize, Serialize};
+
+pub use config::{CollectConfig, RateConfig};
+pub use run::collect;
+
+#[derive(Debug, thiserror::Error)]
+pub enum CollectError {
+    #[error("collect config: {0}")]
+    Config(String),
+    #[error("{0}")]
+    Eval(#[from] kitchen_r_episode::eval::EvalError),
+    #[error("{0}")]
+    Sim(#[from] kitchen_r_sim::SimError),
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("a collection thread panicked")]
+    Panicked,
+}
+
+/// Which files each episode gets.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Formats {
+    pub mcap: bool,
+    pub hdf5: bool,
+}
+
+impl std::str::FromStr for Formats {
+    type Err = String;
+    /// A comma-separated list of `mcap` and `hdf5`.
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let mut f = Formats {
+            mcap: false,
+            hdf5: false,
+        };
+        for part in s.split(',').map(str::trim) {
+            match part {
+                "mcap" => f.mcap = true,
+                "hdf5" => f.hdf5 = true,
+                other => return Err(format!("unknown format {other:?} (accepted: mcap, hdf5)")),
+            }
+        }
+        Ok(f)
+    }
+}
+
+impl Formats {
+    pub(crate) fn extensions(self) -> Vec<&'static str> {
+        [(self.mcap, "mcap"), (self.hdf5, "hdf5")]
+            .into_iter()
+            .filter_map(|(on, e)| on.then_some(e))
+            .collect()
+    }
+}
+
+#[derive(Debug, Clone)]
+pub struct CollectOptions {
+    pub episodes: usize,
+    pub out: PathBuf,
+    pub formats: Formats,
+    pub jobs: usize,
+    pub seed: u64,
+    pub config: CollectConfig,
+    /// Cameras and LiDAR to record; `None` = `configs/sensors.toml`.
+    pub sensors: Option<kitchen_r_sim::SensorsConfig>,
+    /// Draw an indicatif progress bar on stderr (hidden anyway when stderr is not a terminal).
+    pub progress: bool,
+}
+
+/// One `manifest.jsonl` line.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ManifestEntry {
+    pub index: usize,
+    pub episode_id: String,
+    pub instruction_id: String,
+    pub seed: u64,
+    pub kept: bool,
+    /// The monitor or failure that discarded the episode.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason_kind: Option<String>,
+    pub frames: usize,
+    pub sim_time: f64,
+    pub wall_s: f64,
+    pub files: Vec<String>,
+}
+
+/// What a collection run did.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct CollectSummary {
+    pub requested: usize,
+    pub kept: usize,
+    /// Episodes whose files already existed (resume).
+    pub skipped: usize,
+    /// Discarded episodes by reason kind.
+    pub discarded: BTreeMap<String, usize>,
+    pub frames: usize,
+    pub wall_s: f64,
+    /// Episodes run (kept + discarded) per wall-clock minute.
+    pub episodes_per_min: f64,
+}
