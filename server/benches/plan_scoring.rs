@@ -10,7 +10,7 @@ use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use kitchen_r_core::dataset::{Instruction, Split};
-use kitchen_r_server::config::PlanLimits;
+use kitchen_r_server::PlanLimits;
 use kitchen_r_server::plans::{self, IdIndex};
 
 const ZONES: [&str; 4] = ["red", "green", "blue", "yellow"];

@@ -50,10 +50,10 @@ pub struct TestSetInfo {
 }
 
 /// The notice shown wherever a public sample is served.
-pub const PUBLIC_SAMPLE_NOTICE: &str = "public sample: its answers are public; not for a contest";
+pub(crate) const PUBLIC_SAMPLE_NOTICE: &str = "public sample: its answers are public; not for a contest";
 
 #[derive(Debug)]
-pub struct Content {
+pub(crate) struct Content {
     pub dataset: Dataset,
     pub test_set: TestSetInfo,
     pub index: IdIndex,
@@ -67,7 +67,7 @@ pub struct Content {
 
 /// What the scene list shows about a scene.
 #[derive(Debug, Clone, Serialize)]
-pub struct SceneSummary {
+pub(crate) struct SceneSummary {
     pub id: String,
     pub name: String,
     pub description: String,
@@ -80,7 +80,7 @@ pub struct SceneSummary {
 impl Content {
     /// Load `objects.toml`, `scenes/*.toml` and `dataset/` from `assets`; the test split from
     /// `test_set` (a directory written by `kitchen-r dataset generate`) when given.
-    pub fn load(assets: &Path, test_set: Option<&Path>) -> anyhow::Result<Content> {
+    pub(crate) fn load(assets: &Path, test_set: Option<&Path>) -> anyhow::Result<Content> {
         let catalogue = Catalogue::load(&assets.join("objects.toml"))?;
         let scenes = Scene::load_all(&assets.join("scenes"), &catalogue)?;
         let dataset_dir = assets.join("dataset");
@@ -106,7 +106,7 @@ impl Content {
         Content::new(dataset, scenes, catalogue)
     }
 
-    pub fn new(dataset: Dataset, scenes: Vec<Scene>, catalogue: Catalogue) -> anyhow::Result<Content> {
+    pub(crate) fn new(dataset: Dataset, scenes: Vec<Scene>, catalogue: Catalogue) -> anyhow::Result<Content> {
         for inst in dataset.dev.iter().chain(&dataset.test) {
             anyhow::ensure!(
                 scenes.iter().any(|s| s.id == inst.scene),
@@ -132,7 +132,7 @@ impl Content {
     }
 
     /// Refuse to run a contest on a test set whose answers can be rebuilt from public material.
-    pub fn check_contest_ready(&self) -> anyhow::Result<()> {
+    pub(crate) fn check_contest_ready(&self) -> anyhow::Result<()> {
         match self.test_set.kind {
             TestSetKind::Private => Ok(()),
             TestSetKind::PublicSample => anyhow::bail!(
@@ -147,7 +147,7 @@ impl Content {
     }
 
     /// The public file of a split: dev with ground-truth plans, test without.
-    pub fn public_jsonl(&self, split: Split) -> Bytes {
+    pub(crate) fn public_jsonl(&self, split: Split) -> Bytes {
         match split {
             Split::Dev => self.dev_jsonl.clone(),
             Split::Test => self.test_jsonl.clone(),
@@ -155,18 +155,18 @@ impl Content {
     }
 
     /// Ground truth of a split: for scoring only.
-    pub fn ground_truth(&self, split: Split) -> &[Instruction] {
+    pub(crate) fn ground_truth(&self, split: Split) -> &[Instruction] {
         self.dataset.split(split)
     }
 
-    pub fn scene(&self, id: &str) -> Option<&Scene> {
+    pub(crate) fn scene(&self, id: &str) -> Option<&Scene> {
         self.scenes.iter().find(|s| s.id == id)
     }
 
     /// The scene's top-down PNG (zones coloured), rendered once and cached. `None` for an
     /// unknown scene. Rendering is pure CPU work of a few milliseconds, so callers on the async
     /// runtime run it on a blocking thread.
-    pub fn topdown_png(&self, id: &str) -> Option<Bytes> {
+    pub(crate) fn topdown_png(&self, id: &str) -> Option<Bytes> {
         if let Some(png) = self.topdown.lock().unwrap_or_else(|p| p.into_inner()).get(id) {
             return Some(png.clone());
         }
@@ -183,7 +183,7 @@ impl Content {
         Some(png)
     }
 
-    pub fn scene_summaries(&self) -> Vec<SceneSummary> {
+    pub(crate) fn scene_summaries(&self) -> Vec<SceneSummary> {
         self.scenes
             .iter()
             .map(|s| SceneSummary {
@@ -199,7 +199,7 @@ impl Content {
     /// Identifies the ground truth a score was computed against, for the scoring run's version
     /// ([`ground_truth_digest`]): a regenerated or fixed set gives a new tag, which a rescore
     /// records.
-    pub fn dataset_tag(&self) -> String {
+    pub(crate) fn dataset_tag(&self) -> String {
         format!("dataset-{}", self.test_set.version)
     }
 }

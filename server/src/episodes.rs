@@ -10,11 +10,11 @@ use kitchen_r_core::scoring;
 use kitchen_r_proto::worker::v1 as pb;
 use serde::{Deserialize, Serialize};
 
-pub use kitchen_r_core::scoring::{Mode, OFFLINE_SUFFIX, RunScores, TaskOutcome};
+pub(crate) use kitchen_r_core::scoring::{Mode, RunScores, TaskOutcome};
 
 /// Where the policy is and the deadlines to call it with (snapshotted at registration).
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-pub struct EndpointSpec {
+pub(crate) struct EndpointSpec {
     pub url: String,
     /// Empty for none.
     pub bearer_token: String,
@@ -26,7 +26,7 @@ pub struct EndpointSpec {
 
 /// One job: an episode to simulate and the policy to drive it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct JobSpec {
+pub(crate) struct JobSpec {
     pub mode: Mode,
     pub scene_id: String,
     pub instruction_id: String,
@@ -49,12 +49,12 @@ pub struct JobSpec {
 
 impl JobSpec {
     /// Tasks the episode has: the plan's steps, capped by `max_plan_steps` (0 = no cap).
-    pub fn task_count(&self) -> usize {
+    pub(crate) fn task_count(&self) -> usize {
         scoring::task_count(self.plan.len(), self.max_plan_steps)
     }
 
     /// The episode as a worker gets it; `policy_episode_id` is the opaque name the endpoint sees.
-    pub fn episode_proto(&self, policy_episode_id: &str) -> pb::EpisodeSpec {
+    pub(crate) fn episode_proto(&self, policy_episode_id: &str) -> pb::EpisodeSpec {
         pb::EpisodeSpec {
             scene_id: self.scene_id.clone(),
             instruction_id: self.instruction_id.clone(),
@@ -77,7 +77,7 @@ impl JobSpec {
         }
     }
 
-    pub fn endpoint_proto(&self) -> pb::PolicyEndpoint {
+    pub(crate) fn endpoint_proto(&self) -> pb::PolicyEndpoint {
         let e = &self.endpoint;
         pb::PolicyEndpoint {
             url: e.url.clone(),
@@ -92,7 +92,7 @@ impl JobSpec {
 
 /// A recorded episode: its spec and what happened.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Episode {
+pub(crate) struct Episode {
     pub spec: JobSpec,
     pub tasks: Vec<TaskOutcome>,
     /// Set when the episode never ran: the platform gave up after its attempts.
@@ -101,7 +101,7 @@ pub struct Episode {
 
 impl Episode {
     /// The episode as scoring sees it.
-    pub fn scoring(&self) -> scoring::Episode {
+    pub(crate) fn scoring(&self) -> scoring::Episode {
         scoring::Episode {
             mode: self.spec.mode,
             instruction_id: self.spec.instruction_id.clone(),
@@ -115,7 +115,7 @@ impl Episode {
 
 /// Scores of a finished run ([`scoring::aggregate`]). `plans` are the linked plan submission's
 /// predictions by instruction id (integrated runs only).
-pub fn aggregate(episodes: &[Episode], plans: Option<&HashMap<String, Vec<String>>>) -> RunScores {
+pub(crate) fn aggregate(episodes: &[Episode], plans: Option<&HashMap<String, Vec<String>>>) -> RunScores {
     let scored: Vec<scoring::Episode> = episodes.iter().map(Episode::scoring).collect();
     scoring::aggregate(&scored, plans)
 }

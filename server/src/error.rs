@@ -66,26 +66,26 @@ pub enum ServiceError {
 }
 
 /// The header that carries the request id, both ways, on HTTP and gRPC.
-pub const REQUEST_ID_HEADER: &str = "x-request-id";
+pub(crate) const REQUEST_ID_HEADER: &str = "x-request-id";
 
 tokio::task_local! {
     static REQUEST_ID: Arc<str>;
 }
 
 /// Run `fut` as the handling of the request `id`: errors built inside it carry that id.
-pub async fn with_request_id<F: Future>(id: Arc<str>, fut: F) -> F::Output {
+pub(crate) async fn with_request_id<F: Future>(id: Arc<str>, fut: F) -> F::Output {
     REQUEST_ID.scope(id, fut).await
 }
 
 /// The id of the request being handled, if any (none outside the transport stacks, e.g. in
 /// service-level tests or background tasks).
-pub fn current_request_id() -> Option<Arc<str>> {
+pub(crate) fn current_request_id() -> Option<Arc<str>> {
     REQUEST_ID.try_with(Arc::clone).ok()
 }
 
 /// The caller's `x-request-id` when it is sane (1 to 64 characters of `[A-Za-z0-9._:-]`, so it
 /// can be logged and echoed without escaping), else a fresh random one.
-pub fn request_id_from(headers: &HeaderMap) -> Arc<str> {
+pub(crate) fn request_id_from(headers: &HeaderMap) -> Arc<str> {
     let given = headers
         .get(REQUEST_ID_HEADER)
         .and_then(|v| v.to_str().ok())

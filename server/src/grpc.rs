@@ -7,7 +7,7 @@
 
 mod caller;
 
-pub use caller::{CallerLayer, caller};
+pub(crate) use caller::{CallerLayer, caller};
 
 use std::any::Any;
 use std::panic::AssertUnwindSafe;
@@ -29,18 +29,18 @@ use crate::service::jobs::MAX_LEASE_WAIT_MS;
 use crate::service::{AppState, EpisodeView, RegisterPolicy, Scores, SubmissionView};
 
 #[derive(Debug, Clone)]
-pub struct SubmissionsService {
+pub(crate) struct SubmissionsService {
     state: AppState,
 }
 
 impl SubmissionsService {
-    pub fn new(state: AppState) -> Self {
+    pub(crate) fn new(state: AppState) -> Self {
         SubmissionsService { state }
     }
 
     /// The tonic server, with the decoding cap raised to the configured body limit (plus room
     /// for the envelope) so a file over the limit gets the service's own error and line.
-    pub fn into_server(self) -> pb::submissions_server::SubmissionsServer<Self> {
+    pub(crate) fn into_server(self) -> pb::submissions_server::SubmissionsServer<Self> {
         let cap = self.state.config().max_body_bytes.saturating_mul(2);
         pb::submissions_server::SubmissionsServer::new(self).max_decoding_message_size(cap)
     }
@@ -215,14 +215,14 @@ impl Submissions for SubmissionsService {
 /// than a status. The budget covers the call up to its response headers (streamed bodies, as in
 /// reflection or health `Watch`, are not cut).
 #[derive(Debug, Clone)]
-pub struct GrpcStackLayer {
+pub(crate) struct GrpcStackLayer {
     default: Duration,
     registration: Duration,
     lease: Duration,
 }
 
 impl GrpcStackLayer {
-    pub fn new(cfg: &Config) -> Self {
+    pub(crate) fn new(cfg: &Config) -> Self {
         GrpcStackLayer {
             default: cfg.request_timeout(),
             registration: cfg.registration_timeout(),
@@ -254,7 +254,7 @@ impl<S> tower::Layer<S> for GrpcStackLayer {
 
 /// The service [`GrpcStackLayer`] wraps around the gRPC routes.
 #[derive(Debug, Clone)]
-pub struct GrpcStack<S> {
+pub(crate) struct GrpcStack<S> {
     inner: S,
     layer: GrpcStackLayer,
 }

@@ -14,16 +14,16 @@ use crate::service::AppState;
 use crate::service::jobs::{LeasedJob, Report};
 
 #[derive(Debug, Clone)]
-pub struct WorkerService {
+pub(crate) struct WorkerService {
     state: AppState,
 }
 
 impl WorkerService {
-    pub fn new(state: AppState) -> Self {
+    pub(crate) fn new(state: AppState) -> Self {
         WorkerService { state }
     }
 
-    pub fn into_server(self) -> pb::worker_server::WorkerServer<Self> {
+    pub(crate) fn into_server(self) -> pb::worker_server::WorkerServer<Self> {
         // Reports carry a log tail of up to 64 KiB plus task results; leave room.
         pb::worker_server::WorkerServer::new(self).max_decoding_message_size(1 << 20)
     }

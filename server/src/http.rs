@@ -27,9 +27,9 @@ use crate::service::{AppState, Caller, RegisterPolicy};
 
 type Params = Query<HashMap<String, String>>;
 
-pub mod stack;
+pub(crate) mod stack;
 
-pub fn router(state: AppState) -> Router {
+pub(crate) fn router(state: AppState) -> Router {
     let cfg = state.config();
     let quick = Router::new()
         .route("/", get(index))

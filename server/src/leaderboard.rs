@@ -14,7 +14,7 @@
 //! load are a hash lookup and a reference-count increment. A generation counter makes a render
 //! that raced with a write unfit for caching instead of serving stale data.
 
-pub mod render;
+pub(crate) mod render;
 
 use std::collections::HashMap;
 use std::sync::RwLock;
@@ -30,16 +30,16 @@ use crate::scores::Scores;
 /// The ranked tracks.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
 #[serde(rename_all = "snake_case")]
-pub enum Track {
+pub(crate) enum Track {
     Planning,
     Control,
     Integrated,
 }
 
 impl Track {
-    pub const ALL: [Track; 3] = [Track::Planning, Track::Control, Track::Integrated];
+    pub(crate) const ALL: [Track; 3] = [Track::Planning, Track::Control, Track::Integrated];
 
-    pub fn as_str(self) -> &'static str {
+    pub(crate) fn as_str(self) -> &'static str {
         match self {
             Track::Planning => "planning",
             Track::Control => "control",
@@ -63,21 +63,21 @@ impl std::str::FromStr for Track {
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum Format {
+pub(crate) enum Format {
     Json,
     Csv,
     Html,
 }
 
 #[derive(Debug, Clone, Serialize)]
-pub struct Leaderboard {
+pub(crate) struct Leaderboard {
     pub track: Track,
     pub split: Split,
     pub rows: Vec<Row>,
 }
 
 #[derive(Debug, Clone, Serialize)]
-pub struct Row {
+pub(crate) struct Row {
     /// 1-based position among teams' entries; absent for baseline rows.
     pub rank: Option<usize>,
     pub team: String,
@@ -96,13 +96,13 @@ pub struct Row {
 pub(crate) type CacheKey = (Option<Track>, Split, Format);
 
 #[derive(Debug, Default)]
-pub struct LeaderboardCache {
+pub(crate) struct LeaderboardCache {
     generation: AtomicU64,
     rendered: RwLock<HashMap<CacheKey, (u64, Bytes)>>,
 }
 
 impl LeaderboardCache {
-    pub fn invalidate(&self) {
+    pub(crate) fn invalidate(&self) {
         self.generation.fetch_add(1, Ordering::SeqCst);
         self.rendered.write().unwrap_or_else(|p| p.into_inner()).clear();
     }

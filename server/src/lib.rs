@@ -15,22 +15,23 @@
 //! [`store`], [`leaderboard`], [`content`], [`episodes`] → [`error`] → [`plans`] → the leaf
 //! modules [`scores`], [`clock`], [`states`], [`config`]. Nothing below the service imports the
 //! service or an adapter (tests aside).
+#![warn(unreachable_pub)]
 
-pub mod clock;
-pub mod config;
-pub mod content;
-pub mod episodes;
-pub mod error;
-pub mod grpc;
-pub mod grpc_worker;
-pub mod http;
-pub mod leaderboard;
+mod clock;
+mod config;
+mod content;
+mod episodes;
+mod error;
+mod grpc;
+mod grpc_worker;
+mod http;
+mod leaderboard;
 pub mod plans;
-pub mod probe;
-pub mod scores;
-pub mod service;
-pub mod states;
-pub mod store;
+mod probe;
+mod scores;
+mod service;
+mod states;
+mod store;
 #[cfg(test)]
 pub(crate) mod testutil;
 
@@ -43,10 +44,12 @@ use anyhow::Context;
 use tokio::net::TcpListener;
 use tokio_stream::wrappers::TcpListenerStream;
 
-pub use config::Config;
+use service::AppState;
+
+pub use config::{Config, PlanLimits};
+pub use content::TestSetInfo;
 pub use error::ServiceError;
 pub use probe::{BoxFuture, NoProbe, PolicyProbe, ProbeError, ProbedSpec};
-pub use service::AppState;
 
 /// A server ready to listen: state loaded, database migrated.
 #[derive(Debug)]
@@ -102,8 +105,10 @@ fn token_or_generated(configured: &str) -> (String, Option<String>) {
 }
 
 impl Server {
-    pub fn state(&self) -> &AppState {
-        &self.state
+    /// What the served test set is (public sample or private set) and its size, for the
+    /// start-up line.
+    pub fn test_set(&self) -> &TestSetInfo {
+        &self.state.content().test_set
     }
 
     /// The token workers must present on the `Worker` gRPC service (configured or generated).

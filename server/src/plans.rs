@@ -131,7 +131,7 @@ pub struct PlanFile {
 }
 
 /// The line where a body of `limit` bytes stops: for the "too large" message.
-pub fn line_at(body: &[u8], limit: usize) -> usize {
+pub(crate) fn line_at(body: &[u8], limit: usize) -> usize {
     body[..limit.min(body.len())]
         .iter()
         .filter(|b| **b == b'\n')
@@ -236,7 +236,7 @@ pub struct InstructionScore {
 }
 
 impl InstructionScore {
-    pub fn em(&self) -> f64 {
+    pub(crate) fn em(&self) -> f64 {
         PlanMatch {
             correct: self.correct,
             total: self.total,
@@ -278,7 +278,7 @@ pub fn score(file: &PlanFile, ground_truth: &[Instruction]) -> PlanScore {
 }
 
 /// Warnings to show with an accepted file.
-pub fn warnings(score: &PlanScore) -> Vec<String> {
+pub(crate) fn warnings(score: &PlanScore) -> Vec<String> {
     if score.missing == 0 {
         return Vec::new();
     }

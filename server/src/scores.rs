@@ -13,7 +13,7 @@ use serde::{Serialize, Serializer};
 use kitchen_r_core::scoring::RunScores;
 
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
-pub struct Scores {
+pub(crate) struct Scores {
     #[serde(serialize_with = "score")]
     pub em: Option<f64>,
     #[serde(serialize_with = "score", skip_serializing_if = "Option::is_none")]
@@ -28,7 +28,7 @@ pub struct Scores {
 
 impl Scores {
     /// Planning scores: EM only.
-    pub fn em(em: Option<f64>) -> Scores {
+    pub(crate) fn em(em: Option<f64>) -> Scores {
         Scores {
             em,
             ..Scores::default()
@@ -60,7 +60,7 @@ fn score<S: Serializer>(v: &Option<f64>, s: S) -> Result<S::Ok, S::Error> {
 }
 
 /// A score for CSV and HTML: six decimals, `inf` for +inf, empty when absent.
-pub fn fmt_score(v: Option<f64>) -> String {
+pub(crate) fn fmt_score(v: Option<f64>) -> String {
     match v {
         Some(x) if x.is_finite() => format!("{x:.6}"),
         Some(x) if x.is_nan() => String::new(),

@@ -13,8 +13,8 @@
 //! Submodules: [`runs`] (policy submissions, their runs, results, policy leaderboards) and
 //! [`queue`] (the job queue).
 
-pub mod queue;
-pub mod runs;
+pub(crate) mod queue;
+pub(crate) mod runs;
 
 use std::path::Path;
 use std::str::FromStr;
@@ -32,7 +32,7 @@ use crate::scores::Scores;
 use crate::states::{RunState, SubmissionKind};
 
 /// Open (creating file and directory if missing) and migrate the database.
-pub async fn connect(url: &str) -> anyhow::Result<SqlitePool> {
+pub(crate) async fn connect(url: &str) -> anyhow::Result<SqlitePool> {
     let opts = SqliteConnectOptions::from_str(url)
         .with_context(|| format!("bad database URL {url:?}"))?
         .create_if_missing(true)
@@ -58,13 +58,13 @@ pub async fn connect(url: &str) -> anyhow::Result<SqlitePool> {
 }
 
 #[derive(Debug, Clone, PartialEq, Eq, FromRow)]
-pub struct Team {
+pub(crate) struct Team {
     pub id: i64,
     pub name: String,
 }
 
 /// Insert a team; `None` when the name is taken.
-pub async fn insert_team(
+pub(crate) async fn insert_team(
     pool: &SqlitePool,
     name: &str,
     token_hash: &str,
@@ -78,7 +78,7 @@ pub async fn insert_team(
         .await
 }
 
-pub async fn team_by_token_hash(pool: &SqlitePool, token_hash: &str) -> sqlx::Result<Option<Team>> {
+pub(crate) async fn team_by_token_hash(pool: &SqlitePool, token_hash: &str) -> sqlx::Result<Option<Team>> {
     sqlx::query_as("SELECT id, name FROM teams WHERE token_hash = ?")
         .bind(token_hash)
         .fetch_optional(pool)
@@ -88,7 +88,7 @@ pub async fn team_by_token_hash(pool: &SqlitePool, token_hash: &str) -> sqlx::Re
 /// A team's submissions to `split` received at or after `since` (ms). Policy runs the platform
 /// could not evaluate (`platform_failed`) do not count: failures caused by the platform never
 /// use quota.
-pub async fn count_submissions_since(
+pub(crate) async fn count_submissions_since(
     pool: &SqlitePool,
     team: i64,
     split: Split,
@@ -107,7 +107,7 @@ pub async fn count_submissions_since(
 
 /// The scores of one run, as stored.
 #[derive(Debug, Clone, PartialEq)]
-pub struct NewRun<'a> {
+pub(crate) struct NewRun<'a> {
     pub scorer_version: &'a str,
     pub em: f64,
     pub instructions: &'a [InstructionScore],
@@ -115,7 +115,7 @@ pub struct NewRun<'a> {
 
 /// Insert an immutable plan submission and its first scoring run in one transaction.
 /// Returns `(submission id, run id, created_at)`.
-pub async fn insert_plan_submission(
+pub(crate) async fn insert_plan_submission(
     pool: &SqlitePool,
     team: i64,
     split: Split,
@@ -139,7 +139,12 @@ pub async fn insert_plan_submission(
 }
 
 /// Append a scoring run to an existing submission.
-pub async fn insert_run(pool: &SqlitePool, submission: i64, now: i64, run: &NewRun<'_>) -> sqlx::Result<i64> {
+pub(crate) async fn insert_run(
+    pool: &SqlitePool,
+    submission: i64,
+    now: i64,
+    run: &NewRun<'_>,
+) -> sqlx::Result<i64> {
     let mut tx = pool.begin().await?;
     let id = insert_run_in(&mut tx, submission, now, run).await?;
     tx.commit().await?;
@@ -179,7 +184,7 @@ async fn insert_run_in(
 }
 
 #[derive(Debug, Clone, PartialEq, FromRow)]
-pub struct SubmissionRow {
+pub(crate) struct SubmissionRow {
     pub id: i64,
     pub team_id: i64,
     pub team: String,
@@ -189,7 +194,7 @@ pub struct SubmissionRow {
     pub runs: i64,
 }
 
-pub async fn submission(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<SubmissionRow>> {
+pub(crate) async fn submission(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<SubmissionRow>> {
     sqlx::query_as(
         "SELECT s.id, s.team_id, t.name AS team, s.split, s.kind, s.created_at,
                 (SELECT COUNT(*) FROM scoring_runs r WHERE r.submission_id = s.id) AS runs
@@ -203,7 +208,7 @@ pub async fn submission(pool: &SqlitePool, id: i64) -> sqlx::Result<Option<Submi
 /// The id of a team's first test-split policy submission, if any. Test plan files created after
 /// it are not ranked, and integrated test runs must link a plan file created before it: from
 /// that run on, the team's endpoint has seen the test ground-truth steps as sub-tasks.
-pub async fn first_test_policy(pool: &SqlitePool, team: i64) -> sqlx::Result<Option<i64>> {
+pub(crate) async fn first_test_policy(pool: &SqlitePool, team: i64) -> sqlx::Result<Option<i64>> {
     sqlx::query_scalar(
         "SELECT MIN(id) FROM submissions WHERE team_id = ? AND split = 'test' AND kind = 'policy'",
     )
@@ -213,7 +218,7 @@ pub async fn first_test_policy(pool: &SqlitePool, team: i64) -> sqlx::Result<Opt
 }
 
 #[derive(Debug, Clone, PartialEq, FromRow)]
-pub struct RunRow {
+pub(crate) struct RunRow {
     pub id: i64,
     pub scorer_version: String,
     pub created_at: i64,
@@ -248,12 +253,12 @@ impl From<ScoreColumns> for Scores {
 
 impl RunRow {
     /// The run whose episodes (jobs and results) this run's scores come from.
-    pub fn episodes_run(&self) -> i64 {
+    pub(crate) fn episodes_run(&self) -> i64 {
         self.source_run_id.unwrap_or(self.id)
     }
 }
 
-pub async fn latest_run(pool: &SqlitePool, submission: i64) -> sqlx::Result<Option<RunRow>> {
+pub(crate) async fn latest_run(pool: &SqlitePool, submission: i64) -> sqlx::Result<Option<RunRow>> {
     sqlx::query_as(
         "SELECT id, scorer_version, created_at, em, sr, mse, m, p, state, episodes_total, finished_at,
                 source_run_id, needs_resimulation
@@ -264,7 +269,7 @@ pub async fn latest_run(pool: &SqlitePool, submission: i64) -> sqlx::Result<Opti
     .await
 }
 
-pub async fn instruction_results(pool: &SqlitePool, run: i64) -> sqlx::Result<Vec<InstructionScore>> {
+pub(crate) async fn instruction_results(pool: &SqlitePool, run: i64) -> sqlx::Result<Vec<InstructionScore>> {
     let rows: Vec<InstructionRow> = sqlx::query_as(
         "SELECT instruction_id, present, correct_steps, total_steps FROM instruction_results WHERE run_id = ? ORDER BY instruction_id",
     )
@@ -297,13 +302,13 @@ impl From<InstructionRow> for InstructionScore {
 }
 
 /// Ids of every plan submission, oldest first (for rescoring).
-pub async fn policy_submission_ids(pool: &SqlitePool) -> sqlx::Result<Vec<i64>> {
+pub(crate) async fn policy_submission_ids(pool: &SqlitePool) -> sqlx::Result<Vec<i64>> {
     sqlx::query_scalar("SELECT id FROM submissions WHERE kind = 'policy' ORDER BY id")
         .fetch_all(pool)
         .await
 }
 
-pub async fn plan_submission_ids(pool: &SqlitePool) -> sqlx::Result<Vec<i64>> {
+pub(crate) async fn plan_submission_ids(pool: &SqlitePool) -> sqlx::Result<Vec<i64>> {
     sqlx::query_scalar("SELECT id FROM submissions WHERE kind = 'plans' ORDER BY id")
         .fetch_all(pool)
         .await
@@ -312,13 +317,13 @@ pub async fn plan_submission_ids(pool: &SqlitePool) -> sqlx::Result<Vec<i64>> {
 /// What a submission holds: its split and its immutable body (the plan file, or a policy
 /// submission's endpoint JSON).
 #[derive(Debug, Clone, PartialEq, Eq, FromRow)]
-pub struct SubmissionBody {
+pub(crate) struct SubmissionBody {
     pub split: String,
     pub body: String,
 }
 
 /// The split and body of one submission.
-pub async fn submission_body(pool: &SqlitePool, id: i64) -> sqlx::Result<SubmissionBody> {
+pub(crate) async fn submission_body(pool: &SqlitePool, id: i64) -> sqlx::Result<SubmissionBody> {
     sqlx::query_as("SELECT split, body FROM submissions WHERE id = ?")
         .bind(id)
         .fetch_one(pool)
@@ -326,7 +331,7 @@ pub async fn submission_body(pool: &SqlitePool, id: i64) -> sqlx::Result<Submiss
 }
 
 #[derive(Debug, Clone, PartialEq, FromRow)]
-pub struct LeaderboardRow {
+pub(crate) struct LeaderboardRow {
     pub team: String,
     pub submission_id: i64,
     pub em: Option<f64>,
@@ -337,7 +342,10 @@ pub struct LeaderboardRow {
 /// to the earlier submission, then the lower id. Unscored entries sort last. On the test split a
 /// plan file created after the team's first test policy submission is left out
 /// ([`first_test_policy`]).
-pub async fn planning_leaderboard(pool: &SqlitePool, split: Split) -> sqlx::Result<Vec<LeaderboardRow>> {
+pub(crate) async fn planning_leaderboard(
+    pool: &SqlitePool,
+    split: Split,
+) -> sqlx::Result<Vec<LeaderboardRow>> {
     sqlx::query_as(
         "WITH latest AS (
             SELECT r.submission_id, r.em FROM scoring_runs r

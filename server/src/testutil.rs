@@ -14,18 +14,18 @@ use crate::service::jobs::{LeasedJob, Report};
 use crate::service::{AppState, Caller, Organiser, RegisterPolicy, Tokens, WorkerCred};
 use crate::store::Team;
 
-pub const ADMIN: &str = "admin-token-for-tests-0123456789";
-pub const WORKER: &str = "worker-token-for-tests-012345678";
+pub(crate) const ADMIN: &str = "admin-token-for-tests-0123456789";
+pub(crate) const WORKER: &str = "worker-token-for-tests-012345678";
 
 /// A probe answering whatever the test set, counting its calls.
 #[derive(Debug)]
-pub struct FakeProbe {
+pub(crate) struct FakeProbe {
     pub answer: Result<ProbedSpec, ProbeError>,
     pub calls: AtomicUsize,
 }
 
 impl FakeProbe {
-    pub fn ok(max_concurrency: u32) -> Arc<FakeProbe> {
+    pub(crate) fn ok(max_concurrency: u32) -> Arc<FakeProbe> {
         Arc::new(FakeProbe {
             answer: Ok(ProbedSpec {
                 protocol_version: kitchen_r_proto::POLICY_PROTOCOL_VERSION,
@@ -36,14 +36,14 @@ impl FakeProbe {
         })
     }
 
-    pub fn err(e: ProbeError) -> Arc<FakeProbe> {
+    pub(crate) fn err(e: ProbeError) -> Arc<FakeProbe> {
         Arc::new(FakeProbe {
             answer: Err(e),
             calls: AtomicUsize::new(0),
         })
     }
 
-    pub fn calls(&self) -> usize {
+    pub(crate) fn calls(&self) -> usize {
         self.calls.load(Ordering::SeqCst)
     }
 }
@@ -56,13 +56,13 @@ impl PolicyProbe for FakeProbe {
     }
 }
 
-pub struct Fixture {
+pub(crate) struct Fixture {
     pub state: AppState,
     pub _dir: tempfile::TempDir,
 }
 
 /// A state with `control.dev_episodes = 3` (tweak further with `tweak`).
-pub async fn fixture(probe: Arc<dyn PolicyProbe>, tweak: impl FnOnce(&mut Config)) -> Fixture {
+pub(crate) async fn fixture(probe: Arc<dyn PolicyProbe>, tweak: impl FnOnce(&mut Config)) -> Fixture {
     let dir = tempfile::tempdir().unwrap();
     let mut config = Config {
         db: format!("sqlite://{}", dir.path().join("t.db").display()),
@@ -85,7 +85,7 @@ pub async fn fixture(probe: Arc<dyn PolicyProbe>, tweak: impl FnOnce(&mut Config
 
 impl Fixture {
     /// A second server process on the same database file (a restart).
-    pub async fn reopen(&self, probe: Arc<dyn PolicyProbe>) -> AppState {
+    pub(crate) async fn reopen(&self, probe: Arc<dyn PolicyProbe>) -> AppState {
         let config = self.state.config().clone();
         let content = Content::load(&config.assets_dir(), config.test_set_dir()).unwrap();
         let pool = crate::store::connect(&config.db).await.unwrap();
@@ -96,7 +96,7 @@ impl Fixture {
         AppState::new(pool, config, content, tokens, probe)
     }
 
-    pub async fn team(&self, name: &str) -> String {
+    pub(crate) async fn team(&self, name: &str) -> String {
         self.state
             .create_team(self.admin().await, name)
             .await
@@ -105,24 +105,24 @@ impl Fixture {
     }
 
     /// The caller a request with this bearer token resolves to (the adapters' path).
-    pub async fn caller(&self, token: &str) -> Caller {
+    pub(crate) async fn caller(&self, token: &str) -> Caller {
         self.state.caller(Some(token)).await.unwrap()
     }
 
-    pub async fn admin(&self) -> Organiser {
+    pub(crate) async fn admin(&self) -> Organiser {
         self.caller(ADMIN).await.organiser().unwrap()
     }
 
-    pub async fn worker(&self) -> WorkerCred {
+    pub(crate) async fn worker(&self) -> WorkerCred {
         self.caller(WORKER).await.worker().unwrap()
     }
 
     /// The team a team token belongs to.
-    pub async fn team_of(&self, token: &str) -> Team {
+    pub(crate) async fn team_of(&self, token: &str) -> Team {
         self.caller(token).await.team().unwrap().clone()
     }
 
-    pub fn request(&self, split: Split) -> RegisterPolicy {
+    pub(crate) fn request(&self, split: Split) -> RegisterPolicy {
         RegisterPolicy {
             endpoint: "http://127.0.0.1:50099".into(),
             split,
@@ -133,7 +133,7 @@ impl Fixture {
         }
     }
 
-    pub async fn lease(&self, worker: &str, max: u32) -> Vec<LeasedJob> {
+    pub(crate) async fn lease(&self, worker: &str, max: u32) -> Vec<LeasedJob> {
         self.state
             .lease(self.worker().await, worker, max, 0)
             .await
@@ -142,7 +142,13 @@ impl Fixture {
 
     /// A report of `job` where task j succeeds when `success(j)`, with MSE `mse` on 2 samples
     /// per task for offline episodes.
-    pub fn report(&self, worker: &str, job: &LeasedJob, success: impl Fn(usize) -> bool, mse: f64) -> Report {
+    pub(crate) fn report(
+        &self,
+        worker: &str,
+        job: &LeasedJob,
+        success: impl Fn(usize) -> bool,
+        mse: f64,
+    ) -> Report {
         let offline = job.spec.mode == crate::episodes::Mode::Offline;
         let tasks = (0..job.spec.task_count())
             .map(|j| TaskOutcome {

@@ -13,12 +13,12 @@ use crate::service::auth::bearer_token;
 use crate::service::{AppState, Caller};
 
 #[derive(Debug, Clone)]
-pub struct CallerLayer {
+pub(crate) struct CallerLayer {
     state: AppState,
 }
 
 impl CallerLayer {
-    pub fn new(state: AppState) -> Self {
+    pub(crate) fn new(state: AppState) -> Self {
         CallerLayer { state }
     }
 }
@@ -35,7 +35,7 @@ impl<S> tower::Layer<S> for CallerLayer {
 }
 
 #[derive(Debug, Clone)]
-pub struct CallerService<S> {
+pub(crate) struct CallerService<S> {
     state: AppState,
     inner: S,
 }
@@ -75,7 +75,7 @@ where
 }
 
 /// The caller [`CallerLayer`] resolved for this call.
-pub fn caller<T>(req: &Request<T>) -> Result<Caller, Status> {
+pub(crate) fn caller<T>(req: &Request<T>) -> Result<Caller, Status> {
     req.extensions()
         .get::<Caller>()
         .cloned()

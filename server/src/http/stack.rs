@@ -31,10 +31,10 @@ use crate::error::{REQUEST_ID_HEADER, ServiceError, request_id_from, with_reques
 /// The id of the request, in its extensions (handlers may extract it with
 /// `Extension<RequestId>`).
 #[derive(Debug, Clone)]
-pub struct RequestId(pub Arc<str>);
+pub(crate) struct RequestId(pub Arc<str>);
 
 /// `routes` with the request id, trace and catch-panic layers (see the module documentation).
-pub fn layered<S: Clone + Send + Sync + 'static>(routes: Router<S>) -> Router<S> {
+pub(crate) fn layered<S: Clone + Send + Sync + 'static>(routes: Router<S>) -> Router<S> {
     routes.layer(
         ServiceBuilder::new()
             .layer(middleware::from_fn(request_id))
@@ -44,7 +44,10 @@ pub fn layered<S: Clone + Send + Sync + 'static>(routes: Router<S>) -> Router<S>
 }
 
 /// `routes` with a request budget: past it, 503 with code `timeout`.
-pub fn with_timeout<S: Clone + Send + Sync + 'static>(routes: Router<S>, budget: Duration) -> Router<S> {
+pub(crate) fn with_timeout<S: Clone + Send + Sync + 'static>(
+    routes: Router<S>,
+    budget: Duration,
+) -> Router<S> {
     routes.layer(middleware::from_fn_with_state(budget, timeout))
 }
 

@@ -39,7 +39,7 @@ fn rank(r: &Row) -> String {
 
 /// Planning: `rank,team,submission_id,em,submitted_at`. Policy tracks add their scores, the
 /// run state and the baseline flag: `rank,team,submission_id,sr,mse,state,baseline,submitted_at`.
-pub fn csv(board: &Leaderboard) -> String {
+pub(crate) fn csv(board: &Leaderboard) -> String {
     let cols = columns(board.track);
     let policy = board.track != Track::Planning;
     let mut out = String::from("rank,team,submission_id");
@@ -133,7 +133,7 @@ fn table(board: &Leaderboard) -> String {
 }
 
 /// The public page: one table per board, all of one split.
-pub fn page(split: Split, boards: &[Leaderboard], public_sample: bool) -> String {
+pub(crate) fn page(split: Split, boards: &[Leaderboard], public_sample: bool) -> String {
     let other = match split {
         Split::Dev => Split::Test,
         Split::Test => Split::Dev,

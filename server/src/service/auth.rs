@@ -13,7 +13,7 @@ use crate::store::{self, Team};
 
 /// The caller of one request, resolved from its `authorization: Bearer ...` header.
 #[derive(Debug, Clone)]
-pub enum Caller {
+pub(crate) enum Caller {
     /// No token was sent.
     Anonymous,
     /// A token that is none of the ones below.
@@ -25,15 +25,15 @@ pub enum Caller {
 
 /// Proof that the caller presented the organiser token (only [`AppState::caller`] makes one).
 #[derive(Debug, Clone, Copy)]
-pub struct Organiser(());
+pub(crate) struct Organiser(());
 
 /// Proof that the caller presented the simulation workers' token.
 #[derive(Debug, Clone, Copy)]
-pub struct WorkerCred(());
+pub(crate) struct WorkerCred(());
 
 impl Caller {
     /// The caller's team; the organiser and workers are not teams.
-    pub fn team(&self) -> Result<&Team, ServiceError> {
+    pub(crate) fn team(&self) -> Result<&Team, ServiceError> {
         match self {
             Caller::Team(t) => Ok(t),
             Caller::Anonymous => Err(ServiceError::MissingToken),
@@ -41,7 +41,7 @@ impl Caller {
         }
     }
 
-    pub fn organiser(&self) -> Result<Organiser, ServiceError> {
+    pub(crate) fn organiser(&self) -> Result<Organiser, ServiceError> {
         match self {
             Caller::Organiser(o) => Ok(*o),
             Caller::Anonymous => Err(ServiceError::MissingToken),
@@ -49,7 +49,7 @@ impl Caller {
         }
     }
 
-    pub fn worker(&self) -> Result<WorkerCred, ServiceError> {
+    pub(crate) fn worker(&self) -> Result<WorkerCred, ServiceError> {
         match self {
             Caller::Worker(w) => Ok(*w),
             Caller::Anonymous => Err(ServiceError::MissingToken),
@@ -62,7 +62,7 @@ impl AppState {
     /// Resolve a bearer token. The organiser and worker tokens are compared by hash without a
     /// database read (workers call several times a second); a team token costs one indexed
     /// lookup. An unknown token is not an error here: routes that need no caller ignore it.
-    pub async fn caller(&self, token: Option<&str>) -> Result<Caller, ServiceError> {
+    pub(crate) async fn caller(&self, token: Option<&str>) -> Result<Caller, ServiceError> {
         let Some(token) = token else {
             return Ok(Caller::Anonymous);
         };
@@ -81,7 +81,7 @@ impl AppState {
 
 /// The token of an `authorization` header value: `Bearer <token>` (either case of the scheme),
 /// trimmed; `None` for any other shape or an empty token. Both adapters use this one reading.
-pub fn bearer_token(header: &str) -> Option<&str> {
+pub(crate) fn bearer_token(header: &str) -> Option<&str> {
     let token = header
         .strip_prefix("Bearer ")
         .or_else(|| header.strip_prefix("bearer "))?
@@ -90,12 +90,12 @@ pub fn bearer_token(header: &str) -> Option<&str> {
 }
 
 /// A fresh bearer token: 32 random bytes, hex, with a prefix that makes leaks greppable.
-pub fn new_token() -> String {
+pub(crate) fn new_token() -> String {
     let bytes: [u8; 32] = rand::random();
     format!("kr_{}", hex::encode(bytes))
 }
 
-pub fn hash_token(token: &str) -> String {
+pub(crate) fn hash_token(token: &str) -> String {
     hex::encode(Sha256::digest(token.as_bytes()))
 }
 

@@ -12,7 +12,7 @@ use crate::store;
 
 impl AppState {
     /// The ranking of one track and split.
-    pub async fn leaderboard(&self, track: Track, split: Split) -> Result<Leaderboard, ServiceError> {
+    pub(crate) async fn leaderboard(&self, track: Track, split: Split) -> Result<Leaderboard, ServiceError> {
         let rows: Vec<Row> = match track {
             Track::Planning => store::planning_leaderboard(self.pool(), split)
                 .await?
@@ -60,7 +60,7 @@ impl AppState {
     }
 
     /// The leaderboard rendered in `format`, from the cache when nothing was written since.
-    pub async fn leaderboard_rendered(
+    pub(crate) async fn leaderboard_rendered(
         &self,
         track: Track,
         split: Split,
@@ -87,7 +87,7 @@ impl AppState {
     }
 
     /// The public page at `/`: all three tracks of `split`.
-    pub async fn leaderboard_page(&self, split: Split) -> Result<Bytes, ServiceError> {
+    pub(crate) async fn leaderboard_page(&self, split: Split) -> Result<Bytes, ServiceError> {
         let key = (None, split, Format::Html);
         let cache = self.leaderboard_cache();
         let (generation, hit) = cache.get(key);

@@ -26,10 +26,10 @@ use crate::states::JobState;
 use crate::store::queue::{self, NewResult};
 
 /// Most jobs one Lease call hands out, and the longest it is held open.
-pub const MAX_JOBS_PER_LEASE: u32 = 64;
-pub const MAX_LEASE_WAIT_MS: u32 = 30_000;
+pub(crate) const MAX_JOBS_PER_LEASE: u32 = 64;
+pub(crate) const MAX_LEASE_WAIT_MS: u32 = 30_000;
 /// Cap of the stored log tail (worker.proto: 64 KiB).
-pub const MAX_LOG_TAIL_BYTES: usize = 64 << 10;
+pub(crate) const MAX_LOG_TAIL_BYTES: usize = 64 << 10;
 const MAX_TASKS: usize = 256;
 const MAX_REASON_CHARS: usize = 2000;
 /// A long-polling Lease re-checks the queue this often even without a wake-up, so a slot freed
@@ -38,7 +38,7 @@ const POLL_INTERVAL: Duration = Duration::from_millis(500);
 
 /// A job as handed to a worker.
 #[derive(Debug, Clone, PartialEq)]
-pub struct LeasedJob {
+pub(crate) struct LeasedJob {
     pub id: i64,
     pub attempt: u32,
     pub lease_expires_at_ms: i64,
@@ -52,7 +52,7 @@ pub struct LeasedJob {
 
 /// A worker's result report.
 #[derive(Debug, Clone, PartialEq, Default)]
-pub struct Report {
+pub(crate) struct Report {
     pub worker_id: String,
     pub job_id: i64,
     pub attempt: u32,
@@ -65,19 +65,19 @@ pub struct Report {
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-pub struct ReportOutcome {
+pub(crate) struct ReportOutcome {
     pub accepted: bool,
     pub duplicate: bool,
 }
 
 /// `None` expiry means the lease is gone: stop working.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct HeartbeatOutcome {
+pub(crate) struct HeartbeatOutcome {
     pub lease_expires_at_ms: Option<i64>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
-pub struct ReapReport {
+pub(crate) struct ReapReport {
     pub requeued: usize,
     pub failed: usize,
     pub runs_finished: usize,
@@ -85,7 +85,7 @@ pub struct ReapReport {
 
 impl AppState {
     /// The server is shutting down: answer waiting leases now, empty, and lease nothing more.
-    pub fn begin_shutdown(&self) {
+    pub(crate) fn begin_shutdown(&self) {
         self.inner
             .stopping
             .store(true, std::sync::atomic::Ordering::SeqCst);
@@ -97,7 +97,7 @@ impl AppState {
     }
 
     /// Claim up to `max_jobs` jobs for `worker_id`, waiting up to `wait_ms` for work.
-    pub async fn lease(
+    pub(crate) async fn lease(
         &self,
         _: WorkerCred,
         worker_id: &str,
@@ -138,7 +138,7 @@ impl AppState {
     }
 
     /// Extend a lease the worker still holds.
-    pub async fn heartbeat(
+    pub(crate) async fn heartbeat(
         &self,
         _: WorkerCred,
         worker_id: &str,
@@ -170,7 +170,11 @@ impl AppState {
     }
 
     /// Record one episode's result (idempotent on `(run, episode)`).
-    pub async fn report_result(&self, _: WorkerCred, mut r: Report) -> Result<ReportOutcome, ServiceError> {
+    pub(crate) async fn report_result(
+        &self,
+        _: WorkerCred,
+        mut r: Report,
+    ) -> Result<ReportOutcome, ServiceError> {
         validate_worker_id(&r.worker_id)?;
         if r.tasks.len() > MAX_TASKS {
             return Err(ServiceError::BadRequest(format!(
@@ -237,7 +241,7 @@ impl AppState {
 
     /// Requeue every job whose lease ended before `now`, or record it as failed once it has
     /// had all its attempts.
-    pub async fn reap_expired(&self, now: i64) -> Result<ReapReport, ServiceError> {
+    pub(crate) async fn reap_expired(&self, now: i64) -> Result<ReapReport, ServiceError> {
         let mut report = ReapReport::default();
         // A cheap read first, so the periodic reaper takes the write lock only when needed.
         if queue::expired(&mut *self.pool().acquire().await?, now)

@@ -18,7 +18,7 @@ use crate::store::runs::{self as run_store, NewPolicyRun};
 use crate::store::{self, Team};
 
 /// Version of the control scorer; part of every policy run's `scorer_version`.
-pub const CONTROL_SCORER: &str = "control/1";
+pub(crate) const CONTROL_SCORER: &str = "control/1";
 
 const MAX_URL_CHARS: usize = 2048;
 const MAX_TOKEN_CHARS: usize = 4096;
@@ -26,7 +26,7 @@ const MAX_TOKEN_CHARS: usize = 4096;
 /// `POST /api/v1/submissions/policies` and `RegisterPolicy`.
 #[derive(Debug, Clone, PartialEq, Eq, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct RegisterPolicy {
+pub(crate) struct RegisterPolicy {
     /// `http://host:port` or `https://host:port`.
     pub endpoint: String,
     pub split: Split,
@@ -46,7 +46,7 @@ pub struct RegisterPolicy {
 
 /// The answer to an accepted registration.
 #[derive(Debug, Clone, Serialize)]
-pub struct Registered {
+pub(crate) struct Registered {
     pub id: i64,
     pub run_id: i64,
     pub split: Split,
@@ -61,7 +61,7 @@ pub struct Registered {
 
 /// What `submissions.body` holds for a policy submission.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-pub struct PolicyBody {
+pub(crate) struct PolicyBody {
     pub endpoint: String,
     /// Stored because workers must present it to the endpoint; never shown back.
     pub token: Option<String>,
@@ -77,7 +77,7 @@ pub struct PolicyBody {
 
 /// The endpoint as the submission page shows it: everything but the token.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize)]
-pub struct PolicyInfo {
+pub(crate) struct PolicyInfo {
     pub endpoint: String,
     pub has_token: bool,
     pub plans: Option<i64>,
@@ -104,7 +104,7 @@ pub(crate) fn policy_info(body: &str) -> Result<PolicyInfo, ServiceError> {
 
 impl AppState {
     /// Probe and register a policy endpoint, queueing its episodes.
-    pub async fn register_policy(
+    pub(crate) async fn register_policy(
         &self,
         caller: &Caller,
         req: RegisterPolicy,
@@ -187,7 +187,7 @@ impl AppState {
     /// (after `rescore` flagged it `needs_resimulation`), as a new run on the same submission.
     /// The endpoint is not probed and no quota is used: it is the organiser's request, and an
     /// endpoint that is gone fails its tasks like any unreachable policy.
-    pub async fn resimulate(&self, _: Organiser, id: i64) -> Result<Registered, ServiceError> {
+    pub(crate) async fn resimulate(&self, _: Organiser, id: i64) -> Result<Registered, ServiceError> {
         let sub = store::submission(self.pool(), id)
             .await?
             .filter(|s| s.kind == SubmissionKind::Policy)

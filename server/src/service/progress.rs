@@ -16,7 +16,7 @@ use crate::store::RunRow;
 use crate::store::runs::{self as run_store, ResultRow};
 
 #[derive(Debug, Clone, Serialize)]
-pub struct PolicyRunView {
+pub(crate) struct PolicyRunView {
     /// `queued` (no episode started), `running`, `finished` or `platform_failed`.
     pub state: &'static str,
     pub episodes_total: i64,
@@ -47,13 +47,13 @@ pub struct PolicyRunView {
 }
 
 #[derive(Debug, Clone, PartialEq, Eq, Serialize)]
-pub struct ReasonCount {
+pub(crate) struct ReasonCount {
     pub reason: String,
     pub count: usize,
 }
 
 #[derive(Debug, Clone, Serialize)]
-pub struct RetryView {
+pub(crate) struct RetryView {
     pub key: String,
     /// Leases so far.
     pub attempt: i64,
@@ -61,7 +61,7 @@ pub struct RetryView {
 }
 
 #[derive(Debug, Clone, Serialize)]
-pub struct EpisodeView {
+pub(crate) struct EpisodeView {
     /// `dev-0007` (online) or `dev-0007/offline`.
     pub key: String,
     pub mode: String,
@@ -157,7 +157,7 @@ fn failure_counts(episodes: &[EpisodeView], hidden: bool) -> Vec<ReasonCount> {
 
 /// The kind of a failure reason: its text with every number replaced by `N`, capped at 160
 /// characters, so "time limit of 120 s reached" on two tasks counts twice under one kind.
-pub fn reason_kind(reason: &str) -> String {
+pub(super) fn reason_kind(reason: &str) -> String {
     let mut out = String::new();
     let mut in_number = false;
     for c in reason.chars() {

@@ -25,7 +25,7 @@ use crate::store::runs as run_store;
 use crate::store::{self, NewRun};
 
 #[derive(Debug, Clone, Serialize)]
-pub struct RescoreReport {
+pub(crate) struct RescoreReport {
     /// Plan submissions rescored.
     pub rescored: usize,
     /// Plan submissions whose stored file no longer parses against the dataset.
@@ -40,14 +40,14 @@ pub struct RescoreReport {
 }
 
 #[derive(Debug, Clone, Serialize)]
-pub struct RescoreFailure {
+pub(crate) struct RescoreFailure {
     pub id: i64,
     pub error: String,
 }
 
 impl AppState {
     /// Organiser: a new scoring run for every plan submission.
-    pub async fn rescore_all(&self, _: Organiser) -> Result<RescoreReport, ServiceError> {
+    pub(crate) async fn rescore_all(&self, _: Organiser) -> Result<RescoreReport, ServiceError> {
         let scorer = self.scorer_version();
         let mut report = RescoreReport {
             rescored: 0,

@@ -16,7 +16,7 @@ use crate::states::JobState;
 
 /// A job handed to a worker.
 #[derive(Debug, Clone, PartialEq, FromRow)]
-pub struct Claimed {
+pub(crate) struct Claimed {
     pub id: i64,
     pub attempt: i64,
     pub run_id: i64,
@@ -28,7 +28,7 @@ pub struct Claimed {
 
 /// Lease up to `limit` queued jobs to `owner` until `until`, oldest first, never taking a run
 /// past its `max_concurrency` (0 = unlimited) counting the leases it already has.
-pub async fn claim(
+pub(crate) async fn claim(
     pool: &SqlitePool,
     owner: &str,
     now: i64,
@@ -62,7 +62,7 @@ pub async fn claim(
 }
 
 /// Whether any job waits in the queue (a read, cheaper than a claim that finds nothing).
-pub async fn any_queued(pool: &SqlitePool) -> sqlx::Result<bool> {
+pub(crate) async fn any_queued(pool: &SqlitePool) -> sqlx::Result<bool> {
     sqlx::query_scalar("SELECT EXISTS (SELECT 1 FROM jobs WHERE state = 'queued')")
         .fetch_one(pool)
         .await
@@ -70,7 +70,7 @@ pub async fn any_queued(pool: &SqlitePool) -> sqlx::Result<bool> {
 
 /// Extend a lease still held by `(job, attempt, owner)`; `None` when it is not (requeued,
 /// leased again, finished or cancelled).
-pub async fn heartbeat(
+pub(crate) async fn heartbeat(
     pool: &SqlitePool,
     job: i64,
     attempt: i64,
@@ -94,7 +94,7 @@ pub async fn heartbeat(
 
 /// A job as the report and reaper paths see it.
 #[derive(Debug, Clone, PartialEq, FromRow)]
-pub struct JobRow {
+pub(crate) struct JobRow {
     pub id: i64,
     pub run_id: i64,
     pub episode_key: String,
@@ -114,7 +114,7 @@ macro_rules! job_columns {
     };
 }
 
-pub async fn job(conn: &mut SqliteConnection, id: i64) -> sqlx::Result<Option<JobRow>> {
+pub(crate) async fn job(conn: &mut SqliteConnection, id: i64) -> sqlx::Result<Option<JobRow>> {
     sqlx::query_as(concat!("SELECT ", job_columns!(), " FROM jobs WHERE id = ?"))
         .bind(id)
         .fetch_optional(&mut *conn)
@@ -122,7 +122,7 @@ pub async fn job(conn: &mut SqliteConnection, id: i64) -> sqlx::Result<Option<Jo
 }
 
 /// Leased jobs whose lease ended before `now`.
-pub async fn expired(conn: &mut SqliteConnection, now: i64) -> sqlx::Result<Vec<JobRow>> {
+pub(crate) async fn expired(conn: &mut SqliteConnection, now: i64) -> sqlx::Result<Vec<JobRow>> {
     sqlx::query_as(concat!(
         "SELECT ",
         job_columns!(),
@@ -133,7 +133,7 @@ pub async fn expired(conn: &mut SqliteConnection, now: i64) -> sqlx::Result<Vec<
     .await
 }
 
-pub async fn result_exists(conn: &mut SqliteConnection, run: i64, key: &str) -> sqlx::Result<bool> {
+pub(crate) async fn result_exists(conn: &mut SqliteConnection, run: i64, key: &str) -> sqlx::Result<bool> {
     let n: i64 =
         sqlx::query_scalar("SELECT COUNT(*) FROM episode_results WHERE run_id = ? AND episode_key = ?")
             .bind(run)
@@ -145,7 +145,7 @@ pub async fn result_exists(conn: &mut SqliteConnection, run: i64, key: &str) -> 
 
 /// An episode result to record.
 #[derive(Debug, Clone, PartialEq)]
-pub struct NewResult<'a> {
+pub(crate) struct NewResult<'a> {
     pub job: &'a JobRow,
     pub mode: &'a str,
     pub tasks: &'a [TaskOutcome],
@@ -156,7 +156,11 @@ pub struct NewResult<'a> {
 }
 
 /// Record a result; `false` when `(run, episode)` was already recorded (nothing changes).
-pub async fn insert_result(conn: &mut SqliteConnection, r: &NewResult<'_>, now: i64) -> sqlx::Result<bool> {
+pub(crate) async fn insert_result(
+    conn: &mut SqliteConnection,
+    r: &NewResult<'_>,
+    now: i64,
+) -> sqlx::Result<bool> {
     let done = sqlx::query(
         "INSERT INTO episode_results (run_id, episode_key, job_id, mode, tasks, failure, wall_ms, log_tail,
                                       attempt, worker_id, recorded_at)
@@ -180,7 +184,7 @@ pub async fn insert_result(conn: &mut SqliteConnection, r: &NewResult<'_>, now: 
 }
 
 /// Move a job to another state (`done`, `failed`, or back to `queued`), dropping its lease.
-pub async fn close_job(
+pub(crate) async fn close_job(
     conn: &mut SqliteConnection,
     id: i64,
     state: JobState,
@@ -201,12 +205,12 @@ pub async fn close_job(
 }
 
 /// Put a job back in the queue after a platform failure or an expired lease.
-pub async fn requeue(conn: &mut SqliteConnection, id: i64, error: &str, now: i64) -> sqlx::Result<()> {
+pub(crate) async fn requeue(conn: &mut SqliteConnection, id: i64, error: &str, now: i64) -> sqlx::Result<()> {
     close_job(conn, id, JobState::Queued, Some(error), now).await
 }
 
 /// Jobs of a run still queued or leased.
-pub async fn open_jobs(conn: &mut SqliteConnection, run: i64) -> sqlx::Result<i64> {
+pub(crate) async fn open_jobs(conn: &mut SqliteConnection, run: i64) -> sqlx::Result<i64> {
     sqlx::query_scalar("SELECT COUNT(*) FROM jobs WHERE run_id = ? AND state IN ('queued', 'leased')")
         .bind(run)
         .fetch_one(&mut *conn)
@@ -214,7 +218,7 @@ pub async fn open_jobs(conn: &mut SqliteConnection, run: i64) -> sqlx::Result<i6
 }
 
 /// Every recorded episode of a run with the spec it ran under, in key order.
-pub async fn episodes(conn: &mut SqliteConnection, run: i64) -> sqlx::Result<Vec<Episode>> {
+pub(crate) async fn episodes(conn: &mut SqliteConnection, run: i64) -> sqlx::Result<Vec<Episode>> {
     let rows: Vec<EpisodeRow> = sqlx::query_as(
         "SELECT j.spec, e.tasks, e.failure FROM episode_results e JOIN jobs j ON j.id = e.job_id
          WHERE e.run_id = ? ORDER BY e.episode_key",

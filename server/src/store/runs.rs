@@ -11,7 +11,7 @@ use crate::store::{SubmissionBody, Team};
 
 /// A policy submission to insert with its run and jobs.
 #[derive(Debug, Clone, PartialEq)]
-pub struct NewPolicyRun<'a> {
+pub(crate) struct NewPolicyRun<'a> {
     pub team: i64,
     pub split: Split,
     /// The endpoint JSON (`submissions.body`).
@@ -25,7 +25,7 @@ pub struct NewPolicyRun<'a> {
 
 /// Insert the submission, its active run and its queued jobs atomically: a crash never leaves a
 /// run without its episodes. Returns `(submission id, run id)`.
-pub async fn insert_policy_submission(
+pub(crate) async fn insert_policy_submission(
     pool: &SqlitePool,
     new: &NewPolicyRun<'_>,
     now: i64,
@@ -47,7 +47,7 @@ pub async fn insert_policy_submission(
 
 /// A new active run with its queued jobs on an existing policy submission (an organiser's
 /// re-simulation request), atomically. `new.team`, `new.split` and `new.body` are not used.
-pub async fn insert_policy_run(
+pub(crate) async fn insert_policy_run(
     pool: &SqlitePool,
     submission: i64,
     new: &NewPolicyRun<'_>,
@@ -95,7 +95,7 @@ async fn insert_run_with_jobs(
 }
 
 /// Policy runs of a team still evaluating.
-pub async fn active_runs(pool: &SqlitePool, team: i64) -> sqlx::Result<i64> {
+pub(crate) async fn active_runs(pool: &SqlitePool, team: i64) -> sqlx::Result<i64> {
     sqlx::query_scalar(
         "SELECT COUNT(*) FROM scoring_runs r JOIN submissions s ON s.id = r.submission_id
          WHERE s.team_id = ? AND r.state = 'active'",
@@ -106,7 +106,7 @@ pub async fn active_runs(pool: &SqlitePool, team: i64) -> sqlx::Result<i64> {
 }
 
 /// The split and body of the submission a run belongs to.
-pub async fn run_submission(conn: &mut SqliteConnection, run: i64) -> sqlx::Result<SubmissionBody> {
+pub(crate) async fn run_submission(conn: &mut SqliteConnection, run: i64) -> sqlx::Result<SubmissionBody> {
     sqlx::query_as("SELECT s.split, s.body FROM scoring_runs r JOIN submissions s ON s.id = r.submission_id WHERE r.id = ?")
         .bind(run)
         .fetch_one(&mut *conn)
@@ -114,7 +114,7 @@ pub async fn run_submission(conn: &mut SqliteConnection, run: i64) -> sqlx::Resu
 }
 
 /// The split and body of any submission, inside a transaction.
-pub async fn submission_body_in(
+pub(crate) async fn submission_body_in(
     conn: &mut SqliteConnection,
     id: i64,
 ) -> sqlx::Result<Option<SubmissionBody>> {
@@ -126,7 +126,7 @@ pub async fn submission_body_in(
 
 /// Store a finished run's scores; only an `active` run is finished (a second call is a no-op).
 /// Returns whether the run was finished by this call.
-pub async fn finish_run(
+pub(crate) async fn finish_run(
     conn: &mut SqliteConnection,
     run: i64,
     scores: &RunScores,
@@ -156,7 +156,7 @@ pub async fn finish_run(
 
 /// A rescore of a finished policy run: a new finished scoring run with `scores` recomputed from
 /// the episodes of `source` (which stay keyed by `source`).
-pub async fn insert_derived_run(
+pub(crate) async fn insert_derived_run(
     pool: &SqlitePool,
     submission: i64,
     source: i64,
@@ -186,7 +186,7 @@ pub async fn insert_derived_run(
 }
 
 /// Flag a run whose episodes no longer match the ground truth.
-pub async fn mark_needs_resimulation(pool: &SqlitePool, run: i64) -> sqlx::Result<()> {
+pub(crate) async fn mark_needs_resimulation(pool: &SqlitePool, run: i64) -> sqlx::Result<()> {
     sqlx::query("UPDATE scoring_runs SET needs_resimulation = 1 WHERE id = ?")
         .bind(run)
         .execute(pool)
@@ -196,7 +196,7 @@ pub async fn mark_needs_resimulation(pool: &SqlitePool, run: i64) -> sqlx::Resul
 
 /// Job counts of a run by state.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, FromRow)]
-pub struct JobCounts {
+pub(crate) struct JobCounts {
     pub queued: i64,
     pub leased: i64,
     pub done: i64,
@@ -205,7 +205,7 @@ pub struct JobCounts {
     pub started: i64,
 }
 
-pub async fn job_counts(pool: &SqlitePool, run: i64) -> sqlx::Result<JobCounts> {
+pub(crate) async fn job_counts(pool: &SqlitePool, run: i64) -> sqlx::Result<JobCounts> {
     sqlx::query_as(
         "SELECT COALESCE(SUM(state = 'queued'), 0) AS queued, COALESCE(SUM(state = 'leased'), 0) AS leased,
                 COALESCE(SUM(state = 'done'), 0) AS done, COALESCE(SUM(state = 'failed'), 0) AS failed,
@@ -219,7 +219,7 @@ pub async fn job_counts(pool: &SqlitePool, run: i64) -> sqlx::Result<JobCounts> 
 
 /// One recorded episode as the submission page shows it.
 #[derive(Debug, Clone, PartialEq, FromRow)]
-pub struct ResultRow {
+pub(crate) struct ResultRow {
     pub episode_key: String,
     pub mode: String,
     #[sqlx(json)]
@@ -230,7 +230,7 @@ pub struct ResultRow {
     pub attempt: i64,
 }
 
-pub async fn results(pool: &SqlitePool, run: i64) -> sqlx::Result<Vec<ResultRow>> {
+pub(crate) async fn results(pool: &SqlitePool, run: i64) -> sqlx::Result<Vec<ResultRow>> {
     sqlx::query_as(
         "SELECT episode_key, mode, tasks, failure, wall_ms, log_tail, attempt FROM episode_results
          WHERE run_id = ? ORDER BY episode_key",
@@ -242,7 +242,7 @@ pub async fn results(pool: &SqlitePool, run: i64) -> sqlx::Result<Vec<ResultRow>
 
 /// A control or integrated leaderboard row (best entry per team, or a baseline).
 #[derive(Debug, Clone, PartialEq, FromRow)]
-pub struct PolicyBoardRow {
+pub(crate) struct PolicyBoardRow {
     pub team: String,
     pub submission_id: i64,
     pub submitted_at: i64,
@@ -259,7 +259,7 @@ pub struct PolicyBoardRow {
 /// control track, `("m", "p")` for the integrated track (only runs linked to a plans
 /// submission). Best entry per team; reference runs are each their own baseline row. Unscored
 /// or failed entries sort last, then earliest submission, then id.
-pub async fn policy_leaderboard(
+pub(crate) async fn policy_leaderboard(
     pool: &SqlitePool,
     split: Split,
     integrated: bool,
@@ -301,11 +301,11 @@ pub async fn policy_leaderboard(
 
 /// Name of the reserved team organiser reference runs are filed under. Team names cannot
 /// contain parentheses, so no participant can take it.
-pub const BASELINE_TEAM: &str = "(baseline)";
+pub(crate) const BASELINE_TEAM: &str = "(baseline)";
 
 /// The reserved baseline team, created on first use. Its token hash is not a hex digest, so no
 /// bearer token ever authenticates as it.
-pub async fn baseline_team(pool: &SqlitePool, now: i64) -> sqlx::Result<Team> {
+pub(crate) async fn baseline_team(pool: &SqlitePool, now: i64) -> sqlx::Result<Team> {
     sqlx::query_as(
         "INSERT INTO teams (name, token_hash, created_at) VALUES (?, '!baseline: no token', ?)
          ON CONFLICT (name) DO UPDATE SET name = excluded.name RETURNING id, name",
@@ -318,7 +318,7 @@ pub async fn baseline_team(pool: &SqlitePool, now: i64) -> sqlx::Result<Team> {
 
 /// An unfinished job that already failed an attempt.
 #[derive(Debug, Clone, PartialEq, Eq, FromRow)]
-pub struct RetryingJob {
+pub(crate) struct RetryingJob {
     pub episode_key: String,
     /// Leases so far.
     pub attempt: i64,
@@ -326,7 +326,7 @@ pub struct RetryingJob {
 }
 
 /// Unfinished jobs of a run that already failed an attempt, in key order.
-pub async fn retrying(pool: &SqlitePool, run: i64) -> sqlx::Result<Vec<RetryingJob>> {
+pub(crate) async fn retrying(pool: &SqlitePool, run: i64) -> sqlx::Result<Vec<RetryingJob>> {
     sqlx::query_as(
         "SELECT episode_key, attempt, last_error FROM jobs
          WHERE run_id = ? AND state IN ('queued', 'leased') AND last_error IS NOT NULL ORDER BY episode_key",

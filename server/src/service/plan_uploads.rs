@@ -1,0 +1,93 @@
+//! Plan uploads: a team's plan file validated, scored against the split's ground truth and
+//! stored with its scoring run, within the team's daily quota.
+
+use kitchen_r_core::dataset::Split;
+use serde::Serialize;
+
+use super::{AppState, Scores, now_ms, rfc3339};
+use crate::error::ServiceError;
+use crate::plans;
+use crate::store::{self, NewRun, Team};
+
+const DAY_MS: i64 = 86_400_000;
+
+/// The answer to an accepted plan file.
+#[derive(Debug, Clone, Serialize)]
+pub(crate) struct Submitted {
+    pub id: i64,
+    pub split: Split,
+    pub scores: Scores,
+    pub warnings: Vec<String>,
+}
+
+impl AppState {
+    /// Validate, score and store a plan file for `team`.
+    pub(crate) async fn submit_plans(
+        &self,
+        team: &Team,
+        split: Split,
+        body: &[u8],
+    ) -> Result<Submitted, ServiceError> {
+        let limit = self.config().max_body_bytes;
+        if body.len() > limit {
+            let line = plans::line_at(body, limit);
+            return Err(plans::PlanFileError::TooLarge { limit, line }.into());
+        }
+        let gt = self.content().ground_truth(split);
+        let file = plans::parse(body, split, gt.len(), &self.content().index, &self.config().plans)?;
+        let score = plans::score(&file, gt);
+        // `parse` accepted it, so it is UTF-8.
+        let text = String::from_utf8_lossy(body);
+        let scorer = self.scorer_version();
+        let run = NewRun {
+            scorer_version: &scorer,
+            em: score.em,
+            instructions: &score.instructions,
+        };
+        let id = {
+            let _guard = self.inner.submit_lock.lock().await;
+            let now = now_ms();
+            self.check_quota(team, split, now).await?;
+            store::insert_plan_submission(self.pool(), team.id, split, &text, now, &run)
+                .await?
+                .0
+        };
+        self.inner.leaderboard.invalidate();
+        tracing::info!(submission = id, team = %team.name, %split, em = score.em, "plans submitted");
+        let mut warnings = plans::warnings(&score);
+        if split == Split::Test
+            && let Some(why) = self.unranked_reason(team.id, id).await?
+        {
+            warnings.push(format!("not ranked: {why}"));
+        }
+        Ok(Submitted {
+            id,
+            split,
+            scores: Scores::em(Some(score.em)),
+            warnings,
+        })
+    }
+
+    pub(super) async fn check_quota(&self, team: &Team, split: Split, now: i64) -> Result<(), ServiceError> {
+        let q = self.config().quota;
+        let limit = match split {
+            Split::Dev => q.dev_per_day,
+            Split::Test => q.test_per_day,
+        };
+        if limit == 0 {
+            return Ok(());
+        }
+        let day_start = now - now.rem_euclid(DAY_MS);
+        let used = store::count_submissions_since(self.pool(), team.id, split, day_start).await?;
+        if used < i64::from(limit) {
+            return Ok(());
+        }
+        let reset = day_start + DAY_MS;
+        Err(ServiceError::Quota {
+            split: split.as_str(),
+            limit,
+            resets_at: rfc3339(reset),
+            retry_after_s: (reset - now + 999) / 1000,
+        })
+    }
+}

@@ -1,0 +1,153 @@
+//! A submission as its team (or the organiser) sees it: its latest scoring run, per-instruction
+//! results on the dev split only, and why a test plan file is not ranked.
+
+use kitchen_r_core::dataset::Split;
+use serde::Serialize;
+
+use super::policies::{self, PolicyInfo};
+use super::{AppState, Caller, PolicyRunView, Scores, rfc3339};
+use crate::error::ServiceError;
+use crate::plans::InstructionScore;
+use crate::states::SubmissionKind;
+use crate::store;
+
+#[derive(Debug, Clone, Serialize)]
+pub(crate) struct SubmissionView {
+    pub id: i64,
+    pub team: String,
+    pub split: String,
+    pub kind: String,
+    pub created_at: String,
+    pub runs: i64,
+    /// Policy submissions: the endpoint as registered (never its token).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub policy: Option<PolicyInfo>,
+    /// Whether the submission can appear on the leaderboard.
+    pub ranked: bool,
+    /// Why it cannot, when it cannot.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub unranked_reason: Option<String>,
+    pub latest_run: Option<RunView>,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub(crate) struct RunView {
+    pub id: i64,
+    pub scorer_version: String,
+    pub created_at: String,
+    pub scores: Scores,
+    /// Dev plan runs: one row per instruction. Empty on the test split, whose feedback is
+    /// aggregate only (`instructions_total`, `instructions_present`).
+    pub instructions: Vec<InstructionView>,
+    /// Plan runs: instructions in the split and how many the file had a plan for.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub instructions_total: Option<usize>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub instructions_present: Option<usize>,
+    /// Policy runs: progress and per-episode, per-task results.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub evaluation: Option<PolicyRunView>,
+}
+
+/// Per-instruction result of a dev plan run (test runs show none: per-instruction EM would turn
+/// every upload into hundreds of probes of the hidden answers).
+#[derive(Debug, Clone, Serialize)]
+pub(crate) struct InstructionView {
+    pub id: String,
+    pub present: bool,
+    pub correct_steps: usize,
+    pub total_steps: usize,
+    pub em: f64,
+}
+
+impl AppState {
+    /// A submission with its latest run, for its own team or the organiser.
+    pub(crate) async fn get_submission(
+        &self,
+        caller: &Caller,
+        id: i64,
+    ) -> Result<SubmissionView, ServiceError> {
+        let viewer = match caller {
+            Caller::Organiser(_) => None,
+            _ => Some(caller.team()?),
+        };
+        let sub = store::submission(self.pool(), id)
+            .await?
+            .filter(|s| viewer.as_ref().is_none_or(|t| t.id == s.team_id))
+            .ok_or_else(|| ServiceError::not_found(format!("submission {id}")))?;
+        let hidden = sub.split == Split::Test.as_str();
+        let is_policy = sub.kind == SubmissionKind::Policy;
+        let latest_run = match store::latest_run(self.pool(), id).await? {
+            None => None,
+            Some(run) => {
+                let evaluation = match is_policy {
+                    true => Some(self.policy_run_view(&run, hidden).await?),
+                    false => None,
+                };
+                let results = match is_policy {
+                    true => Vec::new(),
+                    false => store::instruction_results(self.pool(), run.id).await?,
+                };
+                let present = results.iter().filter(|i| i.present).count();
+                Some(RunView {
+                    id: run.id,
+                    scorer_version: run.scorer_version,
+                    created_at: rfc3339(run.created_at),
+                    scores: run.scores,
+                    instructions_total: (!is_policy).then_some(results.len()),
+                    instructions_present: (!is_policy).then_some(present),
+                    instructions: match hidden {
+                        true => Vec::new(),
+                        false => results.iter().map(instruction_view).collect(),
+                    },
+                    evaluation,
+                })
+            }
+        };
+        let policy = match is_policy {
+            true => Some(policies::policy_info(
+                &store::submission_body(self.pool(), id).await?.body,
+            )?),
+            false => None,
+        };
+        let test_plans = sub.kind == SubmissionKind::Plans && sub.split == Split::Test.as_str();
+        let unranked_reason = match test_plans {
+            true => self.unranked_reason(sub.team_id, sub.id).await?,
+            false => None,
+        };
+        Ok(SubmissionView {
+            id: sub.id,
+            team: sub.team,
+            split: sub.split,
+            kind: sub.kind.as_str().to_string(),
+            created_at: rfc3339(sub.created_at),
+            runs: sub.runs,
+            policy,
+            ranked: unranked_reason.is_none(),
+            unranked_reason,
+            latest_run,
+        })
+    }
+
+    /// Why the test plan submission `id` of `team` cannot appear on the leaderboard (the rule
+    /// [`store::planning_leaderboard`] applies), or `None` when it can.
+    pub(super) async fn unranked_reason(&self, team: i64, id: i64) -> Result<Option<String>, ServiceError> {
+        Ok(match store::first_test_policy(self.pool(), team).await? {
+            Some(first) if first < id => Some(format!(
+                "created after the team's first test-split policy run (submission {first}), whose \
+                 endpoint received the test plans' steps as sub-tasks: scored, not ranked"
+            )),
+            _ => None,
+        })
+    }
+}
+
+fn instruction_view(i: &InstructionScore) -> InstructionView {
+    InstructionView {
+        id: i.id.clone(),
+        present: i.present,
+        correct_steps: i.correct,
+        total_steps: i.total,
+        em: i.em(),
+    }
+}
