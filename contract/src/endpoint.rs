@@ -225,7 +225,7 @@ pub(crate) const CLASS_RANGES: [(&str, NetworkKind); 9] = [
 
 impl AllowedNetworks {
     /// An `allow_networks` list of CIDR ranges as address classes. Only the ranges of
-    /// [`CLASS_RANGES`] are accepted, and one of them allows its whole class (the check is by
+    /// `CLASS_RANGES` are accepted, and one of them allows its whole class (the check is by
     /// class), so a list never suggests a finer filter than the one applied.
     pub fn from_cidrs<S: AsRef<str>>(list: &[S]) -> Result<AllowedNetworks, String> {
         let mut a = AllowedNetworks {

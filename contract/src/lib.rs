@@ -4,7 +4,7 @@
 //! ([`server::serve_policy`], behind `kitchen-r policy oracle`), and the conformance probe behind
 //! `kitchen-r check-policy` ([`check`]).
 //!
-//! Endpoints are untrusted: the address is checked before the first packet ([`endpoint`]),
+//! Endpoints are untrusted: the address is checked before the first packet ([`AllowedNetworks`]),
 //! every call has a deadline, answers are size-capped, and every failure becomes a task failure
 //! with a reason rather than a worker error.
 //!

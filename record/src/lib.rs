@@ -5,7 +5,7 @@
 //!   format `ros2 bag` uses, so ROS 2 tools and Foxglove open it.
 //! - [`hdf5_aloha`]: one HDF5 file per episode in the layout ALOHA/ACT tooling reads.
 //! - [`rate`]: the Monitoring Module's recording-rate check.
-//! - [`bench`]: oracle-episode and collection throughput figures (it needs both local evaluation
+//! - [`bench`](mod@bench): oracle-episode and collection throughput figures (it needs both local evaluation
 //!   and collection, so it lives with collection).
 //!
 //! The recorder knows nothing about physics: the collector converts simulator observations into

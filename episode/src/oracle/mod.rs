@@ -3,7 +3,7 @@
 //! algorithms themselves live in `kitchen_r_sim::oracle`).
 //!
 //! It answers each query with a chunk of 16 actions that is a coherent plan, not one action
-//! repeated: the task controller ([`task::TaskCtl`]) is stepped along a base trajectory predicted
+//! repeated: the task controller (`task::TaskCtl`) is stepped along a base trajectory predicted
 //! with a unicycle model under the base's speed and acceleration limits from
 //! `assets/robot.toml`. The runner executes the first k of them; at the next query the oracle
 //! adopts the controller state it predicted for exactly the steps executed and re-anchors on the
