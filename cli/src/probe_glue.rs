@@ -2,7 +2,7 @@
 //! worker crate's endpoint check, so registration contacts an endpoint exactly as a worker will.
 //! It lives in the binary because the server must not depend on the worker crate.
 
-use kitchen_r_contract::probe::{ProbeFailure, probe_endpoint};
+use kitchen_r_contract::probe::{ProbeFailure, probe_for_registration};
 use kitchen_r_contract::{AllowedNetworks, RemoteConfig};
 use kitchen_r_server::{BoxFuture, PolicyProbe, ProbeError, ProbedSpec};
 
@@ -16,7 +16,7 @@ impl PolicyProbe for WorkerProbe {
         let (url, bearer) = (url.to_string(), bearer.map(str::to_string));
         let (allow, remote) = (self.allow, self.remote.clone());
         Box::pin(async move {
-            match probe_endpoint(&url, bearer.as_deref(), &allow, &remote).await {
+            match probe_for_registration(&url, bearer.as_deref(), &allow, &remote).await {
                 Ok(s) => Ok(ProbedSpec {
                     protocol_version: s.protocol_version,
                     max_concurrency: s.max_concurrency,

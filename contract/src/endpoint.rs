@@ -49,7 +49,7 @@ pub(crate) enum NetworkKind {
     Loopback,
     Private,
     LinkLocal,
-    /// Multicast and broadcast: never a policy server.
+    /// Multicast, broadcast and reserved ranges (`0/8`, `240/4`): never a policy server.
     NotUnicast,
 }
 
@@ -59,7 +59,7 @@ impl NetworkKind {
             NetworkKind::Loopback => "loopback",
             NetworkKind::Private => "private (RFC 1918, CGNAT or ULA)",
             NetworkKind::LinkLocal => "link-local",
-            NetworkKind::NotUnicast => "multicast or broadcast",
+            NetworkKind::NotUnicast => "multicast, broadcast or reserved",
         }
     }
 
@@ -142,14 +142,44 @@ pub(crate) fn parse(endpoint: &str) -> Result<(bool, String, u16), EndpointError
     Ok((tls, host.to_string(), port))
 }
 
-/// The configurable class of `ip`, or `None` for a public unicast address.
+/// The configurable class of `ip`, or `None` for a public unicast address. An IPv6 address
+/// that carries an IPv4 address (mapped, compatible, SIIT, NAT64, 6to4, Teredo) is classified
+/// by the IPv4 address inside it: a translator or relay delivers it there.
 pub(crate) fn classify(ip: IpAddr) -> Option<NetworkKind> {
     match ip {
         IpAddr::V4(v4) => classify_v4(v4),
-        IpAddr::V6(v6) => match v6.to_ipv4_mapped() {
+        IpAddr::V6(v6) => match embedded_v4(v6) {
             Some(v4) => classify_v4(v4),
             None => classify_v6(v6),
         },
+    }
+}
+
+/// The IPv4 address an IPv6 address reaches, for every standard embedding.
+fn embedded_v4(ip: Ipv6Addr) -> Option<Ipv4Addr> {
+    let s = ip.segments();
+    let low = Ipv4Addr::from(((u32::from(s[6])) << 16) | u32::from(s[7]));
+    let is_zero = |range: &[u16]| range.iter().all(|&x| x == 0);
+    if let Some(v4) = ip.to_ipv4_mapped() {
+        // ::ffff:a.b.c.d
+        Some(v4)
+    } else if is_zero(&s[..6]) && !ip.is_loopback() && !ip.is_unspecified() {
+        // ::a.b.c.d, IPv4-compatible (deprecated, still routed by some stacks)
+        Some(low)
+    } else if is_zero(&s[..4]) && s[4] == 0xffff && s[5] == 0 {
+        // ::ffff:0:a.b.c.d, SIIT (RFC 6145)
+        Some(low)
+    } else if s[0] == 0x64 && s[1] == 0xff9b && (is_zero(&s[2..6]) || s[2] == 1) {
+        // 64:ff9b::/96 well-known NAT64 prefix and 64:ff9b:1::/48 local-use (RFC 6052, 8215)
+        Some(low)
+    } else if s[0] == 0x2002 {
+        // 2002:AABB:CCDD::/48, 6to4 (RFC 3056)
+        Some(Ipv4Addr::from(((u32::from(s[1])) << 16) | u32::from(s[2])))
+    } else if s[0] == 0x2001 && s[1] == 0 {
+        // 2001::/32 Teredo: the client's address is the last 32 bits, inverted (RFC 4380)
+        Some(Ipv4Addr::from(!u32::from(low)))
+    } else {
+        None
     }
 }
 
@@ -157,6 +187,9 @@ fn classify_v4(ip: Ipv4Addr) -> Option<NetworkKind> {
     let [a, b, ..] = ip.octets();
     if ip.is_loopback() || ip.is_unspecified() {
         Some(NetworkKind::Loopback)
+    } else if a == 0 || a >= 240 {
+        // 0.0.0.0/8 "this network" (Linux connects 0.x to the local host) and 240/4 reserved.
+        Some(NetworkKind::NotUnicast)
     } else if ip.is_private() || (a == 100 && (64..128).contains(&b)) {
         Some(NetworkKind::Private)
     } else if ip.is_link_local() {
@@ -172,7 +205,8 @@ fn classify_v6(ip: Ipv6Addr) -> Option<NetworkKind> {
     let first = ip.segments()[0];
     if ip.is_loopback() || ip.is_unspecified() {
         Some(NetworkKind::Loopback)
-    } else if first & 0xfe00 == 0xfc00 {
+    } else if first & 0xfe00 == 0xfc00 || first & 0xffc0 == 0xfec0 {
+        // ULA, and the deprecated site-local fec0::/10 some stacks still route inside a site.
         Some(NetworkKind::Private)
     } else if first & 0xffc0 == 0xfe80 {
         Some(NetworkKind::LinkLocal)
@@ -261,7 +295,7 @@ impl AllowedNetworks {
 /// The [`CLASS_RANGES`] entry `ip` falls in, to name in a refusal.
 pub(crate) fn class_range(ip: IpAddr) -> Option<&'static str> {
     let ip = match ip {
-        IpAddr::V6(v6) => v6.to_ipv4_mapped().map_or(ip, IpAddr::V4),
+        IpAddr::V6(v6) => embedded_v4(v6).map_or(ip, IpAddr::V4),
         v4 => v4,
     };
     let inside = |net: &str| -> bool {
@@ -376,6 +410,21 @@ mod tests {
             ("fe80::1", Some(NetworkKind::LinkLocal)),
             ("224.0.0.1", Some(NetworkKind::NotUnicast)),
             ("255.255.255.255", Some(NetworkKind::NotUnicast)),
+            ("0.1.2.3", Some(NetworkKind::NotUnicast)),
+            ("240.0.0.1", Some(NetworkKind::NotUnicast)),
+            // IPv6 carrying an IPv4 address is classified by it (issue #12's SSRF gaps).
+            ("::10.0.0.1", Some(NetworkKind::Private)),
+            ("::127.0.0.1", Some(NetworkKind::Loopback)),
+            ("::ffff:0:a00:1", Some(NetworkKind::Private)),
+            ("64:ff9b::a00:1", Some(NetworkKind::Private)),
+            ("64:ff9b::a9fe:a9fe", Some(NetworkKind::LinkLocal)),
+            ("64:ff9b:1::7f00:1", Some(NetworkKind::Loopback)),
+            ("2002:a00:1::1", Some(NetworkKind::Private)),
+            ("2002:a9fe:a9fe::1", Some(NetworkKind::LinkLocal)),
+            ("2001:0:4136:e378:8000:63bf:f5ff:fffe", Some(NetworkKind::Private)),
+            ("fec0::1", Some(NetworkKind::Private)),
+            ("64:ff9b::808:808", None),
+            ("2002:808:808::1", None),
             ("8.8.8.8", None),
             ("100.128.0.1", None),
             ("172.32.0.1", None),

@@ -7,6 +7,7 @@
 //! the registration request.
 
 use std::net::IpAddr;
+use std::time::Instant;
 
 use kitchen_r_proto::policy::v1 as pb;
 use kitchen_r_sim::SensorsConfig;
@@ -102,7 +103,25 @@ pub async fn probe_endpoint(
     let cameras = SensorsConfig::load_default()
         .map(|s| SimCamera::from_sensors(&s))
         .map_err(|e| ProbeFailure::Internal(format!("simulator cameras: {e}")))?;
-    probe_with_cameras(url, bearer, allow, cfg, &cameras).await
+    probe_with_cameras(url, bearer, allow, cfg, &cameras, false).await
+}
+
+/// [`probe_endpoint`] as the server's registration runs it, where the caller is a participant
+/// and the prober is the evaluation host. An endpoint on a non-public address (loopback,
+/// private, link-local, when the organiser's config allows them) is on or near that host, so a
+/// failure to reach or use it says only "unreachable", after the full startup deadline: neither
+/// the text nor the time tells a closed port from an HTTP or another gRPC service there. A
+/// public endpoint keeps the detailed reason (it is the participant's own server).
+pub async fn probe_for_registration(
+    url: &str,
+    bearer: Option<&str>,
+    allow: &AllowedNetworks,
+    cfg: &RemoteConfig,
+) -> Result<ProbedSpec, ProbeFailure> {
+    let cameras = SensorsConfig::load_default()
+        .map(|s| SimCamera::from_sensors(&s))
+        .map_err(|e| ProbeFailure::Internal(format!("simulator cameras: {e}")))?;
+    probe_with_cameras(url, bearer, allow, cfg, &cameras, true).await
 }
 
 /// [`probe_endpoint`] against an explicit camera set.
@@ -112,12 +131,41 @@ async fn probe_with_cameras(
     allow: &AllowedNetworks,
     cfg: &RemoteConfig,
     cameras: &[SimCamera],
+    opaque_near: bool,
 ) -> Result<ProbedSpec, ProbeFailure> {
+    let started = Instant::now();
     let (owned_url, allow_copy) = (url.to_string(), *allow);
     // Name resolution blocks: keep it off the server's async threads.
     let ep = tokio::task::spawn_blocking(move || endpoint::resolve(&owned_url, &allow_copy))
         .await
         .map_err(|e| ProbeFailure::Internal(e.to_string()))??;
+    let near = ep.addrs.iter().any(|a| endpoint::classify(a.ip()).is_some());
+    let uri = ep.uri.clone();
+    let answer = handshake(ep, bearer, cfg, cameras).await;
+    match answer {
+        Err(
+            ProbeFailure::Unreachable(_)
+            | ProbeFailure::NotServing(_)
+            | ProbeFailure::Handshake(_)
+            | ProbeFailure::Tls(_),
+        ) if opaque_near && near => {
+            tokio::time::sleep_until((started + cfg.startup_deadline()).into()).await;
+            Err(ProbeFailure::Unreachable(format!(
+                "cannot reach a policy at {uri} within {:.0} s",
+                cfg.startup_deadline().as_secs_f64()
+            )))
+        }
+        other => other,
+    }
+}
+
+/// Health until SERVING, then GetSpec, checked against what the simulator can give.
+async fn handshake(
+    ep: endpoint::Endpoint,
+    bearer: Option<&str>,
+    cfg: &RemoteConfig,
+    cameras: &[SimCamera],
+) -> Result<ProbedSpec, ProbeFailure> {
     let creds = Credentials {
         token: bearer.filter(|t| !t.is_empty()).map(str::to_string),
         ca_pem: None,

@@ -132,3 +132,57 @@ fn a_bad_spec_is_refused_naming_the_field() {
     assert!(matches!(err, ProbeFailure::Handshake(_)), "{err:?}");
     assert!(err.to_string().contains("horizon is 8, must be 16"), "{err}");
 }
+
+/// Issue #12: with loopback allowed, registration must not tell a closed port from a service
+/// that is not a policy on the evaluation host: the same text, after the same startup deadline.
+#[test]
+fn registration_says_only_unreachable_for_anything_near_the_evaluation_host() {
+    use kitchen_r_contract::probe::probe_for_registration;
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .enable_all()
+        .build()
+        .unwrap();
+    let listener = rt.block_on(tokio::net::TcpListener::bind("127.0.0.1:0")).unwrap();
+    let grpc = listener.local_addr().unwrap();
+    rt.spawn(async move {
+        let (reporter, health) = tonic_health::server::health_reporter();
+        reporter.set_service_status("", ServingStatus::NotServing).await;
+        tonic::transport::Server::builder()
+            .add_service(health)
+            .serve_with_incoming(tokio_stream::wrappers::TcpListenerStream::new(listener))
+            .await
+    });
+    let closed = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap();
+    let bad_spec = TestServer::start(
+        factory(8, std::sync::Arc::new(|_| Ok(vec![STILL; 8]))),
+        Default::default(),
+    );
+    let mut texts = Vec::new();
+    for url in [
+        format!("http://{grpc}"),
+        format!("http://{closed}"),
+        bad_spec.url(),
+    ] {
+        let started = std::time::Instant::now();
+        let err = rt
+            .block_on(probe_for_registration(
+                &url,
+                None,
+                &AllowedNetworks::default(),
+                &cfg(),
+            ))
+            .unwrap_err();
+        assert!(
+            started.elapsed() >= Duration::from_secs(1),
+            "{url}: answered early"
+        );
+        assert!(matches!(err, ProbeFailure::Unreachable(_)), "{err:?}");
+        texts.push(err.to_string().replace(url.trim_start_matches("http://"), "ADDR"));
+    }
+    assert!(texts.iter().all(|t| *t == texts[0]), "{texts:?}");
+    rt.shutdown_timeout(Duration::from_secs(1));
+}
