@@ -54,7 +54,8 @@ pub struct Config {
     /// Token simulation workers present on the gRPC `Worker` service; empty means generate one
     /// at start (in-process workers get it from [`crate::Server::worker_token`]).
     pub worker_token: String,
-    /// Largest accepted request body (a plan file), bytes.
+    /// Largest accepted request body, bytes, on every route that reads one (a plan file, a
+    /// registration, an organiser request); past it, 413 `body_too_large`.
     pub max_body_bytes: usize,
     /// Budget of one HTTP or gRPC request, milliseconds; past it the request is abandoned and
     /// answered 503 / UNAVAILABLE (code `timeout`). Calls that wait by design get more on top:
@@ -77,12 +78,20 @@ pub struct PlanLimits {
     pub max_steps: usize,
 }
 
-/// Submissions allowed per team, per split, per UTC day; 0 means unlimited.
+/// What one team may submit (`[quota]`). The defaults bound every split, so no team can fill the
+/// disk: a team stores at most `*_per_day` submissions of at most `max_body_bytes` per split
+/// and day, and reaches that no faster than `per_minute`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct Quota {
+    /// Submissions (plan files and policy registrations) per team, per split, per UTC day;
+    /// 0 means unlimited.
     pub dev_per_day: u32,
     pub test_per_day: u32,
+    /// Upload attempts (plan files and policy registrations, accepted or not) per team, per
+    /// split, per minute, as a burst that refills at this rate; 0 means unlimited. Held in the
+    /// server's memory (see `service::limits`).
+    pub per_minute: u32,
     /// Policy runs of one team evaluating at the same time; 0 means unlimited.
     pub concurrent_runs: u32,
 }
@@ -172,8 +181,9 @@ impl PlanLimits {
 impl Default for Quota {
     fn default() -> Self {
         Quota {
-            dev_per_day: 0,
+            dev_per_day: 200,
             test_per_day: 5,
+            per_minute: 20,
             concurrent_runs: 2,
         }
     }
@@ -351,7 +361,8 @@ mod tests {
         let c = Config::default();
         c.validate().unwrap();
         assert_eq!(c.quota.test_per_day, 5);
-        assert_eq!(c.quota.dev_per_day, 0);
+        // Every split is bounded by default (issue #12: an unlimited dev split filled the disk).
+        assert_eq!((c.quota.dev_per_day, c.quota.per_minute), (200, 20));
     }
 
     #[test]

@@ -43,8 +43,21 @@ pub enum ServiceError {
         resets_at: String,
         retry_after_s: i64,
     },
+    /// Too many uploads from one team in a short time (`quota.per_minute`).
+    #[error(
+        "rate limited: at most {per_minute} {split} submissions per minute per team; retry after {retry_after_s} s"
+    )]
+    RateLimited {
+        split: &'static str,
+        per_minute: u32,
+        retry_after_s: u64,
+    },
     #[error("{0}")]
     Unavailable(String),
+    /// The server is saturated (a bounded queue is full): refused at once rather than left to
+    /// wait for seconds, so the client retries later instead of piling up.
+    #[error("the server is saturated ({what}); retry after {retry_after_s} s")]
+    Busy { retry_after_s: u64, what: String },
     /// The policy endpoint's address is not allowed (private network, malformed URL, ...).
     #[error("policy endpoint refused: {0}")]
     EndpointRefused(String),
@@ -61,6 +74,13 @@ pub enum ServiceError {
     /// The request ran past its budget (`request_timeout_ms`) and was abandoned.
     #[error("the request took longer than {after_ms} ms and was abandoned; try again")]
     Timeout { after_ms: u64 },
+    /// The route exists, but not with this method; the `Allow` header lists the ones it has.
+    #[error("method {method} is not allowed on this route; the Allow header lists the methods it accepts")]
+    MethodNotAllowed { method: String },
+    /// A request body over `max_body_bytes` (a plan file says on which line instead:
+    /// [`PlanFileError::TooLarge`]).
+    #[error("the body is larger than {limit} bytes")]
+    BodyTooLarge { limit: usize },
     #[error("internal error")]
     Internal(#[from] anyhow::Error),
 }
@@ -105,7 +125,15 @@ pub(crate) fn request_id_from(headers: &HeaderMap) -> Arc<str> {
 
 impl From<sqlx::Error> for ServiceError {
     fn from(e: sqlx::Error) -> Self {
-        ServiceError::Internal(e.into())
+        match e {
+            // Every connection of the pool stayed busy for the configured wait
+            // (`db_pool.*_wait_ms`): the server is saturated, not broken; say when to retry.
+            sqlx::Error::PoolTimedOut => ServiceError::Busy {
+                retry_after_s: 1,
+                what: "the database".into(),
+            },
+            e => ServiceError::Internal(e.into()),
+        }
     }
 }
 
@@ -125,12 +153,16 @@ impl ServiceError {
             ServiceError::NotFound { .. } => "not_found",
             ServiceError::Conflict(_) => "conflict",
             ServiceError::Quota { .. } => "quota_exceeded",
+            ServiceError::RateLimited { .. } => "rate_limited",
             ServiceError::Unavailable(_) => "unavailable",
+            ServiceError::Busy { .. } => "busy",
             ServiceError::EndpointRefused(_) => "endpoint_refused",
             ServiceError::ProbeFailed(_) => "policy_probe_failed",
             ServiceError::PolicyDisabled(_) => "policy_evaluation_disabled",
             ServiceError::ConcurrentRuns { .. } => "concurrent_runs_exceeded",
             ServiceError::Timeout { .. } => "timeout",
+            ServiceError::MethodNotAllowed { .. } => "method_not_allowed",
+            ServiceError::BodyTooLarge { .. } => "body_too_large",
             ServiceError::Internal(_) => "internal",
         }
     }
@@ -144,12 +176,16 @@ impl ServiceError {
             ServiceError::BadRequest(_) => StatusCode::BAD_REQUEST,
             ServiceError::NotFound { .. } => StatusCode::NOT_FOUND,
             ServiceError::Conflict(_) => StatusCode::CONFLICT,
-            ServiceError::Quota { .. } => StatusCode::TOO_MANY_REQUESTS,
-            ServiceError::Unavailable(_) | ServiceError::PolicyDisabled(_) => StatusCode::SERVICE_UNAVAILABLE,
+            ServiceError::Quota { .. } | ServiceError::RateLimited { .. } => StatusCode::TOO_MANY_REQUESTS,
+            ServiceError::Unavailable(_) | ServiceError::PolicyDisabled(_) | ServiceError::Busy { .. } => {
+                StatusCode::SERVICE_UNAVAILABLE
+            }
             ServiceError::EndpointRefused(_) => StatusCode::BAD_REQUEST,
             ServiceError::ProbeFailed(_) => StatusCode::UNPROCESSABLE_ENTITY,
             ServiceError::ConcurrentRuns { .. } => StatusCode::TOO_MANY_REQUESTS,
             ServiceError::Timeout { .. } => StatusCode::SERVICE_UNAVAILABLE,
+            ServiceError::MethodNotAllowed { .. } => StatusCode::METHOD_NOT_ALLOWED,
+            ServiceError::BodyTooLarge { .. } => StatusCode::PAYLOAD_TOO_LARGE,
             ServiceError::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
         }
     }
@@ -157,27 +193,37 @@ impl ServiceError {
     /// The JSON body: `{"error": message, "code": ..., "request_id": ...?, ...details}`
     /// (`request_id` whenever the error is built while a request is being handled).
     pub fn body(&self) -> Value {
-        let mut body = json!({ "error": self.to_string(), "code": self.code() });
-        if let Some(id) = current_request_id() {
-            body["request_id"] = json!(&*id);
-        }
+        let mut body = error_body(&self.to_string(), self.code());
         match self {
             ServiceError::PlanFile(e) => {
                 if let Some(line) = e.line() {
                     body["line"] = json!(line);
                 }
             }
-            ServiceError::Quota {
-                resets_at,
-                retry_after_s,
-                ..
-            } => {
+            ServiceError::Quota { resets_at, .. } => {
                 body["resets_at"] = json!(resets_at);
-                body["retry_after_s"] = json!(retry_after_s);
+            }
+            ServiceError::BodyTooLarge { limit } => {
+                body["limit_bytes"] = json!(limit);
             }
             _ => {}
         }
+        if let Some(s) = self.retry_after_s() {
+            body["retry_after_s"] = json!(s);
+        }
         body
+    }
+
+    /// Seconds after which retrying can succeed, for the refusals that know it (sent as the
+    /// `Retry-After` header, `retry_after_s` in the body and `retry-after` gRPC metadata).
+    pub fn retry_after_s(&self) -> Option<u64> {
+        match self {
+            ServiceError::Quota { retry_after_s, .. } => Some(u64::try_from(*retry_after_s).unwrap_or(0)),
+            ServiceError::RateLimited { retry_after_s, .. } | ServiceError::Busy { retry_after_s, .. } => {
+                Some(*retry_after_s)
+            }
+            _ => None,
+        }
     }
 
     fn log(&self) {
@@ -193,11 +239,9 @@ impl IntoResponse for ServiceError {
     fn into_response(self) -> Response {
         self.log();
         let mut resp = (self.status(), axum::Json(self.body())).into_response();
-        if let ServiceError::Quota { retry_after_s, .. } = &self {
-            resp.headers_mut().insert(
-                axum::http::header::RETRY_AFTER,
-                axum::http::HeaderValue::from(*retry_after_s),
-            );
+        if let Some(s) = self.retry_after_s() {
+            resp.headers_mut()
+                .insert(axum::http::header::RETRY_AFTER, axum::http::HeaderValue::from(s));
         }
         resp
     }
@@ -214,20 +258,88 @@ impl From<ServiceError> for tonic::Status {
         {
             msg = format!("{msg} (request id {id})");
         }
-        match e {
+        let retry_after = e.retry_after_s();
+        let mut status = match e {
             ServiceError::MissingToken | ServiceError::BadToken => tonic::Status::unauthenticated(msg),
             ServiceError::NotAdmin => tonic::Status::permission_denied(msg),
-            ServiceError::PlanFile(_) | ServiceError::BadRequest(_) => tonic::Status::invalid_argument(msg),
+            ServiceError::PlanFile(_) | ServiceError::BadRequest(_) | ServiceError::BodyTooLarge { .. } => {
+                tonic::Status::invalid_argument(msg)
+            }
             ServiceError::NotFound { .. } => tonic::Status::not_found(msg),
             ServiceError::Conflict(_) => tonic::Status::already_exists(msg),
-            ServiceError::Quota { .. } | ServiceError::ConcurrentRuns { .. } => {
-                tonic::Status::resource_exhausted(msg)
+            ServiceError::Quota { .. }
+            | ServiceError::ConcurrentRuns { .. }
+            | ServiceError::RateLimited { .. } => tonic::Status::resource_exhausted(msg),
+            ServiceError::Unavailable(_) | ServiceError::PolicyDisabled(_) | ServiceError::Busy { .. } => {
+                tonic::Status::unavailable(msg)
             }
-            ServiceError::Unavailable(_) | ServiceError::PolicyDisabled(_) => tonic::Status::unavailable(msg),
             ServiceError::EndpointRefused(_) => tonic::Status::invalid_argument(msg),
             ServiceError::ProbeFailed(_) => tonic::Status::failed_precondition(msg),
             ServiceError::Timeout { .. } => tonic::Status::unavailable(msg),
+            ServiceError::MethodNotAllowed { .. } => tonic::Status::unimplemented(msg),
             ServiceError::Internal(_) => tonic::Status::internal(msg),
+        };
+        // gRPC has no Retry-After header: the same seconds travel as metadata.
+        if let Some(s) = retry_after {
+            status.metadata_mut().insert("retry-after", s.into());
         }
+        status
+    }
+}
+
+/// The documented shape of every HTTP error body, `{"error", "code", "request_id"?}`: used by
+/// [`ServiceError::body`] and by the HTTP stack for answers no handler made (see
+/// `crate::http::stack`).
+pub(crate) fn error_body(message: &str, code: &str) -> Value {
+    let mut body = json!({ "error": message, "code": code });
+    if let Some(id) = current_request_id() {
+        body["request_id"] = json!(&*id);
+    }
+    body
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[tokio::test]
+    async fn busy_says_when_to_retry_on_both_transports() {
+        let busy = || ServiceError::Busy {
+            retry_after_s: 2,
+            what: "the write queue is full".into(),
+        };
+        let resp = with_request_id(Arc::from("req-busy"), async { busy().into_response() }).await;
+        assert_eq!(resp.status(), StatusCode::SERVICE_UNAVAILABLE);
+        assert_eq!(resp.headers()[axum::http::header::RETRY_AFTER], "2");
+        let body: Value =
+            serde_json::from_slice(&axum::body::to_bytes(resp.into_body(), 1 << 16).await.unwrap()).unwrap();
+        assert_eq!(
+            body,
+            json!({
+                "error": "the server is saturated (the write queue is full); retry after 2 s",
+                "code": "busy",
+                "request_id": "req-busy",
+                "retry_after_s": 2,
+            })
+        );
+        let status = tonic::Status::from(busy());
+        assert_eq!(status.code(), tonic::Code::Unavailable);
+        assert_eq!(status.metadata().get("retry-after").unwrap(), "2");
+    }
+
+    #[test]
+    fn rate_limits_are_resource_exhausted_over_grpc() {
+        let e = ServiceError::RateLimited {
+            split: "dev",
+            per_minute: 20,
+            retry_after_s: 3,
+        };
+        assert_eq!(
+            (e.code(), e.status()),
+            ("rate_limited", StatusCode::TOO_MANY_REQUESTS)
+        );
+        let status = tonic::Status::from(e);
+        assert_eq!(status.code(), tonic::Code::ResourceExhausted);
+        assert_eq!(status.metadata().get("retry-after").unwrap(), "3");
     }
 }

@@ -1,17 +1,19 @@
 //! The HTTP adapter (axum): routes of DESIGN.md "The public interface".
 //!
 //! Handlers only extract, call one service function and shape the answer; every rule is in
-//! [`crate::service`]. Errors are always JSON (`{"error", "code", ...}`), including bad query
-//! parameters and unknown routes, and carry the request id; [`stack`] is the tower stack
-//! (request id, trace, catch-panic, timeout) every route runs in.
+//! [`crate::service`]. Errors are always JSON (`{"error", "code", "request_id", ...}`): unknown
+//! routes and methods answer through fallbacks (405 keeps its `Allow` header), bodies are capped
+//! at `max_body_bytes` with a JSON 413, and path, query and body rejections go through
+//! [`extract`]'s wrappers; [`stack`] is the tower stack (request id, JSON errors, trace,
+//! catch-panic, timeout) every route runs in.
 
 use std::collections::HashMap;
 
 use axum::Router;
 use axum::body::Body;
-use axum::extract::{FromRequestParts, Path, Query, State};
+use axum::extract::{DefaultBodyLimit, FromRequestParts, State};
 use axum::http::request::Parts;
-use axum::http::{HeaderValue, StatusCode, header};
+use axum::http::{HeaderValue, Method, StatusCode, header};
 use axum::response::{Html, IntoResponse, Response};
 use axum::routing::{get, post};
 use bytes::Bytes;
@@ -25,8 +27,11 @@ use crate::leaderboard::{Format, Track};
 use crate::service::auth::bearer_token;
 use crate::service::{AppState, Caller, RegisterPolicy};
 
-type Params = Query<HashMap<String, String>>;
+use extract::{BodyBytes, PathArg, QueryArgs};
 
+type Params = QueryArgs<HashMap<String, String>>;
+
+mod extract;
 pub(crate) mod stack;
 
 pub(crate) fn router(state: AppState) -> Router {
@@ -44,7 +49,8 @@ pub(crate) fn router(state: AppState) -> Router {
         .route("/api/v1/submissions/plans", post(submit_plans))
         .route("/api/v1/submissions/{id}", get(submission))
         .route("/api/v1/leaderboard", get(leaderboard))
-        .route("/api/v1/admin/resimulate", post(resimulate));
+        .route("/api/v1/admin/resimulate", post(resimulate))
+        .route("/api/v1/admin/stats", get(admin_stats));
     // Registration probes the endpoint first, which may take up to `policy.startup_deadline_ms`.
     let probing = Router::new().route("/api/v1/submissions/policies", post(register_policy));
     // The organiser's rescore walks every stored submission, so its length grows with the
@@ -53,8 +59,19 @@ pub(crate) fn router(state: AppState) -> Router {
     let routes = stack::with_timeout(quick, cfg.request_timeout())
         .merge(stack::with_timeout(probing, cfg.registration_timeout()))
         .merge(unbounded)
-        .fallback(|| async { ServiceError::not_found("route") });
+        // After the merge: it is set on the routes present when called.
+        .method_not_allowed_fallback(method_not_allowed)
+        .fallback(|| async { ServiceError::not_found("route") })
+        // Read by `BodyBytes`; plan files are streamed under the same limit by `read_limited`.
+        .layer(DefaultBodyLimit::max(cfg.max_body_bytes));
     stack::layered(routes).with_state(state)
+}
+
+/// A known route called with a method it does not have; axum adds the `Allow` header.
+async fn method_not_allowed(method: Method) -> ServiceError {
+    ServiceError::MethodNotAllowed {
+        method: method.to_string(),
+    }
 }
 
 /// The caller of every route that declares one, resolved once from the `authorization` header
@@ -91,7 +108,7 @@ async fn healthz() -> impl IntoResponse {
     axum::Json(json!({ "status": "ok" }))
 }
 
-async fn index(State(s): State<AppState>, Query(q): Params) -> Result<Response, ServiceError> {
+async fn index(State(s): State<AppState>, QueryArgs(q): Params) -> Result<Response, ServiceError> {
     let split = split_param(q.get("split"), Some(Split::Test))?;
     let body = s.leaderboard_page(split).await?;
     Ok(Html(body).into_response())
@@ -114,7 +131,7 @@ fn body_field<T: serde::de::DeserializeOwned>(
 async fn create_team(
     State(s): State<AppState>,
     caller: Caller,
-    body: Bytes,
+    BodyBytes(body): BodyBytes,
 ) -> Result<Response, ServiceError> {
     let admin = caller.organiser()?;
     let name: String = body_field(&body, "name", r#"{"name": "..."}"#)?;
@@ -122,7 +139,10 @@ async fn create_team(
     Ok((StatusCode::CREATED, axum::Json(team)).into_response())
 }
 
-async fn dataset(State(s): State<AppState>, Path(split): Path<String>) -> Result<Response, ServiceError> {
+async fn dataset(
+    State(s): State<AppState>,
+    PathArg(split): PathArg<String>,
+) -> Result<Response, ServiceError> {
     let split: Split = split.parse().map_err(ServiceError::BadRequest)?;
     let mut response = typed("application/x-ndjson", s.content().public_jsonl(split));
     // Says on every test download whether its answers are public (see /api/v1/dataset/manifest).
@@ -149,7 +169,7 @@ async fn dataset_manifest(State(s): State<AppState>) -> impl IntoResponse {
 
 /// The English scene description planners read (zones, the furniture that holds them and the
 /// names instructions may use for them, and where each key object starts).
-async fn brief(State(s): State<AppState>, Path(id): Path<String>) -> Result<Response, ServiceError> {
+async fn brief(State(s): State<AppState>, PathArg(id): PathArg<String>) -> Result<Response, ServiceError> {
     let scene = s
         .content()
         .scene(&id)
@@ -164,7 +184,7 @@ async fn scenes(State(s): State<AppState>) -> impl IntoResponse {
     axum::Json(s.content().scene_summaries())
 }
 
-async fn scene(State(s): State<AppState>, Path(id): Path<String>) -> Result<Response, ServiceError> {
+async fn scene(State(s): State<AppState>, PathArg(id): PathArg<String>) -> Result<Response, ServiceError> {
     let scene = s
         .content()
         .scene(&id)
@@ -172,7 +192,7 @@ async fn scene(State(s): State<AppState>, Path(id): Path<String>) -> Result<Resp
     Ok(axum::Json(scene).into_response())
 }
 
-async fn topdown(State(s): State<AppState>, Path(id): Path<String>) -> Result<Response, ServiceError> {
+async fn topdown(State(s): State<AppState>, PathArg(id): PathArg<String>) -> Result<Response, ServiceError> {
     let scene = id.clone();
     let png = tokio::task::spawn_blocking(move || s.content().topdown_png(&scene))
         .await
@@ -199,7 +219,7 @@ async fn read_limited(body: Body, limit: usize) -> Result<Vec<u8>, ServiceError>
 
 async fn submit_plans(
     State(s): State<AppState>,
-    Query(q): Params,
+    QueryArgs(q): Params,
     caller: Caller,
     body: Body,
 ) -> Result<Response, ServiceError> {
@@ -214,7 +234,7 @@ async fn submit_plans(
 async fn register_policy(
     State(s): State<AppState>,
     caller: Caller,
-    body: Bytes,
+    BodyBytes(body): BodyBytes,
 ) -> Result<Response, ServiceError> {
     let req: RegisterPolicy = serde_json::from_slice(&body).map_err(|e| {
         ServiceError::BadRequest(format!(
@@ -227,7 +247,7 @@ async fn register_policy(
 
 async fn submission(
     State(s): State<AppState>,
-    Path(id): Path<String>,
+    PathArg(id): PathArg<String>,
     caller: Caller,
 ) -> Result<Response, ServiceError> {
     let id: i64 = id
@@ -236,7 +256,7 @@ async fn submission(
     Ok(axum::Json(s.get_submission(&caller, id).await?).into_response())
 }
 
-async fn leaderboard(State(s): State<AppState>, Query(q): Params) -> Result<Response, ServiceError> {
+async fn leaderboard(State(s): State<AppState>, QueryArgs(q): Params) -> Result<Response, ServiceError> {
     let track: Track = q.get("track").map_or("", String::as_str).parse()?;
     let split = split_param(q.get("split"), Some(Split::Test))?;
     let (format, content_type) = match q.get("format").map(String::as_str) {
@@ -261,12 +281,18 @@ async fn rescore(State(s): State<AppState>, caller: Caller) -> Result<Response, 
 async fn resimulate(
     State(s): State<AppState>,
     caller: Caller,
-    body: Bytes,
+    BodyBytes(body): BodyBytes,
 ) -> Result<Response, ServiceError> {
     let admin = caller.organiser()?;
     let id: i64 = body_field(&body, "submission", r#"{"submission": ID}"#)?;
     let done = s.resimulate(admin, id).await?;
     Ok((StatusCode::CREATED, axum::Json(done)).into_response())
+}
+
+/// Organiser: what the server refused since it started (rate limits and daily quotas, per
+/// split) and the limits in force.
+async fn admin_stats(State(s): State<AppState>, caller: Caller) -> Result<Response, ServiceError> {
+    Ok(axum::Json(s.admin_stats(caller.organiser()?)).into_response())
 }
 
 #[cfg(test)]

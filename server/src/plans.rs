@@ -4,7 +4,8 @@
 //! line so a participant can fix the file without guessing; nothing of a refused file is stored
 //! and it never uses quota. Blank lines are skipped. Keys other than `id` and `plan` are
 //! ignored, so the downloaded dev file (which also carries the instruction text) is itself a
-//! valid submission. Instructions absent from the file score 0 and produce a warning.
+//! valid submission. Instructions absent from the file score 0 and produce a warning. A UTF-8
+//! byte-order mark at the start (Windows editors write one) is skipped, not refused.
 //!
 //! This module is pure (no I/O) so the parser can be fuzzed and benchmarked on its own.
 
@@ -139,6 +140,9 @@ pub(crate) fn line_at(body: &[u8], limit: usize) -> usize {
         + 1
 }
 
+/// The UTF-8 encoding of U+FEFF, which some editors put at the start of a file.
+const UTF8_BOM: &[u8] = b"\xEF\xBB\xBF";
+
 /// Parse and validate `body` for `split` (which has `split_len` instructions).
 pub fn parse(
     body: &[u8],
@@ -147,6 +151,8 @@ pub fn parse(
     index: &IdIndex,
     limits: &PlanLimits,
 ) -> Result<PlanFile, PlanFileError> {
+    // The mark is inside line 1, so line numbers are unchanged.
+    let body = body.strip_prefix(UTF8_BOM).unwrap_or(body);
     let mut plans: Vec<Option<Vec<String>>> = vec![None; split_len];
     let mut first_line: Vec<usize> = vec![0; split_len];
     let mut any = false;

@@ -6,6 +6,7 @@
 //! - [`auth`]: who is calling (a bearer token resolved once into a `Caller` and its proofs);
 //! - [`teams`]: the organiser creates teams;
 //! - [`plan_uploads`]: plan files validated, scored and stored within the daily quota;
+//! - [`limits`]: the per-team upload rate limit and the counts of refused uploads;
 //! - [`policies`]: policy endpoints probed and registered, their episodes queued;
 //! - [`jobs`]: the worker-facing queue (lease, heartbeat, report, reaper);
 //! - [`progress`]: a policy run's episodes and failures as its team may see them;
@@ -18,6 +19,7 @@
 pub(crate) mod auth;
 mod board;
 pub(crate) mod jobs;
+mod limits;
 mod plan_uploads;
 pub(crate) mod policies;
 mod progress;
@@ -65,6 +67,8 @@ struct Inner {
     /// Set at shutdown so long-polling `Lease` calls answer at once instead of holding the
     /// graceful drain for up to 30 s.
     stopping: std::sync::atomic::AtomicBool,
+    /// Per-team upload rate limits and refusal counts (in memory: see [`limits`]).
+    limits: limits::Limits,
 }
 
 impl std::fmt::Debug for AppState {
@@ -93,6 +97,7 @@ impl AppState {
         AppState {
             inner: Arc::new(Inner {
                 pool,
+                limits: limits::Limits::new(config.quota.per_minute, now_ms()),
                 config,
                 content,
                 admin_hash: hash_token(tokens.admin),

@@ -63,19 +63,72 @@ pub(crate) struct Team {
     pub name: String,
 }
 
-/// Insert a team; `None` when the name is taken.
+/// The keys under which look-alike team names collide (migration
+/// `20261122230000_add_team_name_skeletons.sql` says why there are two).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) struct NameKeys {
+    pub skeleton: String,
+    pub skeleton_folded: String,
+}
+
+/// Insert a team unless its name is taken or a team shares one of its [`NameKeys`]; `None`
+/// then. One statement, so two look-alike names created at the same time cannot both get in.
 pub(crate) async fn insert_team(
     pool: &SqlitePool,
     name: &str,
+    keys: &NameKeys,
     token_hash: &str,
     now: i64,
 ) -> sqlx::Result<Option<i64>> {
-    sqlx::query_scalar("INSERT INTO teams (name, token_hash, created_at) VALUES (?, ?, ?) ON CONFLICT (name) DO NOTHING RETURNING id")
-        .bind(name)
-        .bind(token_hash)
-        .bind(now)
-        .fetch_optional(pool)
-        .await
+    // The WHERE clause also settles SQLite's INSERT ... SELECT ... ON CONFLICT ambiguity.
+    sqlx::query_scalar(
+        "INSERT INTO teams (name, skeleton, skeleton_folded, token_hash, created_at)
+         SELECT ?1, ?2, ?3, ?4, ?5
+         WHERE NOT EXISTS (SELECT 1 FROM teams WHERE skeleton = ?2 OR skeleton_folded = ?3)
+         ON CONFLICT (name) DO NOTHING RETURNING id",
+    )
+    .bind(name)
+    .bind(&keys.skeleton)
+    .bind(&keys.skeleton_folded)
+    .bind(token_hash)
+    .bind(now)
+    .fetch_optional(pool)
+    .await
+}
+
+/// The first team named `name` or sharing one of `keys`: whom a refused name looks like.
+pub(crate) async fn team_like(
+    pool: &SqlitePool,
+    name: &str,
+    keys: &NameKeys,
+) -> sqlx::Result<Option<String>> {
+    sqlx::query_scalar(
+        "SELECT name FROM teams WHERE name = ? OR skeleton = ? OR skeleton_folded = ? ORDER BY id LIMIT 1",
+    )
+    .bind(name)
+    .bind(&keys.skeleton)
+    .bind(&keys.skeleton_folded)
+    .fetch_optional(pool)
+    .await
+}
+
+/// Give every team without [`NameKeys`] its keys, computed by `keys`: teams made before the
+/// columns existed and the baseline team (SQL cannot compute Unicode skeletons). Both keys are
+/// always set together; after the first call this finds nothing, through the index.
+pub(crate) async fn fill_team_name_keys(pool: &SqlitePool, keys: fn(&str) -> NameKeys) -> sqlx::Result<()> {
+    let missing: Vec<(i64, String)> = sqlx::query_as("SELECT id, name FROM teams WHERE skeleton IS NULL")
+        .fetch_all(pool)
+        .await?;
+    for (id, name) in missing {
+        let k = keys(&name);
+        sqlx::query("UPDATE teams SET skeleton = ?, skeleton_folded = ? WHERE id = ?")
+            .bind(&k.skeleton)
+            .bind(&k.skeleton_folded)
+            .bind(id)
+            .execute(pool)
+            .await?;
+    }
+    Ok(())
 }
 
 pub(crate) async fn team_by_token_hash(pool: &SqlitePool, token_hash: &str) -> sqlx::Result<Option<Team>> {

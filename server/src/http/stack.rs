@@ -3,11 +3,18 @@
 //! 1. request id: the caller's `x-request-id` when sane, else a fresh one; put in the request's
 //!    extensions, echoed in the response header, and made current
 //!    ([`crate::error::with_request_id`]) so every JSON error body carries it;
-//! 2. trace: one span per request with the method, the *matched route* (`/api/v1/scenes/{id}`,
+//! 2. JSON errors: a 4xx/5xx answer that is not JSON (a default answer or extractor rejection
+//!    that no route mapped to a [`ServiceError`]) is rewritten into the documented shape
+//!    `{"error", "code", "request_id"}`, its text kept as the message and its headers (`Allow`)
+//!    kept. Routes map the ones they can foresee themselves (method not allowed, body limits,
+//!    path and query rejections: see [`crate::http`]) with better messages; this is the net
+//!    under them, so "every error is JSON" holds for whatever a future route or layer sends.
+//!    (Malformed HTTP that hyper refuses before routing never reaches the stack.)
+//! 3. trace: one span per request with the method, the *matched route* (`/api/v1/scenes/{id}`,
 //!    not the raw path, so spans group by route and carry no ids) and the request id;
-//! 3. catch-panic: a handler that panics answers 500 `{"code": "internal", "request_id"}`; the
+//! 4. catch-panic: a handler that panics answers 500 `{"code": "internal", "request_id"}`; the
 //!    panic message is logged, never sent;
-//! 4. timeout (per route group, see [`crate::http::router`]): a request past its budget answers
+//! 5. timeout (per route group, see [`crate::http::router`]): a request past its budget answers
 //!    503 `{"code": "timeout", "request_id"}` instead of hanging.
 //!
 //! The stack is applied with `Router::layer`, i.e. after routing, because the matched route is
@@ -19,14 +26,14 @@ use std::time::Duration;
 
 use axum::Router;
 use axum::extract::{MatchedPath, Request, State};
-use axum::http::HeaderValue;
+use axum::http::{HeaderValue, StatusCode, header};
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
 use tower::ServiceBuilder;
 use tower_http::catch_panic::CatchPanicLayer;
 use tower_http::trace::TraceLayer;
 
-use crate::error::{REQUEST_ID_HEADER, ServiceError, request_id_from, with_request_id};
+use crate::error::{REQUEST_ID_HEADER, ServiceError, error_body, request_id_from, with_request_id};
 
 /// The id of the request, in its extensions (handlers may extract it with
 /// `Extension<RequestId>`).
@@ -38,6 +45,7 @@ pub(crate) fn layered<S: Clone + Send + Sync + 'static>(routes: Router<S>) -> Ro
     routes.layer(
         ServiceBuilder::new()
             .layer(middleware::from_fn(request_id))
+            .layer(middleware::from_fn(json_errors))
             .layer(TraceLayer::new_for_http().make_span_with(span))
             .layer(CatchPanicLayer::custom(panic_response)),
     )
@@ -60,6 +68,63 @@ async fn request_id(mut req: Request, next: Next) -> Response {
         resp.headers_mut().insert(REQUEST_ID_HEADER, v);
     }
     resp
+}
+
+/// Most of a non-JSON error body kept as the message; such bodies are one-line rejections.
+const PLAIN_ERROR_CHARS: usize = 1024;
+
+/// Runs inside the request id's scope, so the rewritten body carries the id.
+async fn json_errors(req: Request, next: Next) -> Response {
+    let resp = next.run(req).await;
+    let status = resp.status();
+    let is_json = resp
+        .headers()
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .is_some_and(|v| v.starts_with("application/json"));
+    if !(status.is_client_error() || status.is_server_error()) || is_json {
+        return resp;
+    }
+    let (mut parts, body) = resp.into_parts();
+    let text: String = axum::body::to_bytes(body, 64 << 10)
+        .await
+        .map(|b| {
+            String::from_utf8_lossy(&b)
+                .trim()
+                .chars()
+                .take(PLAIN_ERROR_CHARS)
+                .collect()
+        })
+        .unwrap_or_default();
+    let message = match text {
+        t if t.is_empty() => status.canonical_reason().unwrap_or("error").to_string(),
+        t => t,
+    };
+    tracing::debug!(%status, %message, "non-JSON error answer rewritten as JSON");
+    // The old length and type describe the old body.
+    parts.headers.remove(header::CONTENT_LENGTH);
+    parts.headers.remove(header::CONTENT_TYPE);
+    (parts, axum::Json(error_body(&message, status_code(status)))).into_response()
+}
+
+/// The `code` of an error answer no handler made, from its status alone (the same codes the
+/// service uses for the same situations).
+fn status_code(status: StatusCode) -> &'static str {
+    match status {
+        StatusCode::BAD_REQUEST => "bad_request",
+        StatusCode::UNAUTHORIZED => "missing_token",
+        StatusCode::FORBIDDEN => "forbidden",
+        StatusCode::NOT_FOUND => "not_found",
+        StatusCode::METHOD_NOT_ALLOWED => "method_not_allowed",
+        StatusCode::REQUEST_TIMEOUT => "timeout",
+        StatusCode::PAYLOAD_TOO_LARGE => "body_too_large",
+        StatusCode::UNSUPPORTED_MEDIA_TYPE => "unsupported_media_type",
+        StatusCode::UNPROCESSABLE_ENTITY => "unprocessable",
+        StatusCode::TOO_MANY_REQUESTS => "rate_limited",
+        StatusCode::SERVICE_UNAVAILABLE => "unavailable",
+        s if s.is_server_error() => "internal",
+        _ => "error",
+    }
 }
 
 fn span<B>(req: &axum::http::Request<B>) -> tracing::Span {

@@ -129,3 +129,40 @@ async fn registration_gets_the_probe_deadline_on_top_of_the_request_budget() {
     assert_eq!(cfg.request_timeout(), Duration::from_secs(1));
     assert_eq!(cfg.registration_timeout(), Duration::from_secs(6));
 }
+
+#[tokio::test]
+async fn an_error_answer_no_handler_made_json_is_rewritten_as_json_keeping_its_headers() {
+    let app: Router = stack::layered(
+        Router::new()
+            .route(
+                "/plain",
+                get(|| async { (StatusCode::BAD_REQUEST, "plain words") }),
+            )
+            .route(
+                "/empty",
+                get(|| async { (StatusCode::METHOD_NOT_ALLOWED, [(header::ALLOW, "POST")]) }),
+            )
+            .route("/ok", get(|| async { "fine" })),
+    );
+    let (status, id, body) = call(app.clone(), "/plain", Some("req-plain")).await;
+    assert_eq!(status, StatusCode::BAD_REQUEST);
+    let v = json(&body);
+    assert_eq!(
+        (v["code"].as_str(), v["error"].as_str(), v["request_id"].as_str()),
+        (Some("bad_request"), Some("plain words"), id.as_deref())
+    );
+    let resp = app
+        .clone()
+        .oneshot(Request::get("/empty").body(Body::empty()).unwrap())
+        .await
+        .unwrap();
+    assert_eq!(resp.headers()[header::ALLOW], "POST");
+    assert_eq!(resp.headers()[header::CONTENT_TYPE], "application/json");
+    let v = json(&to_bytes(resp.into_body(), 1 << 20).await.unwrap());
+    assert_eq!(
+        (v["code"].as_str(), v["error"].as_str()),
+        (Some("method_not_allowed"), Some("Method Not Allowed"))
+    );
+    let (status, _, body) = call(app, "/ok", None).await;
+    assert_eq!((status, &body[..]), (StatusCode::OK, &b"fine"[..]));
+}

@@ -165,3 +165,194 @@ async fn downloads_say_the_test_split_is_a_public_sample_and_briefs_are_served()
         .unwrap();
     assert_eq!(resp.status(), StatusCode::NOT_FOUND);
 }
+
+/// One request with a request id; the answer's status, headers and body.
+async fn send(
+    app: &Router,
+    method: Method,
+    path: &str,
+    token: Option<&str>,
+    body: impl Into<Body>,
+) -> (StatusCode, axum::http::HeaderMap, Bytes) {
+    let mut req = Request::builder()
+        .method(method)
+        .uri(path)
+        .header(crate::error::REQUEST_ID_HEADER, "walk-1");
+    if let Some(t) = token {
+        req = req.header(header::AUTHORIZATION, format!("Bearer {t}"));
+    }
+    let resp = app.clone().oneshot(req.body(body.into()).unwrap()).await.unwrap();
+    let (status, headers) = (resp.status(), resp.headers().clone());
+    (
+        status,
+        headers,
+        to_bytes(resp.into_body(), 1 << 20).await.unwrap(),
+    )
+}
+
+/// The answer is the documented JSON error with `code` and the request id sent by [`send`].
+fn json_error(status: StatusCode, headers: &axum::http::HeaderMap, body: &[u8], code: &str) -> Value {
+    let what = String::from_utf8_lossy(body);
+    assert_eq!(
+        headers[header::CONTENT_TYPE],
+        "application/json",
+        "{status}: {what}"
+    );
+    let v: Value = serde_json::from_slice(body).unwrap_or_else(|e| panic!("{status}: {e}: {what}"));
+    assert_eq!(v["code"], code, "{status}: {v}");
+    assert_eq!(v["request_id"], "walk-1", "{status}: {v}");
+    assert!(v["error"].as_str().is_some_and(|e| !e.is_empty()), "{v}");
+    v
+}
+
+#[tokio::test]
+async fn every_error_the_router_can_send_is_json_with_a_code_and_the_request_id() {
+    let f = fixture(FakeProbe::ok(1), |c| c.max_body_bytes = 2048).await;
+    let token = f.team("alpha").await;
+    let app = router(f.state.clone());
+    // Known routes, wrong methods: 405 with `Allow`.
+    for (method, path, allowed) in [
+        (Method::GET, "/api/v1/submissions/plans", "POST"),
+        (Method::DELETE, "/api/v1/teams", "POST"),
+        (Method::PUT, "/healthz", "GET"),
+        (Method::POST, "/api/v1/leaderboard", "GET"),
+    ] {
+        let (status, headers, body) = send(&app, method.clone(), path, None, Body::empty()).await;
+        assert_eq!(status, StatusCode::METHOD_NOT_ALLOWED, "{method} {path}");
+        // The route's own answer (not the stack's net), saying what to do.
+        let v = json_error(status, &headers, &body, "method_not_allowed");
+        assert!(v["error"].as_str().unwrap().contains("Allow header"), "{v}");
+        let allow = headers[header::ALLOW].to_str().unwrap();
+        assert!(allow.contains(allowed), "{method} {path}: Allow {allow}");
+    }
+    // Bodies over `max_body_bytes` (2 KiB here, not axum's 2 MB default): 413 with the limit.
+    let big = format!(r#"{{"name": "{}"}}"#, "x".repeat(3000));
+    for (path, token) in [
+        ("/api/v1/teams", ADMIN),
+        ("/api/v1/submissions/policies", token.as_str()),
+        ("/api/v1/admin/resimulate", ADMIN),
+    ] {
+        let (status, headers, body) = send(&app, Method::POST, path, Some(token), big.clone()).await;
+        assert_eq!(status, StatusCode::PAYLOAD_TOO_LARGE, "{path}");
+        let v = json_error(status, &headers, &body, "body_too_large");
+        assert_eq!(v["limit_bytes"], 2048, "{path}: {v}");
+    }
+    // A plan file says on which line the limit was crossed.
+    let plans = "{}\n".repeat(1000);
+    let path = "/api/v1/submissions/plans?split=dev";
+    let (status, headers, body) = send(&app, Method::POST, path, Some(&token), plans).await;
+    assert_eq!(status, StatusCode::PAYLOAD_TOO_LARGE);
+    assert!(json_error(status, &headers, &body, "body_too_large")["line"].is_number());
+    // Path segments that are not UTF-8: 400.
+    for path in [
+        "/api/v1/dataset/%ff",
+        "/api/v1/scenes/%ff",
+        "/api/v1/scenes/%ff/brief",
+        "/api/v1/scenes/%ff/topdown.png",
+        "/api/v1/submissions/%ff",
+    ] {
+        let (status, headers, body) = send(&app, Method::GET, path, Some(&token), Body::empty()).await;
+        assert_eq!(status, StatusCode::BAD_REQUEST, "{path}");
+        let v = json_error(status, &headers, &body, "bad_request");
+        assert!(v["error"].as_str().unwrap().starts_with("bad URL path"), "{v}");
+    }
+    // Unknown routes: 404.
+    let (status, headers, body) = send(&app, Method::GET, "/api/v2/nothing", None, Body::empty()).await;
+    assert_eq!(status, StatusCode::NOT_FOUND);
+    json_error(status, &headers, &body, "not_found");
+}
+
+/// A valid one-line dev plan file.
+fn dev_file(f: &crate::testutil::Fixture) -> String {
+    let id = &f.state.content().ground_truth(Split::Dev)[0].id;
+    format!(r#"{{"id": "{id}", "plan": []}}"#)
+}
+
+async fn stats(app: &Router) -> Value {
+    let (status, _, body) = send(
+        app,
+        Method::GET,
+        "/api/v1/admin/stats",
+        Some(ADMIN),
+        Body::empty(),
+    )
+    .await;
+    assert_eq!(status, StatusCode::OK);
+    serde_json::from_slice(&body).unwrap()
+}
+
+#[tokio::test]
+async fn a_burst_over_the_rate_limit_gets_429_with_retry_after_and_is_counted() {
+    let f = fixture(FakeProbe::ok(1), |c| c.quota.per_minute = 3).await;
+    let token = f.team("alpha").await;
+    let other = f.team("beta").await;
+    let app = router(f.state.clone());
+    let plans = "/api/v1/submissions/plans?split=dev";
+    for _ in 0..3 {
+        let (status, _, body) = send(&app, Method::POST, plans, Some(&token), dev_file(&f)).await;
+        assert_eq!(status, StatusCode::CREATED, "{body:?}");
+    }
+    let (status, headers, body) = send(&app, Method::POST, plans, Some(&token), dev_file(&f)).await;
+    assert_eq!(status, StatusCode::TOO_MANY_REQUESTS);
+    let v = json_error(status, &headers, &body, "rate_limited");
+    let retry: u64 = headers[header::RETRY_AFTER].to_str().unwrap().parse().unwrap();
+    assert!((1..=20).contains(&retry), "one slot every 20 s: {retry}");
+    assert_eq!(v["retry_after_s"], retry);
+    // Policy registrations on the same split share the team's slots.
+    let reg = r#"{"endpoint": "http://127.0.0.1:7000", "split": "dev"}"#;
+    let path = "/api/v1/submissions/policies";
+    let (status, _, _) = send(&app, Method::POST, path, Some(&token), reg).await;
+    assert_eq!(status, StatusCode::TOO_MANY_REQUESTS);
+    // Another team, and the other split, have their own.
+    let (status, _, _) = send(&app, Method::POST, plans, Some(&other), dev_file(&f)).await;
+    assert_eq!(status, StatusCode::CREATED);
+    let test_id = &f.state.content().ground_truth(Split::Test)[0].id;
+    let test_file = format!(r#"{{"id": "{test_id}", "plan": []}}"#);
+    let path = "/api/v1/submissions/plans?split=test";
+    let (status, _, _) = send(&app, Method::POST, path, Some(&token), test_file).await;
+    assert_eq!(status, StatusCode::CREATED);
+    let v = stats(&app).await;
+    assert_eq!(v["refusals"]["rate_limited"], json!({"dev": 2, "test": 0}), "{v}");
+    assert_eq!(v["limits"]["per_minute"], 3, "{v}");
+    assert_eq!(f.state.refusals().rate_limited.dev, 2);
+    // Organiser only.
+    let (status, headers, body) = send(
+        &app,
+        Method::GET,
+        "/api/v1/admin/stats",
+        Some(&token),
+        Body::empty(),
+    )
+    .await;
+    assert_eq!(status, StatusCode::FORBIDDEN);
+    json_error(status, &headers, &body, "not_admin");
+}
+
+#[tokio::test]
+async fn daily_quota_refusals_are_counted_per_split() {
+    let f = fixture(FakeProbe::ok(1), |c| c.quota.dev_per_day = 1).await;
+    let token = f.team("alpha").await;
+    let app = router(f.state.clone());
+    let plans = "/api/v1/submissions/plans?split=dev";
+    let (status, _, _) = send(&app, Method::POST, plans, Some(&token), dev_file(&f)).await;
+    assert_eq!(status, StatusCode::CREATED);
+    let (status, headers, body) = send(&app, Method::POST, plans, Some(&token), dev_file(&f)).await;
+    assert_eq!(status, StatusCode::TOO_MANY_REQUESTS);
+    json_error(status, &headers, &body, "quota_exceeded");
+    assert!(headers.contains_key(header::RETRY_AFTER));
+    let v = stats(&app).await;
+    assert_eq!(v["refusals"]["daily_quota"], json!({"dev": 1, "test": 0}), "{v}");
+    assert_eq!(v["refusals"]["rate_limited"], json!({"dev": 0, "test": 0}), "{v}");
+}
+
+#[tokio::test]
+async fn a_look_alike_team_name_is_refused_with_409_naming_the_team() {
+    let f = fixture(FakeProbe::ok(1), |_| {}).await;
+    f.team("rt-alpha").await;
+    let app = router(f.state.clone());
+    let body = r#"{"name": "rt-аlpha"}"#; // Cyrillic а
+    let (status, headers, body) = send(&app, Method::POST, "/api/v1/teams", Some(ADMIN), body).await;
+    assert_eq!(status, StatusCode::CONFLICT);
+    let v = json_error(status, &headers, &body, "conflict");
+    assert!(v["error"].as_str().unwrap().contains("\"rt-alpha\""), "{v}");
+}

@@ -127,6 +127,27 @@ fn every_bad_line_is_named_with_its_line_number() {
 }
 
 #[test]
+fn a_byte_order_mark_at_the_start_is_skipped_and_lines_keep_their_numbers() {
+    let f = fixture();
+    let gt: String = f
+        .dev
+        .iter()
+        .map(|i| serde_json::to_string(i).unwrap() + "\r\n")
+        .collect();
+    let with_bom = format!("\u{feff}{gt}");
+    let file = parse_dev(&f, &with_bom).unwrap();
+    assert_eq!(score(&file, &f.dev).em, 1.0);
+    // Errors after it still name the right line.
+    let e = parse_dev(&f, &format!("\u{feff}{gt}{{oops")).unwrap_err();
+    assert_eq!((e.code(), e.line()), ("not_json", Some(3)), "{e}");
+    // A mark only counts at the very start: elsewhere it is not JSON whitespace.
+    let e = parse_dev(&f, &format!("{gt}\u{feff}{{}}")).unwrap_err();
+    assert_eq!((e.code(), e.line()), ("not_json", Some(3)), "{e}");
+    // A file that is only a mark is empty.
+    assert_eq!(parse_dev(&f, "\u{feff}\n").unwrap_err(), PlanFileError::Empty);
+}
+
+#[test]
 fn empty_and_blank_files_are_refused() {
     let f = fixture();
     for body in ["", "\n\n", "  \n\t\n"] {

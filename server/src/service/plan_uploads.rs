@@ -1,9 +1,11 @@
 //! Plan uploads: a team's plan file validated, scored against the split's ground truth and
-//! stored with its scoring run, within the team's daily quota.
+//! stored with its scoring run, within the team's upload rate ([`super::limits`]) and daily
+//! quota.
 
 use kitchen_r_core::dataset::Split;
 use serde::Serialize;
 
+use super::limits::Refusal;
 use super::{AppState, Scores, now_ms, rfc3339};
 use crate::error::ServiceError;
 use crate::plans;
@@ -28,6 +30,8 @@ impl AppState {
         split: Split,
         body: &[u8],
     ) -> Result<Submitted, ServiceError> {
+        // Before any work: parsing and scoring a large file is what a flood would cost.
+        self.check_rate(team, split)?;
         let limit = self.config().max_body_bytes;
         if body.len() > limit {
             let line = plans::line_at(body, limit);
@@ -83,6 +87,7 @@ impl AppState {
             return Ok(());
         }
         let reset = day_start + DAY_MS;
+        self.count_refusal(Refusal::DailyQuota, split);
         Err(ServiceError::Quota {
             split: split.as_str(),
             limit,

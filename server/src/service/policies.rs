@@ -3,7 +3,8 @@
 //! Policy: an endpoint is accepted only after the injected [`crate::probe::PolicyProbe`] found it
 //! allowed, SERVING and speaking our protocol; then the submission, its scoring run and one job
 //! per episode are inserted in one transaction. Quotas (per day, concurrent runs) are checked
-//! before the probe (a cheap refusal) and again under the submit lock at insert time. Organiser
+//! before the probe (a cheap refusal) and again under the submit lock at insert time; the
+//! upload rate (`quota.per_minute`, [`super::limits`]) before anything else. Organiser
 //! reference runs are exempt from quotas, are filed under a reserved `(baseline)` team, and are
 //! the only runs whose episodes carry `privileged = true`.
 
@@ -113,7 +114,10 @@ impl AppState {
             caller.organiser()?;
             run_store::baseline_team(self.pool(), now_ms()).await?
         } else {
-            caller.team()?.clone()
+            let team = caller.team()?.clone();
+            // Every attempt takes a slot: a probe is a connection made on the team's behalf.
+            self.check_rate(&team, req.split)?;
+            team
         };
         let endpoint = validate_endpoint(&req.endpoint)?;
         let bearer = validate_bearer(req.token.as_deref())?;

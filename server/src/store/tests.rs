@@ -38,8 +38,18 @@ async fn json_columns_round_trip_as_typed_values_in_the_stored_text() {
     let pool = super::connect(&format!("sqlite://{}", dir.path().join("t.db").display()))
         .await
         .unwrap();
-    let team = super::insert_team(&pool, "a", "hash", 1).await.unwrap().unwrap();
-    assert_eq!(super::insert_team(&pool, "a", "other", 1).await.unwrap(), None);
+    let keys = super::NameKeys {
+        skeleton: "a".into(),
+        skeleton_folded: "a".into(),
+    };
+    let team = super::insert_team(&pool, "a", &keys, "hash", 1)
+        .await
+        .unwrap()
+        .unwrap();
+    assert_eq!(
+        super::insert_team(&pool, "a", &keys, "other", 1).await.unwrap(),
+        None
+    );
     let spec = spec();
     // A spec written before `place_targets` existed still reads.
     let mut legacy = serde_json::to_value(&spec).unwrap();
