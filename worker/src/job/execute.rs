@@ -16,7 +16,7 @@ use kitchen_r_sim::{Action, EpisodeConfig, Sim, Snapshot, StepInfo};
 
 use super::spec;
 use super::{JobContext, JobError};
-use kitchen_r_contract::{Credentials, RemoteConfig, RemotePolicy, SimCamera};
+use kitchen_r_contract::{Credentials, RemotePolicy, SimCamera};
 use kitchen_r_episode::offline::{OfflineOutcome, run_offline};
 use kitchen_r_episode::oracle::{OraclePolicy, expert_options};
 use kitchen_r_episode::policy::{Policy, Unreachable};
@@ -192,7 +192,7 @@ fn run(
     ));
     let n_tasks = run.max_tasks.map_or(cfg.plan.len(), |m| m.min(cfg.plan.len()));
     let mut sim = Sim::new(ctx.assets.clone(), ctx.sim.clone(), ctx.sensors.clone(), &cfg)?.0;
-    let remote_cfg = remote_config(&ctx.remote, &ep, run.execute);
+    let remote_cfg = spec::remote_config(&ctx.remote, &ep, run.execute);
     let creds = Credentials {
         token: Some(ep.bearer_token.clone()).filter(|t| !t.is_empty()),
         ca_pem: None,
@@ -237,17 +237,6 @@ fn run(
     };
     let out = run_episode(&mut sim, policy, &run, starts.as_deref(), watch)?;
     Ok(online_results(&out, log))
-}
-
-/// The worker's transport limits with the job's deadlines (zero = the worker's default).
-fn remote_config(base: &RemoteConfig, ep: &pb::PolicyEndpoint, execute: usize) -> RemoteConfig {
-    let secs = |ms: u32, default: f64| if ms == 0 { default } else { f64::from(ms) / 1e3 };
-    RemoteConfig {
-        call_deadline_s: secs(ep.call_deadline_ms, base.call_deadline_s),
-        startup_deadline_s: secs(ep.startup_deadline_ms, base.startup_deadline_s),
-        actions_executed_per_chunk: execute as u32,
-        ..base.clone()
-    }
 }
 
 /// Run the expert over the episode once, keeping its state at each task start, then reset.

@@ -9,6 +9,7 @@
 //! match its plan's `place` steps is refused as a platform fault, never scored.
 use std::time::Duration;
 
+use kitchen_r_contract::RemoteConfig;
 use kitchen_r_core::dataset::Instruction;
 use kitchen_r_core::plan::place_steps;
 use kitchen_r_proto::worker::v1 as pb;
@@ -71,6 +72,23 @@ pub(crate) fn episode_config(
     Ok(cfg)
 }
 
+/// A wire limit in milliseconds: proto3 sends 0 for a field the server left unset, which takes
+/// the worker's default. Every millisecond field of a job is read through here, once.
+fn limit_ms(ms: u32) -> Option<Duration> {
+    (ms > 0).then(|| Duration::from_millis(u64::from(ms)))
+}
+
+/// The worker's transport limits with the job endpoint's deadlines.
+pub(crate) fn remote_config(base: &RemoteConfig, ep: &pb::PolicyEndpoint, execute: usize) -> RemoteConfig {
+    let secs = |ms: u32, default: f64| limit_ms(ms).map_or(default, |d| d.as_secs_f64());
+    RemoteConfig {
+        call_deadline_s: secs(ep.call_deadline_ms, base.call_deadline_s),
+        startup_deadline_s: secs(ep.startup_deadline_ms, base.startup_deadline_s),
+        actions_executed_per_chunk: execute as u32,
+        ..base.clone()
+    }
+}
+
 /// The runner's options for the job: the spec's settings, the endpoint's limits; a zero means
 /// "not set" and takes the default.
 pub(crate) fn run_options(spec: &pb::EpisodeSpec, ep: &pb::PolicyEndpoint) -> Result<RunOptions, JobError> {
@@ -94,8 +112,7 @@ pub(crate) fn run_options(spec: &pb::EpisodeSpec, ep: &pb::PolicyEndpoint) -> Re
             0 => d.max_consecutive_timeouts,
             n => n,
         },
-        wall_budget: (ep.episode_budget_ms > 0)
-            .then(|| Duration::from_millis(u64::from(ep.episode_budget_ms))),
+        wall_budget: limit_ms(ep.episode_budget_ms),
     })
 }
 
