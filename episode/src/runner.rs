@@ -43,8 +43,11 @@ impl Default for RunOptions {
     }
 }
 
+/// What the runner observed of one task: richer than what scoring reads (failed tasks keep the
+/// time they took, the policy calls, whether the failure ended the episode). The worker turns
+/// it into the one scored shape, `kitchen_r_core::scoring::TaskOutcome`, at the wire.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct TaskOutcome {
+pub struct TaskRecord {
     pub index: usize,
     pub step: String,
     pub success: bool,
@@ -63,7 +66,7 @@ pub struct TaskOutcome {
 pub struct EpisodeOutcome {
     pub episode_id: String,
     pub scene: String,
-    pub tasks: Vec<TaskOutcome>,
+    pub tasks: Vec<TaskRecord>,
     pub sim_time: f64,
     pub wall_time_s: f64,
     pub policy_calls: u32,
@@ -168,7 +171,7 @@ pub fn run_episode(
     for j in 0..n_tasks {
         let step_text = episode.plan[j].clone();
         if let Some(reason) = &aborted {
-            out.tasks.push(TaskOutcome {
+            out.tasks.push(TaskRecord {
                 aborts_episode: true,
                 ..failed(j, step_text, 0.0, reason.clone(), 0)
             });
@@ -194,11 +197,11 @@ pub fn run_episode(
 }
 
 /// How the reason of a failure that ends the whole episode starts, for the reader (the runner
-/// itself goes by [`TaskOutcome::aborts_episode`]).
+/// itself goes by [`TaskRecord::aborts_episode`]).
 const ABORT: &str = "episode aborted: ";
 
-fn failed(index: usize, step: String, sim_time: f64, reason: String, calls: u32) -> TaskOutcome {
-    TaskOutcome {
+fn failed(index: usize, step: String, sim_time: f64, reason: String, calls: u32) -> TaskRecord {
+    TaskRecord {
         index,
         step,
         success: false,
@@ -217,7 +220,7 @@ fn run_task(
     timeouts: &mut u32,
     hook: &mut dyn StepHook,
     episode_started: Instant,
-) -> Result<TaskOutcome, RunError> {
+) -> Result<TaskRecord, RunError> {
     let step_text = sim.episode().plan[j].clone();
     let episode_id = sim.episode().id.clone();
     hook.on_task_start(sim, j);
@@ -233,7 +236,7 @@ fn run_task(
     let abort = |sim: &mut Sim, reason: String, calls: u32| {
         let elapsed = sim.time() - t0;
         sim.end_task();
-        Ok(TaskOutcome {
+        Ok(TaskRecord {
             aborts_episode: true,
             ..failed(j, step_text.clone(), elapsed, format!("{ABORT}{reason}"), calls)
         })
@@ -301,7 +304,7 @@ fn run_task(
             let elapsed = sim.time() - t0;
             if info.task.as_ref().is_some_and(|t| t.success) {
                 sim.end_task();
-                return Ok(TaskOutcome {
+                return Ok(TaskRecord {
                     index: j,
                     step: step_text,
                     success: true,

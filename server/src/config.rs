@@ -64,8 +64,34 @@ pub struct Config {
     pub request_timeout_ms: u64,
     pub plans: PlanLimits,
     pub quota: Quota,
+    pub db_pool: DbPool,
     pub control: ControlConfig,
     pub policy: PolicyConfig,
+}
+
+/// How requests share the database (`[db_pool]`). Writes have one connection of their own
+/// (SQLite has one writer), so an upload never waits behind leaderboard readers; readers share
+/// `read_connections` read-only ones. A request that cannot get a connection within its wait
+/// is answered 503 `busy` with `Retry-After`, instead of queueing for seconds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DbPool {
+    /// Read-only connections for pages, leaderboards and token lookups.
+    pub read_connections: u32,
+    /// Longest wait for the write connection (and for SQLite's write lock), milliseconds.
+    pub write_wait_ms: u64,
+    /// Longest wait for a read connection, milliseconds.
+    pub read_wait_ms: u64,
+}
+
+impl Default for DbPool {
+    fn default() -> Self {
+        DbPool {
+            read_connections: 8,
+            write_wait_ms: 2_000,
+            read_wait_ms: 2_000,
+        }
+    }
 }
 
 /// Limits on an uploaded plan file, beyond the body size.
@@ -155,6 +181,7 @@ impl Default for Config {
             request_timeout_ms: 30_000,
             plans: PlanLimits::default(),
             quota: Quota::default(),
+            db_pool: DbPool::default(),
             control: ControlConfig::default(),
             policy: PolicyConfig::default(),
         }
@@ -267,6 +294,16 @@ impl Config {
             return invalid(
                 "request_timeout_ms",
                 "must be between 100 ms and 3600000 ms (one hour)".into(),
+            );
+        }
+        let pool = self.db_pool;
+        if !(1..=64).contains(&pool.read_connections) {
+            return invalid("db_pool.read_connections", "must be between 1 and 64".into());
+        }
+        if !(10..=60_000).contains(&pool.write_wait_ms) || !(10..=60_000).contains(&pool.read_wait_ms) {
+            return invalid(
+                "db_pool",
+                "write_wait_ms and read_wait_ms must be between 10 and 60000".into(),
             );
         }
         if self.plans.max_step_chars == 0 || self.plans.max_steps == 0 {

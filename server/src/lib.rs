@@ -79,7 +79,7 @@ pub async fn build_with(config: Config, probe: Arc<dyn PolicyProbe>) -> anyhow::
     if config.contest {
         content.check_contest_ready()?;
     }
-    let pool = store::connect(&config.db).await?;
+    let pool = store::connect(&config.db, config.db_pool.into()).await?;
     let (admin, generated_admin_token) = token_or_generated(&config.admin_token);
     let (worker_token, generated_worker_token) = token_or_generated(&config.worker_token);
     let tokens = service::Tokens {

@@ -3,7 +3,7 @@
 //! protocol this server speaks.
 //!
 //! The server crate only defines the seam ([`PolicyProbe`]): talking to a policy is the worker
-//! crate's job (`kitchen_r_worker::remote`), and the server must not depend on the simulator.
+//! crate's job (`kitchen_r_contract`), and the server must not depend on the simulator.
 //! The `kitchen-r` binary passes the real probe to [`crate::build_with`]; [`crate::build`]
 //! installs [`NoProbe`], which refuses every registration with a clear 503, so a server that
 //! cannot evaluate policies never queues work no one will do.

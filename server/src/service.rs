@@ -35,6 +35,7 @@ use crate::config::Config;
 use crate::content::Content;
 use crate::leaderboard::LeaderboardCache;
 use crate::probe::PolicyProbe;
+use crate::store::Db;
 
 pub(crate) use crate::clock::{now_ms, rfc3339};
 pub(crate) use crate::scores::Scores;
@@ -53,7 +54,7 @@ pub(crate) struct AppState {
 }
 
 struct Inner {
-    pool: SqlitePool,
+    db: Db,
     config: Config,
     content: Content,
     admin_hash: String,
@@ -88,7 +89,7 @@ pub(crate) struct Tokens<'a> {
 
 impl AppState {
     pub(crate) fn new(
-        pool: SqlitePool,
+        db: Db,
         config: Config,
         content: Content,
         tokens: Tokens<'_>,
@@ -96,7 +97,7 @@ impl AppState {
     ) -> AppState {
         AppState {
             inner: Arc::new(Inner {
-                pool,
+                db,
                 limits: limits::Limits::new(config.quota.per_minute, now_ms()),
                 config,
                 content,
@@ -119,8 +120,14 @@ impl AppState {
         &self.inner.content
     }
 
+    /// The write pool (one connection): every write, and reads inside a write's logic.
     pub(crate) fn pool(&self) -> &SqlitePool {
-        &self.inner.pool
+        &self.inner.db.write
+    }
+
+    /// The read-only pool: pages, boards and caller lookups, which never wait for a writer.
+    pub(crate) fn read_pool(&self) -> &SqlitePool {
+        &self.inner.db.read
     }
 
     pub(crate) fn leaderboard_cache(&self) -> &LeaderboardCache {

@@ -10,9 +10,12 @@
 //! values (and written with `serde_json`, the text existing databases hold). `submissions.body`
 //! stays text: by kind it is a plan file or a policy endpoint's JSON.
 //!
-//! Submodules: [`runs`] (policy submissions, their runs, results, policy leaderboards) and
-//! [`queue`] (the job queue).
+//! Submodules: [`runs`] (policy submissions, their runs and results), [`queue`] (the job queue)
+//! and [`board`] (the maintained leaderboards, refreshed by every write above that changes one).
 
+pub(crate) mod board;
+mod compact;
+mod packed;
 pub(crate) mod queue;
 pub(crate) mod runs;
 
@@ -25,36 +28,86 @@ use kitchen_r_core::dataset::Split;
 use sqlx::sqlite::{
     SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions, SqliteSynchronous,
 };
-use sqlx::{FromRow, QueryBuilder, Sqlite};
+use sqlx::{FromRow, Sqlite};
 
 use crate::plans::InstructionScore;
 use crate::scores::Scores;
 use crate::states::{RunState, SubmissionKind};
 
-/// Open (creating file and directory if missing) and migrate the database.
-pub(crate) async fn connect(url: &str) -> anyhow::Result<SqlitePool> {
+/// The database's two pools. SQLite in WAL mode has one writer and many readers, so writes get
+/// one connection of their own and never queue behind readers for a connection; readers share
+/// a read-only pool. Both wait a bounded time for a connection ([`PoolLimits`]); past it the
+/// caller gets `sqlx::Error::PoolTimedOut`, which the service answers 503 `busy`.
+#[derive(Debug, Clone)]
+pub(crate) struct Db {
+    /// Every write, and reads that must see the write they belong to.
+    pub write: SqlitePool,
+    /// Reads that serve pages and boards (leaderboards, submissions, callers).
+    pub read: SqlitePool,
+}
+
+/// How many readers, and how long a request may wait for a connection (`[db_pool]`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct PoolLimits {
+    pub read_connections: u32,
+    pub write_wait: Duration,
+    pub read_wait: Duration,
+}
+
+impl From<crate::config::DbPool> for PoolLimits {
+    fn from(c: crate::config::DbPool) -> Self {
+        PoolLimits {
+            read_connections: c.read_connections,
+            write_wait: Duration::from_millis(c.write_wait_ms),
+            read_wait: Duration::from_millis(c.read_wait_ms),
+        }
+    }
+}
+
+impl Default for PoolLimits {
+    fn default() -> Self {
+        crate::config::DbPool::default().into()
+    }
+}
+
+/// Open (creating file and directory if missing) and migrate the database, then rebuild the
+/// maintained leaderboards.
+pub(crate) async fn connect(url: &str, limits: PoolLimits) -> anyhow::Result<Db> {
     let opts = SqliteConnectOptions::from_str(url)
         .with_context(|| format!("bad database URL {url:?}"))?
         .create_if_missing(true)
         .journal_mode(SqliteJournalMode::Wal)
         .synchronous(SqliteSynchronous::Normal)
-        .busy_timeout(Duration::from_secs(5))
+        .busy_timeout(limits.write_wait)
         .foreign_keys(true);
     if let Some(dir) = Path::new(opts.get_filename()).parent()
         && !dir.as_os_str().is_empty()
     {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     }
-    let pool = SqlitePoolOptions::new()
-        .max_connections(4)
-        .connect_with(opts)
+    let write = SqlitePoolOptions::new()
+        .max_connections(1)
+        .acquire_timeout(limits.write_wait)
+        .connect_with(opts.clone())
         .await
         .with_context(|| format!("cannot open database {url}"))?;
     sqlx::migrate!("../migrations")
-        .run(&pool)
+        .run(&write)
         .await
         .context("applying migrations")?;
-    Ok(pool)
+    compact::legacy_rows(&write)
+        .await
+        .context("compacting plan files and results stored before 20261122250000")?;
+    board::rebuild(&write)
+        .await
+        .context("rebuilding the leaderboards")?;
+    let read = SqlitePoolOptions::new()
+        .max_connections(limits.read_connections.max(1))
+        .acquire_timeout(limits.read_wait)
+        .connect_with(opts.read_only(true).create_if_missing(false))
+        .await
+        .with_context(|| format!("cannot open database {url} for reading"))?;
+    Ok(Db { write, read })
 }
 
 #[derive(Debug, Clone, PartialEq, Eq, FromRow)]
@@ -178,15 +231,17 @@ pub(crate) async fn insert_plan_submission(
 ) -> sqlx::Result<(i64, i64)> {
     let mut tx = pool.begin().await?;
     let sub: i64 = sqlx::query_scalar(
-        "INSERT INTO submissions (team_id, split, kind, body, created_at) VALUES (?, ?, 'plans', ?, ?) RETURNING id",
+        "INSERT INTO submissions (team_id, split, kind, body, body_z, created_at)
+         VALUES (?, ?, 'plans', '', ?, ?) RETURNING id",
     )
     .bind(team)
     .bind(split.as_str())
-    .bind(body)
+    .bind(packed::pack_text(body))
     .bind(now)
     .fetch_one(&mut *tx)
     .await?;
     let run_id = insert_run_in(&mut tx, sub, now, run).await?;
+    board::refresh_submission(&mut tx, sub).await?;
     tx.commit().await?;
     Ok((sub, run_id))
 }
@@ -200,6 +255,7 @@ pub(crate) async fn insert_run(
 ) -> sqlx::Result<i64> {
     let mut tx = pool.begin().await?;
     let id = insert_run_in(&mut tx, submission, now, run).await?;
+    board::refresh_submission(&mut tx, submission).await?;
     tx.commit().await?;
     Ok(id)
 }
@@ -210,30 +266,17 @@ async fn insert_run_in(
     now: i64,
     run: &NewRun<'_>,
 ) -> sqlx::Result<i64> {
-    let run_id: i64 = sqlx::query_scalar(
-        "INSERT INTO scoring_runs (submission_id, scorer_version, created_at, em) VALUES (?, ?, ?, ?) RETURNING id",
+    sqlx::query_scalar(
+        "INSERT INTO scoring_runs (submission_id, scorer_version, created_at, em, instructions_z)
+         VALUES (?, ?, ?, ?, ?) RETURNING id",
     )
     .bind(submission)
     .bind(run.scorer_version)
     .bind(now)
     .bind(run.em)
+    .bind(packed::pack_instructions(run.instructions))
     .fetch_one(&mut **tx)
-    .await?;
-    // 5 parameters a row; 400 rows stay far below SQLite's parameter limit.
-    for chunk in run.instructions.chunks(400) {
-        let mut q = QueryBuilder::<Sqlite>::new(
-            "INSERT INTO instruction_results (run_id, instruction_id, present, correct_steps, total_steps) ",
-        );
-        q.push_values(chunk, |mut b, i| {
-            b.push_bind(run_id)
-                .push_bind(i.id.clone())
-                .push_bind(i.present)
-                .push_bind(i.correct as i64)
-                .push_bind(i.total as i64);
-        });
-        q.build().execute(&mut **tx).await?;
-    }
-    Ok(run_id)
+    .await
 }
 
 #[derive(Debug, Clone, PartialEq, FromRow)]
@@ -322,36 +365,16 @@ pub(crate) async fn latest_run(pool: &SqlitePool, submission: i64) -> sqlx::Resu
     .await
 }
 
+/// A plan run's per-instruction results, in instruction order (empty for a policy run).
 pub(crate) async fn instruction_results(pool: &SqlitePool, run: i64) -> sqlx::Result<Vec<InstructionScore>> {
-    let rows: Vec<InstructionRow> = sqlx::query_as(
-        "SELECT instruction_id, present, correct_steps, total_steps FROM instruction_results WHERE run_id = ? ORDER BY instruction_id",
-    )
-    .bind(run)
-    .fetch_all(pool)
-    .await?;
-    Ok(rows.into_iter().map(InstructionScore::from).collect())
-}
-
-/// A row of `instruction_results`.
-#[derive(FromRow)]
-struct InstructionRow {
-    instruction_id: String,
-    present: bool,
-    #[sqlx(try_from = "i64")]
-    correct_steps: usize,
-    #[sqlx(try_from = "i64")]
-    total_steps: usize,
-}
-
-impl From<InstructionRow> for InstructionScore {
-    fn from(r: InstructionRow) -> InstructionScore {
-        InstructionScore {
-            id: r.instruction_id,
-            present: r.present,
-            correct: r.correct_steps,
-            total: r.total_steps,
-        }
-    }
+    let blob: Option<Vec<u8>> = sqlx::query_scalar("SELECT instructions_z FROM scoring_runs WHERE id = ?")
+        .bind(run)
+        .fetch_optional(pool)
+        .await?
+        .flatten();
+    let mut rows = blob.map_or(Ok(Vec::new()), |z| packed::unpack_instructions(&z))?;
+    rows.sort_by(|a, b| a.id.cmp(&b.id));
+    Ok(rows)
 }
 
 /// Ids of every plan submission, oldest first (for rescoring).
@@ -377,50 +400,12 @@ pub(crate) struct SubmissionBody {
 
 /// The split and body of one submission.
 pub(crate) async fn submission_body(pool: &SqlitePool, id: i64) -> sqlx::Result<SubmissionBody> {
-    sqlx::query_as("SELECT split, body FROM submissions WHERE id = ?")
-        .bind(id)
-        .fetch_one(pool)
-        .await
-}
-
-#[derive(Debug, Clone, PartialEq, FromRow)]
-pub(crate) struct LeaderboardRow {
-    pub team: String,
-    pub submission_id: i64,
-    pub em: Option<f64>,
-    pub submitted_at: i64,
-}
-
-/// Planning track: each team's best plan submission to `split` by its latest run's EM; ties go
-/// to the earlier submission, then the lower id. Unscored entries sort last. On the test split a
-/// plan file created after the team's first test policy submission is left out
-/// ([`first_test_policy`]).
-pub(crate) async fn planning_leaderboard(
-    pool: &SqlitePool,
-    split: Split,
-) -> sqlx::Result<Vec<LeaderboardRow>> {
-    sqlx::query_as(
-        "WITH latest AS (
-            SELECT r.submission_id, r.em FROM scoring_runs r
-            WHERE r.id = (SELECT MAX(id) FROM scoring_runs WHERE submission_id = r.submission_id)
-         ), ranked AS (
-            SELECT s.id, s.team_id, s.created_at, l.em,
-                   ROW_NUMBER() OVER (PARTITION BY s.team_id
-                       ORDER BY l.em IS NULL, l.em DESC, s.created_at, s.id) AS rn
-            FROM submissions s LEFT JOIN latest l ON l.submission_id = s.id
-            WHERE s.split = ? AND s.kind = 'plans'
-              -- Test plan files made after the team's first test policy run are not ranked.
-              AND (s.split <> 'test' OR s.id < COALESCE((SELECT MIN(p.id) FROM submissions p
-                   WHERE p.team_id = s.team_id AND p.split = 'test' AND p.kind = 'policy'), s.id + 1))
-         )
-         SELECT t.name AS team, k.id AS submission_id, k.em, k.created_at AS submitted_at
-         FROM ranked k JOIN teams t ON t.id = k.team_id
-         WHERE k.rn = 1
-         ORDER BY k.em IS NULL, k.em DESC, k.created_at, k.id",
-    )
-    .bind(split.as_str())
-    .fetch_all(pool)
-    .await
+    let stored: packed::StoredBody =
+        sqlx::query_as("SELECT split, body, body_z FROM submissions WHERE id = ?")
+            .bind(id)
+            .fetch_one(pool)
+            .await?;
+    stored.into_body()
 }
 
 #[cfg(test)]

@@ -72,7 +72,9 @@ pub(crate) async fn fixture(probe: Arc<dyn PolicyProbe>, tweak: impl FnOnce(&mut
     tweak(&mut config);
     config.validate().unwrap();
     let content = Content::load(&config.assets_dir(), config.test_set_dir()).unwrap();
-    let pool = crate::store::connect(&config.db).await.unwrap();
+    let pool = crate::store::connect(&config.db, config.db_pool.into())
+        .await
+        .unwrap();
     let tokens = Tokens {
         admin: ADMIN,
         worker: WORKER,
@@ -88,7 +90,9 @@ impl Fixture {
     pub(crate) async fn reopen(&self, probe: Arc<dyn PolicyProbe>) -> AppState {
         let config = self.state.config().clone();
         let content = Content::load(&config.assets_dir(), config.test_set_dir()).unwrap();
-        let pool = crate::store::connect(&config.db).await.unwrap();
+        let pool = crate::store::connect(&config.db, config.db_pool.into())
+            .await
+            .unwrap();
         let tokens = Tokens {
             admin: ADMIN,
             worker: WORKER,

@@ -164,6 +164,9 @@ async fn control_and_integrated_order_with_baselines_and_infinite_p() {
         Some(f64::INFINITY),
     )
     .await;
+    // The rows above were written by hand, past the store's writers: rebuild the maintained
+    // entries as the server does at start-up.
+    crate::store::board::rebuild(pool).await.unwrap();
     f.state.leaderboard_cache().invalidate();
 
     let control = f.state.leaderboard(Track::Control, Split::Dev).await.unwrap();
@@ -325,4 +328,92 @@ async fn a_policy_dodging_its_mse_episodes_ranks_below_an_honest_one() {
         let dodger = &board.rows[1].scores;
         assert_eq!(dodger.mse, Some(kitchen_r_core::metrics::FAILED_PREDICTION_MSE));
     }
+}
+
+/// The boards are maintained by each write (issue #12: a read after a write must not recompute
+/// from every submission). After plan uploads on both splits, a test policy run that makes later
+/// test plans unranked, finished and active runs and a rescore, every board read equals what a
+/// rebuild from all submissions gives.
+#[tokio::test]
+async fn maintained_boards_equal_a_rebuild_after_every_kind_of_write() {
+    let f = fixture(FakeProbe::ok(8), |c| {
+        c.control.dev_episodes = 1;
+        c.control.offline_mse = false;
+        c.quota.concurrent_runs = 0;
+        c.quota.dev_per_day = 0;
+        c.quota.test_per_day = 0;
+    })
+    .await;
+    let file = |split: Split, keep: usize| -> String {
+        (f.state.content().ground_truth(split).iter().take(6).enumerate())
+            .map(|(n, i)| {
+                let plan = if n < keep {
+                    i.plan.clone()
+                } else {
+                    vec!["pick(x)".into()]
+                };
+                serde_json::json!({"id": i.id, "plan": plan}).to_string() + "\n"
+            })
+            .collect()
+    };
+    let boards = async || {
+        let mut all = Vec::new();
+        for split in [Split::Dev, Split::Test] {
+            for track in Track::ALL {
+                let rows = f.state.leaderboard(track, split).await.unwrap().rows;
+                all.push(serde_json::to_string(&rows).unwrap());
+            }
+        }
+        all
+    };
+    let check = async |what: &str| {
+        let maintained = boards().await;
+        crate::store::board::rebuild(f.state.pool()).await.unwrap();
+        assert_eq!(maintained, boards().await, "after {what}");
+    };
+    let mut tokens = Vec::new();
+    for (n, name) in ["alpha", "beta", "gamma"].into_iter().enumerate() {
+        let token = f.team(name).await;
+        let team = f.team_of(&token).await;
+        for keep in [n, 6 - n, 3] {
+            for split in [Split::Dev, Split::Test] {
+                let body = file(split, keep);
+                f.state.submit_plans(&team, split, body.as_bytes()).await.unwrap();
+            }
+        }
+        tokens.push(token);
+    }
+    check("plan uploads").await;
+    let dev = (f
+        .state
+        .register_policy(&f.caller(&tokens[1]).await, f.request(Split::Dev)))
+    .await
+    .unwrap();
+    check("an active dev run").await;
+    (f.state
+        .register_policy(&f.caller(&tokens[0]).await, f.request(Split::Test)))
+    .await
+    .unwrap();
+    let late = file(Split::Test, 6);
+    let late_id = (f
+        .state
+        .submit_plans(&f.team_of(&tokens[0]).await, Split::Test, late.as_bytes()))
+    .await
+    .unwrap()
+    .id;
+    check("a test policy run and a later test plan file").await;
+    for job in f.lease("w", 64).await {
+        if job.run_id == dev.run_id {
+            let report = f.report("w", &job, |j| j % 2 == 0, 0.0);
+            f.state.report_result(f.worker().await, report).await.unwrap();
+        }
+    }
+    check("finished runs").await;
+    let control = f.state.leaderboard(Track::Control, Split::Dev).await.unwrap();
+    assert_eq!(control.rows[0].state.as_deref(), Some("finished"));
+    let planning = f.state.leaderboard(Track::Planning, Split::Test).await.unwrap();
+    assert_eq!(planning.rows.len(), 3);
+    assert!(planning.rows.iter().all(|r| r.submission_id < late_id));
+    f.state.rescore_all(f.admin().await).await.unwrap();
+    check("a rescore").await;
 }

@@ -73,7 +73,7 @@ impl AppState {
         if hash == self.inner.worker_hash {
             return Ok(Caller::Worker(WorkerCred(())));
         }
-        Ok(store::team_by_token_hash(self.pool(), &hash)
+        Ok(store::team_by_token_hash(self.read_pool(), &hash)
             .await?
             .map_or(Caller::Unrecognised, Caller::Team))
     }

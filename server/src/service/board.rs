@@ -8,50 +8,31 @@ use super::{AppState, rfc3339};
 use crate::error::ServiceError;
 use crate::leaderboard::{Format, Leaderboard, Row, Track, ranked, render};
 use crate::scores::Scores;
-use crate::store;
+use crate::store::board;
 
 impl AppState {
-    /// The ranking of one track and split.
+    /// The ranking of one track and split, read from the maintained entries.
     pub(crate) async fn leaderboard(&self, track: Track, split: Split) -> Result<Leaderboard, ServiceError> {
-        let rows: Vec<Row> = match track {
-            Track::Planning => store::planning_leaderboard(self.pool(), split)
-                .await?
-                .into_iter()
-                .map(|r| Row {
-                    rank: None,
-                    team: r.team,
-                    submission_id: r.submission_id,
-                    scores: Scores::em(r.em),
-                    submitted_at: rfc3339(r.submitted_at),
-                    state: None,
-                    baseline: false,
-                })
-                .collect(),
-            Track::Control | Track::Integrated => {
-                store::runs::policy_leaderboard(self.pool(), split, track == Track::Integrated)
-                    .await?
-                    .into_iter()
-                    .map(|r| {
-                        let integrated = track == Track::Integrated;
-                        Row {
-                            rank: None,
-                            team: r.team,
-                            submission_id: r.submission_id,
-                            scores: Scores {
-                                em: None,
-                                sr: r.sr,
-                                mse: r.mse,
-                                m: r.m.filter(|_| integrated),
-                                p: r.p.filter(|_| integrated),
-                            },
-                            submitted_at: rfc3339(r.submitted_at),
-                            state: r.state.map(|s| s.as_str().to_string()),
-                            baseline: r.baseline,
-                        }
-                    })
-                    .collect()
-            }
-        };
+        let stored = board::read(self.read_pool(), track.as_str(), split).await?;
+        let integrated = track == Track::Integrated;
+        let rows = stored.into_iter().map(|r| Row {
+            rank: None,
+            team: r.team,
+            submission_id: r.submission_id,
+            scores: match track {
+                Track::Planning => Scores::em(r.em),
+                Track::Control | Track::Integrated => Scores {
+                    em: None,
+                    sr: r.sr,
+                    mse: r.mse,
+                    m: r.m.filter(|_| integrated),
+                    p: r.p.filter(|_| integrated),
+                },
+            },
+            submitted_at: rfc3339(r.submitted_at),
+            state: r.state.map(|s| s.as_str().to_string()),
+            baseline: r.baseline,
+        });
         Ok(Leaderboard {
             track,
             split,

@@ -91,8 +91,8 @@ impl AppState {
         hidden: bool,
     ) -> Result<PolicyRunView, ServiceError> {
         let source = run.episodes_run();
-        let counts = run_store::job_counts(self.pool(), source).await?;
-        let results = run_store::results(self.pool(), source).await?;
+        let counts = run_store::job_counts(self.read_pool(), source).await?;
+        let results = run_store::results(self.read_pool(), source).await?;
         let state = match run.state {
             RunState::Finished => "finished",
             RunState::PlatformFailed => "platform_failed",
@@ -101,7 +101,7 @@ impl AppState {
         };
         let episodes: Vec<EpisodeView> = results.into_iter().map(episode_view).collect();
         let failure_counts = failure_counts(&episodes, hidden);
-        let retrying: Vec<RetryView> = run_store::retrying(self.pool(), source)
+        let retrying: Vec<RetryView> = run_store::retrying(self.read_pool(), source)
             .await?
             .into_iter()
             .map(|j| RetryView {

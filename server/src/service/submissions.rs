@@ -71,13 +71,13 @@ impl AppState {
             Caller::Organiser(_) => None,
             _ => Some(caller.team()?),
         };
-        let sub = store::submission(self.pool(), id)
+        let sub = store::submission(self.read_pool(), id)
             .await?
             .filter(|s| viewer.as_ref().is_none_or(|t| t.id == s.team_id))
             .ok_or_else(|| ServiceError::not_found(format!("submission {id}")))?;
         let hidden = sub.split == Split::Test.as_str();
         let is_policy = sub.kind == SubmissionKind::Policy;
-        let latest_run = match store::latest_run(self.pool(), id).await? {
+        let latest_run = match store::latest_run(self.read_pool(), id).await? {
             None => None,
             Some(run) => {
                 let evaluation = match is_policy {
@@ -86,7 +86,7 @@ impl AppState {
                 };
                 let results = match is_policy {
                     true => Vec::new(),
-                    false => store::instruction_results(self.pool(), run.id).await?,
+                    false => store::instruction_results(self.read_pool(), run.id).await?,
                 };
                 let present = results.iter().filter(|i| i.present).count();
                 Some(RunView {
@@ -106,7 +106,7 @@ impl AppState {
         };
         let policy = match is_policy {
             true => Some(policies::policy_info(
-                &store::submission_body(self.pool(), id).await?.body,
+                &store::submission_body(self.read_pool(), id).await?.body,
             )?),
             false => None,
         };
@@ -132,7 +132,7 @@ impl AppState {
     /// Why the test plan submission `id` of `team` cannot appear on the leaderboard (the rule
     /// [`store::planning_leaderboard`] applies), or `None` when it can.
     pub(super) async fn unranked_reason(&self, team: i64, id: i64) -> Result<Option<String>, ServiceError> {
-        Ok(match store::first_test_policy(self.pool(), team).await? {
+        Ok(match store::first_test_policy(self.read_pool(), team).await? {
             Some(first) if first < id => Some(format!(
                 "created after the team's first test-split policy run (submission {first}), whose \
                  endpoint received the test plans' steps as sub-tasks: scored, not ranked"

@@ -7,7 +7,8 @@ use sqlx::{FromRow, QueryBuilder, Sqlite, SqliteConnection};
 
 use crate::episodes::{RunScores, TaskOutcome};
 use crate::states::RunState;
-use crate::store::{SubmissionBody, Team};
+use crate::store::packed::StoredBody;
+use crate::store::{SubmissionBody, Team, board};
 
 /// A policy submission to insert with its run and jobs.
 #[derive(Debug, Clone, PartialEq)]
@@ -41,6 +42,7 @@ pub(crate) async fn insert_policy_submission(
     .fetch_one(&mut *tx)
     .await?;
     let run = insert_run_with_jobs(&mut tx, sub, new, now).await?;
+    board::refresh_submission(&mut tx, sub).await?;
     tx.commit().await?;
     Ok((sub, run))
 }
@@ -55,6 +57,7 @@ pub(crate) async fn insert_policy_run(
 ) -> sqlx::Result<i64> {
     let mut tx = pool.begin_with("BEGIN IMMEDIATE").await?;
     let run = insert_run_with_jobs(&mut tx, submission, new, now).await?;
+    board::refresh_submission(&mut tx, submission).await?;
     tx.commit().await?;
     Ok(run)
 }
@@ -107,10 +110,14 @@ pub(crate) async fn active_runs(pool: &SqlitePool, team: i64) -> sqlx::Result<i6
 
 /// The split and body of the submission a run belongs to.
 pub(crate) async fn run_submission(conn: &mut SqliteConnection, run: i64) -> sqlx::Result<SubmissionBody> {
-    sqlx::query_as("SELECT s.split, s.body FROM scoring_runs r JOIN submissions s ON s.id = r.submission_id WHERE r.id = ?")
-        .bind(run)
-        .fetch_one(&mut *conn)
-        .await
+    let stored: StoredBody = sqlx::query_as(
+        "SELECT s.split, s.body, s.body_z FROM scoring_runs r JOIN submissions s ON s.id = r.submission_id
+         WHERE r.id = ?",
+    )
+    .bind(run)
+    .fetch_one(&mut *conn)
+    .await?;
+    stored.into_body()
 }
 
 /// The split and body of any submission, inside a transaction.
@@ -118,10 +125,12 @@ pub(crate) async fn submission_body_in(
     conn: &mut SqliteConnection,
     id: i64,
 ) -> sqlx::Result<Option<SubmissionBody>> {
-    sqlx::query_as("SELECT split, body FROM submissions WHERE id = ?")
-        .bind(id)
-        .fetch_optional(&mut *conn)
-        .await
+    let stored: Option<StoredBody> =
+        sqlx::query_as("SELECT split, body, body_z FROM submissions WHERE id = ?")
+            .bind(id)
+            .fetch_optional(&mut *conn)
+            .await?;
+    stored.map(StoredBody::into_body).transpose()
 }
 
 /// Store a finished run's scores; only an `active` run is finished (a second call is a no-op).
@@ -151,7 +160,11 @@ pub(crate) async fn finish_run(
     .bind(run)
     .execute(&mut *conn)
     .await?;
-    Ok(done.rows_affected() == 1)
+    let finished = done.rows_affected() == 1;
+    if finished {
+        board::refresh_run(conn, run).await?;
+    }
+    Ok(finished)
 }
 
 /// A rescore of a finished policy run: a new finished scoring run with `scores` recomputed from
@@ -164,7 +177,8 @@ pub(crate) async fn insert_derived_run(
     scores: &RunScores,
     now: i64,
 ) -> sqlx::Result<i64> {
-    sqlx::query_scalar(
+    let mut tx = pool.begin_with("BEGIN IMMEDIATE").await?;
+    let id = sqlx::query_scalar(
         "INSERT INTO scoring_runs (submission_id, scorer_version, created_at, em, state,
              episodes_total, max_concurrency, sr, mse, m, p, finished_at, source_run_id)
          SELECT ?, ?, ?, ?, 'finished', episodes_total, max_concurrency, ?, ?, ?, ?, ?, ?
@@ -181,8 +195,11 @@ pub(crate) async fn insert_derived_run(
     .bind(now)
     .bind(source)
     .bind(source)
-    .fetch_one(pool)
-    .await
+    .fetch_one(&mut *tx)
+    .await?;
+    board::refresh_submission(&mut tx, submission).await?;
+    tx.commit().await?;
+    Ok(id)
 }
 
 /// Flag a run whose episodes no longer match the ground truth.
@@ -241,64 +258,6 @@ pub(crate) async fn results(pool: &SqlitePool, run: i64) -> sqlx::Result<Vec<Res
 }
 
 /// A control or integrated leaderboard row (best entry per team, or a baseline).
-#[derive(Debug, Clone, PartialEq, FromRow)]
-pub(crate) struct PolicyBoardRow {
-    pub team: String,
-    pub submission_id: i64,
-    pub submitted_at: i64,
-    /// `None` for a submission without a run.
-    pub state: Option<RunState>,
-    pub sr: Option<f64>,
-    pub mse: Option<f64>,
-    pub m: Option<f64>,
-    pub p: Option<f64>,
-    pub baseline: bool,
-}
-
-/// Policy submissions ranked on `(primary DESC, secondary ASC)`: `("sr", "mse")` for the
-/// control track, `("m", "p")` for the integrated track (only runs linked to a plans
-/// submission). Best entry per team; reference runs are each their own baseline row. Unscored
-/// or failed entries sort last, then earliest submission, then id.
-pub(crate) async fn policy_leaderboard(
-    pool: &SqlitePool,
-    split: Split,
-    integrated: bool,
-) -> sqlx::Result<Vec<PolicyBoardRow>> {
-    let (primary, secondary) = if integrated { ("m", "p") } else { ("sr", "mse") };
-    let linked = if integrated {
-        "AND json_extract(s.body, '$.plans') IS NOT NULL"
-    } else {
-        ""
-    };
-    // Column names come from the two constants above, never from input.
-    let sql = format!(
-        "WITH latest AS (
-            SELECT r.submission_id, r.state, r.sr, r.mse, r.m, r.p,
-                   CASE WHEN r.state = 'finished' THEN r.{primary} END AS k1,
-                   CASE WHEN r.state = 'finished' THEN r.{secondary} END AS k2
-            FROM scoring_runs r
-            WHERE r.id = (SELECT MAX(id) FROM scoring_runs WHERE submission_id = r.submission_id)
-         ), ranked AS (
-            SELECT s.id, s.team_id, s.created_at, l.state, l.sr, l.mse, l.m, l.p, l.k1, l.k2,
-                   COALESCE(json_extract(s.body, '$.reference'), 0) AS baseline,
-                   ROW_NUMBER() OVER (
-                       PARTITION BY s.team_id, CASE WHEN COALESCE(json_extract(s.body, '$.reference'), 0) THEN s.id END
-                       ORDER BY l.k1 IS NULL, l.k1 DESC, l.k2 IS NULL, l.k2, s.created_at, s.id) AS rn
-            FROM submissions s LEFT JOIN latest l ON l.submission_id = s.id
-            WHERE s.split = ? AND s.kind = 'policy' {linked}
-         )
-         SELECT t.name AS team, k.id AS submission_id, k.created_at AS submitted_at, k.state,
-                k.sr, k.mse, k.m, k.p, k.baseline
-         FROM ranked k JOIN teams t ON t.id = k.team_id
-         WHERE k.rn = 1
-         ORDER BY k.k1 IS NULL, k.k1 DESC, k.k2 IS NULL, k.k2, k.created_at, k.id"
-    );
-    sqlx::query_as(sqlx::AssertSqlSafe(sql))
-        .bind(split.as_str())
-        .fetch_all(pool)
-        .await
-}
-
 /// Name of the reserved team organiser reference runs are filed under. Team names cannot
 /// contain parentheses, so no participant can take it.
 pub(crate) const BASELINE_TEAM: &str = "(baseline)";

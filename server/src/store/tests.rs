@@ -35,9 +35,11 @@ fn spec() -> JobSpec {
 #[tokio::test]
 async fn json_columns_round_trip_as_typed_values_in_the_stored_text() {
     let dir = tempfile::tempdir().unwrap();
-    let pool = super::connect(&format!("sqlite://{}", dir.path().join("t.db").display()))
+    let url = format!("sqlite://{}", dir.path().join("t.db").display());
+    let pool = super::connect(&url, super::PoolLimits::default())
         .await
-        .unwrap();
+        .unwrap()
+        .write;
     let keys = super::NameKeys {
         skeleton: "a".into(),
         skeleton_folded: "a".into(),
@@ -117,9 +119,74 @@ async fn json_columns_round_trip_as_typed_values_in_the_stored_text() {
     let episodes = queue::episodes(&mut conn, run).await.unwrap();
     assert_eq!(episodes.len(), 1);
     assert_eq!((&episodes[0].spec, &episodes[0].tasks), (&spec, &tasks));
+    drop(conn); // the write pool has one connection
     let results = runs::results(&pool, run).await.unwrap();
     assert_eq!(
         (results[0].episode_key.as_str(), &results[0].tasks),
         ("dev-0001", &tasks)
     );
+}
+
+/// Databases from before compressed plan storage keep every plan file and result: the next
+/// start converts them, and they read back the same.
+#[tokio::test]
+async fn rows_stored_before_compression_are_converted_at_start_and_read_the_same() {
+    let dir = tempfile::tempdir().unwrap();
+    let url = format!("sqlite://{}", dir.path().join("t.db").display());
+    let pool = super::connect(&url, super::PoolLimits::default())
+        .await
+        .unwrap()
+        .write;
+    let keys = super::NameKeys {
+        skeleton: "a".into(),
+        skeleton_folded: "a".into(),
+    };
+    let team = super::insert_team(&pool, "a", &keys, "hash", 1)
+        .await
+        .unwrap()
+        .unwrap();
+    let body = "{\"id\": \"dev-0001\", \"plan\": [\"pick(cup)\"]}\n".repeat(20);
+    // Written as the server did before 20261122250000: text body, one row per instruction.
+    let sub: i64 = sqlx::query_scalar(
+        "INSERT INTO submissions (team_id, split, kind, body, created_at) VALUES (?, 'dev', 'plans', ?, 1) RETURNING id",
+    )
+    .bind(team)
+    .bind(&body)
+    .fetch_one(&pool)
+    .await
+    .unwrap();
+    let run: i64 = sqlx::query_scalar(
+        "INSERT INTO scoring_runs (submission_id, scorer_version, created_at, em) VALUES (?, 'v', 1, 0.5) RETURNING id",
+    )
+    .bind(sub)
+    .fetch_one(&pool)
+    .await
+    .unwrap();
+    sqlx::query(
+        "INSERT INTO instruction_results (run_id, instruction_id, present, correct_steps, total_steps)
+         VALUES (?1, 'dev-0002', 0, 0, 4), (?1, 'dev-0001', 1, 3, 4)",
+    )
+    .bind(run)
+    .execute(&pool)
+    .await
+    .unwrap();
+    pool.close().await;
+
+    let db = super::connect(&url, super::PoolLimits::default()).await.unwrap();
+    assert_eq!(super::submission_body(&db.read, sub).await.unwrap().body, body);
+    let results = super::instruction_results(&db.read, run).await.unwrap();
+    let got: Vec<(&str, bool, usize, usize)> = (results.iter())
+        .map(|i| (i.id.as_str(), i.present, i.correct, i.total))
+        .collect();
+    assert_eq!(got, [("dev-0001", true, 3, 4), ("dev-0002", false, 0, 4)]);
+    let left: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM instruction_results")
+        .fetch_one(&db.read)
+        .await
+        .unwrap();
+    let text: String = sqlx::query_scalar("SELECT body FROM submissions WHERE id = ?")
+        .bind(sub)
+        .fetch_one(&db.read)
+        .await
+        .unwrap();
+    assert_eq!((left, text.as_str()), (0, ""));
 }
