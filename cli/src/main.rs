@@ -11,6 +11,7 @@ mod collect_cmd;
 mod dataset_cmd;
 mod eval_cmd;
 mod leaderboard_table;
+mod load_bench;
 mod policy_cmd;
 mod policy_submit;
 mod probe_glue;

@@ -1,5 +1,6 @@
 //! `kitchen-r sim …` and `kitchen-r bench sim`: the kitchen twin's tools. Argument parsing only;
-//! the work is in `kitchen_r_sim`.
+//! the work is in `kitchen_r_sim`. `kitchen-r bench load` (the server under load) lives in
+//! `load_bench`.
 
 use std::path::PathBuf;
 
@@ -48,6 +49,10 @@ pub enum BenchCommand {
         #[arg(long, default_value_t = 8)]
         query_every: u32,
     },
+    /// The server under deadline-hour load: seed N plan submissions across T teams, then R
+    /// leaderboard readers and U uploads/s for D seconds on loopback; latency percentiles and
+    /// throughput of both sides, lost uploads, database size per submission.
+    Load(crate::load_bench::LoadArgs),
 }
 
 pub fn sim(args: SimArgs) -> anyhow::Result<()> {
@@ -63,6 +68,7 @@ pub fn sim(args: SimArgs) -> anyhow::Result<()> {
 
 pub fn bench(args: BenchArgs) -> anyhow::Result<()> {
     match args.command {
+        BenchCommand::Load(args) => crate::load_bench::run(args),
         BenchCommand::Sim {
             json,
             steps,

@@ -15,4 +15,5 @@ mod cli;
 mod control;
 mod grpc;
 mod integrity;
+mod load_bench;
 mod planning;
