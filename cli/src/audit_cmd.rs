@@ -12,7 +12,7 @@ use kitchen_r_core::dataset::Split;
 use kitchen_r_episode::eval::{EvalConfig, EvalOptions, PolicyChoice, evaluate};
 
 #[derive(Args, Debug)]
-pub struct AuditArgs {
+pub(super) struct AuditArgs {
     /// The test set to audit: a directory in the dataset layout (test_ground_truth.jsonl for the
     /// attack EM, shared plans and --oracle; else test.jsonl; manifest.json for its kind).
     #[arg(value_name = "DIR")]
@@ -50,7 +50,7 @@ pub struct AuditArgs {
     config: Option<PathBuf>,
 }
 
-pub fn audit(args: AuditArgs) -> anyhow::Result<()> {
+pub(super) fn audit(args: AuditArgs) -> anyhow::Result<()> {
     let assets = args
         .assets
         .clone()

@@ -14,7 +14,7 @@ use kitchen_r_contract::{AllowedNetworks, Credentials, RemoteConfig, SimCamera};
 use kitchen_r_sim::SensorsConfig;
 
 #[derive(Args, Debug)]
-pub struct CheckPolicyArgs {
+pub(crate) struct CheckPolicyArgs {
     /// The policy server, `http://HOST:PORT` or `https://HOST:PORT`.
     pub endpoint: String,
     /// Bearer token the policy server expects (sent as `authorization: Bearer <T>`).
@@ -31,7 +31,7 @@ pub struct CheckPolicyArgs {
     pub startup_deadline: f64,
 }
 
-pub fn check_policy(args: CheckPolicyArgs) -> anyhow::Result<()> {
+pub(crate) fn check_policy(args: CheckPolicyArgs) -> anyhow::Result<()> {
     let sensors = SensorsConfig::load_default().context("loading configs/sensors.toml")?;
     let ca_pem = match &args.ca {
         Some(p) => Some(std::fs::read(p).with_context(|| format!("reading {}", p.display()))?),

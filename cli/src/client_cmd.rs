@@ -10,14 +10,14 @@ use clap::{Args, Subcommand, ValueEnum};
 use serde_json::Value;
 
 #[derive(Args, Debug)]
-pub struct ServerArgs {
+pub(crate) struct ServerArgs {
     /// Server base URL.
     #[arg(long, env = "KITCHEN_R_SERVER", default_value = "http://127.0.0.1:8080")]
     pub server: String,
 }
 
 #[derive(Args, Debug)]
-pub struct TeamArgs {
+pub(crate) struct TeamArgs {
     #[command(subcommand)]
     command: TeamCommand,
 }
@@ -37,7 +37,7 @@ enum TeamCommand {
 }
 
 #[derive(Args, Debug)]
-pub struct SubmitArgs {
+pub(crate) struct SubmitArgs {
     #[command(subcommand)]
     command: SubmitCommand,
 }
@@ -73,7 +73,7 @@ enum OutputFormat {
 }
 
 #[derive(Args, Debug)]
-pub struct LeaderboardArgs {
+pub(crate) struct LeaderboardArgs {
     /// Track to rank.
     #[arg(long, default_value = "planning", value_parser = ["planning", "control", "integrated"])]
     track: String,
@@ -88,7 +88,7 @@ pub struct LeaderboardArgs {
 }
 
 #[derive(Args, Debug)]
-pub struct RescoreArgs {
+pub(crate) struct RescoreArgs {
     /// Rescore every submission of every track (required unless --resimulate: rescoring is never
     /// implicit).
     #[arg(long, required_unless_present = "resimulate", conflicts_with = "resimulate")]
@@ -104,19 +104,19 @@ pub struct RescoreArgs {
     admin_token: String,
 }
 
-pub fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
+pub(crate) fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
     tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
         .context("starting the async runtime")
 }
 
-pub fn url(server: &ServerArgs, path: &str) -> String {
+pub(crate) fn url(server: &ServerArgs, path: &str) -> String {
     format!("{}{path}", server.server.trim_end_matches('/'))
 }
 
 /// Send, and turn a non-2xx answer into an error carrying the server's message.
-pub async fn send(req: reqwest::RequestBuilder) -> anyhow::Result<reqwest::Response> {
+pub(crate) async fn send(req: reqwest::RequestBuilder) -> anyhow::Result<reqwest::Response> {
     let resp = req.send().await.context("cannot reach the server")?;
     if resp.status().is_success() {
         return Ok(resp);
@@ -130,7 +130,7 @@ pub async fn send(req: reqwest::RequestBuilder) -> anyhow::Result<reqwest::Respo
     bail!("{msg} (HTTP {})", status.as_u16())
 }
 
-pub async fn json(req: reqwest::RequestBuilder) -> anyhow::Result<Value> {
+pub(crate) async fn json(req: reqwest::RequestBuilder) -> anyhow::Result<Value> {
     send(req)
         .await?
         .json()
@@ -138,7 +138,7 @@ pub async fn json(req: reqwest::RequestBuilder) -> anyhow::Result<Value> {
         .context("the server's answer is not JSON")
 }
 
-pub fn team(args: TeamArgs) -> anyhow::Result<()> {
+pub(crate) fn team(args: TeamArgs) -> anyhow::Result<()> {
     let TeamCommand::Create {
         name,
         server,
@@ -161,7 +161,7 @@ pub fn team(args: TeamArgs) -> anyhow::Result<()> {
     })
 }
 
-pub fn submit(args: SubmitArgs) -> anyhow::Result<()> {
+pub(crate) fn submit(args: SubmitArgs) -> anyhow::Result<()> {
     let (file, split, server, token, raw) = match args.command {
         SubmitCommand::Plans {
             file,
@@ -193,7 +193,7 @@ pub fn submit(args: SubmitArgs) -> anyhow::Result<()> {
     })
 }
 
-pub fn leaderboard(args: LeaderboardArgs) -> anyhow::Result<()> {
+pub(crate) fn leaderboard(args: LeaderboardArgs) -> anyhow::Result<()> {
     let format = if args.format == OutputFormat::Csv {
         "csv"
     } else {
@@ -217,7 +217,7 @@ pub fn leaderboard(args: LeaderboardArgs) -> anyhow::Result<()> {
     })
 }
 
-pub fn rescore(args: RescoreArgs) -> anyhow::Result<()> {
+pub(crate) fn rescore(args: RescoreArgs) -> anyhow::Result<()> {
     if let Some(id) = args.resimulate {
         return runtime()?.block_on(async {
             let req = reqwest::Client::new()

@@ -10,7 +10,7 @@ use kitchen_r_core::dataset::Split;
 use kitchen_r_record::collect::{CollectConfig, CollectOptions, Formats, collect};
 
 #[derive(Args, Debug)]
-pub struct CollectArgs {
+pub(crate) struct CollectArgs {
     /// Episodes to collect (episode i uses dev instruction i mod 163).
     #[arg(long)]
     episodes: usize,
@@ -37,7 +37,7 @@ pub struct CollectArgs {
     json: bool,
 }
 
-pub fn collect_cmd(args: CollectArgs) -> anyhow::Result<()> {
+pub(crate) fn collect_cmd(args: CollectArgs) -> anyhow::Result<()> {
     if args.split != Split::Dev {
         bail!("collect drives the public plans of the dev split only (--split dev)");
     }

@@ -18,7 +18,7 @@ use kitchen_r_core::dataset::{self, GenerateOptions, templates};
 mod audit_cmd;
 
 #[derive(Args, Debug)]
-pub struct DatasetArgs {
+pub(crate) struct DatasetArgs {
     #[command(subcommand)]
     command: DatasetCommand,
 }
@@ -49,7 +49,7 @@ enum DatasetCommand {
     Audit(audit_cmd::AuditArgs),
 }
 
-pub fn dataset(args: DatasetArgs) -> anyhow::Result<()> {
+pub(crate) fn dataset(args: DatasetArgs) -> anyhow::Result<()> {
     match args.command {
         DatasetCommand::Generate {
             seed,

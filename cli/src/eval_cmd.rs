@@ -12,7 +12,7 @@ use kitchen_r_episode::eval::{EvalConfig, EvalOptions, EvalReport, PolicyChoice,
 use kitchen_r_worker::job::local::{LocalEpisode, LocalReport, LocalSettings, Mode, evaluate_endpoint};
 
 #[derive(Args, Debug)]
-pub struct EvalArgs {
+pub(crate) struct EvalArgs {
     /// Policy to evaluate: builtin:oracle (the privileged reference expert), or a policy server
     /// at http://HOST:PORT or https://HOST:PORT, run exactly as the server's workers run it.
     #[arg(long, default_value = "builtin:oracle")]
@@ -56,7 +56,7 @@ pub struct EvalArgs {
     config: Option<PathBuf>,
 }
 
-pub fn eval(args: EvalArgs) -> anyhow::Result<()> {
+pub(crate) fn eval(args: EvalArgs) -> anyhow::Result<()> {
     let config = match &args.config {
         Some(p) => EvalConfig::load(p).with_context(|| format!("reading {}", p.display()))?,
         None => EvalConfig::load_default()?,

@@ -21,7 +21,7 @@ fn cell(v: &Value) -> String {
     }
 }
 
-pub fn print_table(board: &Value) {
+pub(crate) fn print_table(board: &Value) {
     let track = board["track"].as_str().unwrap_or("planning");
     println!("{track} track, {} split", board["split"].as_str().unwrap_or("?"));
     let rows = board["rows"].as_array().cloned().unwrap_or_default();

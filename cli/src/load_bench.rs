@@ -34,7 +34,7 @@ use server::{DbSize, Spawned};
 /// The defaults are the target: 20,000 submissions from 100 teams, 32 leaderboard
 /// readers and 20 uploads/s for 60 s.
 #[derive(Args, Debug, Clone)]
-pub struct LoadArgs {
+pub(crate) struct LoadArgs {
     /// Plan submissions seeded before the measurement, round-robin over the teams.
     #[arg(long, default_value_t = 20_000)]
     pub submissions: usize,
@@ -124,7 +124,7 @@ impl LoadArgs {
     }
 }
 
-pub fn run(args: LoadArgs) -> anyhow::Result<()> {
+pub(crate) fn run(args: LoadArgs) -> anyhow::Result<()> {
     args.check()?;
     let dir = tempfile::Builder::new()
         .prefix("kitchen-r-load-")

@@ -16,19 +16,19 @@ use kitchen_r_episode::policy::Policy;
 use kitchen_r_sim::Assets;
 
 #[derive(Args, Debug)]
-pub struct PolicyArgs {
+pub(crate) struct PolicyArgs {
     #[command(subcommand)]
     pub command: PolicyCommand,
 }
 
 #[derive(Subcommand, Debug)]
-pub enum PolicyCommand {
+pub(crate) enum PolicyCommand {
     /// Serve the privileged oracle expert over gRPC (reference runs only).
     Oracle(OracleArgs),
 }
 
 #[derive(Args, Debug)]
-pub struct OracleArgs {
+pub(crate) struct OracleArgs {
     /// Listen address; port 0 picks a free port (printed in the `listening grpc=...` line).
     #[arg(long, value_name = "ADDR", default_value = "127.0.0.1:50061")]
     pub listen: String,
@@ -40,7 +40,7 @@ pub struct OracleArgs {
     pub tls_key: Option<std::path::PathBuf>,
 }
 
-pub fn policy(args: PolicyArgs) -> anyhow::Result<()> {
+pub(crate) fn policy(args: PolicyArgs) -> anyhow::Result<()> {
     match args.command {
         PolicyCommand::Oracle(a) => oracle(a),
     }

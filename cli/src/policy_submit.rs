@@ -10,7 +10,7 @@ use serde_json::{Value, json};
 use crate::client_cmd::{ServerArgs, json as send_json, runtime, url};
 
 #[derive(Args, Debug)]
-pub struct PolicySubmitArgs {
+pub(crate) struct PolicySubmitArgs {
     /// The policy's gRPC endpoint, `http://HOST:PORT` or `https://HOST:PORT`, reachable from the
     /// server and its workers.
     endpoint: String,
@@ -43,7 +43,7 @@ pub struct PolicySubmitArgs {
     json: bool,
 }
 
-pub fn submit_policy(a: PolicySubmitArgs) -> anyhow::Result<()> {
+pub(crate) fn submit_policy(a: PolicySubmitArgs) -> anyhow::Result<()> {
     let mut body = json!({"endpoint": a.endpoint, "split": a.split});
     if let Some(p) = a.plans {
         body["plans"] = json!(p);

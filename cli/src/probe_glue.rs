@@ -6,7 +6,7 @@ use kitchen_r_contract::probe::{ProbeFailure, probe_for_registration};
 use kitchen_r_contract::{AllowedNetworks, RemoteConfig};
 use kitchen_r_server::{BoxFuture, PolicyProbe, ProbeError, ProbedSpec};
 
-pub struct WorkerProbe {
+pub(crate) struct WorkerProbe {
     pub allow: AllowedNetworks,
     pub remote: RemoteConfig,
 }

@@ -21,7 +21,7 @@ use tokio::sync::watch;
 use crate::probe_glue::WorkerProbe;
 
 #[derive(Args, Debug, Default)]
-pub struct ServeArgs {
+pub(crate) struct ServeArgs {
     /// HTTP listen address [config `http`, default 127.0.0.1:8080].
     #[arg(long, value_name = "ADDR")]
     pub http: Option<String>,
@@ -65,7 +65,7 @@ fn load(args: ServeArgs) -> anyhow::Result<Config> {
     Ok(cfg)
 }
 
-pub fn serve(args: ServeArgs) -> anyhow::Result<()> {
+pub(crate) fn serve(args: ServeArgs) -> anyhow::Result<()> {
     init_tracing();
     let cfg = load(args)?;
     let allow = AllowedNetworks::from_cidrs(&cfg.policy.allow_networks)

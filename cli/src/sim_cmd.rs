@@ -7,13 +7,13 @@ use std::path::PathBuf;
 use clap::{Args, Subcommand};
 
 #[derive(Args, Debug)]
-pub struct SimArgs {
+pub(crate) struct SimArgs {
     #[command(subcommand)]
     pub command: SimCommand,
 }
 
 #[derive(Subcommand, Debug)]
-pub enum SimCommand {
+pub(crate) enum SimCommand {
     /// Write every camera's RGB and depth (from the start and each zone's approach point) and a
     /// top-down view of a scene as PNG.
     Render {
@@ -30,13 +30,13 @@ pub enum SimCommand {
 }
 
 #[derive(Args, Debug)]
-pub struct BenchArgs {
+pub(crate) struct BenchArgs {
     #[command(subcommand)]
     pub command: BenchCommand,
 }
 
 #[derive(Subcommand, Debug)]
-pub enum BenchCommand {
+pub(crate) enum BenchCommand {
     /// Simulator figures: physics step, observation time, real-time factor.
     Sim {
         /// Print one JSON object instead of text.
@@ -55,7 +55,7 @@ pub enum BenchCommand {
     Load(crate::load_bench::LoadArgs),
 }
 
-pub fn sim(args: SimArgs) -> anyhow::Result<()> {
+pub(crate) fn sim(args: SimArgs) -> anyhow::Result<()> {
     match args.command {
         SimCommand::Render { scene, out, seed } => {
             for path in kitchen_r_sim::render::render_scene(&scene, &out, seed)? {
@@ -66,7 +66,7 @@ pub fn sim(args: SimArgs) -> anyhow::Result<()> {
     }
 }
 
-pub fn bench(args: BenchArgs) -> anyhow::Result<()> {
+pub(crate) fn bench(args: BenchArgs) -> anyhow::Result<()> {
     match args.command {
         BenchCommand::Load(args) => crate::load_bench::run(args),
         BenchCommand::Sim {

@@ -11,7 +11,7 @@ use kitchen_r_worker::job::WorkerConfig;
 use kitchen_r_worker::job::client::Worker;
 
 #[derive(Args, Debug)]
-pub struct WorkerArgs {
+pub(crate) struct WorkerArgs {
     /// The server's gRPC address, `http://HOST:PORT` [default: `server` in the config file,
     /// else http://127.0.0.1:50051].
     #[arg(long, env = "KITCHEN_R_WORKER_SERVER", value_name = "URL")]
@@ -35,7 +35,7 @@ pub struct WorkerArgs {
     config: Option<PathBuf>,
 }
 
-pub fn worker(args: WorkerArgs) -> anyhow::Result<()> {
+pub(crate) fn worker(args: WorkerArgs) -> anyhow::Result<()> {
     crate::serve_cmd::init_tracing();
     let mut cfg = match &args.config {
         Some(p) => WorkerConfig::load(p)?,

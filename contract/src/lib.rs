@@ -12,8 +12,6 @@
 //! failed call is reported as a [`PolicyError`](kitchen_r_episode::policy::PolicyError), the
 //! episode crate decides what it costs), lease jobs, or touch a database.
 
-#![warn(unreachable_pub)]
-
 pub mod bench;
 pub mod check;
 mod client;

@@ -7,8 +7,6 @@
 //! transports wrap a policy from outside (kitchen-r-contract), the job loop leases and reports
 //! (kitchen-r-worker), and scoring and storage belong to the server.
 
-#![warn(unreachable_pub)]
-
 pub mod eval;
 pub mod offline;
 pub mod oracle;

@@ -12,8 +12,6 @@
 //! [`Frame`]s. This crate writes files only: it must not score submissions (the episode outcome
 //! comes from kitchen-r-episode) and must not touch the network or a database.
 
-#![warn(unreachable_pub)]
-
 pub mod bench;
 mod cdr;
 pub mod collect;

@@ -15,7 +15,6 @@
 //! [`store`], [`leaderboard`], [`content`], [`episodes`] → [`error`] → [`plans`] → the leaf
 //! modules [`scores`], [`clock`], [`states`], [`config`]. Nothing below the service imports the
 //! service or an adapter (tests aside).
-#![warn(unreachable_pub)]
 
 mod clock;
 mod config;

@@ -12,16 +12,16 @@ use std::time::Duration;
 
 use serde_json::{Value, json};
 
-pub const ADMIN: &str = "test-admin-token-0123456789";
+pub(crate) const ADMIN: &str = "test-admin-token-0123456789";
 /// How long a server may take to print its readiness line (a debug build migrating a new DB).
 const STARTUP: Duration = Duration::from_secs(60);
 
-pub fn bin() -> &'static str {
+pub(crate) fn bin() -> &'static str {
     env!("CARGO_BIN_EXE_kitchen-r")
 }
 
 /// Dev ground truth of the fixture: (id, plan).
-pub fn dev_plans() -> Vec<(&'static str, Vec<&'static str>)> {
+pub(crate) fn dev_plans() -> Vec<(&'static str, Vec<&'static str>)> {
     vec![
         (
             "dev-0001",
@@ -58,7 +58,7 @@ pub fn dev_plans() -> Vec<(&'static str, Vec<&'static str>)> {
     ]
 }
 
-pub fn test_plans() -> Vec<(&'static str, Vec<&'static str>)> {
+pub(crate) fn test_plans() -> Vec<(&'static str, Vec<&'static str>)> {
     vec![
         (
             "test-0001",
@@ -100,19 +100,19 @@ fn jsonl(items: &[(&str, Vec<&str>)]) -> String {
 }
 
 /// A plan file line.
-pub fn line(id: &str, plan: &[&str]) -> String {
+pub(crate) fn line(id: &str, plan: &[&str]) -> String {
     json!({ "id": id, "plan": plan }).to_string()
 }
 
 /// A temporary benchmark: assets (committed scenes and catalogue, fixture dataset) and a config.
 /// Planning content only (no robot), so the server runs without simulation slots.
-pub struct Fixture {
+pub(crate) struct Fixture {
     pub dir: tempfile::TempDir,
 }
 
 impl Fixture {
     /// `config` is appended to the generated server.toml (e.g. `[quota]` settings).
-    pub fn new(config: &str) -> Fixture {
+    pub(crate) fn new(config: &str) -> Fixture {
         let dir = tempfile::tempdir().unwrap();
         let repo_assets = Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets");
         let assets = dir.path().join("assets");
@@ -139,18 +139,18 @@ impl Fixture {
         Fixture { dir }
     }
 
-    pub fn config_path(&self) -> PathBuf {
+    pub(crate) fn config_path(&self) -> PathBuf {
         self.dir.path().join("server.toml")
     }
 
     /// Start `kitchen-r serve` on this fixture.
-    pub fn serve(&self) -> Server {
+    pub(crate) fn serve(&self) -> Server {
         Server::start(&self.config_path(), self.dir.path())
     }
 }
 
 /// A running server process, killed when dropped.
-pub struct Server {
+pub(crate) struct Server {
     child: Child,
     pub http: String,
     pub grpc: String,
@@ -184,7 +184,7 @@ impl Server {
         }
     }
 
-    pub fn url(&self, path: &str) -> String {
+    pub(crate) fn url(&self, path: &str) -> String {
         format!("{}{path}", self.http)
     }
 }
@@ -197,7 +197,7 @@ impl Drop for Server {
 }
 
 /// A blocking HTTP client for the tests (bounded timeouts so a hung server fails the test).
-pub fn client() -> reqwest::Client {
+pub(crate) fn client() -> reqwest::Client {
     reqwest::Client::builder()
         .timeout(Duration::from_secs(30))
         .build()
@@ -205,7 +205,7 @@ pub fn client() -> reqwest::Client {
 }
 
 /// Create a team and return its token.
-pub async fn team(server: &Server, name: &str) -> String {
+pub(crate) async fn team(server: &Server, name: &str) -> String {
     let r = client()
         .post(server.url("/api/v1/teams"))
         .bearer_auth(ADMIN)
@@ -219,7 +219,7 @@ pub async fn team(server: &Server, name: &str) -> String {
 }
 
 /// POST a plan file; returns (status, JSON body).
-pub async fn submit(
+pub(crate) async fn submit(
     server: &Server,
     token: Option<&str>,
     split: &str,
@@ -236,7 +236,7 @@ pub async fn submit(
     (status, r.json().await.unwrap())
 }
 
-pub async fn get_json(server: &Server, path: &str, token: Option<&str>) -> (u16, Value) {
+pub(crate) async fn get_json(server: &Server, path: &str, token: Option<&str>) -> (u16, Value) {
     let mut req = client().get(server.url(path));
     if let Some(t) = token {
         req = req.bearer_auth(t);
@@ -247,13 +247,13 @@ pub async fn get_json(server: &Server, path: &str, token: Option<&str>) -> (u16,
 }
 
 /// Worker token the control-track tests configure.
-pub const WORKER_TOKEN: &str = "test-worker-token-0123456789";
+pub(crate) const WORKER_TOKEN: &str = "test-worker-token-0123456789";
 /// Upper bound on how long one test waits for a run to finish (debug build, shared machine).
-pub const RUN_DEADLINE: Duration = Duration::from_secs(900);
+pub(crate) const RUN_DEADLINE: Duration = Duration::from_secs(900);
 
 /// Start `cmd` with piped stdout and wait for its first line starting with `prefix`; the rest of
 /// stdout is drained in the background. Returns the child and that line.
-pub fn spawn_ready(cmd: &mut Command, prefix: &str) -> (Child, String) {
+pub(crate) fn spawn_ready(cmd: &mut Command, prefix: &str) -> (Child, String) {
     let mut child = cmd
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit())
@@ -279,11 +279,11 @@ pub fn spawn_ready(cmd: &mut Command, prefix: &str) -> (Child, String) {
 }
 
 /// A process killed (SIGKILL) when dropped.
-pub struct Proc(pub Child);
+pub(crate) struct Proc(pub Child);
 
 impl Proc {
     /// SIGKILL now and reap.
-    pub fn kill(&mut self) {
+    pub(crate) fn kill(&mut self) {
         let _ = self.0.kill();
         let _ = self.0.wait();
     }
@@ -297,7 +297,7 @@ impl Drop for Proc {
 
 /// The reference oracle served over gRPC (`kitchen-r policy oracle --listen 127.0.0.1:0`);
 /// returns the process and its `http://` URL.
-pub fn oracle_policy() -> (Proc, String) {
+pub(crate) fn oracle_policy() -> (Proc, String) {
     let (child, line) = spawn_ready(
         Command::new(bin())
             .args(["policy", "oracle", "--listen", "127.0.0.1:0"])
@@ -310,12 +310,12 @@ pub fn oracle_policy() -> (Proc, String) {
 
 /// A server on the committed benchmark (real scenes and dataset) with a temporary database;
 /// `config` is appended to its server.toml.
-pub struct ControlFixture {
+pub(crate) struct ControlFixture {
     pub dir: tempfile::TempDir,
 }
 
 impl ControlFixture {
-    pub fn new(config: &str) -> ControlFixture {
+    pub(crate) fn new(config: &str) -> ControlFixture {
         let dir = tempfile::tempdir().unwrap();
         let db = dir.path().join("db/kitchen-r.db");
         let toml = format!(
@@ -327,7 +327,7 @@ impl ControlFixture {
     }
 
     /// `kitchen-r serve --workers N` on this fixture (N = 0: no in-process workers).
-    pub fn serve(&self, workers: usize) -> Server {
+    pub(crate) fn serve(&self, workers: usize) -> Server {
         let mut cmd = Command::new(bin());
         cmd.args(["serve", "--workers", &workers.to_string(), "--config"])
             .arg(self.dir.path().join("server.toml"))
@@ -338,7 +338,7 @@ impl ControlFixture {
 }
 
 /// `kitchen-r worker --server GRPC --slots N` with the test worker token, started and ready.
-pub fn worker(server: &Server, slots: usize, id: &str) -> Proc {
+pub(crate) fn worker(server: &Server, slots: usize, id: &str) -> Proc {
     let (child, _) = spawn_ready(
         Command::new(bin())
             .args(["worker", "--server", &server.grpc, "--slots", &slots.to_string()])
@@ -351,7 +351,7 @@ pub fn worker(server: &Server, slots: usize, id: &str) -> Proc {
 }
 
 /// Register a policy endpoint; returns (status, JSON body).
-pub async fn register_policy(server: &Server, token: &str, body: Value) -> (u16, Value) {
+pub(crate) async fn register_policy(server: &Server, token: &str, body: Value) -> (u16, Value) {
     let r = client()
         .post(server.url("/api/v1/submissions/policies"))
         .bearer_auth(token)
@@ -364,7 +364,7 @@ pub async fn register_policy(server: &Server, token: &str, body: Value) -> (u16,
 }
 
 /// Poll a submission until `done(evaluation)` holds; returns the submission view.
-pub async fn wait_for(
+pub(crate) async fn wait_for(
     server: &Server,
     id: i64,
     token: &str,
@@ -387,6 +387,6 @@ pub async fn wait_for(
 }
 
 /// Whether a run's evaluation has finished.
-pub fn finished(e: &Value) -> bool {
+pub(crate) fn finished(e: &Value) -> bool {
     e["state"] == "finished" || e["state"] == "platform_failed"
 }

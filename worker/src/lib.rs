@@ -7,6 +7,4 @@
 //! submissions or touch the database: results go back to the server, which owns scoring and
 //! storage.
 
-#![warn(unreachable_pub)]
-
 pub mod job;

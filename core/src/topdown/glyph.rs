@@ -12,11 +12,11 @@
 use crate::catalogue::Shape;
 
 /// Smallest glyph radius, metres.
-pub const MIN_RADIUS: f64 = 0.07;
+pub(super) const MIN_RADIUS: f64 = 0.07;
 /// Outline colour: dark enough to separate any fill from a light halo.
-pub const OUTLINE: [u8; 3] = [20, 20, 24];
+pub(super) const OUTLINE: [u8; 3] = [20, 20, 24];
 /// Halo colour, outside the outline.
-pub const HALO: [u8; 3] = [250, 250, 250];
+pub(super) const HALO: [u8; 3] = [250, 250, 250];
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Prim {

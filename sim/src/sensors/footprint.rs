@@ -19,7 +19,7 @@ const SLACK: f64 = 0.01;
 
 /// Where a box lands on the image.
 #[derive(Debug, Clone, PartialEq)]
-pub enum Footprint {
+pub(super) enum Footprint {
     /// Entirely behind the eye: never seen.
     Hidden,
     /// So close to the eye that any pixel may see it.
@@ -30,7 +30,7 @@ pub enum Footprint {
 }
 
 /// The projection model of one image, to place boxes on it.
-pub struct Projector {
+pub(super) struct Projector {
     inv: Isometry3<f64>,
     projection: Projection,
     cx: f64,
@@ -43,7 +43,7 @@ pub struct Projector {
 }
 
 impl Projector {
-    pub fn new(cam: &Isometry3<f64>, projection: Projection, w: usize, h: usize) -> Projector {
+    pub(super) fn new(cam: &Isometry3<f64>, projection: Projection, w: usize, h: usize) -> Projector {
         let (cx, cy) = (w as f64 / 2.0, h as f64 / 2.0);
         let (f, close) = match projection {
             Projection::Pinhole { fov } => {
@@ -68,7 +68,7 @@ impl Projector {
     /// for a pinhole; for parallel rays, which start across the image plane rather than at the
     /// eye, how far in front of that plane the box starts (0 if it reaches behind it), a little
     /// short so that round-off never puts it beyond a hit on it.
-    pub fn place(&self, aabb: &Aabb, near: f32) -> (f32, Footprint) {
+    pub(super) fn place(&self, aabb: &Aabb, near: f32) -> (f32, Footprint) {
         let corners = self.corners(aabb);
         match self.projection {
             Projection::Ortho { .. } => {
@@ -169,7 +169,7 @@ fn hull(mut points: Vec<[f64; 2]>) -> Vec<[f64; 2]> {
 
 /// One bit per pixel and box: bit `k` of pixel `(u, v)` is set when box `k` may appear there.
 /// Memory: pixels × ⌈boxes / 64⌉ × 8 bytes per image (256 KiB for 128×128 and 66 colliders).
-pub struct Coverage {
+pub(super) struct Coverage {
     width: usize,
     height: usize,
     /// Words of bits per pixel.
@@ -179,7 +179,7 @@ pub struct Coverage {
 
 impl Coverage {
     /// No box anywhere on a `width`×`height` image, room for `boxes` boxes.
-    pub fn new(width: usize, height: usize, boxes: usize) -> Coverage {
+    pub(super) fn new(width: usize, height: usize, boxes: usize) -> Coverage {
         let words = boxes.div_ceil(64).max(1);
         Coverage {
             width,
@@ -191,13 +191,13 @@ impl Coverage {
 
     /// The words of pixel `(u, v)`; bit `k % 64` of word `k / 64` is box `k`.
     #[inline]
-    pub fn pixel(&self, u: usize, v: usize) -> &[u64] {
+    pub(super) fn pixel(&self, u: usize, v: usize) -> &[u64] {
         let at = (v * self.width + u) * self.words;
         &self.bits[at..at + self.words]
     }
 
     /// Mark box `k` on the pixels of `footprint`.
-    pub fn add(&mut self, k: usize, footprint: &Footprint) {
+    pub(super) fn add(&mut self, k: usize, footprint: &Footprint) {
         match footprint {
             Footprint::Hidden => {}
             Footprint::Everywhere => {

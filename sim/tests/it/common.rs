@@ -5,19 +5,19 @@ use kitchen_r_sim::episode::{EpisodeConfig, ObjectPlacement};
 use kitchen_r_sim::world::Style;
 use kitchen_r_sim::{Action, Assets, Sim};
 
-pub const DOWN: [f64; 4] = [
+pub(crate) const DOWN: [f64; 4] = [
     std::f64::consts::FRAC_1_SQRT_2,
     0.0,
     std::f64::consts::FRAC_1_SQRT_2,
     0.0,
 ];
 
-pub fn assets() -> Assets {
+pub(crate) fn assets() -> Assets {
     Assets::load_default().unwrap()
 }
 
 /// Sensors without cameras or LiDAR, so tests that do not look stay fast.
-pub fn blind() -> SensorsConfig {
+pub(crate) fn blind() -> SensorsConfig {
     SensorsConfig {
         cameras: Vec::new(),
         lidar: None,
@@ -26,7 +26,7 @@ pub fn blind() -> SensorsConfig {
 }
 
 /// kitchen_a with the given key objects and the robot at `start`, no background, no plan.
-pub fn episode(assets: &Assets, start: [f64; 3], objects: Vec<ObjectPlacement>) -> EpisodeConfig {
+pub(crate) fn episode(assets: &Assets, start: [f64; 3], objects: Vec<ObjectPlacement>) -> EpisodeConfig {
     let scene = assets.scene("kitchen_a").unwrap();
     EpisodeConfig {
         id: "test".into(),
@@ -41,7 +41,7 @@ pub fn episode(assets: &Assets, start: [f64; 3], objects: Vec<ObjectPlacement>) 
     }
 }
 
-pub fn cup_at(x: f64, y: f64, surface: f64) -> ObjectPlacement {
+pub(crate) fn cup_at(x: f64, y: f64, surface: f64) -> ObjectPlacement {
     ObjectPlacement {
         name: "red cup".into(),
         model: "cup".into(),
@@ -51,13 +51,13 @@ pub fn cup_at(x: f64, y: f64, surface: f64) -> ObjectPlacement {
     }
 }
 
-pub fn sim(ep: &EpisodeConfig, sensors: SensorsConfig) -> Sim {
+pub(crate) fn sim(ep: &EpisodeConfig, sensors: SensorsConfig) -> Sim {
     Sim::new(assets(), SimConfig::load_default().unwrap(), sensors, ep)
         .unwrap()
         .0
 }
 
 /// Hold the base still, the TCP at `pos` pointing down, gripper `g`.
-pub fn hold(pos: [f64; 3], g: f64) -> Action {
+pub(crate) fn hold(pos: [f64; 3], g: f64) -> Action {
     Action::new(0.0, 0.0, pos, DOWN, g)
 }

@@ -27,7 +27,7 @@ fn oracle_server() -> TestServer {
 }
 
 /// A job for dev-0001 (move, pick, …), its first `steps` plan steps.
-pub fn job(url: &str, mode: pb::EvalMode, steps: u32, privileged: bool) -> pb::Job {
+pub(crate) fn job(url: &str, mode: pb::EvalMode, steps: u32, privileged: bool) -> pb::Job {
     let data = kitchen_r_core::dataset::Dataset::load(&kitchen_r_core::assets::assets_dir().join("dataset"))
         .unwrap();
     let ins = &data.dev[0];

@@ -14,15 +14,15 @@ use kitchen_r_core::dataset::Dataset;
 use kitchen_r_episode::policy::HORIZON;
 use kitchen_r_sim::{Assets, EpisodeConfig, EpisodeParams, SensorsConfig, Sim, SimConfig};
 
-pub use scripted::*;
+pub(crate) use scripted::*;
 
-pub fn still() -> PolicyFactory {
+pub(crate) fn still() -> PolicyFactory {
     factory(HORIZON, Arc::new(|_| Ok(vec![STILL; HORIZON])))
 }
 
 /// Forwards connections to `upstream` and cuts each one (both directions) once the client
 /// has sent more than `limit` bytes on it: the handshake passes, an Act with images does not.
-pub fn dropping_proxy(upstream: SocketAddr, limit: usize) -> SocketAddr {
+pub(crate) fn dropping_proxy(upstream: SocketAddr, limit: usize) -> SocketAddr {
     let l = TcpListener::bind("127.0.0.1:0").unwrap();
     let addr = l.local_addr().unwrap();
     std::thread::spawn(move || {
@@ -56,12 +56,12 @@ fn pump(mut from: TcpStream, mut to: TcpStream, limit: usize) {
     let _ = to.shutdown(Shutdown::Both);
 }
 
-pub fn cameras() -> Vec<SimCamera> {
+pub(crate) fn cameras() -> Vec<SimCamera> {
     SimCamera::from_sensors(&SensorsConfig::load_default().unwrap())
 }
 
 /// Connect with short deadlines so misbehaviour shows quickly.
-pub fn connect(url: &str, call_deadline_s: f64) -> RemotePolicy {
+pub(crate) fn connect(url: &str, call_deadline_s: f64) -> RemotePolicy {
     let cfg = RemoteConfig {
         call_deadline_s,
         startup_deadline_s: 20.0,
@@ -71,7 +71,7 @@ pub fn connect(url: &str, call_deadline_s: f64) -> RemotePolicy {
 }
 
 /// The first dev instruction's episode.
-pub fn sim() -> Sim {
+pub(crate) fn sim() -> Sim {
     let assets = Assets::load_default().unwrap();
     let data = Dataset::load(&kitchen_r_core::assets::assets_dir().join("dataset")).unwrap();
     let ins = &data.dev[0];

@@ -9,12 +9,12 @@ use kitchen_r_contract::server::{PolicyFactory, ServeOptions, serve_policy};
 use kitchen_r_episode::policy::{Policy, PolicyError, PolicyInput, PolicySpec};
 
 /// Stand still with the gripper open: valid, never succeeds.
-pub const STILL: [f64; 10] = [0.0, 0.0, 0.35, 0.0, 0.95, 0.0, 1.0, 0.0, 0.0, 1.0];
+pub(crate) const STILL: [f64; 10] = [0.0, 0.0, 0.35, 0.0, 0.95, 0.0, 1.0, 0.0, 0.0, 1.0];
 
-pub type Answer = Arc<dyn Fn(&PolicyInput<'_>) -> Result<Vec<[f64; 10]>, PolicyError> + Send + Sync>;
+pub(crate) type Answer = Arc<dyn Fn(&PolicyInput<'_>) -> Result<Vec<[f64; 10]>, PolicyError> + Send + Sync>;
 
 /// A policy answering with a closure.
-pub struct Scripted {
+pub(crate) struct Scripted {
     pub spec: PolicySpec,
     pub answer: Answer,
 }
@@ -31,7 +31,7 @@ impl Policy for Scripted {
     }
 }
 
-pub fn spec(horizon: usize) -> PolicySpec {
+pub(crate) fn spec(horizon: usize) -> PolicySpec {
     PolicySpec {
         name: "scripted".into(),
         horizon,
@@ -41,7 +41,7 @@ pub fn spec(horizon: usize) -> PolicySpec {
     }
 }
 
-pub fn factory(horizon: usize, answer: Answer) -> PolicyFactory {
+pub(crate) fn factory(horizon: usize, answer: Answer) -> PolicyFactory {
     Arc::new(move || {
         Box::new(Scripted {
             spec: spec(horizon),
@@ -51,14 +51,14 @@ pub fn factory(horizon: usize, answer: Answer) -> PolicyFactory {
 }
 
 /// A policy server on 127.0.0.1:0 in its own runtime; stopped on drop.
-pub struct TestServer {
+pub(crate) struct TestServer {
     pub addr: SocketAddr,
     rt: Option<tokio::runtime::Runtime>,
     stop: Option<tokio::sync::oneshot::Sender<()>>,
 }
 
 impl TestServer {
-    pub fn start(factory: PolicyFactory, opts: ServeOptions) -> TestServer {
+    pub(crate) fn start(factory: PolicyFactory, opts: ServeOptions) -> TestServer {
         let rt = tokio::runtime::Builder::new_multi_thread()
             .worker_threads(2)
             .enable_all()
@@ -77,7 +77,7 @@ impl TestServer {
         }
     }
 
-    pub fn url(&self) -> String {
+    pub(crate) fn url(&self) -> String {
         format!("http://{}", self.addr)
     }
 }
