@@ -101,6 +101,14 @@ pub(crate) async fn connect(url: &str, limits: PoolLimits) -> anyhow::Result<Db>
     board::rebuild(&write)
         .await
         .context("rebuilding the leaderboards")?;
+    if opts.get_filename().as_os_str().is_empty() || url.contains(":memory:") || url.contains("mode=memory") {
+        // An in-memory database exists only on its one connection: a second pool would open
+        // another, empty one. Reads share the write connection.
+        return Ok(Db {
+            read: write.clone(),
+            write,
+        });
+    }
     let read = SqlitePoolOptions::new()
         .max_connections(limits.read_connections.max(1))
         .acquire_timeout(limits.read_wait)

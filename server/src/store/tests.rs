@@ -83,7 +83,7 @@ async fn json_columns_round_trip_as_typed_values_in_the_stored_text() {
     );
     assert!(!latest.needs_resimulation);
 
-    let claimed = queue::claim(&pool, "w", 20, 1000, 2).await.unwrap();
+    let claimed = queue::claim(&pool, "w", 20, 1000, 2, 0).await.unwrap();
     assert_eq!(claimed.len(), 2);
     assert_eq!(claimed[0].spec, spec);
     assert!(claimed[1].spec.place_targets.is_empty());
@@ -189,4 +189,22 @@ async fn rows_stored_before_compression_are_converted_at_start_and_read_the_same
         .await
         .unwrap();
     assert_eq!((left, text.as_str()), (0, ""));
+}
+
+/// An in-memory database has one connection; reads must see what was written through it.
+#[tokio::test]
+async fn an_in_memory_database_reads_what_it_wrote() {
+    let db = super::connect("sqlite::memory:", super::PoolLimits::default())
+        .await
+        .unwrap();
+    let keys = super::NameKeys {
+        skeleton: "a".into(),
+        skeleton_folded: "a".into(),
+    };
+    super::insert_team(&db.write, "a", &keys, "hash", 1)
+        .await
+        .unwrap()
+        .unwrap();
+    let team = super::team_by_token_hash(&db.read, "hash").await.unwrap();
+    assert_eq!(team.map(|t| t.name).as_deref(), Some("a"));
 }
