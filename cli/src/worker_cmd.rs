@@ -33,6 +33,11 @@ pub(crate) struct WorkerArgs {
     /// Worker settings [default: configs/worker.toml when present].
     #[arg(long, value_name = "FILE")]
     config: Option<PathBuf>,
+    /// Serve this worker's Prometheus metrics at `http://ADDR/metrics` (episodes run, their
+    /// durations, policy call latency, leases held); port 0 picks one and the line
+    /// `worker metrics http=ADDR` says which [default: off].
+    #[arg(long, env = "KITCHEN_R_WORKER_METRICS", value_name = "ADDR")]
+    metrics: Option<String>,
 }
 
 pub(crate) fn worker(args: WorkerArgs) -> anyhow::Result<()> {
@@ -57,7 +62,11 @@ pub(crate) fn worker(args: WorkerArgs) -> anyhow::Result<()> {
         .enable_all()
         .build()
         .context("starting the runtime")?;
+    let metrics = args.metrics;
     rt.block_on(async move {
+        if let Some(addr) = metrics {
+            serve_metrics(&addr).await?;
+        }
         let (server, slots) = (cfg.server.clone(), cfg.slots);
         let worker = Worker::build(cfg).await?;
         // Tests and scripts wait for this exact line on stdout (like serve's `listening` line).
@@ -66,6 +75,21 @@ pub(crate) fn worker(args: WorkerArgs) -> anyhow::Result<()> {
         worker.run(stop_signal()).await?;
         Ok(())
     })
+}
+
+/// Install the metrics recorder and serve `/metrics` on `addr` for the life of the process.
+async fn serve_metrics(addr: &str) -> anyhow::Result<()> {
+    kitchen_r_server::metrics::install();
+    let listener = tokio::net::TcpListener::bind(addr)
+        .await
+        .with_context(|| format!("cannot listen on {addr} (--metrics)"))?;
+    println!("worker metrics http={}", listener.local_addr()?);
+    tokio::spawn(async move {
+        if let Err(e) = kitchen_r_server::metrics::serve(listener, std::future::pending()).await {
+            tracing::error!("metrics endpoint: {e}");
+        }
+    });
+    Ok(())
 }
 
 /// Ctrl-C or SIGTERM (how containers and orchestrators stop a worker).

@@ -13,7 +13,7 @@ use serde::{Deserialize, Serialize};
 
 /// Environment variables read into the configuration (`KITCHEN_R_<KEY>`). Listed explicitly so
 /// the client-side variables (`KITCHEN_R_SERVER`, `KITCHEN_R_TOKEN`) are not mistaken for keys.
-const ENV_KEYS: [&str; 11] = [
+const ENV_KEYS: [&str; 12] = [
     "http",
     "grpc",
     "db",
@@ -25,6 +25,7 @@ const ENV_KEYS: [&str; 11] = [
     "worker_token",
     "max_body_bytes",
     "request_timeout_ms",
+    "metrics",
 ];
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -62,6 +63,9 @@ pub struct Config {
     /// policy registration `policy.startup_deadline_ms` (it probes the endpoint), a worker's
     /// long-polling Lease its longest wait (30 s); the organiser's rescore has no budget.
     pub request_timeout_ms: u64,
+    /// Serve `GET /metrics` (Prometheus text format, no token: it holds no team data) and
+    /// record the series it shows.
+    pub metrics: bool,
     pub plans: PlanLimits,
     pub quota: Quota,
     pub db_pool: DbPool,
@@ -179,6 +183,7 @@ impl Default for Config {
             worker_token: String::new(),
             max_body_bytes: 4 << 20,
             request_timeout_ms: 30_000,
+            metrics: true,
             plans: PlanLimits::default(),
             quota: Quota::default(),
             db_pool: DbPool::default(),

@@ -201,7 +201,8 @@ impl Submissions for SubmissionsService {
     }
 }
 
-/// The tower stack around every gRPC call, in one layer: the request id (the caller's
+/// The tower stack around every gRPC call, in one layer: metrics (calls and latency by method
+/// path and grpc-status, see [`crate::metrics::record_grpc`]), the request id (the caller's
 /// `x-request-id` metadata when sane, else a fresh one; current while the call runs, so
 /// `INTERNAL` and `UNAVAILABLE` messages name it, and echoed as `x-request-id` response
 /// metadata), a trace span with the gRPC path and the id, a budget (past it `UNAVAILABLE`, code
@@ -280,6 +281,7 @@ where
         let path = req.uri().path().to_owned();
         let budget = self.layer.budget(&path);
         let span = tracing::info_span!("grpc", path = %path, request_id = %id);
+        let started = std::time::Instant::now();
         // The future is never polled again after a panic, so no broken state is observed.
         let call = AssertUnwindSafe(self.inner.call(req)).catch_unwind();
         let answer = async move {
@@ -291,6 +293,7 @@ where
                 })),
             };
             result.map(|mut resp| {
+                crate::metrics::record_grpc(&path, resp.headers(), started.elapsed());
                 if let Some(id) = crate::error::current_request_id()
                     && let Ok(v) = HeaderValue::from_str(&id)
                 {

@@ -51,6 +51,11 @@ pub(crate) fn router(state: AppState) -> Router {
         .route("/api/v1/leaderboard", get(leaderboard))
         .route("/api/v1/admin/resimulate", post(resimulate))
         .route("/api/v1/admin/stats", get(admin_stats));
+    // Prometheus text format, no token (see `service::metrics` for why that is safe).
+    let quick = match cfg.metrics {
+        true => quick.route("/metrics", get(metrics)),
+        false => quick,
+    };
     // Registration probes the endpoint first, which may take up to `policy.startup_deadline_ms`.
     let probing = Router::new().route("/api/v1/submissions/policies", post(register_policy));
     // The organiser's rescore walks every stored submission, so its length grows with the
@@ -106,6 +111,11 @@ fn typed(content_type: &'static str, body: Bytes) -> Response {
 
 async fn healthz() -> impl IntoResponse {
     axum::Json(json!({ "status": "ok" }))
+}
+
+async fn metrics(State(s): State<AppState>) -> Result<Response, ServiceError> {
+    let text = s.metrics_text().await?;
+    Ok(typed(crate::metrics::CONTENT_TYPE, Bytes::from(text)))
 }
 
 async fn index(State(s): State<AppState>, QueryArgs(q): Params) -> Result<Response, ServiceError> {

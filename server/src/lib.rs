@@ -9,7 +9,8 @@
 //! adapters; [`store`] is every SQL statement (including the job queue); [`plans`] parses and
 //! scores plan files; [`episodes`] defines policy-run episodes and their scoring; [`probe`] is
 //! the seam through which the binary supplies the policy endpoint probe; [`content`] holds the
-//! dataset; [`leaderboard`] the ranking types, renderings and cache.
+//! dataset; [`leaderboard`] the ranking types, renderings and cache; [`metrics`] the
+//! Prometheus recorder and metric names (a leaf: adapters and the service record into it).
 //!
 //! Imports go one way: adapters ([`http`], [`grpc`], [`grpc_worker`]) → [`service`] →
 //! [`store`], [`leaderboard`], [`content`], [`episodes`] → [`error`] → [`plans`] → the leaf
@@ -25,6 +26,7 @@ mod grpc;
 mod grpc_worker;
 mod http;
 mod leaderboard;
+pub mod metrics;
 pub mod plans;
 mod probe;
 mod scores;
@@ -72,6 +74,9 @@ pub async fn build(config: Config) -> anyhow::Result<Server> {
 /// policy endpoints at registration (the `kitchen-r` binary passes the worker crate's probe).
 pub async fn build_with(config: Config, probe: Arc<dyn PolicyProbe>) -> anyhow::Result<Server> {
     config.validate()?;
+    if config.metrics {
+        metrics::install();
+    }
     let assets = config.assets_dir();
     let content = content::Content::load(&assets, config.test_set_dir())
         .with_context(|| format!("loading assets from {}", assets.display()))?;

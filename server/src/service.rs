@@ -7,6 +7,7 @@
 //! - [`teams`]: the organiser creates teams;
 //! - [`plan_uploads`]: plan files validated, scored and stored within the daily quota;
 //! - [`limits`]: the per-team upload rate limit and the counts of refused uploads;
+//! - [`metrics`]: what `GET /metrics` reads when scraped (queue gauges, workers seen);
 //! - [`policies`]: policy endpoints probed and registered, their episodes queued;
 //! - [`jobs`]: the worker-facing queue (lease, heartbeat, report, reaper);
 //! - [`progress`]: a policy run's episodes and failures as its team may see them;
@@ -20,6 +21,7 @@ pub(crate) mod auth;
 mod board;
 pub(crate) mod jobs;
 mod limits;
+mod metrics;
 mod plan_uploads;
 pub(crate) mod policies;
 mod progress;
@@ -70,6 +72,8 @@ struct Inner {
     stopping: std::sync::atomic::AtomicBool,
     /// Per-team upload rate limits and refusal counts (in memory: see [`limits`]).
     limits: limits::Limits,
+    /// What `/metrics` reads when scraped (workers seen, cached queue gauges).
+    telemetry: metrics::Telemetry,
 }
 
 impl std::fmt::Debug for AppState {
@@ -99,6 +103,7 @@ impl AppState {
             inner: Arc::new(Inner {
                 db,
                 limits: limits::Limits::new(config.quota.per_minute, now_ms()),
+                telemetry: metrics::Telemetry::new(),
                 config,
                 content,
                 admin_hash: hash_token(tokens.admin),

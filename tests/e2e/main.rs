@@ -16,4 +16,5 @@ mod control;
 mod grpc;
 mod integrity;
 mod load_bench;
+mod metrics;
 mod planning;

@@ -8,3 +8,4 @@
 //! storage.
 
 pub mod job;
+mod metrics;

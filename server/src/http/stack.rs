@@ -1,5 +1,7 @@
 //! The tower stack around every HTTP route (the fallback included), outermost first:
 //!
+//! 0. metrics: every answer counted, and its latency to the response headers, by method,
+//!    *matched route* (`<unmatched>` for the fallback) and status ([`crate::metrics`]);
 //! 1. request id: the caller's `x-request-id` when sane, else a fresh one; put in the request's
 //!    extensions, echoed in the response header, and made current
 //!    ([`crate::error::with_request_id`]) so every JSON error body carries it;
@@ -44,6 +46,7 @@ pub(crate) struct RequestId(pub Arc<str>);
 pub(crate) fn layered<S: Clone + Send + Sync + 'static>(routes: Router<S>) -> Router<S> {
     routes.layer(
         ServiceBuilder::new()
+            .layer(middleware::from_fn(record_metrics))
             .layer(middleware::from_fn(request_id))
             .layer(middleware::from_fn(json_errors))
             .layer(TraceLayer::new_for_http().make_span_with(span))
@@ -57,6 +60,19 @@ pub(crate) fn with_timeout<S: Clone + Send + Sync + 'static>(
     budget: Duration,
 ) -> Router<S> {
     routes.layer(middleware::from_fn_with_state(budget, timeout))
+}
+
+async fn record_metrics(req: Request, next: Next) -> Response {
+    let started = std::time::Instant::now();
+    let method = req.method().clone();
+    let route = req
+        .extensions()
+        .get::<MatchedPath>()
+        .map_or("<unmatched>", MatchedPath::as_str)
+        .to_owned();
+    let resp = next.run(req).await;
+    crate::metrics::record_http(&method, &route, resp.status().as_u16(), started.elapsed());
+    resp
 }
 
 async fn request_id(mut req: Request, next: Next) -> Response {

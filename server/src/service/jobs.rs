@@ -19,6 +19,7 @@ use tokio::time::Instant;
 use kitchen_r_core::dataset::Split;
 use kitchen_r_core::plan::place_steps;
 
+use super::metrics::record;
 use super::{AppState, WorkerCred, now_ms};
 use crate::episodes::{JobSpec, TaskOutcome};
 use crate::error::ServiceError;
@@ -110,6 +111,7 @@ impl AppState {
                 "max_jobs must be between 1 and {MAX_JOBS_PER_LEASE}"
             )));
         }
+        self.worker_seen(worker);
         let deadline = Instant::now() + Duration::from_millis(u64::from(wait_ms.min(MAX_LEASE_WAIT_MS)));
         loop {
             // Registered before the claim so a wake-up between claim and wait is not lost.
@@ -127,6 +129,8 @@ impl AppState {
                 false => Vec::new(),
             };
             if !claimed.is_empty() || Instant::now() >= deadline {
+                self.worker_seen(worker);
+                self.record_queue_waits(&claimed, now).await;
                 let jobs: Vec<LeasedJob> = claimed.into_iter().map(|c| self.leased_job(c)).collect();
                 for j in &jobs {
                     tracing::info!(job = j.id, run = j.run_id, episode = %j.episode_key, attempt = j.attempt, worker, "job leased");
@@ -146,6 +150,7 @@ impl AppState {
         attempt: u32,
     ) -> Result<HeartbeatOutcome, ServiceError> {
         let worker = validate_worker_id(worker_id)?;
+        self.worker_seen(worker);
         let now = now_ms();
         let until = queue::heartbeat(
             self.pool(),
@@ -209,6 +214,8 @@ impl AppState {
                 duplicate: false,
             });
         }
+        // Whether the platform gave up on the job, when the attempt failed (for /metrics).
+        let mut gave_up = None;
         if r.platform_error.trim().is_empty() {
             let result = NewResult {
                 job: &job,
@@ -226,11 +233,17 @@ impl AppState {
                 "platform error: {}",
                 clip(r.platform_error.trim(), MAX_REASON_CHARS)
             );
-            self.retry_or_fail(&mut tx, &job, &reason, &r.worker_id, now)
-                .await?;
+            gave_up = Some(
+                self.retry_or_fail(&mut tx, &job, &reason, &r.worker_id, now)
+                    .await?,
+            );
         }
         let finished = self.finish_if_done(&mut tx, job.run_id, now).await?;
         tx.commit().await?;
+        match gave_up {
+            None => record::episode_done(job.spec.mode.as_str(), r.wall_ms),
+            Some(failed) => record::attempt_failed("platform_error", failed),
+        }
         self.after_queue_write(finished);
         tracing::info!(job = job.id, run = job.run_id, episode = %job.episode_key, finished, "result reported");
         Ok(ReportOutcome {
@@ -266,6 +279,7 @@ impl AppState {
             report.runs_finished += usize::from(self.finish_if_done(&mut tx, run, now).await?);
         }
         tx.commit().await?;
+        record::reaped(report.requeued, report.failed);
         self.after_queue_write(report.runs_finished > 0);
         tracing::info!(?report, "expired leases reaped");
         Ok(report)

@@ -245,3 +245,40 @@ impl From<EpisodeRow> for Episode {
         Episode { spec, tasks, failure }
     }
 }
+
+/// The queue at a glance, for `/metrics`: jobs by state and when the longest-waiting queued job
+/// entered the queue (`updated_at` of a queued job: its creation or its last requeue). One
+/// statement; the counts read the `(state, id)` index only.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub(crate) struct QueueGauges {
+    /// `(state, count)` for every state that has jobs.
+    pub by_state: Vec<(String, i64)>,
+    pub oldest_queued_at: Option<i64>,
+}
+
+pub(crate) async fn gauges(pool: &SqlitePool) -> sqlx::Result<QueueGauges> {
+    let rows: Vec<(String, i64, Option<i64>)> = sqlx::query_as(
+        "SELECT state, COUNT(*), NULL FROM jobs GROUP BY state
+         UNION ALL
+         SELECT 'oldest', 0, MIN(updated_at) FROM jobs WHERE state = 'queued'",
+    )
+    .fetch_all(pool)
+    .await?;
+    let mut g = QueueGauges::default();
+    for (state, n, oldest) in rows {
+        match state.as_str() {
+            "oldest" => g.oldest_queued_at = oldest,
+            _ => g.by_state.push((state, n)),
+        }
+    }
+    Ok(g)
+}
+
+/// When each of `ids` was first queued (`created_at`), for the queue-wait histogram.
+pub(crate) async fn created_at(pool: &SqlitePool, ids: &[i64]) -> sqlx::Result<Vec<i64>> {
+    let ids = serde_json::to_string(ids).unwrap_or_else(|_| "[]".into());
+    sqlx::query_scalar("SELECT created_at FROM jobs WHERE id IN (SELECT value FROM json_each(?))")
+        .bind(ids)
+        .fetch_all(pool)
+        .await
+}

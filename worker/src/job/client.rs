@@ -204,6 +204,7 @@ impl Worker {
         );
         async {
             info!("episode started");
+            let _held = crate::metrics::LeaseHeld::new();
             let control = JobControl::default();
             let mut done = spawn_episode(job.clone(), self.ctx.clone(), control.clone());
             let mut next = heartbeat_in(job.lease_expires_at_ms);
@@ -224,6 +225,7 @@ impl Worker {
                     }
                 }
             };
+            crate::metrics::episode_ran(&result, dropped, false);
             if dropped {
                 info!("result dropped: the server cancelled the lease");
                 return;

@@ -198,6 +198,7 @@ fn run(
         ca_pem: None,
     };
     let mut remote;
+    let mut timed;
     let mut dead;
     let policy: &mut dyn Policy = match RemotePolicy::connect(
         &ep.url,
@@ -209,7 +210,8 @@ fn run(
             remote = p;
             remote.set_scene(&cfg.scene);
             log.line(format!("policy {:?} connected", remote.wire_spec().name));
-            &mut remote
+            timed = crate::metrics::Timed(&mut remote);
+            &mut timed
         }
         Err(e) => {
             let reason = format!("policy unreachable: {e}");
