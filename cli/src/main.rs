@@ -5,6 +5,7 @@
 //! the twin's tools); `main` only dispatches. Without a subcommand the binary serves, so
 //! `cargo run --release` starts the server.
 
+mod admin_cmd;
 mod check_policy_cmd;
 mod client_cmd;
 mod collect_cmd;
@@ -46,6 +47,8 @@ enum Command {
     Leaderboard(client_cmd::LeaderboardArgs),
     /// Organiser: add a new scoring run to every submission.
     Rescore(client_cmd::RescoreArgs),
+    /// Organiser's console: queue, workers, runs; cancel or requeue a run; back up the database.
+    Admin(admin_cmd::AdminArgs),
     /// Benchmark content: regenerate the instruction dataset.
     Dataset(dataset_cmd::DatasetArgs),
     /// Kitchen twin tools (render what the robot sees).
@@ -72,6 +75,7 @@ fn main() -> anyhow::Result<()> {
         Some(Command::Submit(args)) => client_cmd::submit(args),
         Some(Command::Leaderboard(args)) => client_cmd::leaderboard(args),
         Some(Command::Rescore(args)) => client_cmd::rescore(args),
+        Some(Command::Admin(args)) => admin_cmd::admin(args),
         Some(Command::Dataset(args)) => dataset_cmd::dataset(args),
         Some(Command::Sim(args)) => sim_cmd::sim(args),
         Some(Command::Bench(args)) => sim_cmd::bench(args),

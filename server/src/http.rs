@@ -31,6 +31,7 @@ use extract::{BodyBytes, PathArg, QueryArgs};
 
 type Params = QueryArgs<HashMap<String, String>>;
 
+mod admin;
 mod extract;
 pub(crate) mod stack;
 
@@ -50,7 +51,9 @@ pub(crate) fn router(state: AppState) -> Router {
         .route("/api/v1/submissions/{id}", get(submission))
         .route("/api/v1/leaderboard", get(leaderboard))
         .route("/api/v1/admin/resimulate", post(resimulate))
-        .route("/api/v1/admin/stats", get(admin_stats));
+        .route("/api/v1/admin/stats", get(admin_stats))
+        // The organiser's console: admin API and the `/admin` page (see `admin`).
+        .merge(admin::quick_routes());
     // Prometheus text format, no token (see `service::metrics` for why that is safe).
     let quick = match cfg.metrics {
         true => quick.route("/metrics", get(metrics)),
@@ -60,7 +63,9 @@ pub(crate) fn router(state: AppState) -> Router {
     let probing = Router::new().route("/api/v1/submissions/policies", post(register_policy));
     // The organiser's rescore walks every stored submission, so its length grows with the
     // contest; abandoning it would leave it half done. It is organiser-only, so no budget.
-    let unbounded = Router::new().route("/api/v1/admin/rescore", post(rescore));
+    let unbounded = Router::new()
+        .route("/api/v1/admin/rescore", post(rescore))
+        .merge(admin::unbounded_routes());
     let routes = stack::with_timeout(quick, cfg.request_timeout())
         .merge(stack::with_timeout(probing, cfg.registration_timeout()))
         .merge(unbounded)

@@ -84,7 +84,7 @@ pub(crate) struct Row {
     pub submission_id: i64,
     pub scores: Scores,
     pub submitted_at: String,
-    /// Policy tracks: `active` while evaluating, `finished`, or `platform_failed`.
+    /// Policy tracks: `active` while evaluating, `finished`, `platform_failed` or `cancelled`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub state: Option<String>,
     /// An organiser reference run.

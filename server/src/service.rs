@@ -13,10 +13,12 @@
 //! - [`progress`]: a policy run's episodes and failures as its team may see them;
 //! - [`submissions`]: a submission with its latest run, for its team or the organiser;
 //! - [`board`]: the leaderboards, cached and rendered;
-//! - [`rescore`]: the organiser's rescoring of every stored submission.
+//! - [`rescore`]: the organiser's rescoring of every stored submission;
+//! - [`admin`]: the organiser's console (queue, workers, runs; cancel, requeue, backup).
 //!
 //! This file holds only the shared state and its accessors.
 
+pub(crate) mod admin;
 pub(crate) mod auth;
 mod board;
 pub(crate) mod jobs;

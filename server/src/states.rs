@@ -32,6 +32,8 @@ pub(crate) enum RunState {
     Finished,
     /// No episode could run because of the platform: such a run does not use quota.
     PlatformFailed,
+    /// Stopped by the organiser (`cancelled_at`, `cancelled_by`): uses no quota, ranks nowhere.
+    Cancelled,
 }
 
 impl RunState {
@@ -40,6 +42,7 @@ impl RunState {
             RunState::Active => "active",
             RunState::Finished => "finished",
             RunState::PlatformFailed => "platform_failed",
+            RunState::Cancelled => "cancelled",
         }
     }
 }
@@ -90,7 +93,12 @@ mod tests {
             .connect("sqlite::memory:")
             .await
             .unwrap();
-        for s in [RunState::Active, RunState::Finished, RunState::PlatformFailed] {
+        for s in [
+            RunState::Active,
+            RunState::Finished,
+            RunState::PlatformFailed,
+            RunState::Cancelled,
+        ] {
             let text: String = sqlx::query_scalar("SELECT ?")
                 .bind(s)
                 .fetch_one(&pool)

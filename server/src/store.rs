@@ -11,8 +11,10 @@
 //! stays text: by kind it is a plan file or a policy endpoint's JSON.
 //!
 //! Submodules: [`runs`] (policy submissions, their runs and results), [`queue`] (the job queue)
-//! and [`board`] (the maintained leaderboards, refreshed by every write above that changes one).
+//! [`board`] (the maintained leaderboards, refreshed by every write above that changes one) and
+//! [`admin`] (the organiser's console: queue, workers, runs, cancel, requeue, backup).
 
+pub(crate) mod admin;
 pub(crate) mod board;
 mod compact;
 mod packed;
@@ -201,7 +203,7 @@ pub(crate) async fn team_by_token_hash(pool: &SqlitePool, token_hash: &str) -> s
 
 /// A team's submissions to `split` received at or after `since` (ms). Policy runs the platform
 /// could not evaluate (`platform_failed`) do not count: failures caused by the platform never
-/// use quota.
+/// use quota. Nor do runs the organiser cancelled (`cancelled`): cancelling gives the quota back.
 pub(crate) async fn count_submissions_since(
     pool: &SqlitePool,
     team: i64,
@@ -210,7 +212,7 @@ pub(crate) async fn count_submissions_since(
 ) -> sqlx::Result<i64> {
     sqlx::query_scalar(
         "SELECT COUNT(*) FROM submissions s WHERE s.team_id = ? AND s.split = ? AND s.created_at >= ?
-         AND NOT EXISTS (SELECT 1 FROM scoring_runs r WHERE r.submission_id = s.id AND r.state = 'platform_failed')",
+         AND NOT EXISTS (SELECT 1 FROM scoring_runs r WHERE r.submission_id = s.id AND r.state IN ('platform_failed', 'cancelled'))",
     )
         .bind(team)
         .bind(split.as_str())

@@ -10,6 +10,7 @@ mod support;
 #[path = "../../worker/tests/it/remote_support/scripted.rs"]
 mod remote_support;
 
+mod admin;
 mod audit;
 mod cli;
 mod control;

@@ -64,7 +64,8 @@ pub(crate) fn csv(board: &Leaderboard) -> String {
     out
 }
 
-fn escape(s: &str) -> String {
+/// HTML-escape text (team names are untrusted); also used by the organiser's console page.
+pub(crate) fn escape(s: &str) -> String {
     s.replace('&', "&amp;")
         .replace('<', "&lt;")
         .replace('>', "&gt;")
@@ -104,6 +105,7 @@ fn table(board: &Leaderboard) -> String {
         let state = match (policy, r.state.as_deref()) {
             (true, Some("active")) => " (evaluating)",
             (true, Some("platform_failed")) => " (platform failure)",
+            (true, Some("cancelled")) => " (cancelled)",
             _ => "",
         };
         let _ = write!(

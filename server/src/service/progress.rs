@@ -17,7 +17,8 @@ use crate::store::runs::{self as run_store, ResultRow};
 
 #[derive(Debug, Clone, Serialize)]
 pub(crate) struct PolicyRunView {
-    /// `queued` (no episode started), `running`, `finished` or `platform_failed`.
+    /// `queued` (no episode started), `running`, `finished`, `platform_failed` or `cancelled`
+    /// (stopped by the organiser).
     pub state: &'static str,
     pub episodes_total: i64,
     /// Episodes with a recorded result (including ones the platform gave up on).
@@ -96,6 +97,7 @@ impl AppState {
         let state = match run.state {
             RunState::Finished => "finished",
             RunState::PlatformFailed => "platform_failed",
+            RunState::Cancelled => "cancelled",
             RunState::Active if counts.started == 0 => "queued",
             _ => "running",
         };

@@ -1,0 +1,168 @@
+use axum::body::to_bytes;
+use axum::http::Request;
+use serde_json::Value;
+use tower::ServiceExt;
+
+use super::super::router;
+use super::*;
+use crate::testutil::{ADMIN, FakeProbe, fixture};
+
+async fn call(app: &Router, req: Request<Body>) -> (StatusCode, HeaderMap, Vec<u8>) {
+    let resp = app.clone().oneshot(req).await.unwrap();
+    let (parts, body) = resp.into_parts();
+    let bytes = to_bytes(body, 64 << 20).await.unwrap().to_vec();
+    (parts.status, parts.headers, bytes)
+}
+
+fn bearer(req: axum::http::request::Builder, token: &str) -> axum::http::request::Builder {
+    req.header(header::AUTHORIZATION, format!("Bearer {token}"))
+}
+
+#[tokio::test]
+async fn admin_routes_need_the_organiser_and_bad_run_ids_answer_json_errors() {
+    let f = fixture(FakeProbe::ok(2), |_| {}).await;
+    let team = f.team("alpha").await;
+    let app = router(f.state.clone());
+    for path in [
+        "/api/v1/admin/queue",
+        "/api/v1/admin/workers",
+        "/api/v1/admin/runs",
+    ] {
+        let (status, _, body) = call(&app, Request::get(path).body(Body::empty()).unwrap()).await;
+        assert_eq!(status, StatusCode::UNAUTHORIZED, "{path}");
+        let v: Value = serde_json::from_slice(&body).unwrap();
+        assert_eq!(v["code"], "missing_token");
+        let (status, _, _) = call(
+            &app,
+            bearer(Request::get(path), &team).body(Body::empty()).unwrap(),
+        )
+        .await;
+        assert_eq!(status, StatusCode::FORBIDDEN, "{path}");
+        let (status, _, body) = call(
+            &app,
+            bearer(Request::get(path), ADMIN).body(Body::empty()).unwrap(),
+        )
+        .await;
+        assert_eq!(status, StatusCode::OK, "{path}");
+        let _: Value = serde_json::from_slice(&body).unwrap();
+    }
+    for (id, status, code) in [
+        ("abc", StatusCode::BAD_REQUEST, "bad_request"),
+        ("-1", StatusCode::BAD_REQUEST, "bad_request"),
+        ("99999999999999999999", StatusCode::BAD_REQUEST, "bad_request"),
+        ("42", StatusCode::NOT_FOUND, "not_found"),
+    ] {
+        for op in ["cancel", "requeue"] {
+            let path = format!("/api/v1/admin/runs/{id}/{op}");
+            let (got, headers, body) = call(
+                &app,
+                bearer(Request::post(&path), ADMIN).body(Body::empty()).unwrap(),
+            )
+            .await;
+            assert_eq!(got, status, "{path}");
+            assert_eq!(headers[header::CONTENT_TYPE], "application/json");
+            let v: Value = serde_json::from_slice(&body).unwrap();
+            assert_eq!(v["code"], code, "{v}");
+            assert!(v["error"].is_string() && v["request_id"].is_string(), "{v}");
+        }
+    }
+    // Organiser-only, checked before anything else.
+    let (status, _, _) = call(
+        &app,
+        bearer(Request::post("/api/v1/admin/runs/abc/cancel"), &team)
+            .body(Body::empty())
+            .unwrap(),
+    )
+    .await;
+    assert_eq!(status, StatusCode::FORBIDDEN);
+    let (status, _, _) = call(
+        &app,
+        Request::post("/api/v1/admin/backup").body(Body::empty()).unwrap(),
+    )
+    .await;
+    assert_eq!(status, StatusCode::UNAUTHORIZED);
+}
+
+#[tokio::test]
+async fn backup_streams_a_sqlite_copy() {
+    let f = fixture(FakeProbe::ok(2), |_| {}).await;
+    f.team("alpha").await;
+    let app = router(f.state.clone());
+    let (status, headers, body) = call(
+        &app,
+        bearer(Request::post("/api/v1/admin/backup"), ADMIN)
+            .body(Body::empty())
+            .unwrap(),
+    )
+    .await;
+    assert_eq!(status, StatusCode::OK);
+    assert_eq!(headers[header::CONTENT_TYPE], "application/vnd.sqlite3");
+    assert_eq!(headers[header::CONTENT_LENGTH], body.len().to_string().as_str());
+    assert!(body.starts_with(b"SQLite format 3\0"));
+}
+
+#[tokio::test]
+async fn the_page_logs_in_with_a_strict_http_only_cookie() {
+    let f = fixture(FakeProbe::ok(2), |_| {}).await;
+    let team = f.team("alpha").await;
+    let app = router(f.state.clone());
+    let (status, headers, body) = call(&app, Request::get("/admin").body(Body::empty()).unwrap()).await;
+    assert_eq!(status, StatusCode::UNAUTHORIZED);
+    assert!(String::from_utf8(body).unwrap().contains("name=token"));
+    assert_eq!(headers[header::CACHE_CONTROL], "no-store");
+    assert!(headers.contains_key(header::CONTENT_SECURITY_POLICY));
+
+    let login = |token: &str| {
+        Request::post("/admin/login")
+            .header(header::CONTENT_TYPE, "application/x-www-form-urlencoded")
+            .body(Body::from(format!("token={token}")))
+            .unwrap()
+    };
+    let (status, headers, _) = call(&app, login(&team)).await;
+    assert_eq!(
+        status,
+        StatusCode::UNAUTHORIZED,
+        "a team token is not the organiser's"
+    );
+    assert!(!headers.contains_key(header::SET_COOKIE));
+
+    let (status, headers, _) = call(&app, login(ADMIN)).await;
+    assert_eq!(status, StatusCode::SEE_OTHER);
+    let cookie = headers[header::SET_COOKIE].to_str().unwrap().to_string();
+    for attr in ["HttpOnly", "SameSite=Strict", "Path=/admin"] {
+        assert!(cookie.contains(attr), "{cookie}");
+    }
+    let pair = cookie.split(';').next().unwrap().to_string();
+    let (status, _, body) = call(
+        &app,
+        Request::get("/admin")
+            .header(header::COOKIE, format!("other=1; {pair}"))
+            .body(Body::empty())
+            .unwrap(),
+    )
+    .await;
+    assert_eq!(status, StatusCode::OK);
+    assert!(String::from_utf8(body).unwrap().contains("organiser console"));
+
+    // A forged or team cookie is not a session.
+    let forged = format!("{COOKIE}={}", hex::encode(&team));
+    let (status, _, _) = call(
+        &app,
+        Request::get("/admin")
+            .header(header::COOKIE, forged)
+            .body(Body::empty())
+            .unwrap(),
+    )
+    .await;
+    assert_eq!(status, StatusCode::UNAUTHORIZED);
+    // The cookie reaches no API route: actions need the bearer token.
+    let (status, _, _) = call(
+        &app,
+        Request::get("/api/v1/admin/queue")
+            .header(header::COOKIE, pair)
+            .body(Body::empty())
+            .unwrap(),
+    )
+    .await;
+    assert_eq!(status, StatusCode::UNAUTHORIZED);
+}
