@@ -4,7 +4,10 @@
 //!
 //! The in-process slots are an ordinary `kitchen-r worker` running in this process: they lease
 //! jobs from the server's own gRPC port over loopback with the worker token, so a contest on one
-//! machine and a contest with remote workers go through the same queue and the same code.
+//! machine and a contest with remote workers go through the same queue and the same code, and
+//! get the server's `assets`, `policy.allow_networks` and `control.drain_grace_s`. At shutdown the
+//! slots drain first (no more leases, running episodes finish within `control.drain_grace_s`, the
+//! rest is released) while the server still serves, then the server stops.
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -79,6 +82,7 @@ pub(crate) fn serve(args: ServeArgs) -> anyhow::Result<()> {
     };
     let slots = cfg.worker_slots();
     let allow_networks = cfg.policy.allow_networks.clone();
+    let (assets, drain_grace_s) = (cfg.assets_dir(), cfg.control.drain_grace_s);
     let rt = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     rt.block_on(async move {
         let probe = Arc::new(WorkerProbe {
@@ -96,6 +100,8 @@ pub(crate) fn serve(args: ServeArgs) -> anyhow::Result<()> {
                 slots,
                 worker_id: format!("serve-{}", std::process::id()),
                 allow_networks,
+                drain_grace_s,
+                assets,
                 policy: remote,
                 ..WorkerConfig::default()
             };
@@ -125,19 +131,22 @@ pub(crate) fn serve(args: ServeArgs) -> anyhow::Result<()> {
         writeln!(out, "listening http={h} grpc={g} workers={slots}")?;
         out.flush()?;
         drop(out);
+        // The slots drain while the server still takes their reports and releases; the server
+        // stops once they are done.
+        let (served_tx, served_rx) = watch::channel(false);
         tokio::spawn(async move {
             shutdown_signal().await;
             let _ = stop_tx.send(true);
-        });
-        let served = server.run(http, grpc, stopped(stop_rx)).await;
-        if let Some(w) = workers {
-            match w.await {
-                Ok(Err(e)) => tracing::error!("in-process workers: {e}"),
-                Err(e) => tracing::error!("in-process workers panicked: {e}"),
-                Ok(Ok(())) => {}
+            if let Some(w) = workers {
+                match w.await {
+                    Ok(Err(e)) => tracing::error!("in-process workers: {e}"),
+                    Err(e) => tracing::error!("in-process workers panicked: {e}"),
+                    Ok(Ok(())) => {}
+                }
             }
-        }
-        served
+            let _ = served_tx.send(true);
+        });
+        server.run(http, grpc, stopped(served_rx)).await
     })
 }
 

@@ -1,6 +1,10 @@
 //! `kitchen-r worker --server URL [--slots N]`: a standalone simulation worker leasing episodes
-//! from a server's gRPC port. Parsing, tracing set-up and Ctrl-C only; the loop is
+//! from a server's gRPC port. Parsing, tracing set-up and the stop signals only; the loop is
 //! `kitchen_r_worker::job::client`.
+//!
+//! Settings: `configs/worker.toml` (or `--config FILE`), then flags; a flag that is not given
+//! leaves the file's value alone. SIGTERM or Ctrl-C drains the worker: no more leases, running
+//! episodes get `drain_grace_s` to finish, the rest is released to the server, exit code 0.
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -16,9 +20,14 @@ pub(crate) struct WorkerArgs {
     /// else http://127.0.0.1:50051].
     #[arg(long, env = "KITCHEN_R_WORKER_SERVER", value_name = "URL")]
     server: Option<String>,
-    /// Episodes run at once, one thread and simulator each [default: the number of cores].
+    /// Episodes run at once, one thread and simulator each [default: `slots` in the config
+    /// file; 0 or unset = the number of cores].
     #[arg(long, value_name = "N")]
     slots: Option<usize>,
+    /// On SIGTERM/Ctrl-C, seconds running episodes may take to finish before they are released
+    /// to the server [default: `drain_grace_s` in the config file, else 30].
+    #[arg(long, value_name = "SECONDS")]
+    drain_grace_s: Option<u64>,
     /// Worker token the server was configured with.
     #[arg(
         long,
@@ -55,9 +64,12 @@ pub(crate) fn worker(args: WorkerArgs) -> anyhow::Result<()> {
     if let Some(id) = args.worker_id {
         cfg.worker_id = id;
     }
-    cfg.slots = args
-        .slots
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    if let Some(n) = args.slots {
+        cfg.slots = n;
+    }
+    if let Some(g) = args.drain_grace_s {
+        cfg.drain_grace_s = g;
+    }
     let rt = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()
@@ -67,12 +79,18 @@ pub(crate) fn worker(args: WorkerArgs) -> anyhow::Result<()> {
         if let Some(addr) = metrics {
             serve_metrics(&addr).await?;
         }
-        let (server, slots) = (cfg.server.clone(), cfg.slots);
+        let (server, slots, grace) = (cfg.server.clone(), cfg.slot_count(), cfg.drain_grace_s);
         let worker = Worker::build(cfg).await?;
+        let id = worker.id().to_string();
         // Tests and scripts wait for this exact line on stdout (like serve's `listening` line).
-        println!("worker ready id={} slots={slots} server={server}", worker.id());
+        println!(
+            "worker ready id={} slots={slots} server={server} drain_grace_s={grace}",
+            worker.id()
+        );
         std::io::stdout().flush()?;
         worker.run(stop_signal()).await?;
+        println!("worker stopped id={}", id);
+        std::io::stdout().flush()?;
         Ok(())
     })
 }

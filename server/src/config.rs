@@ -150,6 +150,12 @@ pub struct ControlConfig {
     pub reaper_interval_s: u64,
     /// Leases a job gets before its episode is recorded as failed.
     pub max_attempts: u32,
+    /// Most jobs of one team leased at once, over all its runs; 0 = unlimited. Leasing shares
+    /// capacity fairly whatever this is (fewest in flight first, by team then run).
+    pub max_in_flight_per_team: u32,
+    /// At shutdown the in-process slots stop leasing, finish their running episodes for up to
+    /// this long, then release what is left (queued again at once, no attempt used), seconds.
+    pub drain_grace_s: u64,
 }
 
 /// Calling participants' policies (`[policy]`): deadlines sent to workers with every job.
@@ -234,6 +240,8 @@ impl Default for ControlConfig {
             lease_s: 60,
             reaper_interval_s: 5,
             max_attempts: 3,
+            max_in_flight_per_team: 0,
+            drain_grace_s: 30,
         }
     }
 }
@@ -348,6 +356,9 @@ impl Config {
         }
         if c.max_attempts == 0 {
             return invalid("control.max_attempts", "must be at least 1");
+        }
+        if c.drain_grace_s > 3600 {
+            return invalid("control.drain_grace_s", "must be at most 3600 seconds");
         }
         let p = &self.policy;
         if p.call_deadline_ms == 0 || p.startup_deadline_ms == 0 || p.episode_budget_ms == 0 {

@@ -1,5 +1,6 @@
 //! The gRPC adapter (tonic) for `kitchen_r.worker.v1.Worker`: simulation workers lease jobs,
-//! heartbeat and report results here. Served on the same port as the participant API.
+//! heartbeat, report results and release unfinished jobs here. Served on the same port as the
+//! participant API.
 //!
 //! Only conversion lives here; the queue's rules are in [`crate::service::jobs`]. Every call
 //! needs `authorization: Bearer <worker token>` (UNAUTHENTICATED otherwise).
@@ -67,6 +68,18 @@ impl Worker for WorkerService {
             lease_expires_at_ms: out.lease_expires_at_ms.unwrap_or(0),
             cancelled: out.lease_expires_at_ms.is_none(),
         }))
+    }
+
+    async fn release(
+        &self,
+        req: Request<pb::ReleaseRequest>,
+    ) -> Result<Response<pb::ReleaseResponse>, Status> {
+        let worker = caller(&req)?.worker()?;
+        let m = req.into_inner();
+        let released = (self.state)
+            .release(worker, &m.worker_id, m.job_id, m.attempt, &m.reason)
+            .await?;
+        Ok(Response::new(pb::ReleaseResponse { released }))
     }
 
     async fn report_result(

@@ -29,7 +29,11 @@ pub struct Assets {
 impl Assets {
     /// Everything under the assets directory (`KITCHEN_R_ASSETS`, `./assets`, or the workspace).
     pub fn load_default() -> Result<Assets, SimError> {
-        let dir = kitchen_r_core::assets::assets_dir();
+        Assets::load(&kitchen_r_core::assets::assets_dir())
+    }
+
+    /// Everything under `dir`: `objects.toml`, `scenes/`, `robot.toml`.
+    pub fn load(dir: &std::path::Path) -> Result<Assets, SimError> {
         let catalogue = Catalogue::load(&dir.join("objects.toml"))?;
         let scenes = Scene::load_all(&dir.join("scenes"), &catalogue)?;
         let robot = RobotDesc::load(&dir.join("robot.toml"))?;

@@ -19,3 +19,4 @@ mod integrity;
 mod load_bench;
 mod metrics;
 mod planning;
+mod workers;

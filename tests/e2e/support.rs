@@ -187,6 +187,11 @@ impl Server {
     pub(crate) fn url(&self, path: &str) -> String {
         format!("{}{path}", self.http)
     }
+
+    /// The server process (to signal it).
+    pub(crate) fn child(&mut self) -> &mut Child {
+        &mut self.child
+    }
 }
 
 impl Drop for Server {

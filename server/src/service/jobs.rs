@@ -4,6 +4,8 @@
 //! - workers authenticate with the worker token; a lease is `(job, attempt, owner)`;
 //! - a report quoting an older attempt is refused (`accepted = false`), a second report of an
 //!   already recorded `(run, episode)` is acknowledged as a duplicate and changes nothing;
+//! - a released lease (a draining worker gives back what it could not finish) requeues the job
+//!   at once and does not count as an attempt;
 //! - a report with `platform_error` set (or an expired lease) requeues the job without
 //!   recording anything against the participant; after `max_attempts` leases the episode is
 //!   recorded as failed with the reason, so a run always finishes;
@@ -125,7 +127,18 @@ impl AppState {
             let now = now_ms();
             // A read first: idle workers polling must not take the write lock every time.
             let claimed = match queue::any_queued(self.pool()).await? {
-                true => queue::claim(self.pool(), worker, now, now + self.lease_ms(), max_jobs).await?,
+                true => {
+                    let team_cap = self.config().control.max_in_flight_per_team;
+                    queue::claim(
+                        self.pool(),
+                        worker,
+                        now,
+                        now + self.lease_ms(),
+                        max_jobs,
+                        team_cap,
+                    )
+                    .await?
+                }
                 false => Vec::new(),
             };
             if !claimed.is_empty() || Instant::now() >= deadline {
@@ -172,6 +185,31 @@ impl AppState {
         Ok(HeartbeatOutcome {
             lease_expires_at_ms: until,
         })
+    }
+
+    /// Give back a lease unfinished (a draining worker): the job is queued again at once without
+    /// using an attempt, and long-polling leases wake up to take it. `false` when the caller no
+    /// longer holds that lease (nothing changes).
+    pub(crate) async fn release(
+        &self,
+        _: WorkerCred,
+        worker_id: &str,
+        job_id: i64,
+        attempt: u32,
+        reason: &str,
+    ) -> Result<bool, ServiceError> {
+        let worker = validate_worker_id(worker_id)?;
+        let reason = match reason.trim() {
+            "" => "released by the worker".to_string(),
+            r => format!("released: {}", clip(r, MAX_REASON_CHARS)),
+        };
+        let released =
+            queue::release(self.pool(), job_id, i64::from(attempt), worker, &reason, now_ms()).await?;
+        if released {
+            self.after_queue_write(false);
+        }
+        tracing::info!(job = job_id, attempt, worker, released, %reason, "lease released");
+        Ok(released)
     }
 
     /// Record one episode's result (idempotent on `(run, episode)`).

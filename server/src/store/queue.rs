@@ -1,8 +1,9 @@
 //! The job queue's SQL: claim, heartbeat, result recording, reaping.
 //!
 //! Policy: a claim is one `UPDATE … RETURNING` statement, so two workers (or two server tasks)
-//! can never lease the same job, and the policy's max concurrency is part of that statement: a
-//! run never has more leased jobs than it announced. A lease is identified by
+//! can never lease the same job, and the policy's max concurrency, the per-team cap and the
+//! fair order across teams and runs are part of that statement: a run never has more leased jobs
+//! than it announced, and a team's backlog cannot starve another team's run. A lease is identified by
 //! `(job id, attempt, owner)`; anything quoting an older attempt is stale. Functions taking a
 //! `SqliteConnection` run inside the caller's transaction (report and reap must record the
 //! result, move the job and finish the run atomically).
@@ -26,39 +27,84 @@ pub(crate) struct Claimed {
     pub lease_expires_at: i64,
 }
 
-/// Lease up to `limit` queued jobs to `owner` until `until`, oldest first, never taking a run
-/// past its `max_concurrency` (0 = unlimited) counting the leases it already has.
+/// Lease up to `limit` queued jobs to `owner` until `until`, sharing capacity fairly: never
+/// taking a run past its `max_concurrency` (0 = unlimited) nor a team past `team_cap` jobs in
+/// flight (0 = unlimited), counting the leases they already have, and among the jobs that fit
+/// preferring the team with the fewest jobs in flight, then the run with the fewest, then the
+/// oldest job. Each job is ranked as if the ones before it were already leased (its team's and
+/// its run's load once taken), so a claim of several jobs deals them out round-robin, and a new
+/// run's first job goes ahead of a busy team's backlog whatever its size.
 pub(crate) async fn claim(
     pool: &SqlitePool,
     owner: &str,
     now: i64,
     until: i64,
     limit: u32,
+    team_cap: u32,
 ) -> sqlx::Result<Vec<Claimed>> {
     let mut jobs: Vec<Claimed> = sqlx::query_as(
         "WITH busy AS (
             SELECT run_id, COUNT(*) AS n FROM jobs WHERE state = 'leased' GROUP BY run_id
-         ), candidates AS (
-            SELECT j.id, r.max_concurrency AS cap, COALESCE(b.n, 0) AS busy,
+         ), team_busy AS (
+            SELECT s.team_id, SUM(b.n) AS n FROM busy b
+            JOIN scoring_runs r ON r.id = b.run_id JOIN submissions s ON s.id = r.submission_id
+            GROUP BY s.team_id
+         ), per_run AS (
+            SELECT j.id, s.team_id, r.max_concurrency AS cap, COALESCE(b.n, 0) AS busy,
                    ROW_NUMBER() OVER (PARTITION BY j.run_id ORDER BY j.id) AS rn
             FROM jobs j JOIN scoring_runs r ON r.id = j.run_id
+            JOIN submissions s ON s.id = r.submission_id
             LEFT JOIN busy b ON b.run_id = j.run_id
             WHERE j.state = 'queued'
+         ), per_team AS (
+            SELECT p.id, p.busy + p.rn AS run_load, COALESCE(t.n, 0) AS team_busy,
+                   ROW_NUMBER() OVER (PARTITION BY p.team_id ORDER BY p.busy + p.rn, p.id) AS tn
+            FROM per_run p LEFT JOIN team_busy t ON t.team_id = p.team_id
+            WHERE p.cap = 0 OR p.rn + p.busy <= p.cap
          )
          UPDATE jobs SET state = 'leased', lease_owner = ?1, lease_expires_at = ?2,
                          attempt = attempt + 1, updated_at = ?3
-         WHERE id IN (SELECT id FROM candidates WHERE cap = 0 OR rn + busy <= cap ORDER BY id LIMIT ?4)
+         WHERE id IN (SELECT id FROM per_team WHERE ?5 = 0 OR team_busy + tn <= ?5
+                      ORDER BY team_busy + tn, run_load, id LIMIT ?4)
          RETURNING id, attempt, run_id, episode_key, spec, lease_expires_at",
     )
     .bind(owner)
     .bind(until)
     .bind(now)
     .bind(i64::from(limit))
+    .bind(i64::from(team_cap))
     .fetch_all(pool)
     .await?;
     // RETURNING order is unspecified; hand jobs out oldest first.
     jobs.sort_by_key(|j| j.id);
     Ok(jobs)
+}
+
+/// Give back a lease still held by `(job, attempt, owner)`: the job is queued again at once and
+/// the lease is not counted as an attempt (`max_attempts` grows by one, so `attempt` still
+/// names each lease uniquely and a report from the released lease stays recognisable). `false`
+/// when that lease is not held (nothing changes).
+pub(crate) async fn release(
+    pool: &SqlitePool,
+    job: i64,
+    attempt: i64,
+    owner: &str,
+    error: &str,
+    now: i64,
+) -> sqlx::Result<bool> {
+    let done = sqlx::query(
+        "UPDATE jobs SET state = 'queued', lease_owner = NULL, lease_expires_at = NULL,
+                         max_attempts = max_attempts + 1, last_error = ?1, updated_at = ?2
+         WHERE id = ?3 AND attempt = ?4 AND lease_owner = ?5 AND state = 'leased'",
+    )
+    .bind(error)
+    .bind(now)
+    .bind(job)
+    .bind(attempt)
+    .bind(owner)
+    .execute(pool)
+    .await?;
+    Ok(done.rows_affected() == 1)
 }
 
 /// Whether any job waits in the queue (a read, cheaper than a claim that finds nothing).

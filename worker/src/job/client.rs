@@ -6,10 +6,14 @@
 //! Failure policy: the server being down or restarting is transient, so every call is retried
 //! with capped exponential backoff and the worker never exits for it; only a refused worker
 //! token stops the loop (retrying cannot fix it). Results are idempotent server-side, so a report
-//! whose answer was lost is simply sent again. On shutdown a running episode is stopped at its
-//! next control step and reported as a platform error (the server requeues it at once without
-//! charging the participant); if even that report cannot get through, the lease expires and the
-//! server's reaper requeues the job.
+//! whose answer was lost is simply sent again.
+//!
+//! Draining: on shutdown the slots stop leasing at once, running episodes go on (heartbeated) for
+//! up to `drain_grace_s` and are reported as usual when they finish in time; an episode still
+//! running then is stopped at its next control step and *released* (`Release`): the server queues
+//! it again at once, for another worker, without using an attempt, and nothing of it is recorded.
+//! Only when the release cannot get through either does the lease expire and the server's reaper
+//! requeue the job.
 
 use std::future::Future;
 use std::sync::Arc;
@@ -31,6 +35,9 @@ use super::{JobContext, WorkerConfig, WorkerError};
 
 /// How long a shutting-down worker keeps trying to hand in its last result.
 const SHUTDOWN_GRACE: Duration = Duration::from_secs(5);
+/// How long a draining slot waits for the answer of a Lease call in flight (jobs the server
+/// claimed for it are released, not left to expire).
+const LEASE_SETTLE: Duration = Duration::from_secs(1);
 /// Longest pause between retries of a failed call.
 const MAX_BACKOFF: Duration = Duration::from_secs(30);
 
@@ -60,7 +67,7 @@ impl std::fmt::Debug for Worker {
         f.debug_struct("Worker")
             .field("id", &self.id)
             .field("server", &self.cfg.server)
-            .field("slots", &self.cfg.slots)
+            .field("slots", &self.cfg.slot_count())
             .finish_non_exhaustive()
     }
 }
@@ -119,15 +126,19 @@ impl Worker {
         let (stop_tx, stop_rx) = watch::channel(false);
         let shared = Arc::new(self);
         let mut slots = JoinSet::new();
-        for n in 0..shared.cfg.slots {
+        let slots_n = shared.cfg.slot_count();
+        for n in 0..slots_n {
             let (w, stop) = (shared.clone(), stop_rx.clone());
             slots.spawn(async move { w.slot(n, stop).await }.instrument(info_span!("slot", n)));
         }
-        info!(worker = %shared.id, slots = shared.cfg.slots, server = %shared.cfg.server, "worker running");
+        info!(worker = %shared.id, slots = slots_n, server = %shared.cfg.server, "worker running");
         tokio::pin!(shutdown);
         let mut result = Ok(());
         tokio::select! {
-            () = &mut shutdown => info!("shutting down"),
+            () = &mut shutdown => info!(
+                grace_s = shared.cfg.drain_grace_s,
+                "draining: no more leases; running episodes get the grace period, then are released"
+            ),
             Some(r) = slots.join_next() => {
                 result = r.unwrap_or_else(|e| Err(WorkerError::Config(format!("a slot panicked: {e}"))));
             }
@@ -158,9 +169,20 @@ impl Worker {
             req.set_timeout(wait + Duration::from_secs(10));
             let asked = Instant::now();
             let mut client = self.client.clone();
+            let call = client.lease(req);
+            tokio::pin!(call);
             let answer = tokio::select! {
-                r = client.lease(req) => r,
-                _ = stop.changed() => return Ok(()),
+                r = &mut call => r,
+                _ = stop.changed() => {
+                    // The server may have claimed jobs for this call already: give its answer a
+                    // moment, so they are released rather than left leased until they expire.
+                    if let Ok(Ok(r)) = tokio::time::timeout(LEASE_SETTLE, call).await {
+                        for job in r.into_inner().jobs {
+                            self.release(&job, "worker draining: leased as it stopped").await;
+                        }
+                    }
+                    return Ok(());
+                }
             };
             match answer {
                 Ok(r) => {
@@ -171,7 +193,12 @@ impl Worker {
                         pause(Duration::from_millis(500), &mut stop).await;
                     }
                     for job in jobs {
-                        self.job(job, &mut stop).await;
+                        if *stop.borrow() {
+                            // Draining: a job not started yet goes back at once.
+                            self.release(&job, "worker draining: not started").await;
+                        } else {
+                            self.job(job, &mut stop).await;
+                        }
                     }
                 }
                 Err(s) if matches!(s.code(), Code::Unauthenticated | Code::PermissionDenied) => {
@@ -193,7 +220,8 @@ impl Worker {
         }
     }
 
-    /// Run one job with heartbeats, then report it.
+    /// Run one job with heartbeats, then report it; when the worker drains and the grace period
+    /// ends first, stop it and release it instead.
     async fn job(&self, job: pb::Job, stop: &mut watch::Receiver<bool>) {
         let span = info_span!(
             "job",
@@ -208,26 +236,36 @@ impl Worker {
             let control = JobControl::default();
             let mut done = spawn_episode(job.clone(), self.ctx.clone(), control.clone());
             let mut next = heartbeat_in(job.lease_expires_at_ms);
-            let (mut stopping, mut dropped) = (*stop.borrow(), false);
-            if stopping {
-                control.cancel("worker shutting down");
-            }
+            let grace = self.cfg.drain_grace();
+            // When draining began: the episode may run until `drain + grace`.
+            let mut drain = (*stop.borrow()).then(Instant::now);
+            let (mut released, mut dropped) = (false, false);
             let result = loop {
+                let cut = drain.map(|t| tokio::time::Instant::from_std(t + grace));
                 tokio::select! {
                     r = &mut done => break r.unwrap_or_else(|_| platform("the episode thread panicked")),
                     () = tokio::time::sleep(next) => {
                         next = self.heartbeat(&job, &control, &mut dropped).await;
                     }
-                    _ = stop.changed(), if !stopping => {
-                        stopping = true;
-                        control.cancel("worker shutting down");
-                        info!("stopping the episode: worker shutting down");
+                    _ = stop.changed(), if drain.is_none() => {
+                        drain = Some(Instant::now());
+                        info!(grace_s = grace.as_secs(), "draining: the episode may finish within the grace period");
+                    }
+                    () = sleep_until_opt(cut), if !released => {
+                        released = true;
+                        control.cancel("worker draining: grace period over");
+                        info!("grace period over: stopping the episode to release it");
                     }
                 }
             };
-            crate::metrics::episode_ran(&result, dropped, false);
+            crate::metrics::episode_ran(&result, dropped, released && control.is_cancelled());
             if dropped {
                 info!("result dropped: the server cancelled the lease");
+                return;
+            }
+            if released && control.is_cancelled() {
+                self.release(&job, "worker draining: the grace period ended before the episode")
+                    .await;
                 return;
             }
             info!(
@@ -236,10 +274,50 @@ impl Worker {
                 platform_error = %result.platform_error,
                 "episode finished"
             );
-            self.report(&job, result, stopping, stop).await;
+            self.report(&job, result, drain.is_some(), stop).await;
         }
         .instrument(span)
         .await;
+    }
+
+    /// Give an unfinished job back (draining). Retried briefly; if the server cannot be reached,
+    /// the lease expires and its reaper requeues the job.
+    async fn release(&self, job: &pb::Job, reason: &str) {
+        let req = pb::ReleaseRequest {
+            worker_id: self.id.clone(),
+            job_id: job.job_id,
+            attempt: job.attempt,
+            reason: reason.to_string(),
+        };
+        let give_up_at = Instant::now() + SHUTDOWN_GRACE;
+        let mut backoff = Backoff::default();
+        loop {
+            let mut r = Request::new(req.clone());
+            r.set_timeout(Duration::from_secs(5));
+            match self.client.clone().release(r).await {
+                Ok(a) => {
+                    info!(released = a.into_inner().released, "episode released");
+                    return;
+                }
+                Err(s) if !retryable(&s) || Instant::now() >= give_up_at => {
+                    warn!(
+                        "releasing the job failed ({:?}: {}); the server will requeue it when its lease expires",
+                        s.code(),
+                        s.message()
+                    );
+                    return;
+                }
+                Err(s) => {
+                    let d = backoff.next().min(Duration::from_secs(1));
+                    warn!(
+                        "releasing the job failed ({:?}: {}); retrying",
+                        s.code(),
+                        s.message()
+                    );
+                    tokio::time::sleep(d).await;
+                }
+            }
+        }
     }
 
     /// One heartbeat; returns when the next is due. A cancelled lease stops the episode.
@@ -379,6 +457,14 @@ fn retryable(s: &Status) -> bool {
             | Code::Aborted
             | Code::Internal
     )
+}
+
+/// Sleep until `t`, or forever when there is none.
+async fn sleep_until_opt(t: Option<tokio::time::Instant>) {
+    match t {
+        Some(t) => tokio::time::sleep_until(t).await,
+        None => std::future::pending().await,
+    }
 }
 
 /// Sleep for `d` unless asked to stop.

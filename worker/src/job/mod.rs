@@ -10,7 +10,7 @@ mod execute;
 pub mod local;
 pub mod spec;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use kitchen_r_sim::{Assets, EpisodeParams, SensorsConfig, SimConfig, SimError};
@@ -54,18 +54,26 @@ pub struct WorkerConfig {
     pub server: String,
     /// Worker token, sent as `authorization: Bearer <token>`.
     pub token: String,
-    /// Episodes run at once (each on its own thread with its own simulator).
+    /// Episodes run at once (each on its own thread with its own simulator); 0 = one per core.
     pub slots: usize,
     /// Lease owner name; empty = `hostname-pid`.
     pub worker_id: String,
     /// Address classes a policy endpoint may resolve to besides public ones, as CIDR ranges
     /// (see `kitchen_r_contract::endpoint::CLASS_RANGES`); the default allows loopback only.
+    /// The one key for it: `policy.allowed_networks` is refused in a file and ignored in code.
     pub allow_networks: Vec<String>,
     /// Longest long-poll of one Lease call, milliseconds (the server caps it at 30000).
     pub lease_wait_ms: u32,
     /// Offline mode: query the policy at every N-th decision point.
     pub sample_every: usize,
-    /// Transport limits towards policies; the job's deadlines override the deadlines here.
+    /// On shutdown: stop leasing, let running episodes finish for up to this many seconds, then
+    /// release what is left (the server queues it again at once without using an attempt).
+    pub drain_grace_s: u64,
+    /// Benchmark content (objects.toml, scenes/, robot.toml) the simulators load; empty = the
+    /// default lookup (`$KITCHEN_R_ASSETS`, `./assets`, the checkout's).
+    pub assets: PathBuf,
+    /// Transport limits towards policies; the job's deadlines override the deadlines here. Its
+    /// `allowed_networks` is not read: `allow_networks` is the one key for that.
     pub policy: RemoteConfig,
 }
 
@@ -74,11 +82,13 @@ impl Default for WorkerConfig {
         WorkerConfig {
             server: "http://127.0.0.1:50051".into(),
             token: String::new(),
-            slots: 1,
+            slots: 0,
             worker_id: String::new(),
             allow_networks: vec!["127.0.0.0/8".into(), "::1/128".into()],
             lease_wait_ms: 20_000,
             sample_every: 1,
+            drain_grace_s: 30,
+            assets: PathBuf::new(),
             policy: RemoteConfig::default(),
         }
     }
@@ -88,7 +98,24 @@ impl WorkerConfig {
     pub fn load(path: &Path) -> Result<WorkerConfig, WorkerError> {
         let text = std::fs::read_to_string(path)
             .map_err(|e| WorkerError::Config(format!("{}: {e}", path.display())))?;
-        toml::from_str(&text).map_err(|e| WorkerError::Config(format!("{}: {e}", path.display())))
+        WorkerConfig::parse(&text).map_err(|e| WorkerError::Config(format!("{}: {e}", path.display())))
+    }
+
+    /// A worker.toml's text. `[policy.allowed_networks]` (the transport's own switch) is refused
+    /// with a pointer to `allow_networks`: two keys for one setting let one silently replace the
+    /// other.
+    pub fn parse(text: &str) -> Result<WorkerConfig, String> {
+        let table: toml::Table = toml::from_str(text).map_err(|e| e.to_string())?;
+        let legacy = (table.get("policy").and_then(|p| p.get("allowed_networks"))).is_some();
+        if legacy {
+            return Err(
+                "`policy.allowed_networks` is not a worker setting: list the networks a policy \
+                 endpoint may resolve to in the top-level `allow_networks` (CIDR ranges, e.g. \
+                 allow_networks = [\"127.0.0.0/8\", \"10.0.0.0/8\"])"
+                    .into(),
+            );
+        }
+        toml::from_str(text).map_err(|e| e.to_string())
     }
 
     /// `configs/worker.toml` when present, else the defaults.
@@ -113,8 +140,11 @@ impl WorkerConfig {
                 "a worker token is required (--token or KITCHEN_R_WORKER_TOKEN)",
             );
         }
-        if !(1..=64).contains(&self.slots) {
-            return bad("slots", "must be in 1..=64");
+        if self.slots > 64 {
+            return bad("slots", "must be in 0..=64 (0 = one per core)");
+        }
+        if self.drain_grace_s > 3600 {
+            return bad("drain_grace_s", "must be at most 3600 seconds");
         }
         if !(1..=30_000).contains(&self.lease_wait_ms) {
             return bad("lease_wait_ms", "must be in 1..=30000");
@@ -126,7 +156,37 @@ impl WorkerConfig {
     }
 
     pub(crate) fn allowed(&self) -> Result<AllowedNetworks, WorkerError> {
-        AllowedNetworks::from_cidrs(&self.allow_networks).map_err(WorkerError::Config)
+        AllowedNetworks::from_cidrs(&self.allow_networks)
+            .map_err(|e| WorkerError::Config(format!("`allow_networks`: {e}")))
+    }
+
+    /// The transport settings towards policies: `policy` with `allow_networks` as allow-list.
+    pub fn remote(&self) -> Result<RemoteConfig, WorkerError> {
+        Ok(RemoteConfig {
+            allowed_networks: self.allowed()?,
+            ..self.policy.clone()
+        })
+    }
+
+    /// Slots to run: `slots`, or one per core when 0.
+    pub fn slot_count(&self) -> usize {
+        match self.slots {
+            0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
+            n => n,
+        }
+    }
+
+    /// The assets directory the simulators load.
+    pub fn assets_dir(&self) -> PathBuf {
+        if self.assets.as_os_str().is_empty() {
+            kitchen_r_core::assets::assets_dir()
+        } else {
+            self.assets.clone()
+        }
+    }
+
+    pub(crate) fn drain_grace(&self) -> Duration {
+        Duration::from_secs(self.drain_grace_s)
     }
 
     /// The configured id, or `hostname-pid`.
@@ -182,12 +242,92 @@ impl JobContext {
         })
     }
 
-    /// The context a [`WorkerConfig`] describes.
-    pub(crate) fn from_worker_config(cfg: &WorkerConfig) -> Result<JobContext, WorkerError> {
-        Ok(JobContext::load(
-            cfg.policy.clone(),
-            cfg.allowed()?,
-            cfg.sample_every,
-        )?)
+    /// The context a [`WorkerConfig`] describes: its assets directory, its transport settings
+    /// with its allow-list.
+    pub fn from_worker_config(cfg: &WorkerConfig) -> Result<JobContext, WorkerError> {
+        let dir = cfg.assets_dir();
+        let assets = Assets::load(&dir)
+            .map_err(|e| WorkerError::Config(format!("`assets` {}: {e}", dir.display())))?;
+        Ok(JobContext {
+            assets,
+            sim: SimConfig::load_default().map_err(JobError::from)?,
+            sensors: SensorsConfig::load_default().map_err(JobError::from)?,
+            params: EpisodeParams::load_default().map_err(JobError::from)?,
+            remote: cfg.remote()?,
+            sample_every: cfg.sample_every.max(1),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_shipped_worker_config_documents_exactly_the_defaults() {
+        let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/worker.toml");
+        assert_eq!(WorkerConfig::load(&file).unwrap(), WorkerConfig::default());
+    }
+
+    #[test]
+    fn allow_networks_is_the_one_key_for_the_allowed_networks() {
+        let cfg = WorkerConfig::parse("allow_networks = [\"127.0.0.0/8\", \"10.0.0.0/8\"]\n").unwrap();
+        let remote = cfg.remote().unwrap();
+        assert!(remote.allowed_networks.private && remote.allowed_networks.loopback);
+        assert!(!remote.allowed_networks.link_local);
+        // The transport's own switch used to be silently replaced: it is refused, saying which
+        // key to use instead, alone or beside `allow_networks`.
+        for text in [
+            "[policy.allowed_networks]\nprivate = true\n",
+            "allow_networks = [\"10.0.0.0/8\"]\n[policy]\nallowed_networks = { private = true }\n",
+        ] {
+            let err = WorkerConfig::parse(text).unwrap_err();
+            assert!(
+                err.contains("policy.allowed_networks") && err.contains("`allow_networks`"),
+                "{err}"
+            );
+        }
+        // In code too, the allow-list comes from `allow_networks` only.
+        let cfg = WorkerConfig {
+            allow_networks: vec!["127.0.0.0/8".into()],
+            policy: RemoteConfig {
+                allowed_networks: AllowedNetworks::ALL,
+                ..RemoteConfig::default()
+            },
+            ..WorkerConfig::default()
+        };
+        assert!(!cfg.remote().unwrap().allowed_networks.private);
+    }
+
+    #[test]
+    fn slots_come_from_the_config_and_zero_means_one_per_core() {
+        let cfg = WorkerConfig::parse("slots = 3\n").unwrap();
+        assert_eq!(cfg.slot_count(), 3);
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        assert_eq!(WorkerConfig::default().slot_count(), cores);
+        let too_many = WorkerConfig {
+            token: "t".into(),
+            slots: 65,
+            ..WorkerConfig::default()
+        };
+        assert!(too_many.validate().is_err());
+    }
+
+    #[test]
+    fn the_assets_setting_reaches_the_simulators() {
+        let dir = tempfile::tempdir().unwrap();
+        let cfg = WorkerConfig {
+            assets: dir.path().to_path_buf(),
+            ..WorkerConfig::default()
+        };
+        let err = JobContext::from_worker_config(&cfg).unwrap_err().to_string();
+        assert!(err.contains(&dir.path().display().to_string()), "{err}");
+        let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets");
+        let cfg = WorkerConfig {
+            assets: repo,
+            ..WorkerConfig::default()
+        };
+        let ctx = JobContext::from_worker_config(&cfg).unwrap();
+        assert!(ctx.assets.scene("kitchen_a").is_ok());
     }
 }

@@ -21,6 +21,7 @@ struct State {
     report_calls: u32,
     reports: Vec<pb::ReportResultRequest>,
     lease_workers: Vec<String>,
+    releases: Vec<pb::ReleaseRequest>,
 }
 
 #[derive(Clone)]
@@ -71,6 +72,15 @@ impl Worker for TestWorkerServer {
             lease_expires_at_ms: now_ms() + 1_500,
             cancelled: false,
         }))
+    }
+
+    async fn release(
+        &self,
+        req: Request<pb::ReleaseRequest>,
+    ) -> Result<Response<pb::ReleaseResponse>, Status> {
+        authed(&req)?;
+        self.0.lock().unwrap().releases.push(req.into_inner());
+        Ok(Response::new(pb::ReleaseResponse { released: true }))
     }
 
     async fn report_result(
@@ -242,4 +252,73 @@ fn a_server_that_is_down_is_retried_until_shutdown() {
     ));
     assert!(r.is_ok(), "{r:?}");
     assert!(t.elapsed() >= Duration::from_secs(2), "the worker gave up early");
+}
+
+/// Start a worker on two jobs of the slow policy with `grace` seconds to drain, stop it once
+/// both are running, and return the server's state after it exited and how long it took.
+fn drain(grace: u64) -> (Arc<Mutex<State>>, Duration) {
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let policy = slow_still();
+    let state = Arc::new(Mutex::new(State {
+        queue: vec![job(1, &policy.url()), job(2, &policy.url())],
+        // The first report fails once (see `report_result`): count it as done already.
+        report_calls: 1,
+        ..State::default()
+    }));
+    let url = start(state.clone(), &rt);
+    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+    let cfg = WorkerConfig {
+        drain_grace_s: grace,
+        ..config(&url, "worker-secret")
+    };
+    let worker = rt.spawn(run_worker(cfg, async {
+        let _ = stop_rx.await;
+    }));
+    // Both episodes are running once both have heartbeated.
+    let t = Instant::now();
+    while !{
+        let s = state.lock().unwrap();
+        s.heartbeats.iter().any(|h| h.0 == 1) && s.heartbeats.iter().any(|h| h.0 == 2)
+    } {
+        assert!(t.elapsed() < Duration::from_secs(60), "jobs never started");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let stopped = Instant::now();
+    stop_tx.send(()).unwrap();
+    rt.block_on(worker).unwrap().unwrap();
+    (state, stopped.elapsed())
+}
+
+#[test]
+fn a_draining_worker_with_no_grace_releases_its_running_episodes_at_once() {
+    let (state, took) = drain(0);
+    let s = state.lock().unwrap();
+    assert!(s.reports.is_empty(), "nothing reported: {:?}", s.reports);
+    let mut ids: Vec<(i64, u32)> = s.releases.iter().map(|r| (r.job_id, r.attempt)).collect();
+    ids.sort_unstable();
+    assert_eq!(ids, [(1, 1), (2, 1)]);
+    assert!(
+        s.releases
+            .iter()
+            .all(|r| r.worker_id == "test-worker" && r.reason.contains("draining"))
+    );
+    assert!(took < Duration::from_secs(10), "{took:?}");
+    // No lease after the stop: only the two that were running were ever leased (plus polls
+    // before the stop, which found the queue empty and are at most a few).
+    assert!(s.lease_workers.len() <= 4, "{:?}", s.lease_workers);
+}
+
+#[test]
+fn a_draining_worker_finishes_its_running_episodes_within_the_grace_period() {
+    let (state, _) = drain(120);
+    let s = state.lock().unwrap();
+    assert!(s.releases.is_empty(), "nothing released: {:?}", s.releases);
+    let mut ids: Vec<i64> = s.reports.iter().map(|r| r.job_id).collect();
+    ids.sort_unstable();
+    assert_eq!(ids, [1, 2], "both episodes ran to the end and were reported");
+    for r in &s.reports {
+        let res = r.result.as_ref().unwrap();
+        assert_eq!(res.platform_error, "", "{}", res.log_tail);
+        assert_eq!(res.tasks.len(), 1);
+    }
 }

@@ -434,3 +434,118 @@ async fn a_restarted_server_resumes_the_run_from_sqlite() {
         ("finished", Some(1.0))
     );
 }
+
+/// Team `name` registers a dev run of its first `episodes` instructions (an online and an
+/// offline job each); returns the run's job count.
+async fn register_team(f: &Fixture, name: &str, episodes: u32) {
+    let token = f.team(name).await;
+    let mut req = f.request(Split::Dev);
+    req.episodes = Some(episodes);
+    f.state
+        .register_policy(&f.caller(&token).await, req)
+        .await
+        .unwrap();
+}
+
+#[tokio::test]
+async fn a_later_small_run_is_not_starved_by_a_big_one() {
+    // Issue #13 item 10: team A queues 40 episodes (max_concurrency 64), team B then 2; two
+    // slots. Before, B waited for all of A's backlog.
+    let f = fixture(FakeProbe::ok(64), |c| c.control.dev_episodes = 20).await;
+    register_team(&f, "alpha", 20).await;
+    let a1 = f.lease("slot-1", 1).await.remove(0);
+    let a2 = f.lease("slot-2", 1).await.remove(0);
+    assert_eq!(a1.run_id, a2.run_id);
+    register_team(&f, "bravo", 1).await;
+    // A's first episode ends: the next lease call takes B's first, not A's third.
+    let r = f.report("slot-1", &a1, |_| true, 0.0);
+    assert!(f.state.report_result(f.worker().await, r).await.unwrap().accepted);
+    let b1 = f.lease("slot-1", 1).await.remove(0);
+    assert_ne!(b1.run_id, a1.run_id, "team B's first episode goes next");
+    // Each team has one in flight now: A's second slot goes back to A (fewest in flight, then
+    // the oldest job), so both runs progress.
+    let r = f.report("slot-2", &a2, |_| true, 0.0);
+    assert!(f.state.report_result(f.worker().await, r).await.unwrap().accepted);
+    let next = f.lease("slot-2", 1).await.remove(0);
+    assert_eq!(next.run_id, a1.run_id);
+    // One claim of several jobs deals them out round-robin: B's last job is in it.
+    let many = f.lease("big", 4).await;
+    assert_eq!(many.len(), 4);
+    assert_eq!(
+        many.iter().filter(|j| j.run_id == b1.run_id).count(),
+        1,
+        "B has one job left and gets it in the first claim"
+    );
+}
+
+#[tokio::test]
+async fn a_team_never_has_more_than_its_cap_in_flight() {
+    let f = fixture(FakeProbe::ok(64), |c| {
+        c.control.dev_episodes = 4;
+        c.control.max_in_flight_per_team = 2;
+    })
+    .await;
+    register_team(&f, "alpha", 4).await;
+    register_team(&f, "bravo", 4).await;
+    let jobs = f.lease("w", 64).await;
+    assert_eq!(jobs.len(), 4, "two per team");
+    let runs: BTreeSet<i64> = jobs.iter().map(|j| j.run_id).collect();
+    assert_eq!(runs.len(), 2);
+    for run in runs {
+        assert_eq!(jobs.iter().filter(|j| j.run_id == run).count(), 2);
+    }
+    assert!(f.lease("w", 64).await.is_empty(), "both teams are at their cap");
+    let r = f.report("w", &jobs[0], |_| true, 0.0);
+    assert!(f.state.report_result(f.worker().await, r).await.unwrap().accepted);
+    let more = f.lease("w", 64).await;
+    assert_eq!(more.len(), 1);
+    assert_eq!(more[0].run_id, jobs[0].run_id, "the freed place is that team's");
+}
+
+#[tokio::test]
+async fn a_released_job_is_queued_at_once_without_using_an_attempt() {
+    let f = fixture(FakeProbe::ok(8), |c| {
+        c.control.max_attempts = 1;
+        c.control.dev_episodes = 1;
+        c.control.offline_mse = false;
+    })
+    .await;
+    let (token, id) = registered(&f).await;
+    let first = f.lease("w1", 1).await.remove(0);
+    let release = async |worker: &str, attempt: u32| {
+        (f.state)
+            .release(f.worker().await, worker, first.id, attempt, "worker draining")
+            .await
+            .unwrap()
+    };
+    assert!(!release("w2", first.attempt).await, "only the holder may release");
+    assert!(!release("w1", first.attempt + 1).await, "nor a stale attempt");
+    // A long poll waiting for work wakes up when the job comes back.
+    let (state, cred) = (f.state.clone(), f.worker().await);
+    let waiter = tokio::spawn(async move { state.lease(cred, "w2", 1, 10_000).await.unwrap() });
+    tokio::time::sleep(Duration::from_millis(50)).await;
+    let t = std::time::Instant::now();
+    assert!(release("w1", first.attempt).await);
+    assert!(!release("w1", first.attempt).await, "released once");
+    let again = waiter.await.unwrap().remove(0);
+    assert!(t.elapsed() < Duration::from_secs(2), "{:?}", t.elapsed());
+    assert_eq!((again.id, again.attempt), (first.id, 2));
+    // The releasing worker's lease is gone: heartbeat cancelled, a late report refused.
+    let hb = (f.state.heartbeat(f.worker().await, "w1", first.id, first.attempt))
+        .await
+        .unwrap();
+    assert_eq!(hb.lease_expires_at_ms, None);
+    let late = (f.state)
+        .report_result(f.worker().await, f.report("w1", &first, |_| true, 0.0))
+        .await
+        .unwrap();
+    assert!(!late.accepted);
+    // max_attempts = 1 and the release used none: a platform error now is the one attempt.
+    let mut r = f.report("w2", &again, |_| true, 0.0);
+    r.platform_error = "simulator crashed".into();
+    assert!(f.state.report_result(f.worker().await, r).await.unwrap().accepted);
+    let eval = run_state(&f, &token, id).await;
+    assert_eq!(eval.state, "platform_failed");
+    let failure = eval.episodes[0].failure.clone().unwrap();
+    assert!(failure.contains("gave up after 2 attempts"), "{failure}");
+}
