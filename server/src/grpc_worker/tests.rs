@@ -44,6 +44,8 @@ async fn unauthenticated_workers_are_refused() {
         .await
         .unwrap_err();
     assert_eq!(e.code(), Code::Unauthenticated);
+    let e = client.release(pb::ReleaseRequest::default()).await.unwrap_err();
+    assert_eq!(e.code(), Code::Unauthenticated);
 }
 
 #[tokio::test]

@@ -22,6 +22,8 @@ struct State {
     reports: Vec<pb::ReportResultRequest>,
     lease_workers: Vec<String>,
     releases: Vec<pb::ReleaseRequest>,
+    /// Hold a Lease answer this long after taking its job off the queue.
+    lease_delay: Duration,
 }
 
 #[derive(Clone)]
@@ -44,11 +46,14 @@ impl Worker for TestWorkerServer {
         authed(&req)?;
         let r = req.into_inner();
         assert_eq!(r.max_jobs, 1);
-        let job = {
+        let (job, delay) = {
             let mut s = self.0.lock().unwrap();
             s.lease_workers.push(r.worker_id);
-            s.queue.pop()
+            (s.queue.pop(), s.lease_delay)
         };
+        if job.is_some() {
+            tokio::time::sleep(delay).await;
+        }
         match job {
             Some(mut j) => {
                 j.lease_expires_at_ms = now_ms() + 1_500;
@@ -321,4 +326,40 @@ fn a_draining_worker_finishes_its_running_episodes_within_the_grace_period() {
         assert_eq!(res.platform_error, "", "{}", res.log_tail);
         assert_eq!(res.tasks.len(), 1);
     }
+}
+
+#[test]
+fn a_job_leased_as_the_worker_stops_is_released_not_left_to_expire() {
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let policy = slow_still();
+    let state = Arc::new(Mutex::new(State {
+        queue: vec![job(1, &policy.url())],
+        lease_delay: Duration::from_millis(300),
+        ..State::default()
+    }));
+    let url = start(state.clone(), &rt);
+    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+    let cfg = WorkerConfig {
+        slots: 1,
+        ..config(&url, "worker-secret")
+    };
+    let worker = rt.spawn(run_worker(cfg, async {
+        let _ = stop_rx.await;
+    }));
+    // The server has taken the job for the worker's Lease and answers 300 ms later.
+    let t = Instant::now();
+    while !state.lock().unwrap().queue.is_empty() {
+        assert!(t.elapsed() < Duration::from_secs(60), "never leased");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    stop_tx.send(()).unwrap();
+    rt.block_on(worker).unwrap().unwrap();
+    let s = state.lock().unwrap();
+    assert!(
+        s.reports.is_empty() && s.heartbeats.is_empty(),
+        "the job was not run"
+    );
+    assert_eq!(s.releases.len(), 1, "{:?}", s.releases);
+    assert_eq!((s.releases[0].job_id, s.releases[0].attempt), (1, 1));
+    assert!(s.releases[0].reason.contains("stopped"), "{:?}", s.releases[0]);
 }
