@@ -38,6 +38,10 @@ pub(crate) struct OracleArgs {
     /// The PEM private key of --tls-cert.
     #[arg(long, value_name = "FILE", requires = "tls_cert")]
     pub tls_key: Option<std::path::PathBuf>,
+    /// Episodes the server may run against this endpoint at once (GetSpec's max_concurrency);
+    /// each episode gets its own oracle instance.
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    pub max_concurrency: u32,
 }
 
 pub(crate) fn policy(args: PolicyArgs) -> anyhow::Result<()> {
@@ -60,7 +64,10 @@ fn oracle(args: OracleArgs) -> anyhow::Result<()> {
         ..ServeOptions::default()
     };
     let assets = Arc::new(Assets::load_default().context("loading the benchmark assets")?);
-    let factory: PolicyFactory = Arc::new(move || Box::new(OraclePolicy::new(&assets)) as Box<dyn Policy>);
+    let concurrency = args.max_concurrency;
+    let factory: PolicyFactory = Arc::new(move || {
+        Box::new(OraclePolicy::new(&assets).with_max_concurrency(concurrency)) as Box<dyn Policy>
+    });
     let rt = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()

@@ -101,6 +101,13 @@ impl OraclePolicy {
         self
     }
 
+    /// Announce `n` episodes at once (at least 1). Served over gRPC, each episode gets its own
+    /// oracle instance, so a reference run can use several workers' slots.
+    pub fn with_max_concurrency(mut self, n: u32) -> OraclePolicy {
+        self.spec.max_concurrency = n.max(1);
+        self
+    }
+
     fn scene(&self, id: &str) -> Result<&Scene, PolicyError> {
         self.scenes
             .iter()
