@@ -91,6 +91,13 @@ impl From<RemoteError> for ProbeFailure {
     }
 }
 
+/// The cameras the simulator can render, which a policy's GetSpec may ask for.
+fn sim_cameras() -> Result<Vec<SimCamera>, ProbeFailure> {
+    SensorsConfig::load_default()
+        .map(|s| SimCamera::from_sensors(&s))
+        .map_err(|e| ProbeFailure::Internal(format!("simulator cameras: {e}")))
+}
+
 /// Probe `url` as a worker would call it: allow-list (`allow`), health SERVING within
 /// `cfg.startup_deadline_s`, GetSpec (protocol version, horizon 16, action dim 10, cameras the
 /// simulator has). `cfg.allowed_networks` is ignored in favour of `allow`.
@@ -100,10 +107,7 @@ pub async fn probe_endpoint(
     allow: &AllowedNetworks,
     cfg: &RemoteConfig,
 ) -> Result<ProbedSpec, ProbeFailure> {
-    let cameras = SensorsConfig::load_default()
-        .map(|s| SimCamera::from_sensors(&s))
-        .map_err(|e| ProbeFailure::Internal(format!("simulator cameras: {e}")))?;
-    probe_with_cameras(url, bearer, allow, cfg, &cameras, false).await
+    probe_with_cameras(url, bearer, allow, cfg, &sim_cameras()?, false).await
 }
 
 /// [`probe_endpoint`] as the server's registration runs it, where the caller is a participant
@@ -118,10 +122,7 @@ pub async fn probe_for_registration(
     allow: &AllowedNetworks,
     cfg: &RemoteConfig,
 ) -> Result<ProbedSpec, ProbeFailure> {
-    let cameras = SensorsConfig::load_default()
-        .map(|s| SimCamera::from_sensors(&s))
-        .map_err(|e| ProbeFailure::Internal(format!("simulator cameras: {e}")))?;
-    probe_with_cameras(url, bearer, allow, cfg, &cameras, true).await
+    probe_with_cameras(url, bearer, allow, cfg, &sim_cameras()?, true).await
 }
 
 /// [`probe_endpoint`] against an explicit camera set.
