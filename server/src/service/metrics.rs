@@ -43,12 +43,7 @@ impl AppState {
     pub(super) fn worker_seen(&self, worker: &str) {
         let now = Instant::now();
         let window = self.worker_window();
-        let mut seen = self
-            .inner
-            .telemetry
-            .workers
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner);
+        let mut seen = self.seen_workers();
         if let Some(t) = seen.get_mut(worker) {
             *t = now;
             return;
@@ -61,6 +56,11 @@ impl AppState {
         }
     }
 
+    /// The workers seen, by id (a panic elsewhere never poisons a count).
+    fn seen_workers(&self) -> std::sync::MutexGuard<'_, HashMap<String, Instant>> {
+        (self.inner.telemetry.workers.lock()).unwrap_or_else(PoisonError::into_inner)
+    }
+
     /// How recently a worker must have leased or heartbeat to count as connected: a lease
     /// period, and at least a long-polling Lease call's longest wait.
     fn worker_window(&self) -> Duration {
@@ -71,12 +71,7 @@ impl AppState {
     fn workers_connected(&self) -> usize {
         let now = Instant::now();
         let window = self.worker_window();
-        let mut seen = self
-            .inner
-            .telemetry
-            .workers
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner);
+        let mut seen = self.seen_workers();
         seen.retain(|_, t| now.duration_since(*t) < window);
         seen.len()
     }

@@ -32,11 +32,9 @@ fn spec() -> JobSpec {
     }
 }
 
-#[tokio::test]
-async fn json_columns_round_trip_as_typed_values_in_the_stored_text() {
-    let dir = tempfile::tempdir().unwrap();
-    let url = format!("sqlite://{}", dir.path().join("t.db").display());
-    let pool = super::connect(&url, super::PoolLimits::default())
+/// A fresh database at `url` (its write pool) with team "a" (token hash "hash"), its id and keys.
+async fn with_team(url: &str) -> (sqlx::SqlitePool, i64, super::NameKeys) {
+    let pool = super::connect(url, super::PoolLimits::default())
         .await
         .unwrap()
         .write;
@@ -48,6 +46,14 @@ async fn json_columns_round_trip_as_typed_values_in_the_stored_text() {
         .await
         .unwrap()
         .unwrap();
+    (pool, team, keys)
+}
+
+#[tokio::test]
+async fn json_columns_round_trip_as_typed_values_in_the_stored_text() {
+    let dir = tempfile::tempdir().unwrap();
+    let url = format!("sqlite://{}", dir.path().join("t.db").display());
+    let (pool, team, keys) = with_team(&url).await;
     assert_eq!(
         super::insert_team(&pool, "a", &keys, "other", 1).await.unwrap(),
         None
@@ -133,18 +139,7 @@ async fn json_columns_round_trip_as_typed_values_in_the_stored_text() {
 async fn rows_stored_before_compression_are_converted_at_start_and_read_the_same() {
     let dir = tempfile::tempdir().unwrap();
     let url = format!("sqlite://{}", dir.path().join("t.db").display());
-    let pool = super::connect(&url, super::PoolLimits::default())
-        .await
-        .unwrap()
-        .write;
-    let keys = super::NameKeys {
-        skeleton: "a".into(),
-        skeleton_folded: "a".into(),
-    };
-    let team = super::insert_team(&pool, "a", &keys, "hash", 1)
-        .await
-        .unwrap()
-        .unwrap();
+    let (pool, team, _) = with_team(&url).await;
     let body = "{\"id\": \"dev-0001\", \"plan\": [\"pick(cup)\"]}\n".repeat(20);
     // Written as the server did before 20261122250000: text body, one row per instruction.
     let sub: i64 = sqlx::query_scalar(

@@ -70,8 +70,8 @@ fn a_private_address_is_refused_naming_the_class_and_the_key() {
     assert!(err.to_string().contains("http://HOST:PORT"), "{err}");
 }
 
-#[test]
-fn an_endpoint_not_serving_is_refused_with_its_status() {
+/// A runtime serving only `grpc.health.v1`, answering NOT_SERVING, and its address.
+fn not_serving_health_server() -> (tokio::runtime::Runtime, std::net::SocketAddr) {
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(1)
         .enable_all()
@@ -87,6 +87,12 @@ fn an_endpoint_not_serving_is_refused_with_its_status() {
             .serve_with_incoming(tokio_stream::wrappers::TcpListenerStream::new(listener))
             .await
     });
+    (rt, addr)
+}
+
+#[test]
+fn an_endpoint_not_serving_is_refused_with_its_status() {
+    let (rt, addr) = not_serving_health_server();
     let err = rt
         .block_on(probe_endpoint(
             &format!("http://{addr}"),
@@ -138,21 +144,7 @@ fn a_bad_spec_is_refused_naming_the_field() {
 #[test]
 fn registration_says_only_unreachable_for_anything_near_the_evaluation_host() {
     use kitchen_r_contract::probe::probe_for_registration;
-    let rt = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(1)
-        .enable_all()
-        .build()
-        .unwrap();
-    let listener = rt.block_on(tokio::net::TcpListener::bind("127.0.0.1:0")).unwrap();
-    let grpc = listener.local_addr().unwrap();
-    rt.spawn(async move {
-        let (reporter, health) = tonic_health::server::health_reporter();
-        reporter.set_service_status("", ServingStatus::NotServing).await;
-        tonic::transport::Server::builder()
-            .add_service(health)
-            .serve_with_incoming(tokio_stream::wrappers::TcpListenerStream::new(listener))
-            .await
-    });
+    let (rt, grpc) = not_serving_health_server();
     let closed = std::net::TcpListener::bind("127.0.0.1:0")
         .unwrap()
         .local_addr()
