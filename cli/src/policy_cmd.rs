@@ -7,12 +7,13 @@
 
 use std::io::Write;
 use std::sync::Arc;
+use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use clap::{Args, Subcommand};
 use kitchen_r_contract::server::{PolicyFactory, ServeOptions, TlsIdentity, serve_policy};
 use kitchen_r_episode::oracle::OraclePolicy;
-use kitchen_r_episode::policy::Policy;
+use kitchen_r_episode::policy::{ACTION_DIM, Policy, PolicyError, PolicyInput, PolicySpec};
 use kitchen_r_sim::Assets;
 
 #[derive(Args, Debug)]
@@ -42,6 +43,36 @@ pub(crate) struct OracleArgs {
     /// each episode gets its own oracle instance.
     #[arg(long, value_name = "N", default_value_t = 1)]
     pub max_concurrency: u32,
+    /// Answer every Act only after this many milliseconds, like a learned policy's inference
+    /// (the oracle itself answers in microseconds); for measuring how workers cope with slow
+    /// policies (`scripts/bench-slow-policy.sh`). At most 60000.
+    #[arg(long, value_name = "MS", default_value_t = 0,
+          value_parser = clap::value_parser!(u64).range(0..=60_000))]
+    pub delay_ms: u64,
+}
+
+/// A policy that takes `delay` over every chunk, without using a core while it waits.
+struct Delayed {
+    inner: OraclePolicy,
+    delay: Duration,
+}
+
+impl Policy for Delayed {
+    fn spec(&self) -> &PolicySpec {
+        self.inner.spec()
+    }
+    fn reset(&mut self, episode_id: &str, task_index: usize, sub_task: &str) -> Result<(), PolicyError> {
+        self.inner.reset(episode_id, task_index, sub_task)
+    }
+    fn act(&mut self, input: &PolicyInput<'_>) -> Result<Vec<[f64; ACTION_DIM]>, PolicyError> {
+        let started = Instant::now();
+        let chunk = self.inner.act(input);
+        std::thread::sleep(self.delay.saturating_sub(started.elapsed()));
+        chunk
+    }
+    fn wants_images(&self) -> bool {
+        self.inner.wants_images()
+    }
 }
 
 pub(crate) fn policy(args: PolicyArgs) -> anyhow::Result<()> {
@@ -64,9 +95,14 @@ fn oracle(args: OracleArgs) -> anyhow::Result<()> {
         ..ServeOptions::default()
     };
     let assets = Arc::new(Assets::load_default().context("loading the benchmark assets")?);
-    let concurrency = args.max_concurrency;
+    let (concurrency, delay) = (args.max_concurrency, Duration::from_millis(args.delay_ms));
     let factory: PolicyFactory = Arc::new(move || {
-        Box::new(OraclePolicy::new(&assets).with_max_concurrency(concurrency)) as Box<dyn Policy>
+        let oracle = OraclePolicy::new(&assets).with_max_concurrency(concurrency);
+        if delay.is_zero() {
+            Box::new(oracle) as Box<dyn Policy>
+        } else {
+            Box::new(Delayed { inner: oracle, delay })
+        }
     });
     let rt = tokio::runtime::Builder::new_multi_thread()
         .enable_all()

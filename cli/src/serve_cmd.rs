@@ -83,6 +83,7 @@ pub(crate) fn serve(args: ServeArgs) -> anyhow::Result<()> {
     let slots = cfg.worker_slots();
     let allow_networks = cfg.policy.allow_networks.clone();
     let (assets, drain_grace_s) = (cfg.assets_dir(), cfg.control.drain_grace_s);
+    let max_episodes = cfg.control.max_episodes;
     let rt = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     rt.block_on(async move {
         let probe = Arc::new(WorkerProbe {
@@ -98,6 +99,7 @@ pub(crate) fn serve(args: ServeArgs) -> anyhow::Result<()> {
                 server: format!("http://{g}"),
                 token: server.worker_token().to_string(),
                 slots,
+                max_episodes,
                 worker_id: format!("serve-{}", std::process::id()),
                 allow_networks,
                 drain_grace_s,

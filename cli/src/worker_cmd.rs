@@ -20,10 +20,15 @@ pub(crate) struct WorkerArgs {
     /// else http://127.0.0.1:50051].
     #[arg(long, env = "KITCHEN_R_WORKER_SERVER", value_name = "URL")]
     server: Option<String>,
-    /// Episodes run at once, one thread and simulator each [default: `slots` in the config
-    /// file; 0 or unset = the number of cores].
+    /// Simulation cores: episodes stepping their simulators at once [default: `slots` in the
+    /// config file; 0 or unset = the number of cores].
     #[arg(long, value_name = "N")]
     slots: Option<usize>,
+    /// Episodes held at once, one thread and simulator each; an episode holds a slot only while
+    /// it simulates, so with slow policies more episodes than slots are in flight
+    /// [default: `max_episodes` in the config file; 0 or unset = 8 per slot].
+    #[arg(long, value_name = "N")]
+    max_episodes: Option<usize>,
     /// On SIGTERM/Ctrl-C, seconds running episodes may take to finish before they are released
     /// to the server [default: `drain_grace_s` in the config file, else 30].
     #[arg(long, value_name = "SECONDS")]
@@ -67,6 +72,9 @@ pub(crate) fn worker(args: WorkerArgs) -> anyhow::Result<()> {
     if let Some(n) = args.slots {
         cfg.slots = n;
     }
+    if let Some(n) = args.max_episodes {
+        cfg.max_episodes = n;
+    }
     if let Some(g) = args.drain_grace_s {
         cfg.drain_grace_s = g;
     }
@@ -80,11 +88,12 @@ pub(crate) fn worker(args: WorkerArgs) -> anyhow::Result<()> {
             serve_metrics(&addr).await?;
         }
         let (server, slots, grace) = (cfg.server.clone(), cfg.slot_count(), cfg.drain_grace_s);
+        let episodes = cfg.episode_limit();
         let worker = Worker::build(cfg).await?;
         let id = worker.id().to_string();
         // Tests and scripts wait for this exact line on stdout (like serve's `listening` line).
         println!(
-            "worker ready id={} slots={slots} server={server} drain_grace_s={grace}",
+            "worker ready id={} slots={slots} max_episodes={episodes} server={server} drain_grace_s={grace}",
             worker.id()
         );
         std::io::stdout().flush()?;

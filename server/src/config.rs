@@ -156,6 +156,9 @@ pub struct ControlConfig {
     /// At shutdown the in-process slots stop leasing, finish their running episodes for up to
     /// this long, then release what is left (queued again at once, no attempt used), seconds.
     pub drain_grace_s: u64,
+    /// Episodes the in-process slots hold at once; each holds a slot only while it simulates,
+    /// not while it waits for its policy (the worker's `max_episodes`). 0 = 8 per slot.
+    pub max_episodes: usize,
 }
 
 /// Calling participants' policies (`[policy]`): deadlines sent to workers with every job.
@@ -242,6 +245,7 @@ impl Default for ControlConfig {
             max_attempts: 3,
             max_in_flight_per_team: 0,
             drain_grace_s: 30,
+            max_episodes: 0,
         }
     }
 }
@@ -359,6 +363,9 @@ impl Config {
         }
         if c.drain_grace_s > 3600 {
             return invalid("control.drain_grace_s", "must be at most 3600 seconds");
+        }
+        if c.max_episodes > 512 {
+            return invalid("control.max_episodes", "must be in 0..=512 (0 = 8 per slot)");
         }
         let p = &self.policy;
         if p.call_deadline_ms == 0 || p.startup_deadline_ms == 0 || p.episode_budget_ms == 0 {

@@ -294,21 +294,31 @@ fn the_worker_takes_slots_from_its_config_file_and_refuses_the_second_networks_k
         cmd
     };
     // `slots` in the file is used (it was overwritten by the core count), and the flag wins.
-    let (child, ready) = spawn_ready(&mut run("slots = 3\ndrain_grace_s = 7\n", &[]), "worker ready");
-    drop(Proc(child));
-    assert!(
-        ready.contains(" slots=3 ") && ready.ends_with("drain_grace_s=7"),
-        "{ready}"
-    );
     let (child, ready) = spawn_ready(
-        &mut run("slots = 3\n", &["--slots", "2", "--drain-grace-s", "0"]),
+        &mut run("slots = 3\nmax_episodes = 5\ndrain_grace_s = 7\n", &[]),
         "worker ready",
     );
     drop(Proc(child));
     assert!(
-        ready.contains(" slots=2 ") && ready.ends_with("drain_grace_s=0"),
+        ready.contains(" slots=3 max_episodes=5 ") && ready.ends_with("drain_grace_s=7"),
         "{ready}"
     );
+    let (child, ready) = spawn_ready(
+        &mut run(
+            "slots = 3\nmax_episodes = 5\n",
+            &["--slots", "2", "--max-episodes", "9", "--drain-grace-s", "0"],
+        ),
+        "worker ready",
+    );
+    drop(Proc(child));
+    assert!(
+        ready.contains(" slots=2 max_episodes=9 ") && ready.ends_with("drain_grace_s=0"),
+        "{ready}"
+    );
+    // Unset, a worker holds 8 episodes per slot.
+    let (child, ready) = spawn_ready(&mut run("slots = 2\n", &[]), "worker ready");
+    drop(Proc(child));
+    assert!(ready.contains(" slots=2 max_episodes=16 "), "{ready}");
     // The transport's own allow-list switch is refused, naming the one key to use.
     let out = run(
         "allow_networks = [\"10.0.0.0/8\"]\n[policy.allowed_networks]\nprivate = true\n",

@@ -1,14 +1,20 @@
-//! The worker loop: N slots, each leasing one job at a time from the server's
-//! `kitchen_r.worker.v1.Worker` service, running it on its own thread (episodes are CPU-bound
-//! and the policy client blocks), heartbeating every third of the lease while it runs, and
-//! reporting the result.
+//! The worker loop: one lease loop taking jobs from the server's `kitchen_r.worker.v1.Worker`
+//! service while there is room, and one task per leased job that runs its episode on a thread of
+//! its own (episodes are CPU-bound and the policy client blocks), heartbeats every third of the
+//! lease while it runs, and reports the result.
+//!
+//! Episodes and cores are counted apart: `slots` core permits ([`Cores`]) are shared by up to
+//! `max_episodes` episodes in flight, and an episode holds a permit only while it simulates. The
+//! loop takes one job per free core at once, and more only while the cores were idle (the
+//! episodes are waiting on slow policies; see [`Pacer`]). The server never leases a run more
+//! episodes at once than its policy's `max_concurrency`.
 //!
 //! Failure policy: the server being down or restarting is transient, so every call is retried
 //! with capped exponential backoff and the worker never exits for it; only a refused worker
 //! token stops the loop (retrying cannot fix it). Results are idempotent server-side, so a report
 //! whose answer was lost is simply sent again.
 //!
-//! Draining: on shutdown the slots stop leasing at once, running episodes go on (heartbeated) for
+//! Draining: on shutdown the worker stops leasing at once, running episodes go on (heartbeated) for
 //! up to `drain_grace_s` and are reported as usual when they finish in time; an episode still
 //! running then is stopped at its next control step and *released* (`Release`): the server queues
 //! it again at once, for another worker, without using an attempt, and nothing of it is recorded.
@@ -30,14 +36,21 @@ use tonic::transport::{Channel, ClientTlsConfig, Endpoint};
 use tonic::{Code, Request, Status};
 use tracing::{Instrument, error, info, info_span, warn};
 
+use super::cores::Cores;
 use super::execute::{JobControl, execute_job};
 use super::{JobContext, WorkerConfig, WorkerError};
 
 /// How long a shutting-down worker keeps trying to hand in its last result.
 const SHUTDOWN_GRACE: Duration = Duration::from_secs(5);
-/// How long a draining slot waits for the answer of a Lease call in flight (jobs the server
+/// How long a draining worker waits for the answer of a Lease call in flight (jobs the server
 /// claimed for it are released, not left to expire).
 const LEASE_SETTLE: Duration = Duration::from_secs(1);
+/// How often the worker looks at how busy its cores were, and the shortest window it judges by.
+const PACE_WINDOW: Duration = Duration::from_millis(250);
+/// Above this share of busy core time, one more episode would only wait for a core.
+const BUSY: f64 = 0.9;
+/// Jobs asked for in one Lease call (the server's own cap is 64).
+const MAX_JOBS_PER_CALL: usize = 16;
 /// Longest pause between retries of a failed call.
 const MAX_BACKOFF: Duration = Duration::from_secs(30);
 
@@ -58,6 +71,8 @@ type Client = WorkerClient<InterceptedService<Channel, Auth>>;
 pub struct Worker {
     id: String,
     cfg: WorkerConfig,
+    /// One permit per slot: the episodes in flight share them while they simulate.
+    cores: Cores,
     ctx: Arc<JobContext>,
     client: Client,
 }
@@ -68,6 +83,7 @@ impl std::fmt::Debug for Worker {
             .field("id", &self.id)
             .field("server", &self.cfg.server)
             .field("slots", &self.cfg.slot_count())
+            .field("max_episodes", &self.cfg.episode_limit())
             .finish_non_exhaustive()
     }
 }
@@ -109,6 +125,7 @@ impl Worker {
         let client = WorkerClient::with_interceptor(ep.connect_lazy(), Auth(token));
         Ok(Worker {
             id: cfg.worker_id(),
+            cores: Cores::new(cfg.slot_count()),
             cfg,
             ctx,
             client,
@@ -120,50 +137,74 @@ impl Worker {
         &self.id
     }
 
-    /// Run the slots until `shutdown` resolves (then stop them cleanly) or the server refuses
-    /// the worker token.
+    /// Lease and run episodes until `shutdown` resolves (then drain) or the server refuses the
+    /// worker token.
     pub async fn run(self, shutdown: impl Future<Output = ()>) -> Result<(), WorkerError> {
         let (stop_tx, stop_rx) = watch::channel(false);
-        let shared = Arc::new(self);
-        let mut slots = JoinSet::new();
-        let slots_n = shared.cfg.slot_count();
-        for n in 0..slots_n {
-            let (w, stop) = (shared.clone(), stop_rx.clone());
-            slots.spawn(async move { w.slot(n, stop).await }.instrument(info_span!("slot", n)));
-        }
-        info!(worker = %shared.id, slots = slots_n, server = %shared.cfg.server, "worker running");
+        let me = Arc::new(self);
+        let mut jobs = JoinSet::new();
+        info!(
+            worker = %me.id,
+            slots = me.cores.total(),
+            max_episodes = me.cfg.episode_limit(),
+            server = %me.cfg.server,
+            "worker running"
+        );
         tokio::pin!(shutdown);
-        let mut result = Ok(());
-        tokio::select! {
-            () = &mut shutdown => info!(
-                grace_s = shared.cfg.drain_grace_s,
-                "draining: no more leases; running episodes get the grace period, then are released"
-            ),
-            Some(r) = slots.join_next() => {
-                result = r.unwrap_or_else(|e| Err(WorkerError::Config(format!("a slot panicked: {e}"))));
+        let result = {
+            let leasing = me.clone().lease_loop(stop_rx, &mut jobs);
+            tokio::pin!(leasing);
+            tokio::select! {
+            () = &mut shutdown => {
+                info!(
+                    grace_s = me.cfg.drain_grace_s,
+                    "draining: no more leases; running episodes get the grace period, then are released"
+                );
+                let _ = stop_tx.send(true);
+                (&mut leasing).await
             }
-        }
-        let _ = stop_tx.send(true);
-        while let Some(r) = slots.join_next().await {
-            if let Ok(Err(e)) = r
-                && result.is_ok()
-            {
-                result = Err(e);
+            r = &mut leasing => {
+                let _ = stop_tx.send(true);
+                r
+            }
+            }
+        };
+        while let Some(r) = jobs.join_next().await {
+            if let Err(e) = r {
+                error!("an episode task failed: {e}");
             }
         }
         result
     }
 
-    async fn slot(&self, n: usize, mut stop: watch::Receiver<bool>) -> Result<(), WorkerError> {
+    /// Lease while there is room (see [`Pacer`]) and start each job as a task of `jobs`; returns
+    /// when `stop` turns true (jobs leased meanwhile are released) or the token is refused.
+    async fn lease_loop(
+        self: Arc<Self>,
+        mut stop: watch::Receiver<bool>,
+        jobs: &mut JoinSet<()>,
+    ) -> Result<(), WorkerError> {
         let mut backoff = Backoff::default();
+        let mut pacer = Pacer::new(self.cores.clone(), self.cfg.episode_limit());
         let wait = self.cfg.lease_wait();
         loop {
+            while jobs.try_join_next().is_some() {}
             if *stop.borrow() {
                 return Ok(());
             }
+            let room = pacer.room(jobs.len());
+            if room == 0 {
+                // Full, or the cores were busy: look again when an episode ends or a window passes.
+                tokio::select! {
+                    _ = jobs.join_next(), if !jobs.is_empty() => {}
+                    () = tokio::time::sleep(PACE_WINDOW) => {}
+                    _ = stop.changed() => {}
+                }
+                continue;
+            }
             let mut req = Request::new(pb::LeaseRequest {
                 worker_id: self.id.clone(),
-                max_jobs: 1,
+                max_jobs: room.min(MAX_JOBS_PER_CALL) as u32,
                 wait_ms: self.cfg.lease_wait_ms,
             });
             req.set_timeout(wait + Duration::from_secs(10));
@@ -187,22 +228,24 @@ impl Worker {
             match answer {
                 Ok(r) => {
                     backoff.reset();
-                    let jobs = r.into_inner().jobs;
-                    if jobs.is_empty() && asked.elapsed() < Duration::from_millis(100) {
+                    let leased = r.into_inner().jobs;
+                    if leased.is_empty() && asked.elapsed() < Duration::from_millis(100) {
                         // A server that does not hold the call open must not be hammered.
                         pause(Duration::from_millis(500), &mut stop).await;
                     }
-                    for job in jobs {
+                    pacer.leased();
+                    for job in leased {
                         if *stop.borrow() {
                             // Draining: a job not started yet goes back at once.
                             self.release(&job, "worker draining: not started").await;
-                        } else {
-                            self.job(job, &mut stop).await;
+                            continue;
                         }
+                        let (w, mut stop) = (self.clone(), stop.clone());
+                        jobs.spawn(async move { w.job(job, &mut stop).await });
                     }
                 }
                 Err(s) if matches!(s.code(), Code::Unauthenticated | Code::PermissionDenied) => {
-                    error!(slot = n, "the server refused the worker token: {}", s.message());
+                    error!("the server refused the worker token: {}", s.message());
                     return Err(WorkerError::Refused(s.message().to_string()));
                 }
                 Err(s) => {
@@ -233,7 +276,7 @@ impl Worker {
         async {
             info!("episode started");
             let _held = crate::metrics::LeaseHeld::new();
-            let control = JobControl::default();
+            let control = JobControl::with_cores(self.cores.clone());
             let mut done = spawn_episode(job.clone(), self.ctx.clone(), control.clone());
             let mut next = heartbeat_in(job.lease_expires_at_ms);
             let grace = self.cfg.drain_grace();
@@ -404,6 +447,56 @@ impl Worker {
                 }
             }
         }
+    }
+}
+
+/// How many more episodes the worker takes now. Up to one per core, always; past that, one
+/// more at a time, and only when the cores were idle more than `1 - BUSY` of the last window:
+/// episodes then spend their time waiting on their policies, and another one would use the idle
+/// core. CPU-bound episodes keep the cores busy, so the worker does not hoard jobs another
+/// worker could run.
+#[derive(Debug)]
+struct Pacer {
+    cores: Cores,
+    limit: usize,
+    since: Instant,
+    busy_then: f64,
+}
+
+impl Pacer {
+    fn new(cores: Cores, limit: usize) -> Pacer {
+        let busy_then = cores.busy_permit_seconds();
+        Pacer {
+            cores,
+            limit,
+            since: Instant::now(),
+            busy_then,
+        }
+    }
+
+    fn room(&mut self, in_flight: usize) -> usize {
+        let slots = self.cores.total().min(self.limit);
+        if in_flight >= self.limit {
+            return 0;
+        }
+        if in_flight < slots {
+            return slots - in_flight;
+        }
+        let window = self.since.elapsed();
+        if window < PACE_WINDOW {
+            return 0;
+        }
+        let busy = self.cores.busy_permit_seconds();
+        let share = (busy - self.busy_then) / (slots as f64 * window.as_secs_f64());
+        self.since = Instant::now();
+        self.busy_then = busy;
+        usize::from(share < BUSY)
+    }
+
+    /// A lease answered: judge the next one by a window that starts now.
+    fn leased(&mut self) {
+        self.since = Instant::now();
+        self.busy_then = self.cores.busy_permit_seconds();
     }
 }
 

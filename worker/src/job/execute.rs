@@ -14,6 +14,7 @@ use std::time::Instant;
 use kitchen_r_proto::worker::v1 as pb;
 use kitchen_r_sim::{Action, EpisodeConfig, Sim, Snapshot, StepInfo};
 
+use super::cores::{Cores, YieldsCore};
 use super::spec;
 use super::{JobContext, JobError};
 use kitchen_r_contract::{Credentials, RemotePolicy, SimCamera};
@@ -31,9 +32,19 @@ pub struct JobControl {
     cancelled: Arc<AtomicBool>,
     why: Arc<Mutex<String>>,
     tasks_done: Arc<AtomicU32>,
+    /// The worker's simulation cores; unlimited by default.
+    cores: Cores,
 }
 
 impl JobControl {
+    /// A control whose episode simulates only while it holds one of `cores`.
+    pub fn with_cores(cores: Cores) -> JobControl {
+        JobControl {
+            cores,
+            ..JobControl::default()
+        }
+    }
+
     /// Stop the episode at its next control step; `why` becomes the platform error.
     pub fn cancel(&self, why: &str) {
         if let Ok(mut w) = self.why.lock()
@@ -191,6 +202,9 @@ fn run(
         ep.url
     ));
     let n_tasks = run.max_tasks.map_or(cfg.plan.len(), |m| m.min(cfg.plan.len()));
+    // A core while simulating only: not for the handshake, not during policy calls.
+    let mut core = control.cores.core();
+    core.hold();
     let mut sim = Sim::new(ctx.assets.clone(), ctx.sim.clone(), ctx.sensors.clone(), &cfg)?.0;
     let remote_cfg = spec::remote_config(&ctx.remote, &ep, run.execute);
     let creds = Credentials {
@@ -200,12 +214,9 @@ fn run(
     let mut remote;
     let mut timed;
     let mut dead;
-    let policy: &mut dyn Policy = match RemotePolicy::connect(
-        &ep.url,
-        &creds,
-        &remote_cfg,
-        &SimCamera::from_sensors(&ctx.sensors),
-    ) {
+    let camera = SimCamera::from_sensors(&ctx.sensors);
+    let connected = core.without(|| RemotePolicy::connect(&ep.url, &creds, &remote_cfg, &camera));
+    let policy: &mut dyn Policy = match connected {
         Ok(p) => {
             remote = p;
             remote.set_scene(&cfg.scene);
@@ -224,6 +235,10 @@ fn run(
             dead = Unreachable::new(reason);
             &mut dead
         }
+    };
+    let policy = &mut YieldsCore {
+        policy,
+        core: &mut core,
     };
     let watch = &mut Watch(control);
     if mode == pb::EvalMode::Offline {

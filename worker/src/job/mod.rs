@@ -6,6 +6,7 @@
 //! with jobs built the way the server builds them, so local and leaderboard numbers agree.
 
 pub mod client;
+pub mod cores;
 mod execute;
 pub mod local;
 pub mod spec;
@@ -54,8 +55,13 @@ pub struct WorkerConfig {
     pub server: String,
     /// Worker token, sent as `authorization: Bearer <token>`.
     pub token: String,
-    /// Episodes run at once (each on its own thread with its own simulator); 0 = one per core.
+    /// Simulation cores: episodes stepping their simulators at once; 0 = one per core.
     pub slots: usize,
+    /// Episodes held at once, each on its own thread with its own simulator. An episode holds a
+    /// core only while it simulates, not while it waits for its policy, so a worker whose
+    /// policies are slow keeps more episodes than cores in flight: it leases one more while its
+    /// cores were idle more than a tenth of the time. 0 = 8 per slot; at most 512.
+    pub max_episodes: usize,
     /// Lease owner name; empty = `hostname-pid`.
     pub worker_id: String,
     /// Address classes a policy endpoint may resolve to besides public ones, as CIDR ranges
@@ -83,6 +89,7 @@ impl Default for WorkerConfig {
             server: "http://127.0.0.1:50051".into(),
             token: String::new(),
             slots: 0,
+            max_episodes: 0,
             worker_id: String::new(),
             allow_networks: vec!["127.0.0.0/8".into(), "::1/128".into()],
             lease_wait_ms: 20_000,
@@ -143,6 +150,9 @@ impl WorkerConfig {
         if self.slots > 64 {
             return bad("slots", "must be in 0..=64 (0 = one per core)");
         }
+        if self.max_episodes > 512 {
+            return bad("max_episodes", "must be in 0..=512 (0 = 8 per slot)");
+        }
         if self.drain_grace_s > 3600 {
             return bad("drain_grace_s", "must be at most 3600 seconds");
         }
@@ -173,6 +183,14 @@ impl WorkerConfig {
         match self.slots {
             0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
             n => n,
+        }
+    }
+
+    /// Episodes held at once: `max_episodes`, or 8 per slot when 0; never fewer than the slots.
+    pub fn episode_limit(&self) -> usize {
+        match self.max_episodes {
+            0 => 8 * self.slot_count(),
+            n => n.max(self.slot_count()),
         }
     }
 

@@ -1,9 +1,11 @@
 //! The worker loop against a small in-test `kitchen_r.worker.v1.Worker` server on 127.0.0.1:0:
 //! two jobs handed out, heartbeats while they run, the first report failed by the server and
-//! retried, the token checked, and a clean stop on shutdown.
+//! retried, the token checked, a clean stop on shutdown, draining, and episodes that wait on
+//! their policy without holding a slot.
 
 use crate::remote_support;
 
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
@@ -24,6 +26,8 @@ struct State {
     releases: Vec<pb::ReleaseRequest>,
     /// Hold a Lease answer this long after taking its job off the queue.
     lease_delay: Duration,
+    /// The most jobs one Lease call asked for.
+    max_jobs_asked: u32,
 }
 
 #[derive(Clone)]
@@ -45,25 +49,24 @@ impl Worker for TestWorkerServer {
     async fn lease(&self, req: Request<pb::LeaseRequest>) -> Result<Response<pb::LeaseResponse>, Status> {
         authed(&req)?;
         let r = req.into_inner();
-        assert_eq!(r.max_jobs, 1);
-        let (job, delay) = {
+        assert!((1..=64).contains(&r.max_jobs), "{}", r.max_jobs);
+        let (mut jobs, delay) = {
             let mut s = self.0.lock().unwrap();
             s.lease_workers.push(r.worker_id);
-            (s.queue.pop(), s.lease_delay)
+            s.max_jobs_asked = s.max_jobs_asked.max(r.max_jobs);
+            let n = s.queue.len().min(r.max_jobs as usize);
+            let at = s.queue.len() - n;
+            (s.queue.split_off(at), s.lease_delay)
         };
-        if job.is_some() {
+        if jobs.is_empty() {
+            tokio::time::sleep(Duration::from_millis(u64::from(r.wait_ms.min(200)))).await;
+        } else {
             tokio::time::sleep(delay).await;
         }
-        match job {
-            Some(mut j) => {
-                j.lease_expires_at_ms = now_ms() + 1_500;
-                Ok(Response::new(pb::LeaseResponse { jobs: vec![j] }))
-            }
-            None => {
-                tokio::time::sleep(Duration::from_millis(u64::from(r.wait_ms.min(200)))).await;
-                Ok(Response::new(pb::LeaseResponse { jobs: vec![] }))
-            }
+        for j in &mut jobs {
+            j.lease_expires_at_ms = now_ms() + 1_500;
         }
+        Ok(Response::new(pb::LeaseResponse { jobs }))
     }
 
     async fn heartbeat(
@@ -260,8 +263,9 @@ fn a_server_that_is_down_is_retried_until_shutdown() {
 }
 
 /// Start a worker on two jobs of the slow policy with `grace` seconds to drain, stop it once
-/// both are running, and return the server's state after it exited and how long it took.
-fn drain(grace: u64) -> (Arc<Mutex<State>>, Duration) {
+/// both are running, and return the server's state after it exited, how long it took, and how
+/// many Lease calls had come by the stop.
+fn drain(grace: u64) -> (Arc<Mutex<State>>, Duration, usize) {
     let rt = tokio::runtime::Runtime::new().unwrap();
     let policy = slow_still();
     let state = Arc::new(Mutex::new(State {
@@ -289,14 +293,15 @@ fn drain(grace: u64) -> (Arc<Mutex<State>>, Duration) {
         std::thread::sleep(Duration::from_millis(20));
     }
     let stopped = Instant::now();
+    let leases = state.lock().unwrap().lease_workers.len();
     stop_tx.send(()).unwrap();
     rt.block_on(worker).unwrap().unwrap();
-    (state, stopped.elapsed())
+    (state, stopped.elapsed(), leases)
 }
 
 #[test]
 fn a_draining_worker_with_no_grace_releases_its_running_episodes_at_once() {
-    let (state, took) = drain(0);
+    let (state, took, leases) = drain(0);
     let s = state.lock().unwrap();
     assert!(s.reports.is_empty(), "nothing reported: {:?}", s.reports);
     let mut ids: Vec<(i64, u32)> = s.releases.iter().map(|r| (r.job_id, r.attempt)).collect();
@@ -308,14 +313,17 @@ fn a_draining_worker_with_no_grace_releases_its_running_episodes_at_once() {
             .all(|r| r.worker_id == "test-worker" && r.reason.contains("draining"))
     );
     assert!(took < Duration::from_secs(10), "{took:?}");
-    // No lease after the stop: only the two that were running were ever leased (plus polls
-    // before the stop, which found the queue empty and are at most a few).
-    assert!(s.lease_workers.len() <= 4, "{:?}", s.lease_workers);
+    // No Lease call after the stop (one may have been on its way).
+    assert!(
+        s.lease_workers.len() <= leases + 1,
+        "{leases} then {:?}",
+        s.lease_workers
+    );
 }
 
 #[test]
 fn a_draining_worker_finishes_its_running_episodes_within_the_grace_period() {
-    let (state, _) = drain(120);
+    let (state, _, _) = drain(120);
     let s = state.lock().unwrap();
     assert!(s.releases.is_empty(), "nothing released: {:?}", s.releases);
     let mut ids: Vec<i64> = s.reports.iter().map(|r| r.job_id).collect();
@@ -362,4 +370,68 @@ fn a_job_leased_as_the_worker_stops_is_released_not_left_to_expire() {
     assert_eq!(s.releases.len(), 1, "{:?}", s.releases);
     assert_eq!((s.releases[0].job_id, s.releases[0].attempt), (1, 1));
     assert!(s.releases[0].reason.contains("stopped"), "{:?}", s.releases[0]);
+}
+
+#[test]
+fn episodes_waiting_on_a_slow_policy_share_one_slot() {
+    // Each act takes 200 ms; the simulation of a chunk takes a few. With one slot, a worker that
+    // kept the slot for the whole episode would call the policy for one episode at a time.
+    let (now, peak) = (Arc::new(AtomicUsize::new(0)), Arc::new(AtomicUsize::new(0)));
+    let (n, p) = (now.clone(), peak.clone());
+    let policy = TestServer::start(
+        factory(
+            HORIZON,
+            Arc::new(move |_| {
+                p.fetch_max(n.fetch_add(1, Ordering::SeqCst) + 1, Ordering::SeqCst);
+                std::thread::sleep(Duration::from_millis(200));
+                n.fetch_sub(1, Ordering::SeqCst);
+                Ok(vec![STILL; HORIZON])
+            }),
+        ),
+        Default::default(),
+    );
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let state = Arc::new(Mutex::new(State {
+        queue: (1..=6).map(|id| job(id, &policy.url())).collect(),
+        // The first report fails once (see `report_result`): count it as done already.
+        report_calls: 1,
+        ..State::default()
+    }));
+    let url = start(state.clone(), &rt);
+    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+    let cfg = WorkerConfig {
+        slots: 1,
+        max_episodes: 4,
+        ..config(&url, "worker-secret")
+    };
+    let worker = rt.spawn(run_worker(cfg, async {
+        let _ = stop_rx.await;
+    }));
+    let t = Instant::now();
+    while state.lock().unwrap().reports.len() < 6 {
+        assert!(t.elapsed() < Duration::from_secs(120), "reports never arrived");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    stop_tx.send(()).unwrap();
+    rt.block_on(worker).unwrap().unwrap();
+    let peak = peak.load(Ordering::SeqCst);
+    assert!(
+        (2..=4).contains(&peak),
+        "{peak} episodes waited on the policy at once (1 slot, max_episodes 4)"
+    );
+    let s = state.lock().unwrap();
+    assert!(
+        s.max_jobs_asked <= 4,
+        "asked for {} jobs at once",
+        s.max_jobs_asked
+    );
+    for r in &s.reports {
+        let res = r.result.as_ref().unwrap();
+        assert_eq!(res.platform_error, "", "{}", res.log_tail);
+        assert!(
+            res.tasks[0].failure_reason.contains("time limit of 2 s"),
+            "{:?}",
+            res.tasks
+        );
+    }
 }
