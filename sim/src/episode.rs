@@ -85,7 +85,8 @@ pub fn key_object_placement(
 impl EpisodeConfig {
     /// The episode of a dataset instruction: every key object of the scene at its start, the
     /// instruction's plan and place targets; the robot start and background objects are drawn
-    /// with `seed` from `params`.
+    /// with `seed` from `params`. When `params.batch` holds an episode for the instruction's id
+    /// (a saved batch run locally), that episode, checked against the instruction.
     pub fn from_instruction(
         ins: &Instruction,
         scene: &Scene,
@@ -98,6 +99,9 @@ impl EpisodeConfig {
                 "instruction is for scene {:?}, not {:?}",
                 ins.scene, scene.id
             )));
+        }
+        if let Some(cfg) = params.batch.as_ref().and_then(|b| b.get(&ins.id)) {
+            return batch_episode(cfg, ins, scene, cat);
         }
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let objects = scene
@@ -162,6 +166,36 @@ impl EpisodeConfig {
             }
         }
         Ok(())
+    }
+}
+
+/// A saved batch's episode for `ins`: it must be the instruction's task in its scene.
+fn batch_episode(
+    cfg: &EpisodeConfig,
+    ins: &Instruction,
+    scene: &Scene,
+    cat: &Catalogue,
+) -> Result<EpisodeConfig, SimError> {
+    if cfg.scene != ins.scene || cfg.plan != ins.plan || cfg.place_targets != ins.place_targets {
+        return Err(SimError::Episode(format!(
+            "the batch's episode {:?} is not the task of instruction {:?}",
+            cfg.id, ins.id
+        )));
+    }
+    cfg.validate(scene, cat)?;
+    Ok(cfg.clone())
+}
+
+/// The instruction an episode's task amounts to (id, scene, plan, place targets), for paths that
+/// take instructions (a policy endpoint's jobs).
+pub fn as_instruction(cfg: &EpisodeConfig) -> Instruction {
+    Instruction {
+        id: cfg.id.clone(),
+        scene: cfg.scene.clone(),
+        instruction: String::new(),
+        plan: cfg.plan.clone(),
+        template: String::new(),
+        place_targets: cfg.place_targets.clone(),
     }
 }
 

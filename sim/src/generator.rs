@@ -6,6 +6,7 @@
 
 use std::collections::BTreeMap;
 use std::path::Path;
+use std::sync::Arc;
 
 use kitchen_r_core::catalogue::Catalogue;
 use kitchen_r_core::plan::Step;
@@ -16,6 +17,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::episode::{EpisodeConfig, ObjectPlacement, in_disc, object_color};
 use crate::error::{SimError, read_toml};
+use crate::randomise::Randomise;
 use crate::world::Style;
 
 /// `configs/episodes.toml`.
@@ -40,6 +42,13 @@ pub struct EpisodeParams {
     pub scene: BTreeMap<String, SceneParams>,
     /// Fixed values that replace draws.
     pub fixed: Overrides,
+    /// One switch per randomised aspect, and the ranges ([`crate::randomise`]).
+    pub randomise: Randomise,
+    /// Whole episodes by instruction id (a saved batch, `eval --episodes-file`) that
+    /// [`EpisodeConfig::from_instruction`] returns instead of building one. Never read from a
+    /// file: only a local run hands its batch in this way.
+    #[serde(skip)]
+    pub batch: Option<Arc<BTreeMap<String, EpisodeConfig>>>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
@@ -78,13 +87,17 @@ impl Default for EpisodeParams {
             floor_tiles: vec![0.25, 0.3, 0.4, 0.5],
             scene: BTreeMap::new(),
             fixed: Overrides::default(),
+            randomise: Randomise::default(),
+            batch: None,
         }
     }
 }
 
 impl EpisodeParams {
     pub fn load(path: &Path) -> Result<EpisodeParams, SimError> {
-        read_toml(path)
+        let p: EpisodeParams = read_toml(path)?;
+        p.randomise.validate()?;
+        Ok(p)
     }
 
     /// `configs/episodes.toml` when present, else the defaults.
@@ -110,6 +123,22 @@ impl EpisodeParams {
             Some(p) if !p.points.is_empty() => p.points.clone(),
             _ => scene.zones.iter().take(5).map(|z| z.color.clone()).collect(),
         }
+    }
+}
+
+/// The robot start when it is not randomised: the fixed one, else the first start segment's
+/// midpoint.
+pub fn fixed_start(scene: &Scene, p: &EpisodeParams) -> [f64; 3] {
+    if let Some(s) = p.fixed.robot_start {
+        return s;
+    }
+    match p.segments(scene).first() {
+        Some(s) => [
+            (s.from[0] + s.to[0]) / 2.0,
+            (s.from[1] + s.to[1]) / 2.0,
+            s.heading,
+        ],
+        None => [scene.room.size[0] / 2.0, scene.room.size[1] / 2.0, 0.0],
     }
 }
 
@@ -194,7 +223,10 @@ fn pick<'a>(rng: &mut ChaCha8Rng, fixed: &'a Option<String>, from: &'a [String])
         .or_else(|| (!from.is_empty()).then(|| &from[rng.random_range(0..from.len())]))
 }
 
-/// Episode `index` of the batch drawn with `seed` in `scene`.
+/// Episode `index` of the batch drawn with `seed` in `scene`. An aspect switched off in
+/// `p.randomise` is still drawn (so the other aspects' draws do not move) and then replaced by
+/// its fixed value: the zone centres and yaw 0, the default colours, the scene's tile, no
+/// background, [`fixed_start`].
 pub fn generate(
     scene: &Scene,
     cat: &Catalogue,
@@ -204,7 +236,11 @@ pub fn generate(
 ) -> Result<EpisodeConfig, SimError> {
     let episode_seed = splitmix(seed ^ splitmix(index));
     let mut rng = ChaCha8Rng::seed_from_u64(episode_seed);
-    let robot_start = draw_start(&mut rng, scene, p);
+    let r = &p.randomise;
+    let robot_start = match draw_start(&mut rng, scene, p) {
+        _ if !r.robot_start => fixed_start(scene, p),
+        s => s,
+    };
     let model_id = match (&p.fixed.object, p.balance_objects && !p.objects.is_empty()) {
         (Some(o), _) => o.clone(),
         (None, true) => p.objects[(index % p.objects.len() as u64) as usize].clone(),
@@ -216,11 +252,12 @@ pub fn generate(
         .model(&model_id)
         .ok_or_else(|| SimError::UnknownObject(model_id.clone()))?;
     let variants: Vec<String> = model.variants.keys().cloned().collect();
-    let variant = if p.random_variants {
-        pick(&mut rng, &p.fixed.variant, &variants).cloned()
-    } else {
-        p.fixed.variant.clone()
-    };
+    let variant = match p.random_variants {
+        true => pick(&mut rng, &p.fixed.variant, &variants).cloned(),
+        false => None,
+    }
+    .filter(|_| r.colors)
+    .or_else(|| p.fixed.variant.clone());
     let points = p.points(scene);
     if points.len() < 2 {
         return Err(SimError::Config(format!(
@@ -240,8 +277,9 @@ pub fn generate(
     };
     let (zs, zg) = (zone(&start)?, zone(&goal)?);
     let hh = model.shape.half_height();
-    let ds = in_disc(&mut rng, p.radius);
-    let dg = in_disc(&mut rng, p.radius);
+    let pose = |d: [f64; 2]| if r.object_pose { d } else { [0.0, 0.0] };
+    let ds = pose(in_disc(&mut rng, p.radius));
+    let dg = pose(in_disc(&mut rng, p.radius));
     let name = match &variant {
         Some(v) => format!("{v} {}", model.id),
         None => model.id.clone(),
@@ -251,7 +289,10 @@ pub fn generate(
         model: model.id.clone(),
         color: object_color(model, variant.as_deref()),
         position: [zs.center[0] + ds[0], zs.center[1] + ds[1], zs.height + hh],
-        yaw: rng.random::<f64>() * std::f64::consts::TAU,
+        yaw: match rng.random::<f64>() * std::f64::consts::TAU {
+            _ if !r.object_pose => 0.0,
+            yaw => yaw,
+        },
     };
     let target = [zg.center[0] + dg[0], zg.center[1] + dg[1], zg.height + hh];
     let plan = [
@@ -266,13 +307,22 @@ pub fn generate(
     let mut style = Style::of(scene);
     let j = p.color_jitter;
     for c in style.floor_color.iter_mut().chain(style.wall_color.iter_mut()) {
-        *c = (*c + rng.random_range(-j..=j)).clamp(0.0, 1.0);
+        let v = (*c + rng.random_range(-j..=j)).clamp(0.0, 1.0);
+        if r.colors {
+            *c = v;
+        }
     }
     if !p.floor_tiles.is_empty() {
-        style.floor_tile = p.floor_tiles[rng.random_range(0..p.floor_tiles.len())];
+        let tile = p.floor_tiles[rng.random_range(0..p.floor_tiles.len())];
+        if r.textures {
+            style.floor_tile = tile;
+        }
     }
     let objects = vec![object];
-    let background = draw_background(&mut rng, scene, cat, p, &objects);
+    let background = match r.background {
+        true => draw_background(&mut rng, scene, cat, p, &objects),
+        false => Vec::new(),
+    };
     let cfg = EpisodeConfig {
         id: format!("{}-{seed}-{index:04}", scene.id),
         scene: scene.id.clone(),

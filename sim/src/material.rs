@@ -22,6 +22,17 @@ pub enum Pattern {
         size: f32,
         contrast: f32,
     },
+    /// Cubes of this size with alternating brightness in all three axes (check floors, tiled
+    /// walls and fronts).
+    Checker {
+        size: f32,
+        contrast: f32,
+    },
+    /// Boards of this width along x and y alike (floorboards, vertical panels).
+    Planks {
+        size: f32,
+        contrast: f32,
+    },
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -62,6 +73,19 @@ impl Material {
                 } else {
                     1.0 - contrast
                 }
+            }
+            Pattern::Checker { size, contrast } => {
+                let cell = |v: f32| floor(v / size) as i64;
+                if (cell(p[0]) + cell(p[1]) + cell(p[2])).rem_euclid(2) == 0 {
+                    1.0
+                } else {
+                    1.0 - contrast
+                }
+            }
+            Pattern::Planks { size, contrast } => {
+                let board = floor((p[0] + p[1]) / size) as i64;
+                // Three shades cycle so neighbouring boards always differ.
+                1.0 - contrast * (board.rem_euclid(3) as f32) / 2.0
             }
         };
         self.color.map(|c| (c * k).clamp(0.0, 1.0))

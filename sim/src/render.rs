@@ -154,7 +154,7 @@ pub fn topdown(sim: &Sim, scene: &Scene) -> CameraImage {
     let ctx = RenderCtx {
         world: &sim.world,
         materials: &sim.materials.list,
-        light: &sim.sensors.light,
+        light: sim.light(),
     };
     let mut img = ctx.render(
         "topdown",

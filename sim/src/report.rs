@@ -191,7 +191,7 @@ impl Sim {
         let ctx = RenderCtx {
             world: &self.world,
             materials: &self.materials.list,
-            light: &self.sensors.light,
+            light: self.light(),
         };
         let images = self
             .sensors

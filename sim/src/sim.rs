@@ -156,6 +156,11 @@ impl Sim {
             .unwrap_or(&self.assets.scenes[0])
     }
 
+    /// The light images are shaded with: the episode's own, else the sensors'.
+    pub fn light(&self) -> &crate::config::LightConfig {
+        self.episode.style.light.as_ref().unwrap_or(&self.sensors.light)
+    }
+
     pub fn config(&self) -> &SimConfig {
         &self.config
     }

@@ -2,6 +2,7 @@
 //! background objects as dynamic bodies with the catalogue's mass and friction. Everything comes
 //! from the scene file and the catalogue, so a new scene or object model is a data change only.
 
+use std::collections::BTreeMap;
 use std::f64::consts::{FRAC_PI_2, TAU};
 
 use kitchen_r_core::catalogue::{ObjectModel, Shape};
@@ -10,6 +11,7 @@ use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use rapier3d::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use crate::config::LightConfig;
 use crate::convert::{iso_to_pose, planar};
 use crate::furniture;
 use crate::material::{Material, Materials, Owner, Pattern, Tag};
@@ -17,13 +19,30 @@ use crate::material::{Material, Materials, Owner, Pattern, Tag};
 /// Friction of furniture and walls.
 const STATIC_FRICTION: f32 = 0.8;
 
-/// Floor and wall looks of one episode (the scene's colours unless randomised).
+/// The looks of one episode: the scene's colours and patterns and the sensors' light unless
+/// randomised ([`crate::randomise`]). The optional fields are absent from configs written before
+/// they existed and from unrandomised ones, so those load and render exactly as before.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Style {
     pub floor_color: [f32; 3],
     pub wall_color: [f32; 3],
     /// Floor tile size (m).
     pub floor_tile: f32,
+    /// Floor pattern instead of tiles of `floor_tile`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub floor_pattern: Option<Pattern>,
+    /// Wall pattern instead of the default faint bands.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wall_pattern: Option<Pattern>,
+    /// Pattern of the furniture's solid parts (grain, panels) instead of plain.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub furniture_pattern: Option<Pattern>,
+    /// Furniture colour by furniture id, replacing the scene's.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub furniture_colors: BTreeMap<String, [f32; 3]>,
+    /// The light of this episode instead of `configs/sensors.toml`'s.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub light: Option<LightConfig>,
 }
 
 impl Style {
@@ -32,6 +51,11 @@ impl Style {
             floor_color: scene.room.floor_color,
             wall_color: scene.room.wall_color,
             floor_tile: 0.3,
+            floor_pattern: None,
+            wall_pattern: None,
+            furniture_pattern: None,
+            furniture_colors: BTreeMap::new(),
+            light: None,
         }
     }
 }
@@ -68,10 +92,10 @@ pub fn build_static(world: &mut PhysicsWorld, mats: &mut Materials, scene: &Scen
     let (t, wh) = (scene.room.wall_thickness, scene.room.wall_height);
     let floor = mats.add(Material {
         color: style.floor_color,
-        pattern: Pattern::Tiles {
+        pattern: style.floor_pattern.unwrap_or(Pattern::Tiles {
             size: style.floor_tile,
             contrast: 0.12,
-        },
+        }),
     });
     let floor_pose = planar(rx / 2.0, ry / 2.0, -0.05, 0.0);
     add_box(
@@ -84,10 +108,10 @@ pub fn build_static(world: &mut PhysicsWorld, mats: &mut Materials, scene: &Scen
     );
     let wall = mats.add(Material {
         color: style.wall_color,
-        pattern: Pattern::Stripes {
+        pattern: style.wall_pattern.unwrap_or(Pattern::Stripes {
             size: 1.2,
             contrast: 0.06,
-        },
+        }),
     });
     let walls = [
         ([rx / 2.0, -t / 2.0], [rx / 2.0 + t, t / 2.0]),
@@ -107,21 +131,26 @@ pub fn build_static(world: &mut PhysicsWorld, mats: &mut Materials, scene: &Scen
     }
     for f in &scene.furniture {
         let base = planar(f.pose[0], f.pose[1], 0.0, f.pose[2]);
-        for p in furniture::parts(scene, f) {
+        let mut f = f.clone();
+        if let Some(c) = style.furniture_colors.get(&f.id) {
+            f.color = *c;
+        }
+        for p in furniture::parts(scene, &f) {
             let pose = base * Translation3::from(Vector3::from(p.center));
             let owner = if p.decoration {
                 Owner::Decoration
             } else {
                 Owner::Static
             };
-            add_box(
-                world,
-                body,
-                pose,
-                p.half,
-                mats.add(Material::plain(p.color)),
-                owner,
-            );
+            let pattern = match style.furniture_pattern {
+                Some(pattern) if !p.decoration => pattern,
+                _ => Pattern::Plain,
+            };
+            let material = mats.add(Material {
+                color: p.color,
+                pattern,
+            });
+            add_box(world, body, pose, p.half, material, owner);
         }
     }
 }

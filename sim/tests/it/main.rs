@@ -5,4 +5,5 @@ mod common;
 
 mod arm_grasp;
 mod episodes;
+mod randomise;
 mod twin;
