@@ -5,6 +5,7 @@
 //! Episode configurations come from [`EpisodeConfig::from_instruction`] with a seed derived from
 //! the run seed and the instruction id, so an instruction gets the same robot start and
 //! background objects in every run with the same seed, whatever `--episodes` or `--jobs` are.
+//! A saved batch (`--episodes-file`, [`evaluate_batch`]) runs exactly its configurations instead.
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -342,11 +343,36 @@ pub fn evaluate(
     opts: &EvalOptions,
     progress: &mut dyn FnMut(usize, &EpisodeOutcome),
 ) -> Result<EvalReport, EvalError> {
-    let started = Instant::now();
     let assets = Assets::load_default()?;
     let ins = instructions(opts.split, opts.ground_truth.as_ref())?;
     let configs = episode_configs(&assets, &ins, opts.seed, opts.episodes)?;
-    let episodes = run_all(&assets, &configs, opts.policy, &opts.run, opts.jobs, progress)?;
+    evaluate_configs(&assets, opts, &configs, progress)
+}
+
+/// `kitchen-r eval --episodes-file`: exactly the episodes of a saved batch (the first
+/// `opts.episodes`, if given), in its order; `opts.split` and `opts.seed` only label the report.
+pub fn evaluate_batch(
+    opts: &EvalOptions,
+    batch: &[EpisodeConfig],
+    progress: &mut dyn FnMut(usize, &EpisodeOutcome),
+) -> Result<EvalReport, EvalError> {
+    let assets = Assets::load_default()?;
+    let configs = &batch[..opts.episodes.unwrap_or(usize::MAX).min(batch.len())];
+    for cfg in configs {
+        cfg.validate(assets.scene(&cfg.scene)?, &assets.catalogue)
+            .map_err(|e| EvalError::Config(format!("batch episode {:?}: {e}", cfg.id)))?;
+    }
+    evaluate_configs(&assets, opts, configs, progress)
+}
+
+fn evaluate_configs(
+    assets: &Assets,
+    opts: &EvalOptions,
+    configs: &[EpisodeConfig],
+    progress: &mut dyn FnMut(usize, &EpisodeOutcome),
+) -> Result<EvalReport, EvalError> {
+    let started = Instant::now();
+    let episodes = run_all(assets, configs, opts.policy, &opts.run, opts.jobs, progress)?;
     let (overall, by_kind) = summarize(&episodes);
     let n = episodes.len().max(1) as f64;
     Ok(EvalReport {

@@ -7,8 +7,12 @@
 //! episodes of the mean over the plan's tasks of SR_j (an unreported task fails), MSE weights
 //! every prediction equally with a failed prediction for a task left without a sample. Episodes
 //! that hit a platform error (which the server would retry) are listed and left out.
+//!
+//! A saved batch of episodes (`eval --episodes-file`) runs through the same jobs: each episode's
+//! configuration reaches the job's set-up through the context's episode parameters.
 
 use std::collections::BTreeMap;
+use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
@@ -24,6 +28,8 @@ use kitchen_r_contract::probe::{ProbeFailure, probe_endpoint};
 use kitchen_r_contract::{AllowedNetworks, RemoteConfig};
 use kitchen_r_episode::eval::{Sr, task_kinds};
 use kitchen_r_episode::runner::RunOptions;
+use kitchen_r_sim::EpisodeConfig;
+use kitchen_r_sim::episode::as_instruction;
 
 /// Server-side settings a local run reproduces (the server's `[control]` and `[policy]`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -82,6 +88,8 @@ pub enum LocalError {
     Job(#[from] JobError),
     #[error("could not start the runtime: {0}")]
     Runtime(String),
+    #[error("episodes file: {0}")]
+    Batch(String),
 }
 
 /// The job the server would lease for `ins` in `s.mode`.
@@ -126,6 +134,36 @@ pub fn evaluate_endpoint(
     s: &LocalSettings,
     progress: &mut dyn FnMut(&LocalEpisode),
 ) -> Result<LocalReport, LocalError> {
+    evaluate_endpoint_with(url, split, instructions, None, s, progress)
+}
+
+/// Evaluate the endpoint at `url` on exactly the episodes of a saved batch
+/// (`eval --episodes-file`). Each episode runs as the job of the instruction its task amounts to
+/// ([`as_instruction`]), and the job's episode set-up returns the batch's configuration for it
+/// (`EpisodeParams::batch`) instead of drawing one: the rest is the workers' path unchanged.
+pub fn evaluate_endpoint_batch(
+    url: &str,
+    split: Split,
+    batch: &[EpisodeConfig],
+    s: &LocalSettings,
+    progress: &mut dyn FnMut(&LocalEpisode),
+) -> Result<LocalReport, LocalError> {
+    let instructions: Vec<Instruction> = batch.iter().map(as_instruction).collect();
+    let by_id: BTreeMap<String, EpisodeConfig> = batch.iter().map(|c| (c.id.clone(), c.clone())).collect();
+    if by_id.len() != batch.len() {
+        return Err(LocalError::Batch("the batch has two episodes with one id".into()));
+    }
+    evaluate_endpoint_with(url, split, &instructions, Some(Arc::new(by_id)), s, progress)
+}
+
+fn evaluate_endpoint_with(
+    url: &str,
+    split: Split,
+    instructions: &[Instruction],
+    batch: Option<Arc<BTreeMap<String, EpisodeConfig>>>,
+    s: &LocalSettings,
+    progress: &mut dyn FnMut(&LocalEpisode),
+) -> Result<LocalReport, LocalError> {
     let started = Instant::now();
     // The participant's own machine: every address range is theirs to use.
     let remote = RemoteConfig {
@@ -143,7 +181,8 @@ pub fn evaluate_endpoint(
         &remote,
     ))?;
     drop(rt);
-    let ctx = JobContext::load(remote.clone(), AllowedNetworks::ALL, 1)?;
+    let mut ctx = JobContext::load(remote.clone(), AllowedNetworks::ALL, 1)?;
+    ctx.params.batch = batch;
     let jobs: Vec<pb::Job> = instructions
         .iter()
         .map(|i| local_job(i, url, s, &remote))
