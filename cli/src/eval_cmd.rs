@@ -8,8 +8,13 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 use kitchen_r_core::dataset::Split;
-use kitchen_r_episode::eval::{EvalConfig, EvalOptions, EvalReport, PolicyChoice, evaluate, instructions};
-use kitchen_r_worker::job::local::{LocalEpisode, LocalReport, LocalSettings, Mode, evaluate_endpoint};
+use kitchen_r_episode::eval::{
+    EvalConfig, EvalOptions, EvalReport, PolicyChoice, evaluate, evaluate_batch, instructions,
+};
+use kitchen_r_sim::EpisodeConfig;
+use kitchen_r_worker::job::local::{
+    LocalEpisode, LocalReport, LocalSettings, Mode, evaluate_endpoint, evaluate_endpoint_batch,
+};
 
 #[derive(Args, Debug)]
 pub(crate) struct EvalArgs {
@@ -36,9 +41,14 @@ pub(crate) struct EvalArgs {
     /// Instruction split: dev (public plans) or test (needs --ground-truth).
     #[arg(long, default_value = "dev")]
     split: Split,
-    /// Evaluate the first N instructions of the split [default: all].
+    /// Evaluate the first N instructions of the split (or episodes of --episodes-file)
+    /// [default: all].
     #[arg(long)]
     episodes: Option<usize>,
+    /// Run exactly the episodes of a saved batch (`kitchen-r episodes generate`) instead of one
+    /// per split instruction.
+    #[arg(long, value_name = "FILE", conflicts_with = "ground_truth")]
+    episodes_file: Option<PathBuf>,
     /// Print one JSON object (with every episode's outcome) instead of the table.
     #[arg(long)]
     json: bool,
@@ -61,8 +71,15 @@ pub(crate) fn eval(args: EvalArgs) -> anyhow::Result<()> {
         Some(p) => EvalConfig::load(p).with_context(|| format!("reading {}", p.display()))?,
         None => EvalConfig::load_default()?,
     };
+    let batch = match &args.episodes_file {
+        Some(p) => Some(
+            kitchen_r_sim::episode::load_batch(p)
+                .with_context(|| format!("reading the episodes file {}", p.display()))?,
+        ),
+        None => None,
+    };
     if args.policy.starts_with("http://") || args.policy.starts_with("https://") {
-        return eval_endpoint(args, &config);
+        return eval_endpoint(args, &config, batch);
     }
     let policy: PolicyChoice = args.policy.parse()?;
     let opts = EvalOptions {
@@ -77,7 +94,7 @@ pub(crate) fn eval(args: EvalArgs) -> anyhow::Result<()> {
         run: config.run_options(),
     };
     let mut done = 0;
-    let report = evaluate(&opts, &mut |_, o| {
+    let mut progress = |_, o: &kitchen_r_episode::runner::EpisodeOutcome| {
         done += 1;
         let ok = o.tasks.iter().filter(|t| t.success).count();
         eprintln!(
@@ -92,7 +109,11 @@ pub(crate) fn eval(args: EvalArgs) -> anyhow::Result<()> {
         for t in o.tasks.iter().filter(|t| !t.success) {
             eprintln!("    failed {:?}: {}", t.step, t.failure.as_deref().unwrap_or(""));
         }
-    })?;
+    };
+    let report = match &batch {
+        Some(b) => evaluate_batch(&opts, b, &mut progress)?,
+        None => evaluate(&opts, &mut progress)?,
+    };
     if args.json {
         println!("{}", serde_json::to_string(&report)?);
     } else {
@@ -131,9 +152,15 @@ fn print_table(r: &EvalReport) {
 }
 
 /// `--policy http://…`: every instruction as the job the server would lease for it.
-fn eval_endpoint(args: EvalArgs, config: &EvalConfig) -> anyhow::Result<()> {
-    let mut ins = instructions(args.split, args.ground_truth.as_ref())?;
-    ins.truncate(args.episodes.unwrap_or(usize::MAX));
+fn eval_endpoint(
+    args: EvalArgs,
+    config: &EvalConfig,
+    batch: Option<Vec<EpisodeConfig>>,
+) -> anyhow::Result<()> {
+    let ins = match &batch {
+        Some(_) => Vec::new(),
+        None => instructions(args.split, args.ground_truth.as_ref())?,
+    };
     let settings = LocalSettings {
         mode: args.mode,
         seed: args.seed.unwrap_or(config.seed),
@@ -145,35 +172,43 @@ fn eval_endpoint(args: EvalArgs, config: &EvalConfig) -> anyhow::Result<()> {
             .jobs
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
     };
+    let n = args.episodes.unwrap_or(usize::MAX);
     let mut done = 0;
-    let report = evaluate_endpoint(
-        &args.policy,
-        args.split,
-        &ins,
-        &settings,
-        &mut |e: &LocalEpisode| {
-            done += 1;
-            if !e.platform_error.is_empty() {
-                eprintln!(
-                    "[{done}] {} {}  platform error: {}",
-                    e.episode_key, e.scene, e.platform_error
-                );
-                return;
-            }
-            let ok = e.tasks.iter().filter(|t| t.success).count();
-            let samples: u32 = e.tasks.iter().map(|t| t.mse_samples).sum();
+    let mut progress = |e: &LocalEpisode| {
+        done += 1;
+        if !e.platform_error.is_empty() {
             eprintln!(
-                "[{done}] {} {}  {ok}/{} tasks  {samples} MSE samples  wall {:.2} s",
-                e.episode_key,
-                e.scene,
-                e.tasks.len(),
-                e.wall_s
+                "[{done}] {} {}  platform error: {}",
+                e.episode_key, e.scene, e.platform_error
             );
-            for t in e.tasks.iter().filter(|t| !t.failure_reason.is_empty()) {
-                eprintln!("    {:?}: {}", t.step, t.failure_reason);
-            }
-        },
-    )?;
+            return;
+        }
+        let ok = e.tasks.iter().filter(|t| t.success).count();
+        let samples: u32 = e.tasks.iter().map(|t| t.mse_samples).sum();
+        eprintln!(
+            "[{done}] {} {}  {ok}/{} tasks  {samples} MSE samples  wall {:.2} s",
+            e.episode_key,
+            e.scene,
+            e.tasks.len(),
+            e.wall_s
+        );
+        for t in e.tasks.iter().filter(|t| !t.failure_reason.is_empty()) {
+            eprintln!("    {:?}: {}", t.step, t.failure_reason);
+        }
+    };
+    let report = match &batch {
+        Some(b) => {
+            let b = &b[..n.min(b.len())];
+            evaluate_endpoint_batch(&args.policy, args.split, b, &settings, &mut progress)?
+        }
+        None => evaluate_endpoint(
+            &args.policy,
+            args.split,
+            &ins[..n.min(ins.len())],
+            &settings,
+            &mut progress,
+        )?,
+    };
     if args.json {
         println!("{}", serde_json::to_string(&report)?);
     } else {

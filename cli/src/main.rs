@@ -10,6 +10,7 @@ mod check_policy_cmd;
 mod client_cmd;
 mod collect_cmd;
 mod dataset_cmd;
+mod episodes_cmd;
 mod eval_cmd;
 mod leaderboard_table;
 mod load_bench;
@@ -51,6 +52,8 @@ enum Command {
     Admin(admin_cmd::AdminArgs),
     /// Benchmark content: regenerate the instruction dataset.
     Dataset(dataset_cmd::DatasetArgs),
+    /// Saved batches of validation episodes: generate one, show one.
+    Episodes(episodes_cmd::EpisodesArgs),
     /// Kitchen twin tools (render what the robot sees).
     Sim(sim_cmd::SimArgs),
     /// Performance figures.
@@ -77,6 +80,7 @@ fn main() -> anyhow::Result<()> {
         Some(Command::Rescore(args)) => client_cmd::rescore(args),
         Some(Command::Admin(args)) => admin_cmd::admin(args),
         Some(Command::Dataset(args)) => dataset_cmd::dataset(args),
+        Some(Command::Episodes(args)) => episodes_cmd::episodes(args),
         Some(Command::Sim(args)) => sim_cmd::sim(args),
         Some(Command::Bench(args)) => sim_cmd::bench(args),
         Some(Command::Eval(args)) => eval_cmd::eval(args),

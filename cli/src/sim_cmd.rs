@@ -15,17 +15,28 @@ pub(crate) struct SimArgs {
 #[derive(Subcommand, Debug)]
 pub(crate) enum SimCommand {
     /// Write every camera's RGB and depth (from the start and each zone's approach point) and a
-    /// top-down view of a scene as PNG.
+    /// top-down view of a scene as PNG; or, with --episodes-file and --sheet, one contact sheet
+    /// of a saved batch's first base-camera frames.
     Render {
         /// Scene id (file stem under assets/scenes).
-        #[arg(long)]
-        scene: String,
+        #[arg(long, required_unless_present = "episodes_file", requires = "out")]
+        scene: Option<String>,
         /// Output directory (created if missing).
         #[arg(long)]
-        out: PathBuf,
+        out: Option<PathBuf>,
         /// Seed for the robot start and background objects.
         #[arg(long, default_value_t = 0)]
         seed: u64,
+        /// A saved batch (`kitchen-r episodes generate`) to draw a contact sheet of.
+        #[arg(long, value_name = "FILE", conflicts_with = "scene", requires = "sheet")]
+        episodes_file: Option<PathBuf>,
+        /// The contact sheet PNG: the first base-camera frame of each of the first --count
+        /// episodes, four to a row.
+        #[arg(long, value_name = "PNG")]
+        sheet: Option<PathBuf>,
+        /// Episodes on the contact sheet.
+        #[arg(long, default_value_t = 8)]
+        count: usize,
     },
 }
 
@@ -57,7 +68,26 @@ pub(crate) enum BenchCommand {
 
 pub(crate) fn sim(args: SimArgs) -> anyhow::Result<()> {
     match args.command {
-        SimCommand::Render { scene, out, seed } => {
+        SimCommand::Render {
+            scene,
+            out,
+            seed,
+            episodes_file,
+            sheet,
+            count,
+        } => {
+            if let (Some(file), Some(sheet)) = (episodes_file, sheet) {
+                let batch = kitchen_r_sim::episode::load_batch(&file)?;
+                if batch.is_empty() || count == 0 {
+                    anyhow::bail!("{}: no episodes to draw", file.display());
+                }
+                kitchen_r_sim::render::batch_sheet(&batch, count, &sheet)?;
+                println!("{}", sheet.display());
+                return Ok(());
+            }
+            let (Some(scene), Some(out)) = (scene, out) else {
+                anyhow::bail!("sim render needs --scene and --out, or --episodes-file and --sheet");
+            };
             for path in kitchen_r_sim::render::render_scene(&scene, &out, seed)? {
                 println!("{}", path.display());
             }

@@ -110,6 +110,50 @@ pub fn render_scene(scene_id: &str, out: &Path, seed: u64) -> Result<Vec<PathBuf
     Ok(written)
 }
 
+/// A contact sheet of a batch: the first base-camera frame (the first camera if none is called
+/// `base`) of each of the first `n` episodes, twice enlarged, four to a row, in batch order.
+pub fn batch_sheet(batch: &[EpisodeConfig], n: usize, path: &Path) -> Result<(), SimError> {
+    let assets = Assets::load_default()?;
+    let sensors = SensorsConfig::load_default()?;
+    let camera = sensors.cameras.iter().position(|c| c.name == "base").unwrap_or(0);
+    let mut sim: Option<Sim> = None;
+    let mut tiles = Vec::new();
+    for ep in batch.iter().take(n) {
+        let obs = match sim.as_mut() {
+            Some(s) => s.reset(ep)?,
+            None => {
+                let (s, obs) = Sim::new(assets.clone(), SimConfig::load_default()?, sensors.clone(), ep)?;
+                sim = Some(s);
+                obs
+            }
+        };
+        let img = obs
+            .images
+            .get(camera)
+            .ok_or_else(|| SimError::Config("configs/sensors.toml has no camera".into()))?;
+        tiles.push(image::RgbImage::from_raw(img.width, img.height, img.rgb.clone()).unwrap_or_default());
+    }
+    tile(&tiles, 2, path)
+}
+
+/// `tiles` enlarged `scale` times, four to a row.
+fn tile(tiles: &[image::RgbImage], scale: u32, path: &Path) -> Result<(), SimError> {
+    let Some(first) = tiles.first() else { return Ok(()) };
+    let (w, h) = (first.width() * scale, first.height() * scale);
+    let cols = (tiles.len() as u32).min(4);
+    let rows = (tiles.len() as u32).div_ceil(cols);
+    let mut sheet = image::RgbImage::new(w * cols, h * rows);
+    for (i, t) in tiles.iter().enumerate() {
+        let big = image::imageops::resize(t, w, h, image::imageops::FilterType::Nearest);
+        let (x, y) = ((i as u32 % cols) * w, (i as u32 / cols) * h);
+        image::imageops::replace(&mut sheet, &big, i64::from(x), i64::from(y));
+    }
+    sheet.save(path).map_err(|e| SimError::Image {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })
+}
+
 /// Every camera RGB image written so far, three times enlarged, tiled four to a row.
 fn contact_sheet(files: &[PathBuf], path: &Path) -> Result<(), SimError> {
     let err = |p: &Path, e: image::ImageError| SimError::Image {
@@ -121,17 +165,8 @@ fn contact_sheet(files: &[PathBuf], path: &Path) -> Result<(), SimError> {
         .filter(|p| p.to_string_lossy().ends_with("_rgb.png"))
         .map(|p| image::open(p).map_err(|e| err(p, e)))
         .collect::<Result<Vec<_>, _>>()?;
-    let Some(first) = tiles.first() else { return Ok(()) };
-    let (w, h) = (first.width() * 3, first.height() * 3);
-    let cols = 4u32;
-    let rows = (tiles.len() as u32).div_ceil(cols);
-    let mut sheet = image::RgbImage::new(w * cols, h * rows);
-    for (i, t) in tiles.iter().enumerate() {
-        let big = image::imageops::resize(&t.to_rgb8(), w, h, image::imageops::FilterType::Nearest);
-        let (x, y) = ((i as u32 % cols) * w, (i as u32 / cols) * h);
-        image::imageops::replace(&mut sheet, &big, i64::from(x), i64::from(y));
-    }
-    sheet.save(path).map_err(|e| err(path, e))
+    let tiles: Vec<image::RgbImage> = tiles.iter().map(|t| t.to_rgb8()).collect();
+    tile(&tiles, 3, path)
 }
 
 /// Orthographic view from above, north up, zones tinted with their top-down colours.
