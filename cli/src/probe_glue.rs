@@ -21,6 +21,8 @@ impl PolicyProbe for WorkerProbe {
                     protocol_version: s.protocol_version,
                     max_concurrency: s.max_concurrency,
                     summary: s.summary,
+                    observation_history: s.observation_history,
+                    actions_executed_per_chunk: s.actions_executed_per_chunk,
                 }),
                 Err(
                     e

@@ -58,10 +58,7 @@ pub fn call_overhead(calls: usize) -> Result<CallOverhead, RemoteError> {
         .map_err(|e| RemoteError::Runtime(e.to_string()))?;
     let spec = PolicySpec {
         name: "trivial".into(),
-        horizon: HORIZON,
-        action_dim: ACTION_DIM,
-        cameras: vec![],
-        max_concurrency: 1,
+        ..PolicySpec::default()
     };
     let factory: PolicyFactory = Arc::new(move || Box::new(Trivial(spec.clone())) as Box<dyn Policy>);
     let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
@@ -92,6 +89,9 @@ pub fn call_overhead(calls: usize) -> Result<CallOverhead, RemoteError> {
             task_index: 0,
             sub_task: "move to the blue zone",
             observation: &obs,
+            ee_pose: [0.35, 0.0, 0.95, 0.0, 1.0, 0.0, 0.0],
+            previous_action: None,
+            history: &[],
             privileged: None,
         };
         let t = Instant::now();

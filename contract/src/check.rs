@@ -17,7 +17,7 @@ use tonic_health::pb::health_check_response::ServingStatus;
 use crate::conn::{Conn, describe};
 use crate::convert::{self, CameraPlan, MAX_SIDE};
 use crate::{Credentials, RemoteConfig, SimCamera, client, endpoint};
-use kitchen_r_episode::policy::{HORIZON, PolicyInput, validate_chunk};
+use kitchen_r_episode::policy::{ChunkTolerance, HORIZON, PolicyInput, PolicySpec, check_chunk};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Verdict {
@@ -87,12 +87,13 @@ impl Report {
 }
 
 /// Check names, in the order they run.
-pub(crate) const NAMES: [&str; 9] = [
+pub(crate) const NAMES: [&str; 10] = [
     "reachable",
     "health",
     "protocol",
     "shape",
     "cameras",
+    "v1.1",
     "reset",
     "act",
     "act-again",
@@ -193,13 +194,37 @@ async fn probe(
         }
     };
     report.push(NAMES[4], Ok(describe_cameras(&plans)));
-    if client::check_spec(&spec, sim).is_err() {
-        return report.skip_rest(5, "the handshake failed");
+    let v1_1 = client::check_v1_1(&spec, cfg);
+    let v1_1_ok = v1_1.is_ok();
+    report.push(NAMES[5], v1_1.map(|(h, k)| describe_v1_1(h, k, cfg)));
+    match client::check_spec(&spec, sim, cfg) {
+        Ok((checked, _)) => acts(report, &mut conn, cfg, &plans, &checked).await,
+        Err(_) if !v1_1_ok => report.skip_rest(6, "the v1.1 fields are out of range"),
+        Err(_) => report.skip_rest(6, "the handshake failed"),
     }
-    acts(report, &mut conn, cfg, &plans).await;
 }
 
-async fn acts(report: &mut Report, conn: &mut Conn, cfg: &RemoteConfig, plans: &[CameraPlan]) {
+/// What the policy chose of contract v1.1 (history, execution count), and what it gets.
+fn describe_v1_1(history: usize, execute: Option<usize>, cfg: &RemoteConfig) -> String {
+    let execute = match execute {
+        Some(n) => format!("executes {n} actions per chunk (its choice)"),
+        None => format!(
+            "executes the organiser's {} actions per chunk",
+            cfg.actions_executed_per_chunk
+        ),
+    };
+    format!(
+        "observation history {history} frame(s); {execute}; every observation carries the hand pose and the previous action"
+    )
+}
+
+async fn acts(
+    report: &mut Report,
+    conn: &mut Conn,
+    cfg: &RemoteConfig,
+    plans: &[CameraPlan],
+    spec: &PolicySpec,
+) {
     let episode = "check-policy";
     let reset = pb::ResetRequest {
         episode_id: episode.into(),
@@ -208,20 +233,28 @@ async fn acts(report: &mut Report, conn: &mut Conn, cfg: &RemoteConfig, plans: &
         scene_id: "kitchen_a".into(),
     };
     if !report.push(
-        NAMES[5],
+        NAMES[6],
         conn.reset(reset)
             .await
             .map(|()| "Reset accepted".into())
             .map_err(|e| e.to_string()),
     ) {
-        return report.skip_rest(6, "Reset failed");
+        return report.skip_rest(7, "Reset failed");
     }
     let deadline = cfg.call_deadline().as_secs_f64();
-    for (name, step) in [(NAMES[6], 0), (NAMES[7], 8)] {
-        let r = one_act(conn, episode, step, plans).await;
+    let k = spec
+        .actions_executed_per_chunk
+        .unwrap_or(cfg.actions_executed_per_chunk as usize) as u64;
+    let history = spec.observation_history;
+    for (name, step) in [(NAMES[7], 0), (NAMES[8], k)] {
+        let r = one_act(conn, episode, step, plans, history).await;
         report.push(
             name,
-            r.map(|ms| format!("valid 16x10 chunk for step {step} in {ms:.1} ms (deadline {deadline} s)")),
+            r.map(|(ms, note)| {
+                format!(
+                    "valid 16x10 chunk for step {step} ({history} frame(s)) in {ms:.1} ms (deadline {deadline} s){note}"
+                )
+            }),
         );
     }
     let large: Vec<CameraPlan> = plans
@@ -232,36 +265,50 @@ async fn acts(report: &mut Report, conn: &mut Conn, cfg: &RemoteConfig, plans: &
             ..p.clone()
         })
         .collect();
-    let r = one_act(conn, episode, 16, &large).await;
+    let r = one_act(conn, episode, 2 * k, &large, history).await;
     report.push(
-        NAMES[8],
-        r.map(|ms| format!("{} camera(s) at {MAX_SIDE}x{MAX_SIDE} accepted in {ms:.1} ms", large.len()))
+        NAMES[9],
+        r.map(|(ms, _)| format!("{} camera(s) at {MAX_SIDE}x{MAX_SIDE} accepted in {ms:.1} ms", large.len()))
             .map_err(|e| format!("{e} (the worker may send images up to {MAX_SIDE}x{MAX_SIDE}: raise the server's receive limit)")),
     );
 }
 
-/// One Act on a synthetic observation; the elapsed milliseconds when the chunk is valid.
-async fn one_act(conn: &mut Conn, episode: &str, step: u64, plans: &[CameraPlan]) -> Result<f64, String> {
-    let obs = synthetic(plans);
+/// One Act on a synthetic observation (with `history - 1` earlier frames, padded as at the
+/// start of a task); the elapsed milliseconds when the chunk is valid, and a note when values
+/// had to be corrected within the default tolerances (a warning in a real run).
+async fn one_act(
+    conn: &mut Conn,
+    episode: &str,
+    step: u64,
+    plans: &[CameraPlan],
+    history: usize,
+) -> Result<(f64, String), String> {
+    let obs = synthetic(plans, step);
     let input = PolicyInput {
         episode_id: episode,
         step,
         task_index: 0,
         sub_task: "move to the blue zone",
         observation: &obs,
+        ee_pose: [0.35, 0.0, 0.95, 0.0, 1.0, 0.0, 0.0],
+        previous_action: (step > 0).then_some([0.0, 0.0, 0.35, 0.0, 0.95, 0.0, 1.0, 0.0, 0.0, 1.0]),
+        history: &[],
         privileged: None,
     };
-    let wire = convert::observation(&input, plans).map_err(|e| e.to_string())?;
+    let wire = convert::observation(&input, plans, history).map_err(|e| e.to_string())?;
     let t = Instant::now();
     let answer = conn.act(wire).await.map_err(|e| e.to_string())?;
     let ms = t.elapsed().as_secs_f64() * 1e3;
-    let chunk = convert::chunk_from_wire(&answer, HORIZON).map_err(|e| e.to_string())?;
-    validate_chunk(&chunk, HORIZON).map_err(|e| e.to_string())?;
-    Ok(ms)
+    let mut chunk = convert::chunk_from_wire(&answer, HORIZON).map_err(|e| e.to_string())?;
+    let fixed = check_chunk(&mut chunk, HORIZON, &ChunkTolerance::default()).map_err(|e| e.to_string())?;
+    let note = fixed
+        .warning()
+        .map_or_else(String::new, |w| format!("; warning: {w} (within tolerance)"));
+    Ok((ms, note))
 }
 
 /// A grey-gradient frame per camera at exactly the planned size (no resampling).
-fn synthetic(plans: &[CameraPlan]) -> Observation {
+fn synthetic(plans: &[CameraPlan], step: u64) -> Observation {
     let images = plans
         .iter()
         .map(|p| {
@@ -276,7 +323,7 @@ fn synthetic(plans: &[CameraPlan]) -> Observation {
         })
         .collect();
     Observation {
-        time: 0.0,
+        time: step as f64 * 0.1,
         images,
         lidar: None,
         odometry: Odometry {

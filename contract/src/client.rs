@@ -12,7 +12,9 @@ use kitchen_r_proto::policy::v1 as pb;
 use crate::conn::Conn;
 use crate::convert::{self, CameraPlan};
 use crate::{Credentials, RemoteConfig, RemoteError, SimCamera, endpoint};
-use kitchen_r_episode::policy::{ACTION_DIM, HORIZON, Policy, PolicyError, PolicyInput, PolicySpec};
+use kitchen_r_episode::policy::{
+    ACTION_DIM, HORIZON, MAX_OBSERVATION_HISTORY, Policy, PolicyError, PolicyInput, PolicySpec,
+};
 
 pub struct RemotePolicy {
     rt: tokio::runtime::Runtime,
@@ -55,10 +57,11 @@ impl RemotePolicy {
             conn.wait_serving(cfg.startup_deadline()).await?;
             conn.get_spec(cfg).await
         })?;
-        let (spec, cameras) = check_spec(&wire_spec, cameras).map_err(|reason| RemoteError::Handshake {
-            endpoint: conn.endpoint.uri.clone(),
-            reason,
-        })?;
+        let (spec, cameras) =
+            check_spec(&wire_spec, cameras, cfg).map_err(|reason| RemoteError::Handshake {
+                endpoint: conn.endpoint.uri.clone(),
+                reason,
+            })?;
         Ok(RemotePolicy {
             rt,
             conn,
@@ -81,10 +84,12 @@ impl RemotePolicy {
 }
 
 /// The handshake rules: same protocol version, horizon 16, 10 values per action, cameras the
-/// simulator has at a supported resolution and encoding.
+/// simulator has at a supported resolution and encoding, and (v1.1) an observation history in
+/// 1..=8 and an execution count between the organiser's minimum (`cfg`) and the horizon.
 pub(crate) fn check_spec(
     spec: &pb::PolicySpec,
     cameras: &[SimCamera],
+    cfg: &RemoteConfig,
 ) -> Result<(PolicySpec, Vec<CameraPlan>), String> {
     if spec.protocol_version != POLICY_PROTOCOL_VERSION {
         return Err(format!(
@@ -99,6 +104,7 @@ pub(crate) fn check_spec(
         return Err(format!("action_dim is {}, must be {ACTION_DIM}", spec.action_dim));
     }
     let plans = convert::plan_cameras(spec, cameras)?;
+    let (history, execute) = check_v1_1(spec, cfg)?;
     Ok((
         PolicySpec {
             name: spec.name.clone(),
@@ -106,9 +112,38 @@ pub(crate) fn check_spec(
             action_dim: ACTION_DIM,
             cameras: plans.iter().map(|c| c.name.clone()).collect(),
             max_concurrency: spec.max_concurrency.max(1),
+            observation_history: history,
+            actions_executed_per_chunk: execute,
         },
         plans,
     ))
+}
+
+/// `observation_history` (0 = 1) and `actions_executed_per_chunk` (0 = the organiser's) within
+/// their ranges; the reason names the field and the range.
+pub(crate) fn check_v1_1(
+    spec: &pb::PolicySpec,
+    cfg: &RemoteConfig,
+) -> Result<(usize, Option<usize>), String> {
+    let history = spec.observation_history.max(1) as usize;
+    if history > MAX_OBSERVATION_HISTORY {
+        return Err(format!(
+            "observation_history is {history}, must be between 1 and {MAX_OBSERVATION_HISTORY} (0 means 1)"
+        ));
+    }
+    let min = cfg.min_actions_executed_per_chunk.clamp(1, HORIZON as u32);
+    let execute = match spec.actions_executed_per_chunk {
+        0 => None,
+        n if (min..=HORIZON as u32).contains(&n) => Some(n as usize),
+        n => {
+            return Err(format!(
+                "actions_executed_per_chunk is {n}, must be between {min} (this organiser's \
+                 minimum) and {HORIZON}, or 0 for the organiser's default {}",
+                cfg.actions_executed_per_chunk
+            ));
+        }
+    };
+    Ok((history, execute))
 }
 
 impl Policy for RemotePolicy {
@@ -127,7 +162,7 @@ impl Policy for RemotePolicy {
     }
 
     fn act(&mut self, input: &PolicyInput<'_>) -> Result<Vec<[f64; ACTION_DIM]>, PolicyError> {
-        let obs = convert::observation(input, &self.cameras)?;
+        let obs = convert::observation(input, &self.cameras, self.spec.observation_history)?;
         let chunk = self.rt.block_on(self.conn.act(obs))?;
         convert::chunk_from_wire(&chunk, self.spec.horizon)
     }

@@ -20,7 +20,7 @@ use tonic_health::pb::health_client::HealthClient;
 
 use crate::endpoint::Endpoint;
 use crate::{Credentials, RemoteConfig, RemoteError};
-use kitchen_r_episode::policy::PolicyError;
+use kitchen_r_episode::policy::{MAX_OBSERVATION_HISTORY, PolicyError};
 
 /// Adds `authorization: Bearer <token>` to every call when the participant gave a token.
 #[derive(Debug, Clone)]
@@ -143,6 +143,9 @@ impl Conn {
             protocol_version: kitchen_r_proto::POLICY_PROTOCOL_VERSION,
             actions_executed_per_chunk: cfg.actions_executed_per_chunk,
             control_rate_hz: cfg.control_rate_hz,
+            minor_version: kitchen_r_proto::POLICY_MINOR_VERSION,
+            min_actions_executed_per_chunk: cfg.min_actions_executed_per_chunk,
+            max_observation_history: MAX_OBSERVATION_HISTORY as u32,
         });
         req.set_timeout(self.call_deadline);
         within(self.call_deadline, self.policy.get_spec(req))

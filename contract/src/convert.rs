@@ -12,7 +12,7 @@ use kitchen_r_sim::task::TaskTarget;
 use kitchen_r_sim::types::Odometry;
 
 use crate::SimCamera;
-use kitchen_r_episode::policy::{ACTION_DIM, PolicyError, PolicyInput, Privileged, PrivilegedObject};
+use kitchen_r_episode::policy::{ACTION_DIM, Frame, PolicyError, PolicyInput, Privileged, PrivilegedObject};
 
 /// JPEG quality promised in `policy.proto`.
 const JPEG_QUALITY: u8 = 90;
@@ -85,12 +85,57 @@ pub(crate) fn plan_cameras(spec: &pb::PolicySpec, sim: &[SimCamera]) -> Result<V
     Ok(out)
 }
 
-/// The observation the policy receives for `input`.
+/// The observation the policy receives for `input`, with the `history - 1` frames before it
+/// (contract v1.1), padded at the front with the task's first frame where the task is younger.
 pub(crate) fn observation(
     input: &PolicyInput<'_>,
     cameras: &[CameraPlan],
+    history: usize,
 ) -> Result<pb::Observation, PolicyError> {
     let o = input.observation;
+    let (images, depth) = encode_images(o, cameras)?;
+    let robot = robot_state(o, &input.ee_pose);
+    let previous_action = input.previous_action.map_or_else(Vec::new, |a| a.to_vec());
+    let want = history.saturating_sub(1);
+    let shown = &input.history[input.history.len().saturating_sub(want)..];
+    let mut frames = Vec::with_capacity(want);
+    for f in shown {
+        frames.push(frame_to_wire(f, cameras)?);
+    }
+    if frames.len() < want {
+        let pad = match frames.first() {
+            Some(f) => f.clone(),
+            None => pb::Frame {
+                step: input.step,
+                sim_time: o.time,
+                images: images.clone(),
+                depth: depth.clone(),
+                robot: Some(robot.clone()),
+                previous_action: previous_action.clone(),
+            },
+        };
+        frames.splice(0..0, std::iter::repeat_n(pad, want - frames.len()));
+    }
+    Ok(pb::Observation {
+        episode_id: input.episode_id.to_string(),
+        step: input.step,
+        task_index: input.task_index as u32,
+        sub_task: input.sub_task.to_string(),
+        images,
+        depth,
+        robot: Some(robot),
+        sim_time: o.time,
+        privileged: input.privileged.map(privileged_to_wire),
+        previous_action,
+        history: frames,
+    })
+}
+
+/// Colour (and, where asked, depth) images of the planned cameras.
+fn encode_images(
+    o: &Observation,
+    cameras: &[CameraPlan],
+) -> Result<(Vec<pb::Image>, Vec<pb::DepthImage>), PolicyError> {
     let mut images = Vec::with_capacity(cameras.len());
     let mut depth = Vec::new();
     for plan in cameras {
@@ -105,27 +150,34 @@ pub(crate) fn observation(
             depth.push(encode_depth(img, plan));
         }
     }
+    Ok((images, depth))
+}
+
+/// Odometry, joints, gripper opening and the hand pose (in every run since v1.1).
+fn robot_state(o: &Observation, ee_pose: &[f64; 7]) -> pb::RobotState {
     let [x, y, yaw] = o.odometry.pose;
     let [v, w] = o.odometry.velocity;
-    Ok(pb::Observation {
-        episode_id: input.episode_id.to_string(),
-        step: input.step,
-        task_index: input.task_index as u32,
-        sub_task: input.sub_task.to_string(),
+    pb::RobotState {
+        base_x: x,
+        base_y: y,
+        base_yaw: yaw,
+        base_v: v,
+        base_omega: w,
+        arm_joints: o.joints.to_vec(),
+        ee_pose: ee_pose.to_vec(),
+        gripper: o.gripper,
+    }
+}
+
+fn frame_to_wire(f: &Frame, cameras: &[CameraPlan]) -> Result<pb::Frame, PolicyError> {
+    let (images, depth) = encode_images(&f.observation, cameras)?;
+    Ok(pb::Frame {
+        step: f.step,
+        sim_time: f.observation.time,
         images,
         depth,
-        robot: Some(pb::RobotState {
-            base_x: x,
-            base_y: y,
-            base_yaw: yaw,
-            base_v: v,
-            base_omega: w,
-            arm_joints: o.joints.to_vec(),
-            ee_pose: input.privileged.map(|p| p.ee_pose.to_vec()).unwrap_or_default(),
-            gripper: o.gripper,
-        }),
-        sim_time: o.time,
-        privileged: input.privileged.map(privileged_to_wire),
+        robot: Some(robot_state(&f.observation, &f.ee_pose)),
+        previous_action: f.previous_action.map_or_else(Vec::new, |a| a.to_vec()),
     })
 }
 
@@ -183,8 +235,50 @@ fn encode_depth(img: &CameraImage, plan: &CameraPlan) -> pb::DepthImage {
 /// The observation a served in-process policy sees: the wire message back in the
 /// simulator's types (RAW and JPEG images decoded, +inf depth back to 0).
 pub(crate) fn observation_from_wire(o: &pb::Observation) -> Result<Observation, String> {
-    let mut images = Vec::with_capacity(o.images.len());
-    for i in &o.images {
+    let r = o.robot.clone().unwrap_or_default();
+    let mut obs = observation_parts(&o.images, &o.depth, &r, o.sim_time)?;
+    obs.task = Some(o.sub_task.clone());
+    Ok(obs)
+}
+
+/// A wire frame of an observation history back in the runner's types.
+pub(crate) fn frame_from_wire(f: &pb::Frame) -> Result<Frame, String> {
+    let r = f.robot.clone().unwrap_or_default();
+    Ok(Frame {
+        step: f.step,
+        observation: observation_parts(&f.images, &f.depth, &r, f.sim_time)?,
+        ee_pose: ee_pose_from_wire(&r.ee_pose)?,
+        previous_action: action_from_wire(&f.previous_action)?,
+    })
+}
+
+/// The 7-value hand pose; an empty one (a v1.0 worker) reads as zeros.
+pub(crate) fn ee_pose_from_wire(v: &[f64]) -> Result<[f64; 7], String> {
+    if v.is_empty() {
+        return Ok([0.0; 7]);
+    }
+    v.try_into()
+        .map_err(|_| format!("robot.ee_pose has {} values, not 7", v.len()))
+}
+
+/// A previous action: empty for none, else 10 values.
+pub(crate) fn action_from_wire(v: &[f64]) -> Result<Option<[f64; ACTION_DIM]>, String> {
+    if v.is_empty() {
+        return Ok(None);
+    }
+    v.try_into()
+        .map(Some)
+        .map_err(|_| format!("previous_action has {} values, not {ACTION_DIM}", v.len()))
+}
+
+fn observation_parts(
+    wire_images: &[pb::Image],
+    wire_depth: &[pb::DepthImage],
+    r: &pb::RobotState,
+    sim_time: f64,
+) -> Result<Observation, String> {
+    let mut images = Vec::with_capacity(wire_images.len());
+    for i in wire_images {
         let rgb = match pb::ImageEncoding::try_from(i.encoding) {
             Ok(pb::ImageEncoding::Jpeg) => {
                 image::load_from_memory_with_format(&i.data, image::ImageFormat::Jpeg)
@@ -203,8 +297,7 @@ pub(crate) fn observation_from_wire(o: &pb::Observation) -> Result<Observation, 
                 i.height
             ));
         }
-        let depth = o
-            .depth
+        let depth = wire_depth
             .iter()
             .find(|d| d.camera == i.camera)
             .map_or_else(Vec::new, |d| {
@@ -222,13 +315,12 @@ pub(crate) fn observation_from_wire(o: &pb::Observation) -> Result<Observation, 
             depth,
         });
     }
-    let r = o.robot.clone().unwrap_or_default();
     let mut joints = [0.0; 6];
     for (j, v) in joints.iter_mut().zip(&r.arm_joints) {
         *j = *v;
     }
     Ok(Observation {
-        time: o.sim_time,
+        time: sim_time,
         images,
         lidar: None,
         odometry: Odometry {
@@ -237,7 +329,7 @@ pub(crate) fn observation_from_wire(o: &pb::Observation) -> Result<Observation, 
         },
         joints,
         gripper: r.gripper,
-        task: Some(o.sub_task.clone()),
+        task: None,
     })
 }
 
@@ -388,9 +480,12 @@ mod tests {
             task_index: 1,
             sub_task: "pick the bowl",
             observation: &obs,
+            ee_pose: [0.4, 0.0, 0.9, 1.0, 0.0, 0.0, 0.0],
+            previous_action: None,
+            history: &[],
             privileged: None,
         };
-        let wire = observation(&input, std::slice::from_ref(&plan)).unwrap();
+        let wire = observation(&input, std::slice::from_ref(&plan), 1).unwrap();
         assert_eq!(&wire.images[0].data[..2], &[0xFF, 0xD8], "a JPEG file");
         let d = &wire.depth[0].data;
         assert_eq!(d.len(), 64 * 32 * 4);
@@ -399,7 +494,12 @@ mod tests {
             f32::INFINITY,
             "no return is +inf"
         );
-        assert!(wire.privileged.is_none() && wire.robot.as_ref().unwrap().ee_pose.is_empty());
+        assert!(wire.privileged.is_none() && wire.history.is_empty() && wire.previous_action.is_empty());
+        assert_eq!(
+            wire.robot.as_ref().unwrap().ee_pose,
+            input.ee_pose,
+            "in every run"
+        );
         let back = observation_from_wire(&wire).unwrap();
         assert_eq!(
             (back.images[0].width, back.images[0].rgb.len()),
@@ -407,6 +507,65 @@ mod tests {
         );
         assert_eq!(back.images[0].depth[0], 0.0);
         assert_eq!(back.odometry, obs.odometry);
+    }
+
+    #[test]
+    fn history_is_padded_with_the_tasks_first_frame_and_round_trips() {
+        let plan = CameraPlan {
+            name: "base".into(),
+            width: 8,
+            height: 8,
+            encoding: pb::ImageEncoding::RawRgb8,
+            depth: false,
+        };
+        let frame = |step: u64| Frame {
+            step,
+            observation: Observation {
+                time: step as f64 * 0.1,
+                ..frame()
+            },
+            ee_pose: [step as f64; 7],
+            previous_action: (step > 0).then_some([step as f64; ACTION_DIM]),
+        };
+        let (f4, f5, f6) = (frame(4), frame(5), frame(6));
+        let earlier = [f4.clone(), f5.clone()];
+        let input = |history: &'static str, h: &[Frame]| {
+            let wire = observation(
+                &PolicyInput {
+                    episode_id: "e",
+                    step: 6,
+                    task_index: 0,
+                    sub_task: history,
+                    observation: &f6.observation,
+                    ee_pose: f6.ee_pose,
+                    previous_action: f6.previous_action,
+                    history: h,
+                    privileged: None,
+                },
+                std::slice::from_ref(&plan),
+                4,
+            )
+            .unwrap();
+            wire.history.iter().map(|f| f.step).collect::<Vec<_>>()
+        };
+        assert_eq!(
+            input("two earlier", &earlier),
+            [4, 4, 5],
+            "padded with the oldest"
+        );
+        assert_eq!(
+            input("none earlier", &[]),
+            [6, 6, 6],
+            "the first frame of the task"
+        );
+        let wire = frame_to_wire(&f5, std::slice::from_ref(&plan)).unwrap();
+        let back = frame_from_wire(&wire).unwrap();
+        assert_eq!(
+            (back.step, back.ee_pose, back.previous_action),
+            (5, f5.ee_pose, f5.previous_action)
+        );
+        assert_eq!(action_from_wire(&[]).unwrap(), None);
+        assert!(ee_pose_from_wire(&[1.0; 3]).is_err());
     }
 
     #[test]

@@ -42,8 +42,12 @@ pub struct RemoteConfig {
     pub max_answer_bytes: usize,
     /// Largest observation sent, bytes (two 1024×1024 RGB-D cameras fit).
     pub max_request_bytes: usize,
-    /// Actions of each chunk executed before asking again, announced in GetSpec.
+    /// Actions of each chunk executed before asking again, announced in GetSpec: the default
+    /// for a policy that does not choose its own (contract v1.1).
     pub actions_executed_per_chunk: u32,
+    /// The smallest execution count a policy may choose in GetSpec (the largest is the
+    /// horizon); announced in GetSpec.
+    pub min_actions_executed_per_chunk: u32,
     /// Control rate announced in GetSpec, Hz.
     pub control_rate_hz: f64,
     /// Address ranges a policy endpoint may resolve to (`[policy.allowed_networks]`).
@@ -58,6 +62,7 @@ impl Default for RemoteConfig {
             max_answer_bytes: 1 << 20,
             max_request_bytes: 32 << 20,
             actions_executed_per_chunk: 8,
+            min_actions_executed_per_chunk: 1,
             control_rate_hz: 10.0,
             allowed_networks: AllowedNetworks::default(),
         }

@@ -26,6 +26,10 @@ pub struct ProbedSpec {
     pub max_concurrency: u32,
     /// The policy's self-declared name.
     pub name: String,
+    /// Contract v1.1 choices as announced (0 = not set), already checked against the ranges
+    /// of the probe's [`RemoteConfig`]: frames per Act and actions executed per chunk.
+    pub observation_history: u32,
+    pub actions_executed_per_chunk: u32,
     /// One line for the participant: name, version, shape, cameras, concurrency.
     pub summary: String,
 }
@@ -174,7 +178,7 @@ async fn handshake(
     let mut conn = Conn::new(ep, &creds, cfg)?;
     conn.wait_serving(cfg.startup_deadline()).await?;
     let spec = conn.get_spec(cfg).await?;
-    let (checked, plans) = client::check_spec(&spec, cameras).map_err(|reason| {
+    let (checked, plans) = client::check_spec(&spec, cameras, cfg).map_err(|reason| {
         ProbeFailure::Handshake(format!("GetSpec answer of {}: {reason}", conn.endpoint.uri))
     })?;
     let cams: Vec<String> = plans
@@ -194,21 +198,28 @@ async fn handshake(
             )
         })
         .collect();
+    let execute = checked
+        .actions_executed_per_chunk
+        .map_or_else(|| "default".to_string(), |n| n.to_string());
     let summary = format!(
-        "{:?} at {}: protocol v{}, horizon {}, action dim {}, cameras [{}], max concurrency {}",
+        "{:?} at {}: protocol v{}, horizon {}, action dim {}, cameras [{}], max concurrency {}, \
+         history {}, executes {execute}",
         spec.name,
         conn.endpoint.uri,
         spec.protocol_version,
         checked.horizon,
         checked.action_dim,
         cams.join(", "),
-        checked.max_concurrency
+        checked.max_concurrency,
+        checked.observation_history
     );
     Ok(ProbedSpec {
         endpoint: conn.endpoint.uri.clone(),
         protocol_version: spec.protocol_version,
         max_concurrency: checked.max_concurrency,
         name: spec.name,
+        observation_history: spec.observation_history,
+        actions_executed_per_chunk: spec.actions_executed_per_chunk,
         summary,
     })
 }

@@ -149,12 +149,21 @@ impl PolicyRpc for Service {
                 Some(pv) => Some(convert::privileged_from_wire(pv).map_err(Status::invalid_argument)?),
                 None => None,
             };
+            let history = (o.history.iter())
+                .map(convert::frame_from_wire)
+                .collect::<Result<Vec<_>, _>>()
+                .map_err(Status::invalid_argument)?;
+            let robot = o.robot.clone().unwrap_or_default();
             let input = PolicyInput {
                 episode_id: &o.episode_id,
                 step: o.step,
                 task_index: o.task_index as usize,
                 sub_task: &o.sub_task,
                 observation: &obs,
+                ee_pose: convert::ee_pose_from_wire(&robot.ee_pose).map_err(Status::invalid_argument)?,
+                previous_action: convert::action_from_wire(&o.previous_action)
+                    .map_err(Status::invalid_argument)?,
+                history: &history,
                 privileged: privileged.as_ref(),
             };
             let mut p = p.lock().map_err(|_| Status::internal("policy state poisoned"))?;
@@ -194,6 +203,13 @@ pub async fn serve_policy(
         action_dim: s.action_dim as u32,
         max_concurrency: s.max_concurrency,
         name: s.name,
+        // A v1 policy (history 1, organiser's count) announces neither, as a v1 server would.
+        observation_history: if s.observation_history > 1 {
+            s.observation_history as u32
+        } else {
+            0
+        },
+        actions_executed_per_chunk: s.actions_executed_per_chunk.map_or(0, |n| n as u32),
     };
     let service = Service {
         factory,

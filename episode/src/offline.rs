@@ -30,7 +30,10 @@ use kitchen_r_core::metrics::chunk_mse;
 use kitchen_r_sim::Sim;
 use serde::{Deserialize, Serialize};
 
-use crate::policy::{ACTION_DIM, HORIZON, Policy, PolicyError, PolicyInput, PolicySpec, validate_chunk};
+use crate::policy::{
+    ACTION_DIM, ChunkTolerance, Corrections, HORIZON, Policy, PolicyError, PolicyInput, PolicySpec,
+    check_chunk,
+};
 use crate::runner::{RunError, RunOptions, StepHook, run_episode};
 
 /// MSE charged for a failed prediction (defined with the metrics, so server and worker agree).
@@ -53,6 +56,9 @@ pub struct OfflineOptions {
     pub max_consecutive_timeouts: u32,
     /// Stop calling the policy once the episode has run this long.
     pub wall_budget: Option<Duration>,
+    /// How far a predicted chunk may be off; slips within are corrected and counted.
+    #[serde(default)]
+    pub chunk_tolerance: ChunkTolerance,
 }
 
 impl OfflineOptions {
@@ -66,6 +72,7 @@ impl OfflineOptions {
             privileged: run.privileged,
             max_consecutive_timeouts: run.max_consecutive_timeouts,
             wall_budget: run.wall_budget,
+            chunk_tolerance: run.chunk_tolerance,
         }
     }
 }
@@ -86,6 +93,9 @@ pub struct OfflineTask {
     /// Whether the expert completed the task (for logs; the policy is not credited with it).
     pub expert_success: bool,
     pub expert_failure: Option<String>,
+    /// Predicted chunk values corrected within tolerance (a warning, not a failure).
+    #[serde(default)]
+    pub corrections: Corrections,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -128,14 +138,23 @@ pub fn run_offline(
         // The expert is local: it never times out, and the budget limits the policy only.
         max_consecutive_timeouts: u32::MAX,
         wall_budget: None,
+        chunk_tolerance: ChunkTolerance::default(),
     };
+    // The runner captures the frames the participant's decisions show (its history); the
+    // expert's own execution count (one action per query) stays.
+    let shown = policy.spec();
+    let spec = PolicySpec {
+        observation_history: shown.observation_history,
+        ..expert.spec().clone()
+    };
+    let per_chunk = shown.actions_executed_per_chunk.unwrap_or(opts.execute);
     let mut shadow = Shadow {
-        spec: expert.spec().clone(),
+        spec,
         expert,
         policy,
         opts,
         started,
-        period: opts.execute.max(1) * opts.sample_every.max(1),
+        period: per_chunk.max(1) * opts.sample_every.max(1),
         step_in_task: 0,
         open: Vec::new(),
         tasks: Vec::new(),
@@ -164,6 +183,7 @@ pub fn run_offline(
                 failure: acc.reason(),
                 expert_success: t.success,
                 expert_failure: t.failure.clone(),
+                corrections: acc.corrections,
             }
         })
         .collect();
@@ -190,6 +210,7 @@ struct TaskAcc {
     failed: u32,
     sum: f64,
     first_failure: Option<(u64, String)>,
+    corrections: Corrections,
 }
 
 impl TaskAcc {
@@ -283,13 +304,15 @@ impl Shadow<'_> {
             ..*input
         };
         self.calls += 1;
-        let answer = self
-            .policy
-            .act(&shown)
-            .and_then(|c| validate_chunk(&c, HORIZON).map(|()| c));
+        let tolerance = self.opts.chunk_tolerance;
+        let answer = self.policy.act(&shown).and_then(|mut c| {
+            let fixed = check_chunk(&mut c, HORIZON, &tolerance)?;
+            Ok((c, fixed))
+        });
         match answer {
-            Ok(predicted) => {
+            Ok((predicted, fixed)) => {
                 self.timeouts = 0;
+                self.task().corrections.add(&fixed);
                 self.open.push(Window {
                     predicted,
                     executed: Vec::with_capacity(HORIZON),
@@ -328,9 +351,13 @@ impl Policy for Shadow<'_> {
         self.expert.reset(episode_id, task_index, sub_task)
     }
 
-    /// Images only for the decision points the participant's policy is asked at.
+    /// Images only for the frames the participant's policy is shown: the step of each sampled
+    /// decision point and the `observation_history - 1` steps before it. The frame about to be
+    /// captured is step `step_in_task` of the task.
     fn wants_images(&self) -> bool {
-        self.stopped.is_none() && self.step_in_task.is_multiple_of(self.period)
+        let s = self.step_in_task;
+        let next_sample = s.div_ceil(self.period) * self.period;
+        self.stopped.is_none() && next_sample - s < self.spec.observation_history.max(1)
     }
 
     fn act(&mut self, input: &PolicyInput<'_>) -> Result<Vec<[f64; ACTION_DIM]>, PolicyError> {
@@ -338,9 +365,9 @@ impl Policy for Shadow<'_> {
             self.sample(input);
         }
         self.step_in_task += 1;
-        let chunk = self.expert.act(input)?;
+        let mut chunk = self.expert.act(input)?;
         // Checked here too so that the action recorded below is the one the runner executes.
-        validate_chunk(&chunk, self.spec.horizon)?;
+        check_chunk(&mut chunk, self.spec.horizon, &ChunkTolerance::default())?;
         // The runner executes exactly the first action (execute = 1).
         for w in &mut self.open {
             w.executed.push(chunk[0]);

@@ -1,8 +1,11 @@
 //! The policy interface the episode runner drives, whatever the policy is: the in-process
 //! oracle, or (through the gRPC client) a participant's endpoint.
 //!
-//! The runner never trusts a policy: every chunk is checked by [`validate_chunk`] before a
-//! single action of it reaches the simulator.
+//! The runner never trusts a policy: every chunk goes through [`check_chunk`] before a single
+//! action of it reaches the simulator. Small numeric slips that learned models make routinely
+//! (a quaternion norm a little off 1, a gripper value a hair outside [0, 1]) are corrected and
+//! counted ([`Corrections`], reported with the task as a warning); anything beyond the
+//! organiser's [`ChunkTolerance`] fails the task with the reason.
 
 use kitchen_r_sim::Observation;
 use kitchen_r_sim::task::TaskTarget;
@@ -12,6 +15,8 @@ use serde::{Deserialize, Serialize};
 pub const ACTION_DIM: usize = 10;
 /// Chunk length the paper's policies predict.
 pub const HORIZON: usize = 16;
+/// Most consecutive frames a policy may ask to see with each decision (contract v1.1).
+pub const MAX_OBSERVATION_HISTORY: usize = 8;
 
 /// What a policy announces about itself (the GetSpec handshake).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -25,6 +30,32 @@ pub struct PolicySpec {
     pub cameras: Vec<String>,
     /// Parallel episodes the endpoint accepts.
     pub max_concurrency: u32,
+    /// Consecutive control steps each decision sees, the newest included (1..=8; 1 = v1).
+    #[serde(default = "one")]
+    pub observation_history: usize,
+    /// Actions of each chunk executed before asking again, when the policy chose (v1.1);
+    /// `None` = the organiser's [`RunOptions::execute`](crate::runner::RunOptions::execute).
+    #[serde(default)]
+    pub actions_executed_per_chunk: Option<usize>,
+}
+
+fn one() -> usize {
+    1
+}
+
+impl Default for PolicySpec {
+    /// A v1 policy: 16×10 chunks, default cameras, one frame, the organiser's execution count.
+    fn default() -> Self {
+        PolicySpec {
+            name: String::new(),
+            horizon: HORIZON,
+            action_dim: ACTION_DIM,
+            cameras: Vec::new(),
+            max_concurrency: 1,
+            observation_history: 1,
+            actions_executed_per_chunk: None,
+        }
+    }
 }
 
 /// World state only organiser-run reference policies (the oracle) may see.
@@ -49,6 +80,20 @@ pub struct PrivilegedObject {
     pub pose: [f64; 7],
 }
 
+/// One control step as a policy sees it (an element of an observation history).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Frame {
+    /// Control steps since the episode started.
+    pub step: u64,
+    /// Images only where the runner rendered (the policy wants images); robot state always.
+    pub observation: Observation,
+    /// Hand (tool centre point) pose in the base frame `[x, y, z, qw, qx, qy, qz]`.
+    pub ee_pose: [f64; 7],
+    /// The action executed in the step that led here (after corrections); `None` at the start
+    /// of the episode and after the robot was moved to the expert's state (teleport).
+    pub previous_action: Option<[f64; ACTION_DIM]>,
+}
+
 /// One decision point.
 #[derive(Debug, Clone, Copy)]
 pub struct PolicyInput<'a> {
@@ -59,6 +104,14 @@ pub struct PolicyInput<'a> {
     /// The sub-task sentence, a canonical plan step (`pick the bowl`).
     pub sub_task: &'a str,
     pub observation: &'a Observation,
+    /// Hand pose in the base frame `[x, y, z, qw, qx, qy, qz]`, in every run.
+    pub ee_pose: [f64; 7],
+    /// The action executed in the last control step; `None` before the first one of the
+    /// episode and right after a teleport.
+    pub previous_action: Option<[f64; ACTION_DIM]>,
+    /// The frames before this one, oldest first, consecutive control steps of the current task:
+    /// at most `observation_history - 1`, fewer at the start of a task (the wire pads them).
+    pub history: &'a [Frame],
     /// Present only in organiser reference runs.
     pub privileged: Option<&'a Privileged>,
 }
@@ -82,8 +135,9 @@ pub trait Policy: Send {
     fn reset(&mut self, episode_id: &str, task_index: usize, sub_task: &str) -> Result<(), PolicyError>;
     /// The next chunk of `horizon` actions.
     fn act(&mut self, input: &PolicyInput<'_>) -> Result<Vec<[f64; ACTION_DIM]>, PolicyError>;
-    /// Whether the next `act` call needs camera images and LiDAR. The runner renders only when
-    /// it does (rendering is most of an episode's cost); the robot state is always there.
+    /// Whether the frame the runner is about to capture needs camera images and LiDAR. The
+    /// runner renders only the frames a decision will show and only when this says so
+    /// (rendering is most of an episode's cost); the robot state is always there.
     fn wants_images(&self) -> bool {
         true
     }
@@ -104,10 +158,7 @@ impl Unreachable {
         Unreachable {
             spec: PolicySpec {
                 name: "unreachable".into(),
-                horizon: HORIZON,
-                action_dim: ACTION_DIM,
-                cameras: Vec::new(),
-                max_concurrency: 1,
+                ..PolicySpec::default()
             },
             reason: reason.into(),
         }
@@ -129,67 +180,5 @@ impl Policy for Unreachable {
     }
 }
 
-/// Tolerance on the quaternion norm: chunks are produced in f32 by most learned policies.
-pub(crate) const QUAT_NORM_TOLERANCE: f64 = 1e-2;
-
-/// Shape, finiteness, gripper range and unit quaternion of every action in `chunk`.
-pub fn validate_chunk(chunk: &[[f64; ACTION_DIM]], horizon: usize) -> Result<(), PolicyError> {
-    if chunk.len() != horizon {
-        return Err(PolicyError::BadChunk(format!(
-            "expected {horizon} actions of {ACTION_DIM} values, got {} actions",
-            chunk.len()
-        )));
-    }
-    for (i, a) in chunk.iter().enumerate() {
-        if let Some(j) = a.iter().position(|v| !v.is_finite()) {
-            return Err(PolicyError::BadChunk(format!(
-                "action {i} value {j} is not finite"
-            )));
-        }
-        if !(0.0..=1.0).contains(&a[9]) {
-            return Err(PolicyError::BadChunk(format!(
-                "action {i}: gripper {} outside [0, 1]",
-                a[9]
-            )));
-        }
-        let n = a[5..9].iter().map(|q| q * q).sum::<f64>().sqrt();
-        if (n - 1.0).abs() > QUAT_NORM_TOLERANCE {
-            return Err(PolicyError::BadChunk(format!(
-                "action {i}: quaternion norm {n:.4} is not 1 (±{QUAT_NORM_TOLERANCE})"
-            )));
-        }
-    }
-    Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    const GOOD: [f64; 10] = [0.0, 0.0, 0.4, 0.0, 0.9, 1.0, 0.0, 0.0, 0.0, 1.0];
-
-    #[test]
-    fn a_well_formed_chunk_passes() {
-        validate_chunk(&[GOOD; HORIZON], HORIZON).unwrap();
-    }
-
-    #[test]
-    fn each_defect_is_named() {
-        let mut nan = [GOOD; HORIZON];
-        nan[3][4] = f64::NAN;
-        let mut grip = [GOOD; HORIZON];
-        grip[0][9] = 1.5;
-        let mut quat = [GOOD; HORIZON];
-        quat[7][5] = 2.0;
-        let cases: [(&[[f64; 10]], &str); 4] = [
-            (&[GOOD; 3], "got 3 actions"),
-            (&nan, "action 3 value 4 is not finite"),
-            (&grip, "gripper 1.5"),
-            (&quat, "quaternion norm"),
-        ];
-        for (chunk, needle) in cases {
-            let err = validate_chunk(chunk, HORIZON).unwrap_err().to_string();
-            assert!(err.contains(needle), "{err:?} lacks {needle:?}");
-        }
-    }
-}
+mod chunk;
+pub use chunk::{ChunkTolerance, Corrections, check_chunk};

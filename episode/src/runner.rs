@@ -5,20 +5,25 @@
 //! This is the single code path behind `kitchen-r eval`, the server's workers and trajectory
 //! collection, so a participant's local number and the leaderboard's are the same number.
 
+use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
 use kitchen_r_sim::task::TaskTarget;
 use kitchen_r_sim::{Action, Observation, Sim, SimError, Snapshot, StepInfo};
 use serde::{Deserialize, Serialize};
 
-use crate::policy::{Policy, PolicyError, PolicyInput, Privileged, PrivilegedObject, validate_chunk};
+use crate::policy::{
+    ACTION_DIM, ChunkTolerance, Corrections, Frame, MAX_OBSERVATION_HISTORY, Policy, PolicyError,
+    PolicyInput, Privileged, PrivilegedObject, check_chunk,
+};
 
 /// How an episode is run.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RunOptions {
     /// Sim seconds each task may take (the paper: 120).
     pub task_time_limit: f64,
-    /// Actions of each chunk executed before the policy is asked again.
+    /// Actions of each chunk executed before the policy is asked again, unless the policy
+    /// chose its own count ([`crate::policy::PolicySpec::actions_executed_per_chunk`]).
     pub execute: usize,
     /// Execute only the first N plan steps (the paper's option); `None` = all.
     pub max_tasks: Option<usize>,
@@ -28,6 +33,9 @@ pub struct RunOptions {
     pub max_consecutive_timeouts: u32,
     /// Wall-clock budget for the whole episode.
     pub wall_budget: Option<Duration>,
+    /// How far a chunk may be off before it fails the task; slips within are corrected.
+    #[serde(default)]
+    pub chunk_tolerance: ChunkTolerance,
 }
 
 impl Default for RunOptions {
@@ -39,6 +47,7 @@ impl Default for RunOptions {
             privileged: false,
             max_consecutive_timeouts: 3,
             wall_budget: None,
+            chunk_tolerance: ChunkTolerance::default(),
         }
     }
 }
@@ -60,6 +69,9 @@ pub struct TaskRecord {
     #[serde(default)]
     pub aborts_episode: bool,
     pub policy_calls: u32,
+    /// Chunk values corrected within tolerance during the task (a warning, not a failure).
+    #[serde(default)]
+    pub corrections: Corrections,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -133,13 +145,16 @@ fn privileged(sim: &Sim, target: TaskTarget) -> Privileged {
             })
             .collect(),
         held: sim.held_object().map(str::to_string),
-        ee_pose: {
-            let ee = sim.ee_pose();
-            let (t, q) = (ee.translation.vector, ee.rotation);
-            [t.x, t.y, t.z, q.w, q.i, q.j, q.k]
-        },
+        ee_pose: ee_pose(sim),
         target,
     }
+}
+
+/// The hand (tool centre point) pose in the base frame `[x, y, z, qw, qx, qy, qz]`.
+fn ee_pose(sim: &Sim) -> [f64; 7] {
+    let ee = sim.ee_pose();
+    let (t, q) = (ee.translation.vector, ee.rotation);
+    [t.x, t.y, t.z, q.w, q.i, q.j, q.k]
 }
 
 /// Run the episode already loaded in `sim` (after `reset`) with `policy`.
@@ -168,6 +183,7 @@ pub fn run_episode(
     };
     let mut timeouts = 0u32;
     let mut aborted: Option<String> = None;
+    let mut last_action: Option<[f64; ACTION_DIM]> = None;
     for j in 0..n_tasks {
         let step_text = episode.plan[j].clone();
         if let Some(reason) = &aborted {
@@ -177,7 +193,12 @@ pub fn run_episode(
             });
             continue;
         }
-        let task = run_task(sim, policy, opts, j, &mut timeouts, hook, started)?;
+        let mut state = EpisodeState {
+            timeouts: &mut timeouts,
+            last_action: &mut last_action,
+            started,
+        };
+        let task = run_task(sim, policy, opts, j, &mut state, hook)?;
         out.policy_calls += task.policy_calls;
         if task.aborts_episode {
             aborted = task.failure.clone();
@@ -189,6 +210,8 @@ pub fn run_episode(
             && let Some(snap) = expert_starts.and_then(|s| s.get(j + 1))
         {
             sim.restore(snap)?;
+            // The robot was moved: no action of the policy led to this state.
+            last_action = None;
         }
     }
     out.sim_time = sim.time();
@@ -209,6 +232,37 @@ fn failed(index: usize, step: String, sim_time: f64, reason: String, calls: u32)
         failure: Some(reason),
         aborts_episode: false,
         policy_calls: calls,
+        corrections: Corrections::default(),
+    }
+}
+
+/// What one task's run shares with the rest of its episode.
+struct EpisodeState<'a> {
+    timeouts: &'a mut u32,
+    /// The last action executed, the next frame's `previous_action`.
+    last_action: &'a mut Option<[f64; ACTION_DIM]>,
+    started: Instant,
+}
+
+/// The frames the next decision shows: the last `cap` captured control steps of the task,
+/// oldest first. Only the steps a decision will show are captured (rendered), so when the
+/// history is longer than a part-chunk the frames span earlier chunks of the task.
+struct History {
+    frames: VecDeque<Frame>,
+    cap: usize,
+}
+
+impl History {
+    fn push(&mut self, sim: &Sim, observation: Observation, previous_action: Option<[f64; ACTION_DIM]>) {
+        if self.frames.len() == self.cap {
+            self.frames.pop_front();
+        }
+        self.frames.push_back(Frame {
+            step: sim_step(sim),
+            observation,
+            ee_pose: ee_pose(sim),
+            previous_action,
+        });
     }
 }
 
@@ -217,9 +271,8 @@ fn run_task(
     policy: &mut dyn Policy,
     opts: &RunOptions,
     j: usize,
-    timeouts: &mut u32,
+    ep: &mut EpisodeState<'_>,
     hook: &mut dyn StepHook,
-    episode_started: Instant,
 ) -> Result<TaskRecord, RunError> {
     let step_text = sim.episode().plan[j].clone();
     let episode_id = sim.episode().id.clone();
@@ -228,101 +281,118 @@ fn run_task(
     let target = kitchen_r_sim::task_target(sim.episode(), sim.scene(), j)?;
     let t0 = sim.time();
     let mut calls = 0u32;
-    let fail = |sim: &mut Sim, reason: String, calls: u32| {
+    let mut corrections = Corrections::default();
+    // `failure`: the reason and whether it ends the episode; `None` = success.
+    let end = |sim: &mut Sim, failure: Option<(String, bool)>, calls: u32, corrections: Corrections| {
         let elapsed = sim.time() - t0;
         sim.end_task();
-        Ok(failed(j, step_text.clone(), elapsed, reason, calls))
-    };
-    let abort = |sim: &mut Sim, reason: String, calls: u32| {
-        let elapsed = sim.time() - t0;
-        sim.end_task();
-        Ok(TaskRecord {
-            aborts_episode: true,
-            ..failed(j, step_text.clone(), elapsed, format!("{ABORT}{reason}"), calls)
+        let (failure, aborts_episode) = match failure {
+            None => (None, false),
+            Some((reason, true)) => (Some(format!("{ABORT}{reason}")), true),
+            Some((reason, false)) => (Some(reason), false),
+        };
+        Ok::<_, RunError>(TaskRecord {
+            index: j,
+            step: step_text.clone(),
+            success: failure.is_none(),
+            sim_time: elapsed,
+            failure,
+            aborts_episode,
+            policy_calls: calls,
+            corrections,
         })
     };
     if let Err(e) = policy.reset(&episode_id, j, &step_text) {
-        return fail(sim, format!("reset: {e}"), calls);
+        return end(sim, Some((format!("reset: {e}"), false)), calls, corrections);
     }
-    let mut obs: Observation = if policy.wants_images() || hook.wants_observation() {
+    let spec = policy.spec();
+    let (horizon, cap) = (
+        spec.horizon,
+        spec.observation_history.clamp(1, MAX_OBSERVATION_HISTORY),
+    );
+    let per_chunk = spec.actions_executed_per_chunk.unwrap_or(opts.execute);
+    let mut history = History {
+        frames: VecDeque::with_capacity(cap),
+        cap,
+    };
+    let first = if policy.wants_images() || hook.wants_observation() {
         sim.observe()
     } else {
         sim.observe_state()
     };
+    history.push(sim, first, *ep.last_action);
     loop {
-        if opts.wall_budget.is_some_and(|b| episode_started.elapsed() > b) {
-            return abort(sim, "wall-clock budget exceeded".into(), calls);
+        if opts.wall_budget.is_some_and(|b| ep.started.elapsed() > b) {
+            let why = "wall-clock budget exceeded".to_string();
+            return end(sim, Some((why, true)), calls, corrections);
         }
         let privileged = opts.privileged.then(|| privileged(sim, target.clone()));
+        let (newest, earlier) = match history.frames.make_contiguous().split_last() {
+            Some(split) => split,
+            None => return end(sim, Some(("no observation".into(), false)), calls, corrections),
+        };
         let input = PolicyInput {
             episode_id: &episode_id,
-            step: sim_step(sim),
+            step: newest.step,
             task_index: j,
             sub_task: &step_text,
-            observation: &obs,
+            observation: &newest.observation,
+            ee_pose: newest.ee_pose,
+            previous_action: newest.previous_action,
+            history: earlier,
             privileged: privileged.as_ref(),
         };
         calls += 1;
-        let chunk = match policy.act(&input).and_then(|c| {
-            validate_chunk(&c, policy.spec().horizon)?;
-            Ok(c)
-        }) {
-            Ok(c) => {
-                *timeouts = 0;
+        let answer = policy.act(&input).and_then(|mut c| {
+            let fixed = check_chunk(&mut c, horizon, &opts.chunk_tolerance)?;
+            Ok((c, fixed))
+        });
+        let chunk = match answer {
+            Ok((c, fixed)) => {
+                *ep.timeouts = 0;
+                corrections.add(&fixed);
                 c
             }
             Err(PolicyError::Timeout(s)) => {
-                *timeouts += 1;
+                *ep.timeouts += 1;
                 let reason = PolicyError::Timeout(s).to_string();
-                if *timeouts >= opts.max_consecutive_timeouts {
-                    return abort(
-                        sim,
-                        format!("{} successive timeouts ({reason})", *timeouts),
-                        calls,
-                    );
+                if *ep.timeouts >= opts.max_consecutive_timeouts {
+                    let why = format!("{} successive timeouts ({reason})", *ep.timeouts);
+                    return end(sim, Some((why, true)), calls, corrections);
                 }
-                return fail(sim, reason, calls);
+                return end(sim, Some((reason, false)), calls, corrections);
             }
-            Err(e) => return fail(sim, e.to_string(), calls),
+            Err(e) => return end(sim, Some((e.to_string(), false)), calls, corrections),
         };
-        let k = opts.execute.clamp(1, chunk.len());
+        let k = per_chunk.clamp(1, chunk.len());
         let hook_watches = hook.wants_observation();
         for (i, a) in chunk[..k].iter().enumerate() {
             let action = Action(*a);
-            // The policy is asked again after the last action of the part-chunk.
-            let query = i + 1 == k;
-            let render = hook_watches || (query && policy.wants_images());
+            // The policy is asked again after the last action of the part-chunk and sees the
+            // last `cap` steps: only those are captured, and rendered only if it wants images.
+            let capture = i + cap >= k;
+            let render = hook_watches || (capture && policy.wants_images());
             let (o, info) = sim.step(&action, render)?;
+            *ep.last_action = Some(*a);
             if let Some(o) = &o
                 && hook_watches
             {
                 hook.observation(o);
             }
             if let Err(reason) = hook.on_step(sim, &action, &info) {
-                return abort(sim, reason, calls);
+                return end(sim, Some((reason, true)), calls, corrections);
             }
             let elapsed = sim.time() - t0;
             if info.task.as_ref().is_some_and(|t| t.success) {
-                sim.end_task();
-                return Ok(TaskRecord {
-                    index: j,
-                    step: step_text,
-                    success: true,
-                    sim_time: elapsed,
-                    failure: None,
-                    aborts_episode: false,
-                    policy_calls: calls,
-                });
+                return end(sim, None, calls, corrections);
             }
             if elapsed >= opts.task_time_limit - 1e-9 {
-                return fail(
-                    sim,
-                    format!("time limit of {} s reached", opts.task_time_limit),
-                    calls,
-                );
+                let why = format!("time limit of {} s reached", opts.task_time_limit);
+                return end(sim, Some((why, false)), calls, corrections);
             }
-            if query {
-                obs = o.unwrap_or_else(|| sim.observe_state());
+            if capture {
+                let obs = o.unwrap_or_else(|| sim.observe_state());
+                history.push(sim, obs, Some(*a));
             }
         }
     }

@@ -36,6 +36,7 @@ impl From<&TaskOutcome> for pb::TaskResult {
             failure_reason: t.failure_reason.clone(),
             mse: t.mse,
             mse_samples: t.mse_samples,
+            ..Default::default()
         }
     }
 }

@@ -19,6 +19,11 @@ pub const FILE_DESCRIPTOR_SET: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "
 /// The policy protocol version this build speaks (see `policy.proto`).
 pub const POLICY_PROTOCOL_VERSION: u32 = 1;
 
+/// The minor version of protocol 1 this build's workers speak, announced in GetSpec: 1 is
+/// contract v1.1 (observation history, chosen execution count, hand pose and previous action in
+/// every observation). Compatible: a v1.0 policy is driven exactly as before.
+pub const POLICY_MINOR_VERSION: u32 = 1;
+
 pub mod policy {
     pub mod v1 {
         #![allow(clippy::all, missing_docs)]

@@ -138,8 +138,12 @@ pub struct ControlConfig {
     pub seed: u64,
     /// Simulated seconds per task.
     pub task_time_limit_s: f64,
-    /// Actions executed from each 16-action chunk before the policy is asked again.
+    /// Actions executed from each 16-action chunk before the policy is asked again, for a
+    /// policy that does not choose its own count.
     pub actions_executed_per_chunk: u32,
+    /// The smallest count a policy may choose in GetSpec (contract v1.1; the largest is 16).
+    /// Each query renders its frames, so a small count costs the organiser more simulation.
+    pub min_actions_executed_per_chunk: u32,
     /// After a failed task, move robot and objects to the expert's state for the next one.
     pub teleport_on_failure: bool,
     /// Execute at most this many plan steps per episode; 0 = all.
@@ -161,8 +165,9 @@ pub struct ControlConfig {
     pub max_episodes: usize,
 }
 
-/// Calling participants' policies (`[policy]`): deadlines sent to workers with every job.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+/// Calling participants' policies (`[policy]`): deadlines and chunk check tolerances sent to
+/// workers with every job.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct PolicyConfig {
     /// Deadline of one Reset or Act call, milliseconds.
@@ -176,6 +181,12 @@ pub struct PolicyConfig {
     /// Networks (CIDR) a policy endpoint may resolve to besides public addresses. Handed to the
     /// registration probe, which owns the parsing and the check.
     pub allow_networks: Vec<String>,
+    /// Largest |‖q‖ − 1| of a chunk's quaternion that workers normalise (and count as a
+    /// warning) instead of failing the task; 0 to 1.
+    pub quat_norm_tolerance: f64,
+    /// Largest distance of a gripper value outside [0, 1] that workers clamp (and count)
+    /// instead of failing the task; 0 to 1.
+    pub gripper_margin: f64,
 }
 
 impl Default for Config {
@@ -238,6 +249,7 @@ impl Default for ControlConfig {
             seed: 0,
             task_time_limit_s: 120.0,
             actions_executed_per_chunk: 8,
+            min_actions_executed_per_chunk: 1,
             teleport_on_failure: true,
             max_plan_steps: 0,
             lease_s: 60,
@@ -258,6 +270,8 @@ impl Default for PolicyConfig {
             episode_budget_ms: 600_000,
             max_successive_timeouts: 3,
             allow_networks: vec!["127.0.0.0/8".into(), "::1/128".into()],
+            quat_norm_tolerance: 0.1,
+            gripper_margin: 0.05,
         }
     }
 }
@@ -352,6 +366,12 @@ impl Config {
         if !(1..=16).contains(&c.actions_executed_per_chunk) {
             return invalid("control.actions_executed_per_chunk", "must be between 1 and 16");
         }
+        if !(1..=c.actions_executed_per_chunk).contains(&c.min_actions_executed_per_chunk) {
+            return invalid(
+                "control.min_actions_executed_per_chunk",
+                "must be between 1 and control.actions_executed_per_chunk (the default must be allowed)",
+            );
+        }
         if c.lease_s == 0 || c.reaper_interval_s == 0 {
             return invalid(
                 "control.lease_s",
@@ -376,6 +396,12 @@ impl Config {
         }
         if p.max_successive_timeouts == 0 {
             return invalid("policy.max_successive_timeouts", "must be at least 1");
+        }
+        if !(0.0..=1.0).contains(&p.quat_norm_tolerance) {
+            return invalid("policy.quat_norm_tolerance", "must be between 0 and 1");
+        }
+        if !(0.0..=1.0).contains(&p.gripper_margin) {
+            return invalid("policy.gripper_margin", "must be between 0 and 1");
         }
         Ok(())
     }
@@ -453,6 +479,18 @@ mod tests {
         ));
         let mut c = Config::default();
         c.control.max_attempts = 0;
+        assert!(c.validate().is_err());
+        let mut c = Config::default();
+        c.control.min_actions_executed_per_chunk = 9;
+        assert!(matches!(
+            c.validate(),
+            Err(ConfigError::Invalid {
+                key: "control.min_actions_executed_per_chunk",
+                ..
+            })
+        ));
+        let mut c = Config::default();
+        c.policy.gripper_margin = f64::NAN;
         assert!(c.validate().is_err());
         let c = Config {
             worker_token: "short".into(),

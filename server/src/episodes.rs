@@ -12,8 +12,10 @@ use serde::{Deserialize, Serialize};
 
 pub(crate) use kitchen_r_core::scoring::{Mode, RunScores, TaskOutcome};
 
-/// Where the policy is and the deadlines to call it with (snapshotted at registration).
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+/// Where the policy is, the deadlines to call it with and the contract's limits (snapshotted
+/// at registration). The limits added with contract v1.1 are absent from specs stored before
+/// it: they then take the worker's defaults.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub(crate) struct EndpointSpec {
     pub url: String,
     /// Empty for none.
@@ -22,6 +24,14 @@ pub(crate) struct EndpointSpec {
     pub startup_deadline_ms: u32,
     pub episode_budget_ms: u32,
     pub max_successive_timeouts: u32,
+    /// `control.min_actions_executed_per_chunk`; 0 = the worker's default.
+    #[serde(default)]
+    pub min_actions_executed_per_chunk: u32,
+    /// `policy.quat_norm_tolerance` and `policy.gripper_margin`.
+    #[serde(default)]
+    pub quat_norm_tolerance: Option<f64>,
+    #[serde(default)]
+    pub gripper_margin: Option<f64>,
 }
 
 /// One job: an episode to simulate and the policy to drive it.
@@ -86,6 +96,9 @@ impl JobSpec {
             startup_deadline_ms: e.startup_deadline_ms,
             episode_budget_ms: e.episode_budget_ms,
             max_successive_timeouts: e.max_successive_timeouts,
+            min_actions_executed_per_chunk: e.min_actions_executed_per_chunk,
+            quat_norm_tolerance: e.quat_norm_tolerance,
+            gripper_margin: e.gripper_margin,
         }
     }
 }

@@ -23,6 +23,10 @@ pub struct ProbedSpec {
     pub max_concurrency: u32,
     /// One line for the submission page and logs (name, cameras, encoding).
     pub summary: String,
+    /// Contract v1.1 choices as announced (0 = not set): frames per Act, actions executed per
+    /// chunk. The server checks them against its `[control]` ranges.
+    pub observation_history: u32,
+    pub actions_executed_per_chunk: u32,
 }
 
 /// Why an endpoint was not accepted. Messages are shown to the participant as they are.

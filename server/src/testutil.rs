@@ -31,6 +31,8 @@ impl FakeProbe {
                 protocol_version: kitchen_r_proto::POLICY_PROTOCOL_VERSION,
                 max_concurrency,
                 summary: "fake-policy 1.0".into(),
+                observation_history: 0,
+                actions_executed_per_chunk: 0,
             }),
             calls: AtomicUsize::new(0),
         })

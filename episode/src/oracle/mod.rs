@@ -78,10 +78,7 @@ impl OraclePolicy {
         OraclePolicy {
             spec: PolicySpec {
                 name: ORACLE_NAME.into(),
-                horizon: HORIZON,
-                action_dim: ACTION_DIM,
-                cameras: Vec::new(),
-                max_concurrency: 1,
+                ..PolicySpec::default()
             },
             scenes: assets.scenes.clone(),
             catalogue: assets.catalogue.clone(),

@@ -20,6 +20,9 @@ fn spec(mode: Mode, id: &str, plan: &[&str]) -> JobSpec {
             startup_deadline_ms: 1,
             episode_budget_ms: 1,
             max_successive_timeouts: 1,
+            min_actions_executed_per_chunk: 0,
+            quat_norm_tolerance: None,
+            gripper_margin: None,
         },
         place_targets: Vec::new(),
     }

@@ -108,6 +108,15 @@ async fn lease_heartbeat_and_report_over_grpc() {
         (policy.episode_budget_ms, policy.max_successive_timeouts),
         (600_000, 3)
     );
+    // Contract v1.1: the organiser's minimum execution count and chunk tolerances travel too.
+    assert_eq!(
+        (
+            policy.min_actions_executed_per_chunk,
+            policy.quat_norm_tolerance,
+            policy.gripper_margin
+        ),
+        (1, Some(0.1), Some(0.05))
+    );
     assert_eq!(job.attempt, 1);
 
     let hb = pb::HeartbeatRequest {

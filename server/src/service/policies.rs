@@ -12,8 +12,10 @@ use kitchen_r_core::dataset::{Instruction, Split};
 use serde::{Deserialize, Serialize};
 
 use super::{AppState, Caller, Organiser, now_ms};
+use crate::config::ControlConfig;
 use crate::episodes::{EndpointSpec, JobSpec, Mode};
 use crate::error::ServiceError;
+use crate::probe::ProbedSpec;
 use crate::states::{RunState, SubmissionKind};
 use crate::store::runs::{self as run_store, NewPolicyRun};
 use crate::store::{self, Team};
@@ -137,9 +139,10 @@ impl AppState {
                 kitchen_r_proto::POLICY_PROTOCOL_VERSION
             )));
         }
+        let cfg = self.config();
+        check_contract_v1_1(&probed, &cfg.control)?;
         // policy.proto: 0 is read as 1.
         let max_concurrency = probed.max_concurrency.max(1);
-        let cfg = self.config();
         let endpoint_spec = self.endpoint_spec(&endpoint, bearer.as_deref());
         let jobs = self.job_specs(instructions, &endpoint_spec, req.reference)?;
         let body = PolicyBody {
@@ -244,7 +247,7 @@ impl AppState {
 
     /// Where a run's jobs call the policy, with the deadlines configured now.
     fn endpoint_spec(&self, url: &str, bearer: Option<&str>) -> EndpointSpec {
-        let p = &self.config().policy;
+        let (p, c) = (&self.config().policy, &self.config().control);
         EndpointSpec {
             url: url.to_string(),
             bearer_token: bearer.unwrap_or_default().to_string(),
@@ -252,6 +255,9 @@ impl AppState {
             startup_deadline_ms: p.startup_deadline_ms,
             episode_budget_ms: p.episode_budget_ms,
             max_successive_timeouts: p.max_successive_timeouts,
+            min_actions_executed_per_chunk: c.min_actions_executed_per_chunk,
+            quat_norm_tolerance: Some(p.quat_norm_tolerance),
+            gripper_margin: Some(p.gripper_margin),
         }
     }
 
@@ -362,6 +368,33 @@ impl AppState {
         Ok(())
     }
 }
+
+/// The v1.1 choices of GetSpec within this organiser's ranges (policy.proto): a history of
+/// 1..=8 frames (0 = 1), an execution count between `control.min_actions_executed_per_chunk`
+/// and 16 (0 = `control.actions_executed_per_chunk`). The reason names the field and range.
+fn check_contract_v1_1(probed: &ProbedSpec, c: &ControlConfig) -> Result<(), ServiceError> {
+    if probed.observation_history > MAX_OBSERVATION_HISTORY {
+        return Err(ServiceError::ProbeFailed(format!(
+            "GetSpec asks for observation_history {}, which must be between 1 and \
+             {MAX_OBSERVATION_HISTORY} (0 means 1)",
+            probed.observation_history
+        )));
+    }
+    let k = probed.actions_executed_per_chunk;
+    if k != 0 && !(c.min_actions_executed_per_chunk..=HORIZON).contains(&k) {
+        return Err(ServiceError::ProbeFailed(format!(
+            "GetSpec asks for actions_executed_per_chunk {k}, which must be between {} (this \
+             server's control.min_actions_executed_per_chunk) and {HORIZON}, or 0 for the default {}",
+            c.min_actions_executed_per_chunk, c.actions_executed_per_chunk
+        )));
+    }
+    Ok(())
+}
+
+/// Most frames a policy may ask for (policy.proto, `PolicySpec.observation_history`).
+const MAX_OBSERVATION_HISTORY: u32 = 8;
+/// Actions per chunk (policy.proto); the largest execution count.
+const HORIZON: u32 = 16;
 
 /// `http://HOST:PORT` or `https://HOST:PORT`, trimmed; the probe does the real address check.
 fn validate_endpoint(url: &str) -> Result<String, ServiceError> {

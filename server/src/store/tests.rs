@@ -27,6 +27,9 @@ fn spec() -> JobSpec {
             startup_deadline_ms: 1,
             episode_budget_ms: 1,
             max_successive_timeouts: 1,
+            min_actions_executed_per_chunk: 0,
+            quat_norm_tolerance: None,
+            gripper_margin: None,
         },
         place_targets: vec![[0.5, -0.25, 0.9]],
     }

@@ -20,7 +20,7 @@ use super::{JobContext, JobError};
 use kitchen_r_contract::{Credentials, RemotePolicy, SimCamera};
 use kitchen_r_episode::offline::{OfflineOutcome, run_offline};
 use kitchen_r_episode::oracle::{OraclePolicy, expert_options};
-use kitchen_r_episode::policy::{Policy, Unreachable};
+use kitchen_r_episode::policy::{Corrections, Policy, Unreachable};
 use kitchen_r_episode::runner::{EpisodeOutcome, StepHook, run_episode};
 
 /// The log tail kept with a result (the contract's cap).
@@ -297,6 +297,7 @@ fn online_results(out: &EpisodeOutcome, log: &mut Log) -> Vec<pb::TaskResult> {
                     format!(": {why}")
                 }
             ));
+            let warning = warn(log, t.index, &t.corrections);
             pb::TaskResult {
                 index: t.index as u32,
                 step: t.step.clone(),
@@ -305,9 +306,23 @@ fn online_results(out: &EpisodeOutcome, log: &mut Log) -> Vec<pb::TaskResult> {
                 failure_reason: why,
                 mse: 0.0,
                 mse_samples: 0,
+                corrections: t.corrections.total(),
+                warning,
             }
         })
         .collect()
+}
+
+/// The task's correction warning, logged (participants read the log tail) and returned for
+/// the wire result; empty when nothing was corrected.
+fn warn(log: &mut Log, index: usize, c: &Corrections) -> String {
+    let w = c.warning().unwrap_or_default();
+    if !w.is_empty() {
+        log.line(format!(
+            "task {index} warning: {w} (chunk values corrected within tolerance)"
+        ));
+    }
+    w
 }
 
 fn offline_results(out: &OfflineOutcome, log: &mut Log) -> Vec<pb::TaskResult> {
@@ -326,6 +341,7 @@ fn offline_results(out: &OfflineOutcome, log: &mut Log) -> Vec<pb::TaskResult> {
                     .as_ref()
                     .map_or(String::new(), |f| format!(" [expert did not finish: {f}]"))
             ));
+            let warning = warn(log, t.index, &t.corrections);
             // SR is not measured offline: `success` stays false and the server reads SR from
             // online episodes only.
             pb::TaskResult {
@@ -336,6 +352,8 @@ fn offline_results(out: &OfflineOutcome, log: &mut Log) -> Vec<pb::TaskResult> {
                 failure_reason: t.failure.clone().unwrap_or_default(),
                 mse: t.mse,
                 mse_samples: t.samples,
+                corrections: t.corrections.total(),
+                warning,
             }
         })
         .collect()

@@ -122,6 +122,9 @@ pub(crate) fn local_job(ins: &Instruction, url: &str, s: &LocalSettings, remote:
             startup_deadline_ms: (remote.startup_deadline_s * 1e3) as u32,
             episode_budget_ms: s.run.wall_budget.map_or(0, |d| d.as_millis() as u32),
             max_successive_timeouts: s.run.max_consecutive_timeouts,
+            min_actions_executed_per_chunk: remote.min_actions_executed_per_chunk,
+            quat_norm_tolerance: Some(s.run.chunk_tolerance.quat_norm),
+            gripper_margin: Some(s.run.chunk_tolerance.gripper_margin),
         }),
     }
 }

@@ -18,7 +18,7 @@ use kitchen_r_sim::{Assets, EpisodeConfig, EpisodeParams};
 use super::JobError;
 use kitchen_r_episode::eval::instruction_seed;
 use kitchen_r_episode::offline::OfflineOptions;
-use kitchen_r_episode::policy::HORIZON;
+use kitchen_r_episode::policy::{ChunkTolerance, HORIZON};
 use kitchen_r_episode::runner::RunOptions;
 
 /// The instruction a job's spec describes: its plan and place targets as the server sent them.
@@ -85,8 +85,23 @@ pub(crate) fn remote_config(base: &RemoteConfig, ep: &pb::PolicyEndpoint, execut
         call_deadline_s: secs(ep.call_deadline_ms, base.call_deadline_s),
         startup_deadline_s: secs(ep.startup_deadline_ms, base.startup_deadline_s),
         actions_executed_per_chunk: execute as u32,
+        min_actions_executed_per_chunk: match ep.min_actions_executed_per_chunk {
+            0 => base.min_actions_executed_per_chunk,
+            n => n,
+        },
         ..base.clone()
     }
+}
+
+/// The chunk check tolerances of the job; an absent one takes the worker's default.
+fn chunk_tolerance(ep: &pb::PolicyEndpoint) -> Result<ChunkTolerance, JobError> {
+    let d = ChunkTolerance::default();
+    let tol = ChunkTolerance {
+        quat_norm: ep.quat_norm_tolerance.unwrap_or(d.quat_norm),
+        gripper_margin: ep.gripper_margin.unwrap_or(d.gripper_margin),
+    };
+    tol.validate().map_err(JobError::Spec)?;
+    Ok(tol)
 }
 
 /// The runner's options for the job: the spec's settings, the endpoint's limits; a zero means
@@ -113,6 +128,7 @@ pub(crate) fn run_options(spec: &pb::EpisodeSpec, ep: &pb::PolicyEndpoint) -> Re
             n => n,
         },
         wall_budget: limit_ms(ep.episode_budget_ms),
+        chunk_tolerance: chunk_tolerance(ep)?,
     })
 }
 

@@ -58,6 +58,7 @@ pub(crate) fn job(url: &str, mode: pb::EvalMode, steps: u32, privileged: bool) -
             startup_deadline_ms: 5_000,
             episode_budget_ms: 300_000,
             max_successive_timeouts: 3,
+            ..Default::default()
         }),
     }
 }

@@ -19,6 +19,7 @@ mod place_reach;
 mod record_roundtrip;
 mod remote_bench;
 mod remote_check;
+mod remote_history;
 mod remote_oracle;
 mod remote_probe;
 mod remote_starter_kit;

@@ -39,9 +39,59 @@ fn a_good_endpoint_passes_every_check() {
     let server = TestServer::start(still(), ServeOptions::default());
     let r = probe(&server.url());
     assert!(r.passed());
-    assert_eq!(r.checks.len(), 9);
+    assert_eq!(r.checks.len(), 10);
     assert!(r.checks.iter().all(|c| c.verdict == Verdict::Pass));
     assert!(r.get("cameras").unwrap().detail.contains("base 128x128 RAW_RGB8"));
+    let v = &r.get("v1.1").unwrap().detail;
+    assert!(
+        v.contains("history 1 frame(s); executes the organiser's 8"),
+        "{v}"
+    );
+}
+
+/// A policy asking for `history` frames and `execute` actions per chunk (contract v1.1).
+fn v1_1(history: usize, execute: Option<usize>) -> TestServer {
+    let f: kitchen_r_contract::server::PolicyFactory = Arc::new(move || {
+        Box::new(Scripted {
+            spec: kitchen_r_episode::policy::PolicySpec {
+                observation_history: history,
+                actions_executed_per_chunk: execute,
+                ..spec(HORIZON)
+            },
+            answer: Arc::new(move |i| {
+                assert_eq!(i.history.len(), history - 1, "padded to the history asked for");
+                // A learned model's slip, within the default tolerance: reported, not failed.
+                let mut c = vec![STILL; HORIZON];
+                c[0][9] = 1.0001;
+                Ok(c)
+            }),
+        }) as Box<dyn kitchen_r_episode::policy::Policy>
+    });
+    TestServer::start(f, ServeOptions::default())
+}
+
+#[test]
+fn the_v1_1_fields_are_checked_and_shown() {
+    let good = v1_1(3, Some(4));
+    let r = probe(&good.url());
+    assert!(r.passed());
+    let v = &r.get("v1.1").unwrap().detail;
+    assert!(
+        v.contains("history 3 frame(s); executes 4 actions per chunk (its choice)"),
+        "{v}"
+    );
+    let act = &r.get("act-again").unwrap().detail;
+    assert!(act.contains("for step 4 (3 frame(s))"), "{act}");
+    assert!(
+        act.contains("warning: 1 corrections: 1 gripper values clamped"),
+        "{act}"
+    );
+
+    let r = probe(&v1_1(2, Some(17)).url());
+    assert_fails(&r, "v1.1", "actions_executed_per_chunk is 17, must be between 1");
+    assert_eq!(r.get("reset").unwrap().verdict, Verdict::Skip);
+    let r = probe(&v1_1(9, None).url());
+    assert_fails(&r, "v1.1", "observation_history is 9, must be between 1 and 8");
 }
 
 #[test]

@@ -139,6 +139,47 @@ fn a_bad_spec_is_refused_naming_the_field() {
     assert!(err.to_string().contains("horizon is 8, must be 16"), "{err}");
 }
 
+/// Contract v1.1: an execution count under the organiser's minimum is refused with the range;
+/// within it the probe reports the policy's choices.
+#[test]
+fn an_execution_count_outside_the_organisers_range_is_refused() {
+    let asks = |k: usize| {
+        let f: kitchen_r_contract::server::PolicyFactory = std::sync::Arc::new(move || {
+            Box::new(Scripted {
+                spec: kitchen_r_episode::policy::PolicySpec {
+                    observation_history: 2,
+                    actions_executed_per_chunk: Some(k),
+                    ..spec(16)
+                },
+                answer: std::sync::Arc::new(|_| Ok(vec![STILL; 16])),
+            }) as Box<dyn kitchen_r_episode::policy::Policy>
+        });
+        TestServer::start(f, Default::default())
+    };
+    let strict = RemoteConfig {
+        min_actions_executed_per_chunk: 4,
+        ..cfg()
+    };
+    let probe = |server: &TestServer| {
+        rt().block_on(probe_endpoint(
+            &server.url(),
+            None,
+            &AllowedNetworks::default(),
+            &strict,
+        ))
+    };
+    let err = probe(&asks(2)).unwrap_err();
+    assert!(matches!(err, ProbeFailure::Handshake(_)), "{err:?}");
+    assert!(
+        err.to_string()
+            .contains("actions_executed_per_chunk is 2, must be between 4 (this organiser's minimum) and 16"),
+        "{err}"
+    );
+    let ok = probe(&asks(4)).unwrap();
+    assert_eq!((ok.observation_history, ok.actions_executed_per_chunk), (2, 4));
+    assert!(ok.summary.ends_with("history 2, executes 4"), "{}", ok.summary);
+}
+
 /// Issue #12: with loopback allowed, registration must not tell a closed port from a service
 /// that is not a policy on the evaluation host: the same text, after the same startup deadline.
 #[test]

@@ -94,6 +94,49 @@ async fn refused(probe: Arc<dyn crate::probe::PolicyProbe>) -> ServiceError {
     e
 }
 
+/// Contract v1.1: GetSpec's execution count and history must be within this server's ranges.
+#[tokio::test]
+async fn a_spec_outside_the_contract_ranges_is_refused_naming_field_and_range() {
+    let asks = |history: u32, execute: u32| {
+        Arc::new(FakeProbe {
+            answer: Ok(ProbedSpec {
+                protocol_version: 1,
+                max_concurrency: 1,
+                summary: String::new(),
+                observation_history: history,
+                actions_executed_per_chunk: execute,
+            }),
+            calls: Default::default(),
+        })
+    };
+    let f = fixture(asks(2, 2), |c| c.control.min_actions_executed_per_chunk = 4).await;
+    let token = f.team("alpha").await;
+    let e = (f.state)
+        .register_policy(&f.caller(&token).await, f.request(Split::Dev))
+        .await
+        .unwrap_err();
+    assert_eq!(e.code(), "policy_probe_failed");
+    assert!(
+        e.to_string().contains(
+            "actions_executed_per_chunk 2, which must be between 4 (this server's \
+             control.min_actions_executed_per_chunk) and 16"
+        ),
+        "{e}"
+    );
+    let e = refused(asks(9, 0)).await;
+    assert!(
+        e.to_string()
+            .contains("observation_history 9, which must be between 1 and 8"),
+        "{e}"
+    );
+    let f = fixture(asks(2, 4), |c| c.control.min_actions_executed_per_chunk = 4).await;
+    let token = f.team("alpha").await;
+    (f.state)
+        .register_policy(&f.caller(&token).await, f.request(Split::Dev))
+        .await
+        .unwrap();
+}
+
 #[tokio::test]
 async fn probe_failures_are_clear_4xx_naming_what_failed() {
     let e = refused(FakeProbe::err(ProbeError::Refused(
@@ -119,6 +162,8 @@ async fn probe_failures_are_clear_4xx_naming_what_failed() {
             protocol_version: 99,
             max_concurrency: 1,
             summary: String::new(),
+            observation_history: 0,
+            actions_executed_per_chunk: 0,
         }),
         calls: Default::default(),
     });

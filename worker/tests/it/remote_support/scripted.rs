@@ -35,9 +35,7 @@ pub(crate) fn spec(horizon: usize) -> PolicySpec {
     PolicySpec {
         name: "scripted".into(),
         horizon,
-        action_dim: 10,
-        cameras: vec![],
-        max_concurrency: 1,
+        ..PolicySpec::default()
     }
 }
 
