@@ -12,8 +12,14 @@ directory) with grpcio-tools; nothing generated is committed. By hand it is one 
     python -m grpc_tools.protoc -I ../proto --python_out=_gen --grpc_python_out=_gen \
         ../proto/kitchen_r/policy/v1/policy.proto
 
-Run:  python policy_server.py --listen 0.0.0.0:50051 [--token SECRET]
+Run:  python policy_server.py --listen 0.0.0.0:50051 [--token SECRET] [--history 2] [--execute 4]
 It prints `listening grpc=HOST:PORT` once it accepts calls.
+
+Contract v1.1 (what a learned policy needs): GetSpec may ask for an observation history (the
+last N control steps, 0.1 s apart, in every Act) and for how many actions of each chunk the
+worker executes before asking again; every observation carries the hand pose in the base frame
+(`robot.ee_pose`), the gripper opening (`robot.gripper`) and the previous action
+(`previous_action`, empty at the start of the episode).
 """
 
 import argparse
@@ -35,6 +41,8 @@ HORIZON = 16
 ACTION_DIM = 10
 # Largest observation accepted: the worker may send images up to 1024x1024 (plus depth).
 MAX_MESSAGE_BYTES = 64 * 1024 * 1024
+# Contract v1.1 limits (policy.proto): frames per Act, and the largest execution count.
+MAX_OBSERVATION_HISTORY = 8
 
 
 def proto_dir(explicit):
@@ -87,12 +95,32 @@ class StarterPolicy:
 
         `obs.images[i]` has `camera`, `width`, `height`, `encoding` and `data` (RAW_RGB8:
         width*height*3 bytes, row-major from the top-left pixel); `obs.robot` has odometry, arm
-        joints and the gripper; `obs.sub_task` is the sentence to carry out.
+        joints, the hand pose and the gripper; `obs.sub_task` is the sentence to carry out.
+        `frames(obs)` gives the observation history oldest first, `state(frame)` the paper's
+        robot state of one frame: what a learned model would be conditioned on.
         """
+        _states = [state(f) for f in frames(obs)]  # a model would read these and the images
         return [list(self.HOLD) for _ in range(HORIZON)]
 
 
-def make_servicer(pb2, pb2_grpc, policy, token):
+def frames(obs):
+    """The frames of one Act, oldest first: `obs.history` (the steps before, as many as
+    GetSpec's observation_history asked for minus one, padded with the task's first frame at
+    its start) then the observation itself. Each has `step`, `sim_time`, `images`, `depth`,
+    `robot` and `previous_action`."""
+    return list(obs.history) + [obs]
+
+
+def state(frame):
+    """The robot state of one frame: hand pose in the base frame (x, y, z, qw, qx, qy, qz),
+    gripper opening in [0, 1], and the previous action (10 values; zeros at the start of the
+    episode, where the worker sends it empty)."""
+    hand = list(frame.robot.ee_pose) or [0.0] * 7
+    previous = list(frame.previous_action) or [0.0] * ACTION_DIM
+    return hand + [frame.robot.gripper] + previous
+
+
+def make_servicer(pb2, pb2_grpc, policy, token, history=1, execute=0):
     import grpc
 
     class Servicer(pb2_grpc.PolicyServicer):
@@ -117,7 +145,12 @@ def make_servicer(pb2, pb2_grpc, policy, token):
                 horizon=HORIZON,
                 action_dim=ACTION_DIM,
                 max_concurrency=4,
-                name="starter-kit stand-still 0.1",
+                name="starter-kit stand-still 0.2",
+                # v1.1: frames per Act (1..8), and actions executed per chunk (0 = the
+                # organiser's default, announced in request.actions_executed_per_chunk; else
+                # between request.min_actions_executed_per_chunk and 16).
+                observation_history=history,
+                actions_executed_per_chunk=execute,
             )
 
         def Reset(self, request, context):
@@ -141,7 +174,15 @@ def main():
     ap.add_argument("--token", default=os.environ.get("POLICY_TOKEN"), help="require this bearer token")
     ap.add_argument("--proto-dir", default=None, help="directory with kitchen_r/policy/v1/policy.proto")
     ap.add_argument("--threads", type=int, default=8)
+    ap.add_argument("--history", type=int, default=2, help="frames per Act, 1..8 (contract v1.1)")
+    ap.add_argument(
+        "--execute", type=int, default=0, help="actions executed per chunk; 0 = the organiser's default (v1.1)"
+    )
     args = ap.parse_args()
+    if not 1 <= args.history <= MAX_OBSERVATION_HISTORY:
+        sys.exit(f"--history must be between 1 and {MAX_OBSERVATION_HISTORY}")
+    if not 0 <= args.execute <= HORIZON:
+        sys.exit(f"--execute must be between 0 and {HORIZON}")
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(message)s")
 
     import grpc
@@ -153,7 +194,8 @@ def main():
         ("grpc.max_send_message_length", MAX_MESSAGE_BYTES),
     ]
     server = grpc.server(futures.ThreadPoolExecutor(max_workers=args.threads), options=opts)
-    pb2_grpc.add_PolicyServicer_to_server(make_servicer(pb2, pb2_grpc, StarterPolicy(), args.token), server)
+    servicer = make_servicer(pb2, pb2_grpc, StarterPolicy(), args.token, args.history, args.execute)
+    pb2_grpc.add_PolicyServicer_to_server(servicer, server)
     h = health.HealthServicer()
     for name in ("", "kitchen_r.policy.v1.Policy"):
         h.set(name, health_pb2.HealthCheckResponse.SERVING)
