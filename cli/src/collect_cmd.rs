@@ -1,5 +1,5 @@
-//! `kitchen-r collect`: expert trajectory collection into MCAP and/or HDF5 with the Monitoring
-//! Module's checks. Argument parsing and printing only; the work is in
+//! `kitchen-r collect`: expert trajectory collection into MCAP, HDF5 and/or a LeRobotDataset
+//! with the Monitoring Module's checks. Argument parsing and printing only; the work is in
 //! `kitchen_r_record::collect`.
 
 use std::path::PathBuf;
@@ -7,22 +7,39 @@ use std::path::PathBuf;
 use anyhow::{Context, bail};
 use clap::Args;
 use kitchen_r_core::dataset::Split;
-use kitchen_r_record::collect::{CollectConfig, CollectOptions, Formats, collect};
+use kitchen_r_record::collect::{CollectConfig, CollectOptions, DepthUnit, Formats, collect};
 
 #[derive(Args, Debug)]
 pub(crate) struct CollectArgs {
     /// Episodes to collect (episode i uses dev instruction i mod 163).
-    #[arg(long)]
-    episodes: usize,
+    #[arg(
+        long,
+        required_unless_present = "episodes_file",
+        conflicts_with = "episodes_file"
+    )]
+    episodes: Option<usize>,
+    /// Run exactly the episodes of a batch file (`kitchen-r episodes generate --out FILE`):
+    /// episode i is the batch's i-th configuration.
+    #[arg(long, value_name = "FILE")]
+    episodes_file: Option<PathBuf>,
     /// Instruction split; only dev has public plans to drive.
     #[arg(long, default_value = "dev")]
     split: Split,
     /// Output directory (created; rerunning resumes, skipping finished episodes).
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
-    /// Comma-separated file formats: mcap, hdf5.
+    /// Comma-separated formats: mcap, hdf5, lerobot (a LeRobotDataset v3.0 in DIR/lerobot).
     #[arg(long, default_value = "mcap,hdf5")]
     format: Formats,
+    /// Comma-separated cameras to record [default: every camera of configs/sensors.toml].
+    #[arg(long, value_delimiter = ',', value_name = "NAMES")]
+    cameras: Option<Vec<String>>,
+    /// Record no depth images (MCAP and HDF5; the LeRobotDataset has none anyway).
+    #[arg(long)]
+    no_depth: bool,
+    /// HDF5 depth unit: `mm` (uint16 millimetres) or `m` (float32 metres).
+    #[arg(long, value_enum, default_value = "mm", value_name = "UNIT")]
+    depth_unit: DepthArg,
     /// Parallel episodes [default: the number of cores].
     #[arg(long)]
     jobs: Option<usize>,
@@ -37,6 +54,12 @@ pub(crate) struct CollectArgs {
     json: bool,
 }
 
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+enum DepthArg {
+    Mm,
+    M,
+}
+
 pub(crate) fn collect_cmd(args: CollectArgs) -> anyhow::Result<()> {
     if args.split != Split::Dev {
         bail!("collect drives the public plans of the dev split only (--split dev)");
@@ -45,17 +68,29 @@ pub(crate) fn collect_cmd(args: CollectArgs) -> anyhow::Result<()> {
         Some(p) => CollectConfig::load(p).with_context(|| format!("reading {}", p.display()))?,
         None => CollectConfig::load_default()?,
     };
+    let batch = match &args.episodes_file {
+        Some(p) => {
+            Some(kitchen_r_sim::episode::load_batch(p).with_context(|| format!("reading {}", p.display()))?)
+        }
+        None => None,
+    };
+    let depth = match (args.no_depth, args.depth_unit) {
+        (true, _) => None,
+        (false, DepthArg::Mm) => Some(DepthUnit::Millimetres),
+        (false, DepthArg::M) => Some(DepthUnit::Metres),
+    };
     let opts = CollectOptions {
-        episodes: args.episodes,
-        out: args.out,
         formats: args.format,
         jobs: args
             .jobs
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
         seed: args.seed,
         config,
-        sensors: None,
+        cameras: args.cameras,
+        depth,
+        batch,
         progress: !args.json,
+        ..CollectOptions::new(args.out, args.episodes.unwrap_or(0))
     };
     let s = collect(&opts)?;
     if args.json {

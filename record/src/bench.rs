@@ -47,14 +47,9 @@ pub fn oracle_episodes(episodes: usize) -> Result<OracleBench, EvalError> {
 /// Collect `episodes` episodes (both formats, configured sensors) into `out`; episodes/min.
 pub fn collection(episodes: usize, jobs: usize, out: &Path) -> Result<f64, CollectError> {
     let s = collect(&CollectOptions {
-        episodes,
-        out: out.to_path_buf(),
-        formats: "mcap,hdf5".parse().map_err(CollectError::Config)?,
         jobs,
-        seed: 0,
         config: CollectConfig::load_default()?,
-        sensors: None,
-        progress: false,
+        ..CollectOptions::new(out, episodes)
     })?;
     Ok(s.episodes_per_min)
 }

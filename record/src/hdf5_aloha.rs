@@ -4,7 +4,9 @@
 //! /                               attrs: sim=1, compress=0, episode_id, scene, instruction,
 //!                                        plan (JSON list), tasks (JSON list of TaskSpan), seed
 //! /observations/images/<cam>      uint8   (T, H, W, 3)   RGB
-//! /observations/depth/<cam>       float32 (T, H, W)      metres
+//! /observations/depth/<cam>       float32 (T, H, W)      metres, or uint16 millimetres
+//!                                                        (attr `unit` = "m" or "mm"); absent
+//!                                                        when depth is not recorded
 //! /observations/qpos              float64 (T, J+1)       arm joints then gripper opening
 //! /observations/qvel              float64 (T, J+1)
 //! /observations/base_pose         float64 (T, 3)         odometry x, y, yaw
@@ -16,23 +18,60 @@
 //! /task_success                   uint8   (K,)
 //! ```
 //! Every frame must carry every camera: ACT indexes images and actions by the same t.
+//!
+//! Images and depth are chunked one frame per chunk (ACT samples single timesteps, so a read
+//! decompresses only the frame it needs) and compressed with shuffle + deflate, the filters
+//! libhdf5 and so h5py always have: no plugin is needed to read the file. Raw, an average dev
+//! episode was ~240 MB; compressed with millimetre depth it is a tenth of that (README).
 
 use std::path::Path;
 
-use rust_hdf5::{H5File, H5Group, H5Type};
+use rust_hdf5::types::VarLenUnicode;
+use rust_hdf5::{H5Dataset, H5File, H5Group, H5Type};
 
 use crate::{EpisodeMeta, Frame, RecordError, TaskSpan};
+
+/// How `/observations/depth/<cam>` stores depth.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum DepthUnit {
+    /// float32 metres, as the simulator renders it.
+    Metres,
+    /// uint16 millimetres (0 = no return; clamped at 65.535 m): half the bytes, and integer
+    /// data compresses several times better than float noise.
+    #[default]
+    Millimetres,
+}
+
+/// Storage options of the HDF5 file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Hdf5Options {
+    pub depth: DepthUnit,
+    /// Deflate level 0–9 of the image and depth datasets (0 = chunked but uncompressed).
+    pub deflate: u32,
+}
+
+impl Default for Hdf5Options {
+    fn default() -> Self {
+        // Level 4: within a few percent of level 9's size on rendered frames, several times faster.
+        Hdf5Options {
+            depth: DepthUnit::default(),
+            deflate: 4,
+        }
+    }
+}
 
 /// Buffers an episode's frames and writes the file at the end (an episode is tens of MB).
 pub struct Hdf5Recorder {
     meta: EpisodeMeta,
+    options: Hdf5Options,
     frames: Vec<Frame>,
 }
 
 impl Hdf5Recorder {
-    pub fn new(meta: EpisodeMeta) -> Self {
+    pub fn new(meta: EpisodeMeta, options: Hdf5Options) -> Self {
         Hdf5Recorder {
             meta,
+            options,
             frames: Vec::new(),
         }
     }
@@ -40,11 +79,12 @@ impl Hdf5Recorder {
     pub fn push(&mut self, frame: Frame) -> Result<(), RecordError> {
         if let Some(first) = self.frames.first() {
             let same = first.cameras.len() == frame.cameras.len()
-                && first
-                    .cameras
-                    .iter()
-                    .zip(&frame.cameras)
-                    .all(|(a, b)| a.name == b.name && a.width == b.width && a.height == b.height)
+                && first.cameras.iter().zip(&frame.cameras).all(|(a, b)| {
+                    a.name == b.name
+                        && a.width == b.width
+                        && a.height == b.height
+                        && a.depth.is_empty() == b.depth.is_empty()
+                })
                 && first.qpos.len() == frame.qpos.len();
             if !same {
                 return Err(RecordError::Frame {
@@ -55,7 +95,9 @@ impl Hdf5Recorder {
         }
         for c in &frame.cameras {
             let n = (c.width * c.height) as usize;
-            if c.rgb.len() != 3 * n || c.depth.len() != n {
+            // An empty depth buffer means depth is not recorded (`collect --no-depth`).
+            let depth_ok = c.depth.len() == n || c.depth.is_empty();
+            if c.rgb.len() != 3 * n || !depth_ok {
                 return Err(RecordError::Frame {
                     index: self.frames.len(),
                     message: format!("camera {} buffers do not match {}x{}", c.name, c.width, c.height),
@@ -82,7 +124,16 @@ impl Hdf5Recorder {
         let t = self.frames.len();
         let obs = root.create_group("observations")?;
         let images = obs.create_group("images")?;
-        let depth = obs.create_group("depth")?;
+        let with_depth = self
+            .frames
+            .first()
+            .is_some_and(|f| f.cameras.iter().all(|c| !c.depth.is_empty()));
+        let depth = if with_depth {
+            Some(obs.create_group("depth")?)
+        } else {
+            None
+        };
+        let level = self.options.deflate;
         if let Some(first) = self.frames.first() {
             for (ci, cam) in first.cameras.iter().enumerate() {
                 let (h, w) = (cam.height as usize, cam.width as usize);
@@ -91,13 +142,30 @@ impl Hdf5Recorder {
                     .iter()
                     .flat_map(|f| f.cameras[ci].rgb.iter().copied())
                     .collect();
-                let d: Vec<f32> = self
+                write_frames(&images, &cam.name, &[t, h, w, 3], &rgb, level)?;
+                let Some(depth) = &depth else { continue };
+                let metres = self
                     .frames
                     .iter()
-                    .flat_map(|f| f.cameras[ci].depth.iter().copied())
-                    .collect();
-                write(&images, &cam.name, &[t, h, w, 3], &rgb)?;
-                write(&depth, &cam.name, &[t, h, w], &d)?;
+                    .flat_map(|f| f.cameras[ci].depth.iter().copied());
+                let ds = match self.options.depth {
+                    DepthUnit::Metres => {
+                        let d: Vec<f32> = metres.collect();
+                        write_frames(depth, &cam.name, &[t, h, w], &d, level)?
+                    }
+                    DepthUnit::Millimetres => {
+                        let d: Vec<u16> = metres.map(millimetres).collect();
+                        write_frames(depth, &cam.name, &[t, h, w], &d, level)?
+                    }
+                };
+                let unit = match self.options.depth {
+                    DepthUnit::Metres => "m",
+                    DepthUnit::Millimetres => "mm",
+                };
+                ds.new_attr::<VarLenUnicode>()
+                    .shape(())
+                    .create("unit")?
+                    .write_scalar(&VarLenUnicode(unit.into()))?;
             }
         }
         let rows = |get: &dyn Fn(&Frame) -> Vec<f64>| -> (Vec<f64>, usize) {
@@ -128,6 +196,32 @@ impl Hdf5Recorder {
 
 fn json<T: serde::Serialize + ?Sized>(v: &T) -> String {
     serde_json::to_string(v).unwrap_or_default()
+}
+
+/// Depth in metres to uint16 millimetres (0 stays 0: no return).
+fn millimetres(m: f32) -> u16 {
+    (m * 1000.0).round().clamp(0.0, f32::from(u16::MAX)) as u16
+}
+
+/// A `(T, ...)` dataset chunked one frame per chunk, shuffled and deflated.
+fn write_frames<T: H5Type>(
+    g: &H5Group,
+    name: &str,
+    shape: &[usize],
+    data: &[T],
+    level: u32,
+) -> Result<H5Dataset, RecordError> {
+    let mut chunk = shape.to_vec();
+    chunk[0] = 1;
+    let builder = g.new_dataset::<T>().shape(shape).chunk(&chunk);
+    let builder = if level > 0 {
+        builder.shuffle_deflate(level)
+    } else {
+        builder
+    };
+    let ds = builder.create(name)?;
+    ds.write_raw(data)?;
+    Ok(ds)
 }
 
 /// A dataset of `shape` holding `data` in row-major order.

@@ -1,9 +1,11 @@
-//! Trajectory recording: the episode data model and its two on-disk formats, and expert
+//! Trajectory recording: the episode data model and its on-disk formats, and expert
 //! trajectory collection ([`collect`]) that fills them.
 //!
 //! - [`mcap_ros2`]: MCAP with ROS 2 message encodings (`ros2msg` schemas, CDR payloads), the
 //!   format `ros2 bag` uses, so ROS 2 tools and Foxglove open it.
 //! - [`hdf5_aloha`]: one HDF5 file per episode in the layout ALOHA/ACT tooling reads.
+//! - [`lerobot`]: a LeRobotDataset v3.0 (Parquet + AV1 video), what LeRobot trains from.
+//! - [`video`]: RGB frames to an AV1 MP4 in pure Rust (LeRobot's videos; episode videos).
 //! - [`rate`]: the Monitoring Module's recording-rate check.
 //! - [`bench`](mod@bench): oracle-episode and collection throughput figures (it needs both local evaluation
 //!   and collection, so it lives with collection).
@@ -16,9 +18,11 @@ pub mod bench;
 mod cdr;
 pub mod collect;
 pub mod hdf5_aloha;
+pub mod lerobot;
 pub mod mcap_ros2;
 pub mod rate;
 mod ros2_msgs;
+pub mod video;
 
 use serde::{Deserialize, Serialize};
 

@@ -4,7 +4,10 @@
 //! - `/camera/<cam>/image_raw` `sensor_msgs/Image` rgb8 [`<cam>_optical_frame`]
 //! - `/camera/<cam>/depth` `sensor_msgs/Image` 32FC1, metres [`<cam>_optical_frame`]
 //! - `/lidar/points` `sensor_msgs/PointCloud2` xyz float32 [`lidar`]
+//! - `/camera/<cam>/depth` is absent when depth is not recorded (`collect --no-depth`)
 //! - `/odom` `nav_msgs/Odometry` [`odom` → `base_link`]
+//! - `/imu` `sensor_msgs/Imu` [`base_link`]: the base's motion (yaw, yaw rate, acceleration
+//!   from the change of base speed plus gravity on z; covariances in `ros2_msgs::IMU_COVARIANCE`)
 //! - `/tf` `tf2_msgs/TFMessage` (odom → base_link, base_link → ee_link) and `/tf_static` (sensor mounts)
 //! - `/cmd_vel` `geometry_msgs/Twist`: the commanded base twist
 //! - `/action` `std_msgs/Float64MultiArray`: the 10-value action
@@ -27,6 +30,8 @@ pub struct McapRecorder {
     path: PathBuf,
     channels: BTreeMap<String, u16>,
     sequence: u32,
+    /// The previous frame's time and base twist, for the IMU's acceleration.
+    previous: Option<(f64, [f64; 2])>,
     /// Messages written per topic, for summaries and tests.
     pub counts: BTreeMap<String, u64>,
 }
@@ -47,6 +52,7 @@ impl McapRecorder {
             path: path.to_path_buf(),
             channels: BTreeMap::new(),
             sequence: 0,
+            previous: None,
             counts: BTreeMap::new(),
         };
         let mut md = BTreeMap::new();
@@ -129,6 +135,9 @@ impl McapRecorder {
                 &rgb,
                 rate.as_deref_mut(),
             )?;
+            if cam.depth.is_empty() {
+                continue;
+            }
             let depth_bytes: Vec<u8> = cam.depth.iter().flat_map(|d| d.to_le_bytes()).collect();
             let depth = msg::image(
                 t,
@@ -159,6 +168,9 @@ impl McapRecorder {
         }
         let odom = msg::odometry(t, f.base_pose, f.base_twist);
         self.publish("/odom", "nav_msgs/Odometry", t, &odom, rate.as_deref_mut())?;
+        let imu = msg::imu(t, f.base_pose[2], f.base_twist, self.previous);
+        self.previous = Some((t, f.base_twist));
+        self.publish("/imu", "sensor_msgs/Imu", t, &imu, rate.as_deref_mut())?;
         let (bt, br) = msg::base_tf(f.base_pose);
         let e = f.ee_pose;
         let tf = msg::tf_message(

@@ -67,6 +67,12 @@ const DEFS: &[(&str, &str)] = &[
         "geometry_msgs/TransformStamped[] transforms\n",
     ),
     (
+        "sensor_msgs/Imu",
+        "std_msgs/Header header\ngeometry_msgs/Quaternion orientation\nfloat64[9] orientation_covariance\n\
+         geometry_msgs/Vector3 angular_velocity\nfloat64[9] angular_velocity_covariance\n\
+         geometry_msgs/Vector3 linear_acceleration\nfloat64[9] linear_acceleration_covariance\n",
+    ),
+    (
         "std_msgs/MultiArrayDimension",
         "string label\nuint32 size\nuint32 stride\n",
     ),
@@ -198,6 +204,37 @@ pub(crate) fn odometry(t: f64, pose: [f64; 3], twist: [f64; 2]) -> Vec<u8> {
     vec3(&mut w, [twist[0], 0.0, 0.0]);
     vec3(&mut w, [0.0, 0.0, twist[1]]);
     (0..36).for_each(|_| w.f64(0.0));
+    w.finish()
+}
+
+/// Standard gravity, m/s²: what an accelerometer at rest on level ground reads along +z.
+const GRAVITY: f64 = 9.80665;
+
+/// Diagonal covariances of `/imu` (row-major 3×3). The values come from the simulator's exact
+/// odometry, so they are small but not zero (zero would mean "unknown" in ROS):
+/// orientation 1e-6 rad², angular velocity 1e-6 (rad/s)²; linear acceleration 1e-2 (m/s²)²,
+/// since it is a finite difference of the base speed over one 0.1 s control step.
+pub(crate) const IMU_COVARIANCE: [f64; 3] = [1e-6, 1e-6, 1e-2];
+
+/// The base's motion as `sensor_msgs/Imu` in `base_link`: orientation from the odometry yaw
+/// (the floor is level, so roll = pitch = 0), angular velocity about z from the measured yaw
+/// rate, linear acceleration from the change of the measured base speed over `dt` along x,
+/// the centripetal `v·ω` along y, and gravity along z.
+pub(crate) fn imu(t: f64, yaw: f64, twist: [f64; 2], previous: Option<(f64, [f64; 2])>) -> Vec<u8> {
+    let [v, omega] = twist;
+    let ax = match previous {
+        Some((t0, [v0, _])) if t > t0 => (v - v0) / (t - t0),
+        _ => 0.0,
+    };
+    let diag = |x: f64| [x, 0.0, 0.0, 0.0, x, 0.0, 0.0, 0.0, x];
+    let mut w = CdrWriter::with_capacity(400);
+    header(&mut w, t, "base_link");
+    quat(&mut w, yaw_quat(yaw));
+    diag(IMU_COVARIANCE[0]).into_iter().for_each(|x| w.f64(x));
+    vec3(&mut w, [0.0, 0.0, omega]);
+    diag(IMU_COVARIANCE[1]).into_iter().for_each(|x| w.f64(x));
+    vec3(&mut w, [ax, v * omega, GRAVITY]);
+    diag(IMU_COVARIANCE[2]).into_iter().for_each(|x| w.f64(x));
     w.finish()
 }
 

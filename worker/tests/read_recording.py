@@ -40,15 +40,32 @@ def read_mcap(path):
                 first[channel.topic] = {"children": [t.child_frame_id for t in ros_msg.transforms]}
             elif schema.name == "geometry_msgs/msg/Twist":
                 first[channel.topic] = {"v": ros_msg.linear.x, "w": ros_msg.angular.z}
+            elif schema.name == "sensor_msgs/msg/Imu":
+                a, o = ros_msg.linear_acceleration, ros_msg.orientation
+                first[channel.topic] = {
+                    "frame_id": ros_msg.header.frame_id, "wz": ros_msg.angular_velocity.z,
+                    "acc": [a.x, a.y, a.z], "q": [o.w, o.x, o.y, o.z],
+                    "cov": [list(ros_msg.orientation_covariance),
+                            list(ros_msg.angular_velocity_covariance),
+                            list(ros_msg.linear_acceleration_covariance)],
+                }
     return {"profile": profile, "counts": counts, "first": first, "metadata": meta}
 
 
 def read_hdf5(path):
-    out = {"shapes": {}, "attrs": {}}
+    out = {"shapes": {}, "attrs": {}, "dtypes": {}, "filters": {}, "units": {}}
     with h5py.File(path, "r") as f:
         def visit(name, obj):
             if isinstance(obj, h5py.Dataset):
                 out["shapes"][name] = list(obj.shape)
+                out["dtypes"][name] = obj.dtype.str
+                out["filters"][name] = {"compression": obj.compression, "shuffle": obj.shuffle,
+                                        "chunks": list(obj.chunks) if obj.chunks else None}
+                if "unit" in obj.attrs:
+                    u = obj.attrs["unit"]
+                    out["units"][name] = u.decode() if isinstance(u, bytes) else str(u)
+                # Reading every frame proves the filters decode without a plugin.
+                obj[...]
         f.visititems(visit)
         for k, v in f.attrs.items():
             out["attrs"][k] = v.decode() if isinstance(v, bytes) else (v.item() if hasattr(v, "item") else v)

@@ -6,6 +6,7 @@ use kitchen_r_sim::task::MonitorTrip;
 use kitchen_r_sim::{Action, Observation, Sim, StepInfo};
 
 use crate::hdf5_aloha::Hdf5Recorder;
+use crate::lerobot::EpisodeRecorder;
 use crate::mcap_ros2::McapRecorder;
 use crate::rate::RateMonitor;
 use crate::{CameraFrame, Frame, TaskSpan};
@@ -53,6 +54,9 @@ impl Trip {
 pub(super) struct Recorder {
     pub mcap: Option<McapRecorder>,
     pub hdf5: Option<Hdf5Recorder>,
+    pub lerobot: Option<EpisodeRecorder>,
+    /// Keep depth images (`collect --no-depth` drops them before any writer sees them).
+    pub depth: bool,
     pub rate: RateMonitor,
     pub monitors: MonitorConfig,
     pub spans: Vec<TaskSpan>,
@@ -68,12 +72,15 @@ impl Recorder {
     pub(super) fn new(
         mcap: Option<McapRecorder>,
         hdf5: Option<Hdf5Recorder>,
+        lerobot: Option<EpisodeRecorder>,
         rate: RateMonitor,
         monitors: MonitorConfig,
     ) -> Recorder {
         Recorder {
             mcap,
             hdf5,
+            lerobot,
+            depth: true,
             rate,
             monitors,
             spans: Vec::new(),
@@ -101,7 +108,7 @@ impl Recorder {
                     width: c.width,
                     height: c.height,
                     rgb: c.rgb,
-                    depth: c.depth,
+                    depth: if self.depth { c.depth } else { Vec::new() },
                 })
                 .collect(),
             lidar: obs.lidar.map(|l| l.points),
@@ -128,6 +135,10 @@ impl Recorder {
                 self.rate
                     .record(&format!("/camera/{}/image_raw", c.name), frame.time);
             }
+        }
+        if let Some(l) = &mut self.lerobot {
+            l.push(&frame)
+                .map_err(|e| Trip::new("write_error", e.to_string()))?;
         }
         if let Some(h) = &mut self.hdf5 {
             h.push(frame)

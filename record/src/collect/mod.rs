@@ -3,15 +3,19 @@
 //!
 //! Episode `i` takes dev instruction `i mod n` with a seed drawn from `(seed, i)`: the robot start
 //! and background objects from the episode-configuration generator, and (with
-//! `randomize_style`) the floor and wall colours and floor tile. The oracle expert drives it
+//! `randomize_style`) the floor and wall colours and floor tile. With a batch
+//! ([`CollectOptions::batch`], `collect --episodes-file`) episode `i` is the batch's `i`-th
+//! configuration, run exactly as saved. The oracle expert drives it
 //! closed-loop, one action per query, through the evaluation runner; every control step is
-//! recorded (both cameras RGB + depth, LiDAR, odometry, TF, cmd_vel, the action) to MCAP and/or
-//! HDF5 by [`crate::mcap_ros2`] and [`crate::hdf5_aloha`]. An episode that trips a monitor of
+//! recorded (the chosen cameras' RGB and, unless turned off, depth; LiDAR, odometry, IMU, TF,
+//! cmd_vel, the action) to MCAP, HDF5 and/or a LeRobotDataset by [`crate::mcap_ros2`],
+//! [`crate::hdf5_aloha`] and [`crate::lerobot`]. An episode that trips a monitor of
 //! `configs/collect.toml`, fails a task, or fails the simulator's preflight collider check is
 //! discarded: its files are removed and the reason counted.
 //!
 //! Output directory: `ep00000.mcap`, `ep00000.hdf5`, ... written as `*.partial` and renamed when
-//! complete, plus `manifest.jsonl` (one line per finished episode, kept or discarded). A rerun
+//! complete, plus `manifest.jsonl` (one line per finished episode, kept or discarded), plus the
+//! LeRobotDataset under `lerobot/` (its own resumable layout, see [`crate::lerobot`]). A rerun
 //! skips episodes whose final files exist, so an interrupted collection resumes.
 
 mod config;
@@ -23,6 +27,7 @@ use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
 
+pub use crate::hdf5_aloha::DepthUnit;
 pub use config::{CollectConfig, RateConfig};
 pub use run::collect;
 
@@ -42,6 +47,8 @@ pub enum CollectError {
     },
     #[error("a collection thread panicked")]
     Panicked,
+    #[error("LeRobot dataset: {0}")]
+    LeRobot(#[from] crate::lerobot::LeRobotError),
 }
 
 /// Which files each episode gets.
@@ -49,21 +56,29 @@ pub enum CollectError {
 pub struct Formats {
     pub mcap: bool,
     pub hdf5: bool,
+    /// Rows and video frames in the LeRobotDataset v3.0 under `<out>/lerobot/`.
+    pub lerobot: bool,
 }
 
 impl std::str::FromStr for Formats {
     type Err = String;
-    /// A comma-separated list of `mcap` and `hdf5`.
+    /// A comma-separated list of `mcap`, `hdf5` and `lerobot`.
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         let mut f = Formats {
             mcap: false,
             hdf5: false,
+            lerobot: false,
         };
         for part in s.split(',').map(str::trim) {
             match part {
                 "mcap" => f.mcap = true,
                 "hdf5" => f.hdf5 = true,
-                other => return Err(format!("unknown format {other:?} (accepted: mcap, hdf5)")),
+                "lerobot" => f.lerobot = true,
+                other => {
+                    return Err(format!(
+                        "unknown format {other:?} (accepted: mcap, hdf5, lerobot)"
+                    ));
+                }
             }
         }
         Ok(f)
@@ -71,6 +86,7 @@ impl std::str::FromStr for Formats {
 }
 
 impl Formats {
+    /// The per-episode files' extensions (the LeRobotDataset has no file per episode).
     pub(crate) fn extensions(self) -> Vec<&'static str> {
         [(self.mcap, "mcap"), (self.hdf5, "hdf5")]
             .into_iter()
@@ -81,6 +97,7 @@ impl Formats {
 
 #[derive(Debug, Clone)]
 pub struct CollectOptions {
+    /// Episodes to collect (ignored when `batch` is given: then its length).
     pub episodes: usize,
     pub out: PathBuf,
     pub formats: Formats,
@@ -89,8 +106,44 @@ pub struct CollectOptions {
     pub config: CollectConfig,
     /// Cameras and LiDAR to record; `None` = `configs/sensors.toml`.
     pub sensors: Option<kitchen_r_sim::SensorsConfig>,
+    /// Names of the cameras to record, a subset of the sensors' (`None` = all of them).
+    pub cameras: Option<Vec<String>>,
+    /// Depth images: `None` records none (MCAP, HDF5); else HDF5's unit (MCAP stays `32FC1`).
+    pub depth: Option<DepthUnit>,
+    /// Exactly these episode configurations (`collect --episodes-file`, a batch written by
+    /// `kitchen_r_sim::episode::save_batch`) instead of drawing from the dev instructions.
+    pub batch: Option<Vec<kitchen_r_sim::EpisodeConfig>>,
     /// Draw an indicatif progress bar on stderr (hidden anyway when stderr is not a terminal).
     pub progress: bool,
+}
+
+impl CollectOptions {
+    /// `episodes` dev episodes into `out` as MCAP and HDF5, one job, seed 0, the default
+    /// thresholds and sensors, every camera, millimetre depth; set fields to change that.
+    pub fn new(out: impl Into<PathBuf>, episodes: usize) -> CollectOptions {
+        CollectOptions {
+            episodes,
+            out: out.into(),
+            formats: Formats {
+                mcap: true,
+                hdf5: true,
+                lerobot: false,
+            },
+            jobs: 1,
+            seed: 0,
+            config: CollectConfig::default(),
+            sensors: None,
+            cameras: None,
+            depth: Some(DepthUnit::default()),
+            batch: None,
+            progress: false,
+        }
+    }
+
+    /// How many episodes the run covers.
+    pub(crate) fn count(&self) -> usize {
+        self.batch.as_ref().map_or(self.episodes, Vec::len)
+    }
 }
 
 /// One `manifest.jsonl` line.

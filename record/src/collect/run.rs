@@ -16,9 +16,11 @@ use rand_chacha::ChaCha8Rng;
 
 use super::hook::{Recorder, Trip};
 use super::{CollectError, CollectOptions, CollectSummary, ManifestEntry};
-use crate::hdf5_aloha::Hdf5Recorder;
+use crate::hdf5_aloha::{Hdf5Options, Hdf5Recorder};
+use crate::lerobot::{CameraSpec, EpisodeRecorder, LeRobotDataset};
 use crate::mcap_ros2::McapRecorder;
 use crate::rate::RateMonitor;
+use crate::video::VideoSettings;
 use crate::{EpisodeMeta, StaticTransform};
 use kitchen_r_episode::oracle::{OraclePolicy, expert_options};
 use kitchen_r_episode::runner::run_episode;
@@ -30,14 +32,21 @@ fn io(path: &Path) -> impl FnOnce(std::io::Error) -> CollectError + '_ {
     }
 }
 
-/// The configuration of episode `index`.
+/// The configuration of episode `index`, its instruction text and instruction id.
 fn episode(
     assets: &Assets,
     params: &EpisodeParams,
     ins: &[Instruction],
     opts: &CollectOptions,
     index: usize,
-) -> Result<(EpisodeConfig, String), CollectError> {
+) -> Result<(EpisodeConfig, String, String), CollectError> {
+    if let Some(batch) = &opts.batch {
+        // Run exactly as saved (ids and seeds included); a batch episode has no dataset
+        // instruction, so its plan stands in for the text.
+        let cfg = batch[index].clone();
+        let text = cfg.plan.join("; ");
+        return Ok((cfg, text, String::new()));
+    }
     let instruction = &ins[index % ins.len()];
     let seed = splitmix(opts.seed ^ splitmix(index as u64));
     let scene = assets.scene(&instruction.scene)?;
@@ -55,7 +64,7 @@ fn episode(
             s.floor_tile = params.floor_tiles[rng.random_range(0..params.floor_tiles.len())];
         }
     }
-    Ok((cfg, instruction.instruction.clone()))
+    Ok((cfg, instruction.instruction.clone(), instruction.id.clone()))
 }
 
 fn final_paths(opts: &CollectOptions, index: usize) -> Vec<PathBuf> {
@@ -71,7 +80,9 @@ fn partial(p: &Path) -> PathBuf {
     PathBuf::from(s)
 }
 
-/// Run, record and judge episode `index`; returns its manifest entry.
+/// Run, record and judge episode `index`; returns its manifest entry. A kept episode is staged
+/// for the LeRobotDataset under `staging` (when that format is on).
+#[allow(clippy::too_many_arguments)]
 fn one(
     assets: &Assets,
     sim: &mut Option<Sim>,
@@ -80,6 +91,7 @@ fn one(
     instruction: &str,
     opts: &CollectOptions,
     index: usize,
+    staging: Option<&Path>,
 ) -> Result<ManifestEntry, CollectError> {
     let started = Instant::now();
     let finals = final_paths(opts, index);
@@ -130,9 +142,31 @@ fn one(
         Some(p) => Some(McapRecorder::create(p, &meta).map_err(|e| CollectError::Config(e.to_string()))?),
         None => None,
     };
-    let hdf5 = opts.formats.hdf5.then(|| Hdf5Recorder::new(meta.clone()));
-    let rate = RateMonitor::new(opts.config.rates.min_hz.clone(), opts.config.rates.window_s);
-    let mut rec = Recorder::new(mcap, hdf5, rate, opts.config.monitors.clone());
+    let hdf5_options = Hdf5Options {
+        depth: opts.depth.unwrap_or_default(),
+        ..Hdf5Options::default()
+    };
+    let hdf5 = opts
+        .formats
+        .hdf5
+        .then(|| Hdf5Recorder::new(meta.clone(), hdf5_options));
+    let lerobot = match staging {
+        Some(_) => Some(EpisodeRecorder::new(
+            index,
+            meta.clone(),
+            &camera_specs(&sensors(opts)?),
+            VideoSettings::default(),
+        )?),
+        None => None,
+    };
+    let mut rec = Recorder::new(
+        mcap,
+        hdf5,
+        lerobot,
+        rate_monitor(opts)?,
+        opts.config.monitors.clone(),
+    );
+    rec.depth = opts.depth.is_some();
     let outcome = run_episode(s, oracle, &expert_options(), None, &mut rec)
         .map_err(|e| CollectError::Config(e.to_string()))?;
     entry.frames = rec.frames;
@@ -146,7 +180,10 @@ fn one(
             )
         })
     });
-    let written = finish(&mut rec, opts, &finals, mcap_path.as_deref());
+    let mut written = finish(&mut rec, opts, &finals, mcap_path.as_deref());
+    if let (None, Ok(()), Some(l), Some(dir)) = (&trip, &written, rec.lerobot.take(), staging) {
+        written = l.finish(dir).map_err(|e| Trip::new("write_error", e.to_string()));
+    }
     match (trip, written) {
         (Some(t), _) | (None, Err(t)) => {
             for p in &finals {
@@ -190,11 +227,58 @@ fn finish(
     Ok(())
 }
 
+/// The sensors to simulate: the configured ones, less the cameras `opts.cameras` leaves out.
 fn sensors(opts: &CollectOptions) -> Result<SensorsConfig, CollectError> {
-    Ok(match &opts.sensors {
+    let mut s = match &opts.sensors {
         Some(s) => s.clone(),
         None => SensorsConfig::load_default()?,
-    })
+    };
+    if let Some(names) = &opts.cameras {
+        let known: Vec<String> = s.cameras.iter().map(|c| c.name.clone()).collect();
+        if let Some(bad) = names.iter().find(|n| !known.contains(n)) {
+            return Err(CollectError::Config(format!(
+                "--cameras: no camera {bad:?} (configured: {})",
+                known.join(", ")
+            )));
+        }
+        if names.is_empty() {
+            return Err(CollectError::Config("--cameras: name at least one camera".into()));
+        }
+        // Keep the configured order: it is the order of the recorded topics and datasets.
+        s.cameras.retain(|c| names.contains(&c.name));
+    }
+    Ok(s)
+}
+
+fn camera_specs(s: &SensorsConfig) -> Vec<CameraSpec> {
+    s.cameras
+        .iter()
+        .map(|c| CameraSpec {
+            name: c.name.clone(),
+            width: c.width,
+            height: c.height,
+        })
+        .collect()
+}
+
+/// The recording-rate monitor over the topics this run writes: a camera left out by
+/// `--cameras` has no rate to keep.
+fn rate_monitor(opts: &CollectOptions) -> Result<RateMonitor, CollectError> {
+    let cameras: Vec<String> = sensors(opts)?.cameras.into_iter().map(|c| c.name).collect();
+    let min_hz = opts
+        .config
+        .rates
+        .min_hz
+        .iter()
+        .filter(|(topic, _)| {
+            topic
+                .strip_prefix("/camera/")
+                .and_then(|t| t.split('/').next())
+                .is_none_or(|cam| cameras.iter().any(|c| c == cam))
+        })
+        .map(|(t, hz)| (t.clone(), *hz))
+        .collect();
+    Ok(RateMonitor::new(min_hz, opts.config.rates.window_s))
 }
 
 /// Static transforms of the sensor mounts (`/tf_static`).
@@ -242,22 +326,36 @@ fn bar(opts: &CollectOptions, n: usize) -> ProgressBar {
     pb
 }
 
-/// Collect `opts.episodes` episodes into `opts.out`.
+/// Collect `opts.episodes` episodes (or the batch's) into `opts.out`.
 pub fn collect(opts: &CollectOptions) -> Result<CollectSummary, CollectError> {
     opts.config.validate()?;
+    let f = opts.formats;
+    if !(f.mcap || f.hdf5 || f.lerobot) {
+        return Err(CollectError::Config("--format: name at least one format".into()));
+    }
+    sensors(opts)?;
     std::fs::create_dir_all(&opts.out).map_err(io(&opts.out))?;
     let started = Instant::now();
     let assets = Assets::load_default()?;
     let params = EpisodeParams::load_default()?;
     let ins = kitchen_r_episode::eval::instructions(Split::Dev, None)?;
+    let count = opts.count();
     let mut summary = CollectSummary {
-        requested: opts.episodes,
+        requested: count,
         ..CollectSummary::default()
     };
-    let todo: Vec<usize> = (0..opts.episodes)
-        .filter(|i| !final_paths(opts, *i).iter().all(|p| p.is_file()))
+    let mut dataset = match f.lerobot {
+        true => Some(LeRobotDataset::open(&opts.out.join("lerobot"))?),
+        false => None,
+    };
+    let staging = dataset.as_ref().map(LeRobotDataset::staging_dir);
+    let todo: Vec<usize> = (0..count)
+        .filter(|i| {
+            let files = final_paths(opts, *i).iter().all(|p| p.is_file());
+            !(files && dataset.as_ref().is_none_or(|d| d.has(*i)))
+        })
         .collect();
-    summary.skipped = opts.episodes - todo.len();
+    summary.skipped = count - todo.len();
     let manifest_path = opts.out.join("manifest.jsonl");
     let mut manifest = std::fs::OpenOptions::new()
         .create(true)
@@ -270,13 +368,14 @@ pub fn collect(opts: &CollectOptions) -> Result<CollectSummary, CollectError> {
     std::thread::scope(|scope| -> Result<(), CollectError> {
         for _ in 0..opts.jobs.clamp(1, todo.len().max(1)) {
             let (tx, next, todo, assets, params, ins) = (tx.clone(), &next, &todo, &assets, &params, &ins);
+            let staging = staging.as_deref();
             scope.spawn(move || {
                 let mut oracle = OraclePolicy::new(assets);
                 let mut sim = None;
                 while let Some(&i) = todo.get(next.fetch_add(1, Ordering::SeqCst)) {
-                    let r = episode(assets, params, ins, opts, i).and_then(|(cfg, text)| {
-                        let mut e = one(assets, &mut sim, &mut oracle, &cfg, &text, opts, i)?;
-                        e.instruction_id = ins[i % ins.len()].id.clone();
+                    let r = episode(assets, params, ins, opts, i).and_then(|(cfg, text, id)| {
+                        let mut e = one(assets, &mut sim, &mut oracle, &cfg, &text, opts, i, staging)?;
+                        e.instruction_id = id;
                         Ok(e)
                     });
                     if tx.send(r).is_err() {
@@ -292,7 +391,12 @@ pub fn collect(opts: &CollectOptions) -> Result<CollectSummary, CollectError> {
             writeln!(manifest, "{line}").map_err(io(&manifest_path))?;
             summary.frames += e.frames;
             match (&e.kept, &e.reason_kind) {
-                (true, _) => summary.kept += 1,
+                (true, _) => {
+                    summary.kept += 1;
+                    if let Some(d) = &mut dataset {
+                        d.staged(e.index)?;
+                    }
+                }
                 (false, kind) => {
                     let kind = kind.clone().unwrap_or_else(|| "unknown".into());
                     pb.println(format!(
@@ -310,6 +414,9 @@ pub fn collect(opts: &CollectOptions) -> Result<CollectSummary, CollectError> {
         Ok(())
     })?;
     pb.finish_and_clear();
+    if let Some(d) = &mut dataset {
+        d.finish()?;
+    }
     summary.wall_s = started.elapsed().as_secs_f64();
     let ran = summary.kept + summary.discarded.values().sum::<usize>();
     summary.episodes_per_min = if summary.wall_s > 0.0 {

@@ -19,14 +19,12 @@ fn small_sensors() -> SensorsConfig {
 
 fn options(out: &Path, episodes: usize, formats: &str) -> CollectOptions {
     CollectOptions {
-        episodes,
-        out: out.to_path_buf(),
         formats: formats.parse().unwrap(),
         jobs: 2,
         seed: 3,
         config: CollectConfig::default(),
         sensors: Some(small_sensors()),
-        progress: false,
+        ..CollectOptions::new(out, episodes)
     }
 }
 
@@ -92,6 +90,7 @@ fn two_collected_episodes_read_back_in_the_reference_readers() {
             "/tf",
             "/cmd_vel",
             "/action",
+            "/imu",
         ] {
             assert_eq!(m["counts"][topic].as_u64(), Some(t), "{topic}");
         }

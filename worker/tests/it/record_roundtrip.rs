@@ -4,7 +4,7 @@
 use std::collections::BTreeMap;
 use std::process::Command;
 
-use kitchen_r_record::hdf5_aloha::Hdf5Recorder;
+use kitchen_r_record::hdf5_aloha::{Hdf5Options, Hdf5Recorder};
 use kitchen_r_record::mcap_ros2::McapRecorder;
 use kitchen_r_record::rate::RateMonitor;
 use kitchen_r_record::{CameraFrame, EpisodeMeta, Frame, StaticTransform, TaskSpan};
@@ -65,7 +65,7 @@ fn mcap_and_hdf5_read_back_in_reference_readers() {
     let mcap_path = dir.path().join("ep.mcap");
     let h5_path = dir.path().join("ep.hdf5");
     let mut mcap = McapRecorder::create(&mcap_path, &meta).unwrap();
-    let mut h5 = Hdf5Recorder::new(meta);
+    let mut h5 = Hdf5Recorder::new(meta, Hdf5Options::default());
     let mut rate = RateMonitor::new(BTreeMap::from([("/odom".to_string(), 9.0)]), 0.5);
     for i in 0..10 {
         mcap.write_frame(&frame(i), Some(&mut rate)).unwrap();
@@ -118,9 +118,25 @@ fn mcap_and_hdf5_read_back_in_reference_readers() {
         "/tf",
         "/cmd_vel",
         "/action",
+        "/imu",
     ] {
         assert_eq!(m["counts"][topic], 10, "{topic}: {}", m["counts"]);
     }
+    let imu = &m["first"]["/imu"];
+    assert_eq!(imu["frame_id"], "base_link");
+    assert_eq!(imu["wz"], 0.0);
+    assert_eq!(
+        imu["acc"],
+        serde_json::json!([0.0, 0.0, 9.80665]),
+        "gravity on z at rest"
+    );
+    let yaw_half = 0.25f64;
+    assert!((imu["q"][0].as_f64().unwrap() - yaw_half.cos()).abs() < 1e-12);
+    assert!((imu["q"][3].as_f64().unwrap() - yaw_half.sin()).abs() < 1e-12);
+    assert!(
+        imu["cov"][2][0].as_f64().unwrap() > 0.0,
+        "covariances are known, not -1 or 0"
+    );
     assert_eq!(m["counts"]["/tf_static"], 1);
     let img = &m["first"]["/camera/base/image_raw"];
     assert_eq!(
@@ -161,4 +177,11 @@ fn mcap_and_hdf5_read_back_in_reference_readers() {
     assert_eq!(h["attrs"]["instruction"], "Move the bowl to the green zone.");
     assert_eq!(h["attrs"]["sim"], 1);
     assert_eq!(h["action0"][2], 0.4);
+    // Compact by default: deflate (h5py reads it without a plugin), one frame per chunk,
+    // depth as uint16 millimetres.
+    let img = "observations/images/gripper";
+    assert_eq!(h["filters"][img]["compression"], "gzip");
+    assert_eq!(h["filters"][img]["chunks"], serde_json::json!([1, 6, 8, 3]));
+    assert_eq!(h["dtypes"]["observations/depth/base"], "<u2");
+    assert_eq!(h["units"]["observations/depth/base"], "mm");
 }

@@ -1,0 +1,141 @@
+//! Pure-Rust video: RGB8 frames in, an AV1 stream in an MP4 (ISO-BMFF) file out.
+//!
+//! AV1 in MP4 is what LeRobot writes by default and decodes (PyAV/torchcodec with dav1d), and
+//! what Chromium and Firefox play inline in a `<video>` element. [`av1`] wraps `rav1e` (built
+//! without its nasm assembly, so cargo alone builds it) and [`mp4`] writes the container by
+//! hand: `ftyp`, then `moov` (one `av01` track, `av1C` and `colr` in its sample entry) before
+//! `mdat`, so a browser can start playing before the whole file has arrived.
+//!
+//! ```no_run
+//! use kitchen_r_record::video::{VideoEncoder, VideoSettings};
+//! let mut enc = VideoEncoder::new(128, 128, 10, VideoSettings::default()).unwrap();
+//! for _ in 0..20 {
+//!     enc.push_rgb(&vec![128u8; 128 * 128 * 3]).unwrap();
+//! }
+//! enc.finish().unwrap().write_mp4(std::path::Path::new("clip.mp4")).unwrap();
+//! ```
+//!
+//! An [`EncodedVideo`] can also be kept as samples ([`EncodedVideo::save`]/[`EncodedVideo::load`])
+//! and several joined into one file ([`EncodedVideo::concat`]): every clip starts on a key frame
+//! and the sequence header is the same for equal settings and size, so joining is copying samples.
+
+mod av1;
+mod mp4;
+mod stored;
+
+use std::path::Path;
+
+pub use av1::VideoEncoder;
+
+#[derive(Debug, thiserror::Error)]
+pub enum VideoError {
+    #[error("video settings: {0}")]
+    Config(String),
+    #[error("frame {index}: {message}")]
+    Frame { index: usize, message: String },
+    #[error("AV1 encoder: {0}")]
+    Encoder(String),
+    #[error("cannot join clips of different size, rate or stream configuration")]
+    Mismatch,
+    #[error("{path}: {source}")]
+    Io {
+        path: std::path::PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{path}: not a stored clip ({message})")]
+    Stored {
+        path: std::path::PathBuf,
+        message: String,
+    },
+}
+
+/// Encoder knobs; the defaults suit small robot-camera frames at 10 fps.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct VideoSettings {
+    /// rav1e speed preset 0 (slowest, smallest) – 10 (fastest).
+    pub speed: u8,
+    /// rav1e base quantizer 0–255 (lower = better quality, larger files).
+    pub quantizer: u8,
+    /// A key frame at least every this many frames: a decoder seeking to a frame decodes from
+    /// the key frame before it, so this bounds a random-access read (LeRobot samples frames).
+    pub key_interval: u32,
+}
+
+impl Default for VideoSettings {
+    fn default() -> Self {
+        VideoSettings {
+            speed: 10,
+            quantizer: 100,
+            key_interval: 10,
+        }
+    }
+}
+
+/// One coded frame (an AV1 temporal unit without its temporal delimiter, as ISO-BMFF stores it).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Sample {
+    pub data: Vec<u8>,
+    pub key: bool,
+}
+
+/// An encoded clip: what an MP4 track needs.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct EncodedVideo {
+    pub width: u32,
+    pub height: u32,
+    pub fps: u32,
+    /// The `av1C` box payload: 4 header bytes then the sequence header OBU.
+    pub config: Vec<u8>,
+    pub samples: Vec<Sample>,
+}
+
+impl EncodedVideo {
+    /// Duration in seconds (frames are evenly spaced at `fps`).
+    pub fn duration(&self) -> f64 {
+        self.samples.len() as f64 / f64::from(self.fps.max(1))
+    }
+
+    /// Write the clip as an MP4 file at `path` (replacing it).
+    pub fn write_mp4(&self, path: &Path) -> Result<(), VideoError> {
+        let bytes = mp4::mux(self);
+        std::fs::write(path, bytes).map_err(|source| VideoError::Io {
+            path: path.to_path_buf(),
+            source,
+        })
+    }
+
+    /// The MP4 file's bytes.
+    pub fn to_mp4(&self) -> Vec<u8> {
+        mp4::mux(self)
+    }
+
+    /// The clips one after the other, as one clip (all of the same size, rate and stream
+    /// configuration; the first sample of each is a key frame).
+    pub fn concat(clips: &[EncodedVideo]) -> Result<EncodedVideo, VideoError> {
+        let Some(first) = clips.first() else {
+            return Err(VideoError::Config("no clips to join".into()));
+        };
+        let same = |c: &EncodedVideo| {
+            (c.width, c.height, c.fps) == (first.width, first.height, first.fps)
+                && c.config == first.config
+                && c.samples.first().is_none_or(|s| s.key)
+        };
+        if !clips.iter().all(same) {
+            return Err(VideoError::Mismatch);
+        }
+        Ok(EncodedVideo {
+            samples: clips.iter().flat_map(|c| c.samples.iter().cloned()).collect(),
+            ..first.clone()
+        })
+    }
+
+    /// Keep the samples in a small file of our own (cheaper to join than an MP4 is to parse).
+    pub fn save(&self, path: &Path) -> Result<(), VideoError> {
+        stored::save(self, path)
+    }
+
+    pub fn load(path: &Path) -> Result<EncodedVideo, VideoError> {
+        stored::load(path)
+    }
+}

@@ -1,0 +1,107 @@
+//! Our own container for an encoded clip between episode end and the MP4 that joins a batch of
+//! episodes: a header, the `av1C` payload, then `(key, length, bytes)` per sample. Little
+//! endian; not meant for other tools.
+
+use std::path::Path;
+
+use super::{EncodedVideo, Sample, VideoError};
+
+const MAGIC: &[u8; 8] = b"KRAV1\0\0\x01";
+
+pub(super) fn save(v: &EncodedVideo, path: &Path) -> Result<(), VideoError> {
+    let payload: usize = v.samples.iter().map(|s| s.data.len() + 5).sum();
+    let mut out = Vec::with_capacity(payload + v.config.len() + 32);
+    out.extend(MAGIC);
+    for x in [
+        v.width,
+        v.height,
+        v.fps,
+        v.config.len() as u32,
+        v.samples.len() as u32,
+    ] {
+        out.extend(x.to_le_bytes());
+    }
+    out.extend(&v.config);
+    for s in &v.samples {
+        out.push(u8::from(s.key));
+        out.extend((s.data.len() as u32).to_le_bytes());
+        out.extend(&s.data);
+    }
+    std::fs::write(path, out).map_err(|source| VideoError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+pub(super) fn load(path: &Path) -> Result<EncodedVideo, VideoError> {
+    let b = std::fs::read(path).map_err(|source| VideoError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    parse(&b).ok_or_else(|| VideoError::Stored {
+        path: path.to_path_buf(),
+        message: "truncated or wrong magic".into(),
+    })
+}
+
+fn parse(b: &[u8]) -> Option<EncodedVideo> {
+    let mut at: usize = 0;
+    let mut take = |n: usize| -> Option<&[u8]> {
+        let s = b.get(at..at.checked_add(n)?)?;
+        at += n;
+        Some(s)
+    };
+    if take(8)? != MAGIC {
+        return None;
+    }
+    let mut word = || -> Option<u32> { Some(u32::from_le_bytes(take(4)?.try_into().ok()?)) };
+    let (width, height, fps, config_len, n) = (word()?, word()?, word()?, word()?, word()?);
+    let config = take(config_len as usize)?.to_vec();
+    let mut samples = Vec::with_capacity(n as usize);
+    for _ in 0..n {
+        let key = take(1)?[0] != 0;
+        let len = u32::from_le_bytes(take(4)?.try_into().ok()?) as usize;
+        samples.push(Sample {
+            data: take(len)?.to_vec(),
+            key,
+        });
+    }
+    (at == b.len()).then_some(EncodedVideo {
+        width,
+        height,
+        fps,
+        config,
+        samples,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_saved_clip_loads_back_equal_and_a_truncated_one_is_refused() {
+        let v = EncodedVideo {
+            width: 6,
+            height: 4,
+            fps: 10,
+            config: vec![0x81, 1, 2, 3, 9],
+            samples: vec![
+                Sample {
+                    data: vec![7; 11],
+                    key: true,
+                },
+                Sample {
+                    data: vec![],
+                    key: false,
+                },
+            ],
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("clip.krav1");
+        save(&v, &p).unwrap();
+        assert_eq!(load(&p).unwrap(), v);
+        let b = std::fs::read(&p).unwrap();
+        assert!(parse(&b[..b.len() - 1]).is_none());
+    }
+}
