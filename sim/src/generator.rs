@@ -9,8 +9,10 @@ use std::path::Path;
 use std::sync::Arc;
 
 use kitchen_r_core::catalogue::Catalogue;
+use kitchen_r_core::dataset::symbolic::{Placed, spot_is_reachable};
 use kitchen_r_core::plan::Step;
-use kitchen_r_core::scene::{Scene, Segment};
+use kitchen_r_core::reach::ArmReach;
+use kitchen_r_core::scene::{Scene, Segment, Zone};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -278,8 +280,10 @@ pub fn generate(
     let (zs, zg) = (zone(&start)?, zone(&goal)?);
     let hh = model.shape.half_height();
     let pose = |d: [f64; 2]| if r.object_pose { d } else { [0.0, 0.0] };
-    let ds = pose(in_disc(&mut rng, p.radius));
-    let dg = pose(in_disc(&mut rng, p.radius));
+    let arm = ArmReach::committed().map_err(SimError::Config)?;
+    let placed = Placed::of(model);
+    let ds = pose(reachable_near(&mut rng, arm, zs, &placed, p.radius));
+    let dg = pose(reachable_near(&mut rng, arm, zg, &placed, p.radius));
     let name = match &variant {
         Some(v) => format!("{v} {}", model.id),
         None => model.id.clone(),
@@ -336,6 +340,30 @@ pub fn generate(
     };
     cfg.validate(scene, cat)?;
     Ok(cfg)
+}
+
+/// Draws before a point falls back to the zone centre.
+const REACH_TRIES: usize = 32;
+
+/// An offset in the disc of `radius` around `zone`'s centre from which the arm can pick (and at
+/// which it can place) `placed`, seen from the zone's approach pose. A uniform draw, redrawn
+/// while out of reach: a shelf's far edge can be, and an episode the robot cannot do measures
+/// nothing. The object may overhang the zone's edge (the paper's distribution is the disc).
+fn reachable_near(
+    rng: &mut ChaCha8Rng,
+    arm: &ArmReach,
+    zone: &Zone,
+    placed: &Placed,
+    radius: f64,
+) -> [f64; 2] {
+    for _ in 0..REACH_TRIES {
+        let d = in_disc(rng, radius);
+        let xy = [zone.center[0] + d[0], zone.center[1] + d[1]];
+        if spot_is_reachable(arm, zone, placed, xy) {
+            return d;
+        }
+    }
+    [0.0, 0.0]
 }
 
 /// `n` episodes cycling through `scenes`.
