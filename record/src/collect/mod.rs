@@ -113,6 +113,8 @@ pub struct CollectOptions {
     /// Exactly these episode configurations (`collect --episodes-file`, a batch written by
     /// `kitchen_r_sim::episode::save_batch`) instead of drawing from the dev instructions.
     pub batch: Option<Vec<kitchen_r_sim::EpisodeConfig>>,
+    /// Episodes per LeRobotDataset data/video file ([`crate::lerobot::EPISODES_PER_FILE`]).
+    pub lerobot_episodes_per_file: usize,
     /// Draw an indicatif progress bar on stderr (hidden anyway when stderr is not a terminal).
     pub progress: bool,
 }
@@ -136,6 +138,7 @@ impl CollectOptions {
             cameras: None,
             depth: Some(DepthUnit::default()),
             batch: None,
+            lerobot_episodes_per_file: crate::lerobot::EPISODES_PER_FILE,
             progress: false,
         }
     }

@@ -345,7 +345,10 @@ pub fn collect(opts: &CollectOptions) -> Result<CollectSummary, CollectError> {
         ..CollectSummary::default()
     };
     let mut dataset = match f.lerobot {
-        true => Some(LeRobotDataset::open(&opts.out.join("lerobot"))?),
+        true => Some(
+            LeRobotDataset::open(&opts.out.join("lerobot"))?
+                .with_episodes_per_file(opts.lerobot_episodes_per_file),
+        ),
         false => None,
     };
     let staging = dataset.as_ref().map(LeRobotDataset::staging_dir);

@@ -153,3 +153,93 @@ fn an_episode_that_trips_a_monitor_is_discarded_with_its_reason() {
         "discarded files are removed"
     );
 }
+
+#[test]
+fn cameras_and_no_depth_leave_the_others_out_of_both_formats() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut opts = options(dir.path(), 1, "mcap,hdf5");
+    opts.cameras = Some(vec!["gripper".into()]);
+    opts.depth = None;
+    let s = collect(&opts).unwrap();
+    assert_eq!(s.kept, 1, "{s:?}");
+    let mut bad = options(dir.path(), 1, "mcap");
+    bad.cameras = Some(vec!["nose".into()]);
+    assert!(collect(&bad).is_err_and(|e| e.to_string().contains("nose")));
+    if !python() {
+        return;
+    }
+    let stem = dir.path().join("ep00000");
+    let out = Command::new("python3")
+        .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/read_recording.py"))
+        .arg(stem.with_extension("mcap"))
+        .arg(stem.with_extension("hdf5"))
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let topics: Vec<&String> = v["mcap"]["counts"].as_object().unwrap().keys().collect();
+    assert!(
+        topics.iter().any(|t| *t == "/camera/gripper/image_raw"),
+        "{topics:?}"
+    );
+    assert!(
+        !topics
+            .iter()
+            .any(|t| t.contains("/base/") || t.ends_with("/depth")),
+        "{topics:?}"
+    );
+    let datasets: Vec<&String> = v["hdf5"]["shapes"].as_object().unwrap().keys().collect();
+    assert!(datasets.iter().any(|d| *d == "observations/images/gripper"));
+    assert!(
+        !datasets
+            .iter()
+            .any(|d| d.contains("depth") || d.ends_with("/base")),
+        "{datasets:?}"
+    );
+}
+
+#[test]
+fn an_episodes_file_runs_exactly_its_batch_and_resumes() {
+    use kitchen_r_core::dataset::Split;
+    use kitchen_r_sim::generator::EpisodeParams;
+    use kitchen_r_sim::{Assets, EpisodeConfig};
+
+    let assets = Assets::load_default().unwrap();
+    let params = EpisodeParams::load_default().unwrap();
+    let ins = kitchen_r_episode::eval::instructions(Split::Dev, None).unwrap();
+    let batch: Vec<EpisodeConfig> = [7usize, 11]
+        .iter()
+        .map(|&i| {
+            let scene = assets.scene(&ins[i].scene).unwrap();
+            let mut c =
+                EpisodeConfig::from_instruction(&ins[i], scene, &assets.catalogue, &params, 40 + i as u64)
+                    .unwrap();
+            c.id = format!("val-{i}");
+            c
+        })
+        .collect();
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("batch.json");
+    kitchen_r_sim::episode::save_batch(&batch, &file).unwrap();
+    let out = dir.path().join("out");
+    let mut opts = options(&out, 99, "mcap");
+    opts.batch = Some(kitchen_r_sim::episode::load_batch(&file).unwrap());
+    let s = collect(&opts).unwrap();
+    assert_eq!(
+        (s.requested, s.kept),
+        (2, 2),
+        "the batch's size, not --episodes: {s:?}"
+    );
+    let mut ids: Vec<(String, u64)> = manifest(&out)
+        .into_iter()
+        .map(|e| (e.episode_id, e.seed))
+        .collect();
+    ids.sort();
+    assert_eq!(
+        ids,
+        vec![("val-11".to_string(), 51), ("val-7".to_string(), 47)],
+        "ids and seeds as saved"
+    );
+    let again = collect(&opts).unwrap();
+    assert_eq!((again.kept, again.skipped), (0, 2));
+}
