@@ -13,6 +13,7 @@ mod remote_support;
 mod collect;
 mod job_execute;
 mod job_worker;
+mod lerobot_export;
 mod offline;
 mod oracle;
 mod place_reach;
