@@ -14,6 +14,7 @@ mod admin;
 mod audit;
 mod cli;
 mod control;
+mod episodes;
 mod grpc;
 mod integrity;
 mod load_bench;
