@@ -52,7 +52,8 @@ pub(crate) struct EvalArgs {
     /// Print one JSON object (with every episode's outcome) instead of the table.
     #[arg(long)]
     json: bool,
-    /// Run seed: robot starts and background objects derive from it and each instruction id.
+    /// Run seed: robot starts and background objects derive from it and each instruction id
+    /// (a batch from --episodes-file keeps its own draws).
     #[arg(long)]
     seed: Option<u64>,
     /// Parallel episodes [default: the number of cores].
