@@ -369,10 +369,10 @@ fn run_task(
         for (i, a) in chunk[..k].iter().enumerate() {
             let action = Action(*a);
             // The policy is asked again after the last action of the part-chunk and sees the
-            // last `cap` steps: only those are captured, and rendered only if it wants images.
+            // last `cap` steps: only those are captured, and rendered only if it wants images,
+            // after the step proved not to end the task (the hook's frames are rendered anyway).
             let capture = i + cap >= k;
-            let render = hook_watches || (capture && policy.wants_images());
-            let (o, info) = sim.step(&action, render)?;
+            let (o, info) = sim.step(&action, hook_watches)?;
             *ep.last_action = Some(*a);
             if let Some(o) = &o
                 && hook_watches
@@ -391,7 +391,11 @@ fn run_task(
                 return end(sim, Some((why, false)), calls, corrections);
             }
             if capture {
-                let obs = o.unwrap_or_else(|| sim.observe_state());
+                let obs = match o {
+                    Some(o) => o,
+                    None if policy.wants_images() => sim.observe(),
+                    None => sim.observe_state(),
+                };
                 history.push(sim, obs, Some(*a));
             }
         }
