@@ -192,3 +192,50 @@ fn failed_predictions_cost_the_penalty_and_say_why() {
         assert!(t.failure.as_deref().unwrap().contains("got 3 actions"));
     }
 }
+
+/// Contract v1.1 offline: a policy asking for 3 frames and 4 actions per chunk is sampled every
+/// 4 expert steps of a task and sees the 2 steps before each sample, rendered, with the hand
+/// pose and the expert's previous action.
+#[test]
+fn offline_samples_show_the_history_and_count_the_policy_asked_for() {
+    type Seen = Vec<(u64, usize, Vec<(u64, usize, bool)>)>;
+    let seen: Arc<std::sync::Mutex<Seen>> = Arc::default();
+    let log = seen.clone();
+    let mut p = Scripted {
+        spec: kitchen_r_episode::policy::PolicySpec {
+            observation_history: 3,
+            actions_executed_per_chunk: Some(4),
+            ..spec(HORIZON)
+        },
+        answer: Arc::new(move |i| {
+            let frames = (i.history.iter())
+                .map(|f| (f.step, f.observation.images.len(), f.previous_action.is_some()))
+                .collect();
+            log.lock()
+                .unwrap()
+                .push((i.step, i.observation.images.len(), frames));
+            Ok(vec![STILL; HORIZON])
+        }),
+    };
+    let opts = OfflineOptions {
+        max_tasks: Some(1),
+        ..opts()
+    };
+    let out = offline(&mut p, &opts);
+    let seen = seen.lock().unwrap().clone();
+    assert_eq!(out.tasks[0].samples as usize, seen.len());
+    for (n, (step, images, earlier)) in seen.iter().enumerate() {
+        assert_eq!(*step, 4 * n as u64, "a decision point every 4 steps of the task");
+        assert_eq!(*images, 2);
+        let want: Vec<u64> = (step.saturating_sub(2)..*step).collect();
+        let steps: Vec<u64> = earlier.iter().map(|f| f.0).collect();
+        assert_eq!(
+            steps, want,
+            "the steps before, oldest first (fewer at the task's start)"
+        );
+        for &(s, imgs, previous) in earlier {
+            assert_eq!(imgs, 2, "history frames are rendered");
+            assert_eq!(previous, s > 0, "the expert's action that led to step {s}");
+        }
+    }
+}
