@@ -29,9 +29,20 @@ pub(crate) struct CheckPolicyArgs {
     /// Seconds the server may take to start answering.
     #[arg(long, value_name = "S", default_value_t = 30.0)]
     pub startup_deadline: f64,
+    /// The organiser's default actions executed per chunk (server `control.actions_executed_per_chunk`),
+    /// announced in GetSpec and used when the policy does not choose its own count.
+    #[arg(long, value_name = "K", default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..=16))]
+    pub execute: u32,
+    /// The organiser's smallest count a policy may choose (server
+    /// `control.min_actions_executed_per_chunk`), to check a GetSpec against a stricter server.
+    #[arg(long, value_name = "K", default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=16))]
+    pub min_execute: u32,
 }
 
 pub(crate) fn check_policy(args: CheckPolicyArgs) -> anyhow::Result<()> {
+    if args.min_execute > args.execute {
+        anyhow::bail!("--min-execute {} exceeds --execute {}", args.min_execute, args.execute);
+    }
     let sensors = SensorsConfig::load_default().context("loading configs/sensors.toml")?;
     let ca_pem = match &args.ca {
         Some(p) => Some(std::fs::read(p).with_context(|| format!("reading {}", p.display()))?),
@@ -44,6 +55,8 @@ pub(crate) fn check_policy(args: CheckPolicyArgs) -> anyhow::Result<()> {
     let cfg = RemoteConfig {
         call_deadline_s: args.deadline,
         startup_deadline_s: args.startup_deadline,
+        actions_executed_per_chunk: args.execute,
+        min_actions_executed_per_chunk: args.min_execute,
         allowed_networks: AllowedNetworks::ALL,
         ..RemoteConfig::default()
     };
