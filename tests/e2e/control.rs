@@ -263,3 +263,53 @@ fn misbehaving_policies_fail_their_tasks_with_the_reason_while_the_runs_complete
         }
     });
 }
+
+/// Contract v1.1 through `serve`: a policy whose chunks slip within tolerance (gripper 1.0001,
+/// quaternion norm 1.02) is not failed for it; the episode's log shows the counted corrections.
+#[test]
+fn slips_within_tolerance_are_reported_as_warnings_not_failures() {
+    use kitchen_r_episode::policy::HORIZON as H;
+    use remote_support::{STILL, TestServer, factory};
+    let sloppy = TestServer::start(
+        factory(
+            H,
+            Arc::new(|_| {
+                let mut c = vec![STILL; H];
+                c[0][9] = 1.0001;
+                c[1][6] = 1.02;
+                Ok(c)
+            }),
+        ),
+        ServeOptions::default(),
+    );
+    let fx = ControlFixture::new(&format!(
+        "{CONFIG}offline_mse = false\nmax_plan_steps = 1\ntask_time_limit_s = 2.0\n"
+    ));
+    let server = fx.serve(1);
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    rt.block_on(async {
+        let token = team(&server, "sloppy").await;
+        let (status, reg) = register_policy(
+            &server,
+            &token,
+            json!({"endpoint": sloppy.url(), "split": "dev", "episodes": 1}),
+        )
+        .await;
+        assert_eq!(status, 201, "{reg}");
+        let id = reg["id"].as_i64().unwrap();
+        let view = wait_for(&server, id, &token, "time limit", finished).await;
+        let episode = &episodes(&view)[0];
+        let reason = episode["tasks"][0]["failure_reason"].as_str().unwrap_or_default();
+        assert!(
+            reason.contains("time limit of 2 s reached"),
+            "not a chunk failure: {reason:?}"
+        );
+        let log = episode["log_tail"].as_str().unwrap_or_default();
+        // 20 steps at 8 per chunk: 3 chunks, each with one clamp and one normalisation.
+        assert!(
+            log.contains("task 0 warning: 6 corrections: 3 quaternions normalised")
+                && log.contains("3 gripper values clamped"),
+            "{log}"
+        );
+    });
+}
