@@ -112,6 +112,12 @@ pub struct EvalConfig {
     pub episode_budget_s: f64,
     /// Abort an episode after this many successive policy timeouts.
     pub max_successive_timeouts: u32,
+    /// Largest |‖q‖ − 1| of an action's quaternion that is normalised (and counted as a
+    /// warning) instead of failing the task (the server's `policy.quat_norm_tolerance`).
+    pub quat_norm_tolerance: f64,
+    /// Largest distance of a gripper value outside [0, 1] that is clamped (and counted) instead
+    /// of failing the task (the server's `policy.gripper_margin`).
+    pub gripper_margin: f64,
 }
 
 impl Default for EvalConfig {
@@ -125,6 +131,8 @@ impl Default for EvalConfig {
             max_plan_steps: 0,
             episode_budget_s: 600.0,
             max_successive_timeouts: r.max_consecutive_timeouts,
+            quat_norm_tolerance: r.chunk_tolerance.quat_norm,
+            gripper_margin: r.chunk_tolerance.gripper_margin,
         }
     }
 }
@@ -146,6 +154,7 @@ impl EvalConfig {
                 crate::policy::HORIZON
             )));
         }
+        c.chunk_tolerance().validate().map_err(bad)?;
         Ok(c)
     }
 
@@ -159,8 +168,16 @@ impl EvalConfig {
         }
     }
 
+    fn chunk_tolerance(&self) -> crate::policy::ChunkTolerance {
+        crate::policy::ChunkTolerance {
+            quat_norm: self.quat_norm_tolerance,
+            gripper_margin: self.gripper_margin,
+        }
+    }
+
     pub fn run_options(&self) -> RunOptions {
         RunOptions {
+            chunk_tolerance: self.chunk_tolerance(),
             task_time_limit: self.task_time_limit,
             execute: self.execute,
             max_tasks: (self.max_plan_steps > 0).then_some(self.max_plan_steps),
@@ -386,4 +403,27 @@ fn evaluate_configs(
         jobs: opts.jobs,
         episodes,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_shipped_eval_config_documents_exactly_the_defaults_and_tolerances_reach_the_runner() {
+        let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/eval.toml");
+        let shipped = EvalConfig::load(&file).unwrap();
+        assert_eq!(shipped, EvalConfig::default());
+        let path = std::env::temp_dir().join(format!("kitchen-r-eval-{}.toml", std::process::id()));
+        std::fs::write(&path, "quat_norm_tolerance = 0.0\ngripper_margin = 0.2\n").unwrap();
+        let run = EvalConfig::load(&path).unwrap().run_options();
+        assert_eq!(
+            (run.chunk_tolerance.quat_norm, run.chunk_tolerance.gripper_margin),
+            (0.0, 0.2)
+        );
+        std::fs::write(&path, "gripper_margin = 1.5\n").unwrap();
+        let err = EvalConfig::load(&path).unwrap_err().to_string();
+        let _ = std::fs::remove_file(&path);
+        assert!(err.contains("gripper_margin"), "{err}");
+    }
 }
