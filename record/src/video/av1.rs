@@ -8,6 +8,7 @@ use rav1e::color::{
 };
 use rav1e::config::SpeedSettings;
 use rav1e::data::{FrameType, Rational};
+use rav1e::prelude::{SceneDetectionSpeed, Tune};
 use rav1e::{Config, Context, EncoderConfig, EncoderStatus};
 
 use super::{EncodedVideo, Sample, VideoError, VideoSettings};
@@ -60,7 +61,8 @@ impl VideoEncoder {
                 transfer_characteristics: TransferCharacteristics::BT601,
                 matrix_coefficients: MatrixCoefficients::BT601,
             }),
-            speed_settings: SpeedSettings::from_preset(s.speed.min(10)),
+            speed_settings: speed_settings(s.speed),
+            tune: Tune::Psnr,
             quantizer: usize::from(s.quantizer),
             min_key_frame_interval: 1,
             max_key_frame_interval: u64::from(s.key_interval.max(1)),
@@ -157,6 +159,17 @@ impl VideoEncoder {
             }
         }
     }
+}
+
+/// rav1e's preset, less three costs that buy little on small robot-camera frames without
+/// rav1e's assembly: scene-cut detection (key frames come every `key_interval` anyway), CDEF
+/// and psychovisual tuning. Measured on 400 recorded 128×128 frames at speed 10: 131 → 226
+/// frames/s on one core for 5% more bytes.
+fn speed_settings(speed: u8) -> SpeedSettings {
+    let mut s = SpeedSettings::from_preset(speed.min(10));
+    s.scene_detection_mode = SceneDetectionSpeed::None;
+    s.cdef = false;
+    s
 }
 
 fn chroma_size(width: u32, height: u32) -> (usize, usize) {
