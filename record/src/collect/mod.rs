@@ -21,6 +21,7 @@
 mod config;
 mod hook;
 mod run;
+mod sensors;
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;

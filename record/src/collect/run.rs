@@ -10,18 +10,18 @@ use std::time::Instant;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use kitchen_r_core::dataset::{Instruction, Split};
 use kitchen_r_sim::generator::splitmix;
-use kitchen_r_sim::{Assets, EpisodeConfig, EpisodeParams, SensorsConfig, Sim, SimConfig, SimError};
+use kitchen_r_sim::{Assets, EpisodeConfig, EpisodeParams, Sim, SimConfig, SimError};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::hook::{Recorder, Trip};
+use super::sensors::{camera_specs, mounts, rate_monitor, sensors};
 use super::{CollectError, CollectOptions, CollectSummary, ManifestEntry};
+use crate::EpisodeMeta;
 use crate::hdf5_aloha::{Hdf5Options, Hdf5Recorder};
-use crate::lerobot::{CameraSpec, EpisodeRecorder, LeRobotDataset};
+use crate::lerobot::{EpisodeRecorder, LeRobotDataset};
 use crate::mcap_ros2::McapRecorder;
-use crate::rate::RateMonitor;
 use crate::video::VideoSettings;
-use crate::{EpisodeMeta, StaticTransform};
 use kitchen_r_episode::oracle::{OraclePolicy, expert_options};
 use kitchen_r_episode::runner::run_episode;
 
@@ -225,92 +225,6 @@ fn finish(
         h.finish(&path, &rec.spans).map_err(err)?;
     }
     Ok(())
-}
-
-/// The sensors to simulate: the configured ones, less the cameras `opts.cameras` leaves out.
-fn sensors(opts: &CollectOptions) -> Result<SensorsConfig, CollectError> {
-    let mut s = match &opts.sensors {
-        Some(s) => s.clone(),
-        None => SensorsConfig::load_default()?,
-    };
-    if let Some(names) = &opts.cameras {
-        let known: Vec<String> = s.cameras.iter().map(|c| c.name.clone()).collect();
-        if let Some(bad) = names.iter().find(|n| !known.contains(n)) {
-            return Err(CollectError::Config(format!(
-                "--cameras: no camera {bad:?} (configured: {})",
-                known.join(", ")
-            )));
-        }
-        if names.is_empty() {
-            return Err(CollectError::Config("--cameras: name at least one camera".into()));
-        }
-        // Keep the configured order: it is the order of the recorded topics and datasets.
-        s.cameras.retain(|c| names.contains(&c.name));
-    }
-    Ok(s)
-}
-
-fn camera_specs(s: &SensorsConfig) -> Vec<CameraSpec> {
-    s.cameras
-        .iter()
-        .map(|c| CameraSpec {
-            name: c.name.clone(),
-            width: c.width,
-            height: c.height,
-        })
-        .collect()
-}
-
-/// The recording-rate monitor over the topics this run writes: a camera left out by
-/// `--cameras` has no rate to keep.
-fn rate_monitor(opts: &CollectOptions) -> Result<RateMonitor, CollectError> {
-    let cameras: Vec<String> = sensors(opts)?.cameras.into_iter().map(|c| c.name).collect();
-    let min_hz = opts
-        .config
-        .rates
-        .min_hz
-        .iter()
-        .filter(|(topic, _)| {
-            topic
-                .strip_prefix("/camera/")
-                .and_then(|t| t.split('/').next())
-                .is_none_or(|cam| cameras.iter().any(|c| c == cam))
-        })
-        .map(|(t, hz)| (t.clone(), *hz))
-        .collect();
-    Ok(RateMonitor::new(min_hz, opts.config.rates.window_s))
-}
-
-/// Static transforms of the sensor mounts (`/tf_static`).
-fn mounts(sensors: &SensorsConfig) -> Vec<StaticTransform> {
-    use kitchen_r_sim::config::Mount;
-    let parent = |m: Mount| match m {
-        Mount::Base => "base_link",
-        Mount::Gripper => "ee_link",
-        Mount::World => "odom",
-    };
-    let mut out: Vec<StaticTransform> = sensors
-        .cameras
-        .iter()
-        .map(|c| {
-            let q = nalgebra::UnitQuaternion::from_euler_angles(c.rpy[0], c.rpy[1], c.rpy[2]);
-            StaticTransform {
-                parent: parent(c.mount).into(),
-                child: format!("{}_optical_frame", c.name),
-                translation: c.position,
-                rotation: [q.w, q.i, q.j, q.k],
-            }
-        })
-        .collect();
-    if let Some(l) = &sensors.lidar {
-        out.push(StaticTransform {
-            parent: parent(l.mount).into(),
-            child: "lidar".into(),
-            translation: l.position,
-            rotation: [1.0, 0.0, 0.0, 0.0],
-        });
-    }
-    out
 }
 
 fn bar(opts: &CollectOptions, n: usize) -> ProgressBar {

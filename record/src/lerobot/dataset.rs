@@ -7,9 +7,10 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
-use serde_json::{Value, json};
+use serde_json::Value;
 
 use super::episode::StagedEpisode;
+use super::meta;
 use super::stats::FeatureStats;
 use super::tables::{self, DataRows, EpisodeRow};
 use super::{CHUNKS_SIZE, CameraSpec, EPISODES_PER_FILE, FPS, LeRobotError, io_err, write_atomic};
@@ -17,27 +18,27 @@ use crate::video::EncodedVideo;
 
 /// One ledger line: an episode in the dataset and everything the metadata is rebuilt from.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-struct EpisodeRecord {
-    episode_index: usize,
-    collect_index: usize,
-    episode_id: String,
-    scene: String,
-    instruction: String,
-    tasks: Vec<String>,
-    length: usize,
+pub(super) struct EpisodeRecord {
+    pub episode_index: usize,
+    pub collect_index: usize,
+    pub episode_id: String,
+    pub scene: String,
+    pub instruction: String,
+    pub tasks: Vec<String>,
+    pub length: usize,
     /// Global file number: chunk `file / 1000`, file `file % 1000`.
-    file: usize,
-    from_index: usize,
-    from_timestamp: f64,
-    stats: Vec<(String, FeatureStats)>,
+    pub file: usize,
+    pub from_index: usize,
+    pub from_timestamp: f64,
+    pub stats: Vec<(String, FeatureStats)>,
 }
 
 /// The features every episode must share (checked when a staged episode is appended).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-struct Spec {
+pub(super) struct Spec {
     /// Numeric features: key and per-dimension names.
-    columns: Vec<(String, Vec<String>)>,
-    cameras: Vec<CameraSpec>,
+    pub columns: Vec<(String, Vec<String>)>,
+    pub cameras: Vec<CameraSpec>,
 }
 
 impl Spec {
@@ -63,7 +64,7 @@ pub struct LeRobotDataset {
     per_file: usize,
 }
 
-fn chunk_file(file: usize) -> (usize, usize) {
+pub(super) fn chunk_file(file: usize) -> (usize, usize) {
     (file / CHUNKS_SIZE, file % CHUNKS_SIZE)
 }
 
@@ -262,7 +263,7 @@ impl LeRobotDataset {
                 file,
                 from_index: next_index,
                 from_timestamp: offset,
-                stats: episode_stats(e, episode_index, next_index, &task_index),
+                stats: meta::episode_stats(e, episode_index, next_index, &task_index),
             };
             rows.push(DataRows {
                 columns: &e.columns,
@@ -288,7 +289,7 @@ impl LeRobotDataset {
                 write_atomic(&path, |p| Ok(joined.write_mp4(p)?))?;
             }
         }
-        let meta_rows: Vec<EpisodeRow> = new.iter().map(episode_row).collect();
+        let meta_rows: Vec<EpisodeRow> = new.iter().map(meta::episode_row).collect();
         let path = self.root.join(rel("meta/episodes", file, "parquet"));
         write_atomic(&path, |p| {
             tables::write_episodes(p, &meta_rows, &self.video_keys())
@@ -336,78 +337,9 @@ impl LeRobotDataset {
         let tasks = self.tasks();
         let path = self.root.join("meta/tasks.parquet");
         write_atomic(&path, |p| tables::write_tasks(p, &tasks))?;
-        let info = self.info(tasks.len());
+        let info = meta::info(self.spec.as_ref(), &self.records, tasks.len());
         write_json(&self.root.join("meta/info.json"), &info)?;
-        let mut stats = serde_json::Map::new();
-        if let Some(first) = self.records.first() {
-            for (i, (key, _)) in first.stats.iter().enumerate() {
-                let all: Vec<&FeatureStats> = self.records.iter().map(|r| &r.stats[i].1).collect();
-                if let Some(s) = FeatureStats::aggregate(&all) {
-                    stats.insert(key.clone(), s.to_json());
-                }
-            }
-        }
-        write_json(&self.root.join("meta/stats.json"), &Value::Object(stats))
-    }
-
-    fn info(&self, total_tasks: usize) -> Value {
-        let mut features = serde_json::Map::new();
-        if let Some(spec) = &self.spec {
-            for (key, names) in &spec.columns {
-                features.insert(
-                    key.clone(),
-                    json!({"dtype": "float32", "shape": [names.len()], "names": names, "fps": FPS}),
-                );
-            }
-            for c in &spec.cameras {
-                features.insert(
-                    c.key(),
-                    json!({
-                        "dtype": "video",
-                        "shape": [c.height, c.width, 3],
-                        "names": ["height", "width", "channels"],
-                        "info": {
-                            "video.height": c.height,
-                            "video.width": c.width,
-                            "video.codec": "av1",
-                            "video.pix_fmt": "yuv420p",
-                            "video.is_depth_map": false,
-                            "is_depth_map": false,
-                            "video.fps": FPS,
-                            "video.channels": 3,
-                            "has_audio": false
-                        }
-                    }),
-                );
-            }
-        }
-        features.insert(
-            "timestamp".into(),
-            json!({"dtype": "float32", "shape": [1], "names": null, "fps": FPS}),
-        );
-        for k in ["frame_index", "episode_index", "index", "task_index"] {
-            features.insert(
-                k.into(),
-                json!({"dtype": "int64", "shape": [1], "names": null, "fps": FPS}),
-            );
-        }
-        let episodes = self.records.len();
-        let frames: usize = self.records.iter().map(|r| r.length).sum();
-        json!({
-            "codebase_version": "v3.0",
-            "robot_type": "kitchen_r_mobile_aloha",
-            "total_episodes": episodes,
-            "total_frames": frames,
-            "total_tasks": total_tasks,
-            "chunks_size": CHUNKS_SIZE,
-            "data_files_size_in_mb": 100,
-            "video_files_size_in_mb": 200,
-            "fps": FPS,
-            "splits": {"train": format!("0:{episodes}")},
-            "data_path": "data/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet",
-            "video_path": "videos/{video_key}/chunk-{chunk_index:03d}/file-{file_index:03d}.mp4",
-            "features": features,
-        })
+        write_json(&self.root.join("meta/stats.json"), &meta::stats(&self.records))
     }
 }
 
@@ -419,52 +351,6 @@ fn task_id(tasks: &mut Vec<String>, task: &str) -> usize {
             tasks.push(task.to_string());
             tasks.len() - 1
         }
-    }
-}
-
-/// Statistics of every feature of one episode, in `info.json`'s feature order.
-fn episode_stats(
-    e: &StagedEpisode,
-    episode_index: usize,
-    first_index: usize,
-    task_index: &[i64],
-) -> Vec<(String, FeatureStats)> {
-    let n = e.len();
-    let mut out: Vec<(String, FeatureStats)> = e
-        .columns
-        .iter()
-        .map(|c| (c.key.clone(), FeatureStats::of_rows(&c.values, c.names.len())))
-        .collect();
-    for (cam, s) in e.cameras.iter().zip(&e.image_stats) {
-        out.push((cam.key(), s.clone()));
-    }
-    let scalar = |f: &dyn Fn(usize) -> f64| -> FeatureStats {
-        let v: Vec<f32> = (0..n).map(|k| f(k) as f32).collect();
-        FeatureStats::of_rows(&v, 1)
-    };
-    out.push(("timestamp".into(), scalar(&|k| k as f64 / f64::from(FPS))));
-    out.push(("frame_index".into(), scalar(&|k| k as f64)));
-    out.push(("episode_index".into(), scalar(&|_| episode_index as f64)));
-    out.push(("index".into(), scalar(&|k| (first_index + k) as f64)));
-    out.push(("task_index".into(), scalar(&|k| task_index[k] as f64)));
-    out
-}
-
-fn episode_row(r: &EpisodeRecord) -> EpisodeRow {
-    let (c, f) = chunk_file(r.file);
-    EpisodeRow {
-        episode_index: r.episode_index as i64,
-        tasks: r.tasks.clone(),
-        length: r.length as i64,
-        file: (c as i64, f as i64),
-        dataset_from_index: r.from_index as i64,
-        dataset_to_index: (r.from_index + r.length) as i64,
-        from_timestamp: r.from_timestamp,
-        to_timestamp: r.from_timestamp + r.length as f64 / f64::from(FPS),
-        stats: r.stats.clone(),
-        instruction: r.instruction.clone(),
-        scene: r.scene.clone(),
-        source: format!("ep{:05}", r.collect_index),
     }
 }
 

@@ -1,0 +1,95 @@
+//! What a collection run records: the sensors (less the cameras `--cameras` leaves out), their
+//! mounts as static transforms, and the recording-rate monitor over the topics actually written.
+
+use kitchen_r_sim::SensorsConfig;
+
+use super::{CollectError, CollectOptions};
+use crate::StaticTransform;
+use crate::lerobot::CameraSpec;
+use crate::rate::RateMonitor;
+
+/// The sensors to simulate: the configured ones, less the cameras `opts.cameras` leaves out.
+pub(super) fn sensors(opts: &CollectOptions) -> Result<SensorsConfig, CollectError> {
+    let mut s = match &opts.sensors {
+        Some(s) => s.clone(),
+        None => SensorsConfig::load_default()?,
+    };
+    if let Some(names) = &opts.cameras {
+        let known: Vec<String> = s.cameras.iter().map(|c| c.name.clone()).collect();
+        if let Some(bad) = names.iter().find(|n| !known.contains(n)) {
+            return Err(CollectError::Config(format!(
+                "--cameras: no camera {bad:?} (configured: {})",
+                known.join(", ")
+            )));
+        }
+        if names.is_empty() {
+            return Err(CollectError::Config("--cameras: name at least one camera".into()));
+        }
+        // Keep the configured order: it is the order of the recorded topics and datasets.
+        s.cameras.retain(|c| names.contains(&c.name));
+    }
+    Ok(s)
+}
+
+pub(super) fn camera_specs(s: &SensorsConfig) -> Vec<CameraSpec> {
+    s.cameras
+        .iter()
+        .map(|c| CameraSpec {
+            name: c.name.clone(),
+            width: c.width,
+            height: c.height,
+        })
+        .collect()
+}
+
+/// The recording-rate monitor over the topics this run writes: a camera left out by
+/// `--cameras` has no rate to keep.
+pub(super) fn rate_monitor(opts: &CollectOptions) -> Result<RateMonitor, CollectError> {
+    let cameras: Vec<String> = sensors(opts)?.cameras.into_iter().map(|c| c.name).collect();
+    let min_hz = opts
+        .config
+        .rates
+        .min_hz
+        .iter()
+        .filter(|(topic, _)| {
+            topic
+                .strip_prefix("/camera/")
+                .and_then(|t| t.split('/').next())
+                .is_none_or(|cam| cameras.iter().any(|c| c == cam))
+        })
+        .map(|(t, hz)| (t.clone(), *hz))
+        .collect();
+    Ok(RateMonitor::new(min_hz, opts.config.rates.window_s))
+}
+
+/// Static transforms of the sensor mounts (`/tf_static`).
+pub(super) fn mounts(sensors: &SensorsConfig) -> Vec<StaticTransform> {
+    use kitchen_r_sim::config::Mount;
+    let parent = |m: Mount| match m {
+        Mount::Base => "base_link",
+        Mount::Gripper => "ee_link",
+        Mount::World => "odom",
+    };
+    let mut out: Vec<StaticTransform> = sensors
+        .cameras
+        .iter()
+        .map(|c| {
+            let q = nalgebra::UnitQuaternion::from_euler_angles(c.rpy[0], c.rpy[1], c.rpy[2]);
+            StaticTransform {
+                parent: parent(c.mount).into(),
+                child: format!("{}_optical_frame", c.name),
+                translation: c.position,
+                rotation: [q.w, q.i, q.j, q.k],
+            }
+        })
+        .collect();
+    if let Some(l) = &sensors.lidar {
+        out.push(StaticTransform {
+            parent: parent(l.mount).into(),
+            child: "lidar".into(),
+            translation: l.position,
+            rotation: [1.0, 0.0, 0.0, 0.0],
+        });
+    }
+    out
+}
