@@ -12,6 +12,7 @@ their ISO-BMFF structure. Exits non-zero with the first violation.
 import json
 import struct
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -162,11 +163,45 @@ def main(root):
                 check(list(shape) == feats[k]["shape"], f"{path}: frames of {shape}")
             videos[str(path.relative_to(root))] = {"frames": frames, "decoded": decoded}
 
+    loaded = load_like_lerobot(feats, data_paths, ep_paths)
+    check(loaded is None or loaded == (len(data), n), f"datasets loaded {loaded}")
+
     print(json.dumps({
         "episodes": n, "frames": len(data), "tasks": list(tasks.index), "videos": videos,
         "data_files": len(data_paths), "episode_files": len(ep_paths),
         "decoder": None if av is None else av.__version__,
+        "hf_datasets": loaded is not None,
     }))
+
+
+def load_like_lerobot(feats, data_paths, ep_paths):
+    """LeRobot's own load path where Hugging Face `datasets` is installed: the data files cast
+    to the features of info.json (`get_hf_features_from_features`) and the episodes metadata,
+    both through `Dataset.from_parquet` (`load_nested_dataset`). (frames, episodes) or None."""
+    try:
+        import datasets
+    except ImportError:
+        return None
+    datasets.disable_progress_bars()
+    seq = getattr(datasets, "Sequence", None) or datasets.List
+    features = {}
+    for k, f in feats.items():
+        if f["dtype"] == "video":
+            continue
+        value = datasets.Value(dtype=f["dtype"])
+        features[k] = value if f["shape"] == [1] else seq(feature=value, length=f["shape"][0])
+    with tempfile.TemporaryDirectory() as cache:
+        data = datasets.Dataset.from_parquet([str(p) for p in data_paths],
+                                             features=datasets.Features(features), cache_dir=cache)
+        data = data.with_format("numpy")
+        last = data[len(data) - 1]
+        check(last["observation.state"].shape == (feats["observation.state"]["shape"][0],),
+              "observation.state through datasets")
+        check(int(last["index"]) == len(data) - 1, "last index through datasets")
+        eps = datasets.Dataset.from_parquet([str(p) for p in ep_paths], cache_dir=cache)
+        eps = eps.select_columns([c for c in eps.column_names if not c.startswith("stats/")])
+        check(eps[len(eps) - 1]["dataset_to_index"] == len(data), "episodes through datasets")
+        return len(data), len(eps)
 
 
 if __name__ == "__main__":

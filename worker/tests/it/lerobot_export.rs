@@ -1,6 +1,6 @@
 //! `collect --format lerobot` read by outside readers (issue #14, items 4 and 6): pyarrow/pandas
-//! check every field LeRobot v3.0 requires and PyAV decodes the videos
-//! (`tests/read_lerobot.py`), across two runs of the same `--out` (the second resumes and adds
+//! check every field LeRobot v3.0 requires, Hugging Face `datasets` loads the Parquet files the
+//! way LeRobot does, and PyAV decodes the videos (`tests/read_lerobot.py`), across two runs of the same `--out` (the second resumes and adds
 //! a file); where `lerobot` itself is installed, `LeRobotDataset` loads it and a DataLoader
 //! iterates a batch (`tests/load_lerobot.py`).
 
@@ -28,17 +28,17 @@ fn options(out: &Path, episodes: usize) -> CollectOptions {
     }
 }
 
-/// python3 with pyarrow, pandas and PyAV (required on CI: scripts/test-requirements.txt).
+/// python3 with pyarrow, pandas, datasets and PyAV (required on CI: scripts/test-requirements.txt).
 fn readers() -> bool {
     let ok = Command::new("python3")
-        .args(["-c", "import pyarrow, pandas, av"])
+        .args(["-c", "import pyarrow, pandas, datasets, av"])
         .status()
         .is_ok_and(|s| s.success());
     if !ok && std::env::var("CI").is_ok_and(|v| v == "true") {
-        panic!("CI must have python3 with pyarrow, pandas and av (scripts/test-requirements.txt)");
+        panic!("CI must have python3 with pyarrow, pandas, datasets and av (scripts/test-requirements.txt)");
     }
     if !ok {
-        eprintln!("skipping the read-back: python3 with pyarrow, pandas, av not installed");
+        eprintln!("skipping the read-back: python3 with pyarrow, pandas, datasets, av not installed");
     }
     ok
 }
@@ -106,6 +106,7 @@ fn three_collected_episodes_open_in_pyarrow_pandas_pyav_and_lerobot() {
     assert_eq!(videos.len(), 4, "two cameras × two files: {v}");
     assert!(videos.values().all(|f| f["decoded"] == f["frames"]), "{v}");
     assert_eq!(v["frames"], info["total_frames"]);
+    assert_eq!(v["hf_datasets"], true, "loaded through datasets: {v}");
     let Some(py) = lerobot_python() else { return };
     let l = run_script(&py, "load_lerobot.py", &root);
     assert_eq!(l["episodes"], 3);
