@@ -265,6 +265,9 @@ pub fn collect(opts: &CollectOptions) -> Result<CollectSummary, CollectError> {
         ),
         false => None,
     };
+    if let Some(d) = &dataset {
+        d.check_cameras(&camera_specs(&sensors(opts)?))?;
+    }
     let staging = dataset.as_ref().map(LeRobotDataset::staging_dir);
     let todo: Vec<usize> = (0..count)
         .filter(|i| {

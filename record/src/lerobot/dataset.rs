@@ -110,6 +110,21 @@ impl LeRobotDataset {
         Ok(ds)
     }
 
+    /// Refuse a run whose cameras differ from the dataset's (checked before any episode runs,
+    /// rather than when its staged episodes would be appended).
+    pub fn check_cameras(&self, cameras: &[CameraSpec]) -> Result<(), LeRobotError> {
+        match &self.spec {
+            Some(s) if s.cameras != cameras => Err(LeRobotError::Mismatch(format!(
+                "the dataset at {} was collected with cameras {:?}, this run records {:?}; \
+                 collect into another --out",
+                self.root.display(),
+                s.cameras,
+                cameras
+            ))),
+            _ => Ok(()),
+        }
+    }
+
     /// Episodes per data/video file (tests use a small number to exercise several files).
     pub fn with_episodes_per_file(mut self, n: usize) -> Self {
         self.per_file = n.max(1);

@@ -87,6 +87,10 @@ fn three_collected_episodes_open_in_pyarrow_pandas_pyav_and_lerobot() {
         (1, 2),
         "the rerun resumes: {again:?}"
     );
+    let mut other = options(dir.path(), 4);
+    other.cameras = Some(vec!["gripper".into()]);
+    let refused = collect(&other).unwrap_err().to_string();
+    assert!(refused.contains("cameras"), "{refused}");
     let root = dir.path().join("lerobot");
     let staged = std::fs::read_dir(root.join(".collect/staging")).unwrap().count();
     assert_eq!(staged, 0, "every staged episode was appended");
