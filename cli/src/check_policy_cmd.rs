@@ -41,7 +41,11 @@ pub(crate) struct CheckPolicyArgs {
 
 pub(crate) fn check_policy(args: CheckPolicyArgs) -> anyhow::Result<()> {
     if args.min_execute > args.execute {
-        anyhow::bail!("--min-execute {} exceeds --execute {}", args.min_execute, args.execute);
+        anyhow::bail!(
+            "--min-execute {} exceeds --execute {}",
+            args.min_execute,
+            args.execute
+        );
     }
     let sensors = SensorsConfig::load_default().context("loading configs/sensors.toml")?;
     let ca_pem = match &args.ca {

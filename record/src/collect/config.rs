@@ -14,9 +14,11 @@ pub struct CollectConfig {
     /// Per-action time limits and the end-of-action checks (the sim's monitor keys).
     pub monitors: MonitorConfig,
     pub rates: RateConfig,
-    /// Draw floor and wall colours and the floor tile per episode (the generator's
-    /// `color_jitter` and `floor_tiles` from `configs/episodes.toml`).
-    pub randomize_style: bool,
+    /// Apply the paper's randomisation to every episode built from a dataset instruction
+    /// (`kitchen_r_sim::randomise`, each aspect as switched in `configs/episodes.toml`
+    /// `[randomise]`); `randomize_style`, its former name, is still read.
+    #[serde(alias = "randomize_style")]
+    pub randomise: bool,
 }
 
 /// Recording-rate minimums per topic, over a sliding window of sim time.
@@ -54,7 +56,7 @@ impl Default for CollectConfig {
                 ..MonitorConfig::default()
             },
             rates: RateConfig::default(),
-            randomize_style: true,
+            randomise: true,
         }
     }
 }

@@ -2,8 +2,10 @@
 //! Customization and Randomization modules).
 //!
 //! Episode `i` takes dev instruction `i mod n` with a seed drawn from `(seed, i)`: the robot start
-//! and background objects from the episode-configuration generator, and (with
-//! `randomize_style`) the floor and wall colours and floor tile. With a batch
+//! and background objects from the episode-configuration generator, then (with `randomise`, the
+//! default) the paper's randomisation of `kitchen_r_sim::randomise`: key-object poses, colours,
+//! textures, light, background, robot start, each as switched in `configs/episodes.toml`
+//! `[randomise]`. With a batch
 //! ([`CollectOptions::batch`], `collect --episodes-file`) episode `i` is the batch's `i`-th
 //! configuration, run exactly as saved. The oracle expert drives it
 //! closed-loop, one action per query, through the evaluation runner; every control step is

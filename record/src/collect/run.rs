@@ -11,8 +11,6 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use kitchen_r_core::dataset::{Instruction, Split};
 use kitchen_r_sim::generator::splitmix;
 use kitchen_r_sim::{Assets, EpisodeConfig, EpisodeParams, Sim, SimConfig, SimError};
-use rand::{RngExt, SeedableRng};
-use rand_chacha::ChaCha8Rng;
 
 use super::hook::{Recorder, Trip};
 use super::sensors::{camera_specs, mounts, rate_monitor, sensors};
@@ -52,17 +50,10 @@ fn episode(
     let scene = assets.scene(&instruction.scene)?;
     let mut cfg = EpisodeConfig::from_instruction(instruction, scene, &assets.catalogue, params, seed)?;
     cfg.id = format!("ep{index:05}");
-    if opts.config.randomize_style {
-        // A separate stream, so style draws never shift the robot start or background objects.
-        let mut rng = ChaCha8Rng::seed_from_u64(splitmix(seed ^ 0x53_5459_4c45));
-        let j = params.color_jitter;
-        let s = &mut cfg.style;
-        for c in s.floor_color.iter_mut().chain(s.wall_color.iter_mut()) {
-            *c = (*c + rng.random_range(-j..=j)).clamp(0.0, 1.0);
-        }
-        if !params.floor_tiles.is_empty() {
-            s.floor_tile = params.floor_tiles[rng.random_range(0..params.floor_tiles.len())];
-        }
+    if opts.config.randomise {
+        // The paper's randomisation, each aspect as switched in configs/episodes.toml
+        // `[randomise]`; the same seed gives the same episode.
+        kitchen_r_sim::randomise(&mut cfg, scene, &assets.catalogue, params, seed)?;
     }
     Ok((cfg, instruction.instruction.clone(), instruction.id.clone()))
 }
