@@ -14,7 +14,9 @@ from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: E402
 
 
 def main(root):
-    ds = LeRobotDataset("kitchen-r/collect", root=root)
+    # PyAV decodes with the FFmpeg its wheel bundles; LeRobot's default (torchcodec) needs the
+    # system's FFmpeg libraries, which a fresh machine does not have.
+    ds = LeRobotDataset("kitchen-r/collect", root=root, video_backend="pyav")
     loader = torch.utils.data.DataLoader(ds, batch_size=4, shuffle=True, num_workers=0)
     batch = next(iter(loader))
     cams = [k for k in ds.meta.camera_keys]
