@@ -5,7 +5,8 @@
 //! routes and methods answer through fallbacks (405 keeps its `Allow` header), bodies are capped
 //! at `max_body_bytes` with a JSON 413, and path, query and body rejections go through
 //! [`extract`]'s wrappers; [`stack`] is the tower stack (request id, JSON errors, trace,
-//! catch-panic, timeout) every route runs in.
+//! catch-panic, timeout) every route runs in. HTML pages are [`admin`]'s console and
+//! [`pages`] (sessions and CSRF in [`session`]); their errors are pages, not JSON.
 
 use std::collections::HashMap;
 
@@ -33,6 +34,8 @@ type Params = QueryArgs<HashMap<String, String>>;
 
 mod admin;
 mod extract;
+mod pages;
+mod session;
 pub(crate) mod stack;
 
 pub(crate) fn router(state: AppState) -> Router {
@@ -53,7 +56,9 @@ pub(crate) fn router(state: AppState) -> Router {
         .route("/api/v1/admin/resimulate", post(resimulate))
         .route("/api/v1/admin/stats", get(admin_stats))
         // The organiser's console: admin API and the `/admin` page (see `admin`).
-        .merge(admin::quick_routes());
+        .merge(admin::quick_routes())
+        // The participant pages: contest home, team login, team and submission pages.
+        .merge(pages::routes());
     // Prometheus text format, no token (see `service::metrics` for why that is safe).
     let quick = match cfg.metrics {
         true => quick.route("/metrics", get(metrics)),

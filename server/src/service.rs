@@ -13,6 +13,7 @@
 //! - [`progress`]: a policy run's episodes and failures as its team may see them;
 //! - [`submissions`]: a submission with its latest run, for its team or the organiser;
 //! - [`board`]: the leaderboards, cached and rendered;
+//! - [`portal`]: what the participant pages read (a team's submissions, quota left, ETA);
 //! - [`rescore`]: the organiser's rescoring of every stored submission;
 //! - [`admin`]: the organiser's console (queue, workers, runs; cancel, requeue, backup).
 //!
@@ -26,6 +27,7 @@ mod limits;
 mod metrics;
 mod plan_uploads;
 pub(crate) mod policies;
+pub(crate) mod portal;
 mod progress;
 mod rescore;
 mod submissions;
@@ -46,7 +48,7 @@ pub(crate) use crate::scores::Scores;
 pub(crate) use auth::{Caller, Organiser, WorkerCred, hash_token, new_token};
 pub(crate) use policies::RegisterPolicy;
 pub(crate) use progress::{EpisodeView, PolicyRunView};
-pub(crate) use submissions::SubmissionView;
+pub(crate) use submissions::{RunView, SubmissionView};
 
 /// Version of the planning scorer; part of every scoring run's `scorer_version`.
 pub(crate) const PLANNING_SCORER: &str = "planning-em/1";

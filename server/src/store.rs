@@ -12,12 +12,14 @@
 //!
 //! Submodules: [`runs`] (policy submissions, their runs and results), [`queue`] (the job queue)
 //! [`board`] (the maintained leaderboards, refreshed by every write above that changes one) and
-//! [`admin`] (the organiser's console: queue, workers, runs, cancel, requeue, backup).
+//! [`admin`] (the organiser's console: queue, workers, runs, cancel, requeue, backup) and
+//! [`portal`] (reads of the participant pages).
 
 pub(crate) mod admin;
 pub(crate) mod board;
 mod compact;
 mod packed;
+pub(crate) mod portal;
 pub(crate) mod queue;
 pub(crate) mod runs;
 

@@ -3,13 +3,12 @@
 //! HTML page `GET /admin`.
 //!
 //! A browser cannot send a bearer header from a plain page, so `/admin` has a login form that
-//! takes the organiser token and sets it as a cookie: `HttpOnly` (no script can read it),
-//! `SameSite=Strict` (no other site's page or link sends it), `Path=/admin` (no other route
-//! sees it), 8 hours. The cookie authorises only *reading* the page: every action (cancel,
-//! requeue, backup) stays on the bearer-token API (the CLI), so a forged cross-site request
-//! could do nothing even if the browser sent the cookie. The page sends `Cache-Control:
-//! no-store`, a strict Content-Security-Policy and `X-Frame-Options: DENY`. Serve it over
-//! TLS (a reverse proxy) when the organiser's browser is not on the server's machine.
+//! takes the organiser token and keeps it in a session cookie for 8 hours (attributes and CSRF
+//! in [`super::session`]). The cookie is `Path=/` so that the participant pages
+//! (`/submissions/{id}`) also open for the organiser; no API route reads it. It authorises
+//! only *reading* pages: every action (cancel, requeue, backup) stays on the bearer-token API
+//! (the CLI), and the login and logout forms carry a CSRF token. Serve it over TLS (a reverse
+//! proxy) when the organiser's browser is not on the server's machine.
 
 use axum::Router;
 use axum::body::Body;
@@ -22,12 +21,13 @@ use serde::Deserialize;
 use tokio::io::AsyncReadExt;
 
 use super::extract::PathArg;
+use super::session;
 use crate::error::ServiceError;
-use crate::service::admin::login_page;
+use crate::service::admin::{CSRF_SLOT, login_page};
 use crate::service::{AppState, Caller};
 
 /// The session cookie's name; its value is the organiser token, hex-encoded.
-const COOKIE: &str = "kitchen_r_admin";
+pub(super) const COOKIE: &str = "kitchen_r_admin";
 const SESSION_S: u32 = 8 * 3600;
 
 /// Routes answered within the request budget.
@@ -117,36 +117,6 @@ async fn backup(State(s): State<AppState>, caller: Caller) -> Result<Response, S
     Ok(response)
 }
 
-/// The organiser token of the session cookie, if any.
-fn cookie_token(headers: &HeaderMap) -> Option<String> {
-    headers
-        .get_all(header::COOKIE)
-        .iter()
-        .filter_map(|v| v.to_str().ok())
-        .flat_map(|v| v.split(';'))
-        .filter_map(|kv| kv.trim().strip_prefix(COOKIE)?.strip_prefix('='))
-        .find_map(|hexed| String::from_utf8(hex::decode(hexed).ok()?).ok())
-}
-
-fn html(status: StatusCode, body: String) -> Response {
-    let mut r = (status, body).into_response();
-    let h = r.headers_mut();
-    h.insert(
-        header::CONTENT_TYPE,
-        HeaderValue::from_static("text/html; charset=utf-8"),
-    );
-    h.insert(header::CACHE_CONTROL, HeaderValue::from_static("no-store"));
-    h.insert(
-        header::CONTENT_SECURITY_POLICY,
-        HeaderValue::from_static(
-            "default-src 'none'; style-src 'unsafe-inline'; form-action 'self'; frame-ancestors 'none'",
-        ),
-    );
-    h.insert(header::X_FRAME_OPTIONS, HeaderValue::from_static("DENY"));
-    h.insert(header::REFERRER_POLICY, HeaderValue::from_static("no-referrer"));
-    r
-}
-
 /// `GET /admin`: the console for the organiser (session cookie or bearer header), else the
 /// login form.
 async fn page(
@@ -156,65 +126,98 @@ async fn page(
 ) -> Result<Response, ServiceError> {
     let admin = match caller.organiser() {
         Ok(a) => Some(a),
-        Err(_) => match cookie_token(&headers) {
-            Some(t) => s.caller(Some(&t)).await?.organiser().ok(),
-            None => None,
-        },
+        Err(_) => organiser_session(&s, &headers).await?,
     };
+    let csrf = session::csrf(&headers, COOKIE);
     match admin {
-        Some(a) => Ok(html(StatusCode::OK, s.admin_page(a).await?)),
-        None => Ok(html(StatusCode::UNAUTHORIZED, login_page(None))),
+        Some(a) => {
+            let body = s.admin_page(a).await?.replacen(CSRF_SLOT, &csrf.field, 1);
+            Ok(session::html_with(StatusCode::OK, body, &csrf))
+        }
+        None => Ok(session::html_with(
+            StatusCode::UNAUTHORIZED,
+            login_page(None, &csrf.field),
+            &csrf,
+        )),
     }
+}
+
+/// The organiser, when the request carries the console's session cookie (also read by the
+/// participant pages, which the organiser may open too).
+pub(super) async fn organiser_session(
+    s: &AppState,
+    headers: &HeaderMap,
+) -> Result<Option<crate::service::Organiser>, ServiceError> {
+    Ok(match session::session_token(headers, COOKIE) {
+        Some(t) => s.caller(Some(&t)).await?.organiser().ok(),
+        None => None,
+    })
 }
 
 #[derive(Debug, Deserialize)]
 struct LoginForm {
     token: String,
+    csrf: Option<String>,
 }
 
-/// `POST /admin/login` (form `token=...`): the organiser token sets the session cookie.
+#[derive(Debug, Deserialize)]
+struct CsrfForm {
+    csrf: Option<String>,
+}
+
+/// The login form again, with `message`, answered with `status`.
+fn login_again(headers: &HeaderMap, status: StatusCode, message: &str) -> Response {
+    let csrf = session::csrf(headers, COOKIE);
+    session::html_with(status, login_page(Some(message), &csrf.field), &csrf)
+}
+
+/// `POST /admin/login` (form `token=...&csrf=...`): the organiser token sets the session cookie.
 async fn login(
     State(s): State<AppState>,
+    headers: HeaderMap,
     form: Result<Form<LoginForm>, axum::extract::rejection::FormRejection>,
 ) -> Result<Response, ServiceError> {
     let Ok(Form(form)) = form else {
-        return Ok(html(
+        return Ok(login_again(
+            &headers,
             StatusCode::BAD_REQUEST,
-            login_page(Some("Send the organiser token.")),
+            "Send the organiser token.",
         ));
     };
+    if !session::csrf_ok(&headers, COOKIE, form.csrf.as_deref()) {
+        return Ok(login_again(
+            &headers,
+            StatusCode::FORBIDDEN,
+            session::CSRF_REFUSED,
+        ));
+    }
     let token = form.token.trim();
     if token.is_empty() || s.caller(Some(token)).await?.organiser().is_err() {
         tracing::warn!("organiser console: failed login");
-        return Ok(html(
+        return Ok(login_again(
+            &headers,
             StatusCode::UNAUTHORIZED,
-            login_page(Some("That is not the organiser token.")),
+            "That is not the organiser token.",
         ));
     }
-    let cookie = format!(
-        "{COOKIE}={}; Path=/admin; HttpOnly; SameSite=Strict; Max-Age={SESSION_S}",
-        hex::encode(token)
-    );
-    let mut r = StatusCode::SEE_OTHER.into_response();
-    let h = r.headers_mut();
-    h.insert(header::LOCATION, HeaderValue::from_static("/admin"));
-    h.insert(header::CACHE_CONTROL, HeaderValue::from_static("no-store"));
-    if let Ok(v) = HeaderValue::from_str(&cookie) {
-        h.insert(header::SET_COOKIE, v);
-    }
-    Ok(r)
+    let secure = session::https(&headers);
+    let cookie = session::session_cookie(COOKIE, token, SESSION_S, secure);
+    Ok(session::see_other("/admin", &[cookie]))
 }
 
-/// `POST /admin/logout`: drop the session cookie.
-async fn logout() -> Response {
-    let mut r = StatusCode::SEE_OTHER.into_response();
-    let h = r.headers_mut();
-    h.insert(header::LOCATION, HeaderValue::from_static("/admin"));
-    h.insert(
-        header::SET_COOKIE,
-        HeaderValue::from_static("kitchen_r_admin=; Path=/admin; HttpOnly; SameSite=Strict; Max-Age=0"),
-    );
-    r
+/// `POST /admin/logout` (form `csrf=...`): drop the session cookie (and the one older servers
+/// set on `Path=/admin`).
+async fn logout(
+    headers: HeaderMap,
+    form: Result<Form<CsrfForm>, axum::extract::rejection::FormRejection>,
+) -> Response {
+    let sent = form.ok().and_then(|Form(f)| f.csrf);
+    if !session::csrf_ok(&headers, COOKIE, sent.as_deref()) {
+        return login_again(&headers, StatusCode::FORBIDDEN, session::CSRF_REFUSED);
+    }
+    let secure = session::https(&headers);
+    let old = HeaderValue::from_static("kitchen_r_admin=; Path=/admin; HttpOnly; SameSite=Strict; Max-Age=0");
+    session::see_other("/admin", &[session::set_cookie(COOKIE, "", Some(0), secure), old])
 }
 
 #[cfg(test)]

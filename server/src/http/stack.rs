@@ -11,6 +11,8 @@
 //!    kept. Routes map the ones they can foresee themselves (method not allowed, body limits,
 //!    path and query rejections: see [`crate::http`]) with better messages; this is the net
 //!    under them, so "every error is JSON" holds for whatever a future route or layer sends.
+//!    HTML pages (`text/html`: the organiser console, the participant pages) keep their own
+//!    error pages: a browser shows them.
 //!    (Malformed HTTP that hyper refuses before routing never reaches the stack.)
 //! 3. trace: one span per request with the method, the *matched route* (`/api/v1/scenes/{id}`,
 //!    not the raw path, so spans group by route and carry no ids) and the request id;
@@ -93,12 +95,15 @@ const PLAIN_ERROR_CHARS: usize = 1024;
 async fn json_errors(req: Request, next: Next) -> Response {
     let resp = next.run(req).await;
     let status = resp.status();
-    let is_json = resp
+    let content_type = resp
         .headers()
         .get(header::CONTENT_TYPE)
         .and_then(|v| v.to_str().ok())
-        .is_some_and(|v| v.starts_with("application/json"));
-    if !(status.is_client_error() || status.is_server_error()) || is_json {
+        .unwrap_or("");
+    // An HTML page's error answer (a login form, a 404 page) is meant for a browser: kept.
+    let is_json = content_type.starts_with("application/json");
+    let is_page = content_type.starts_with("text/html");
+    if !(status.is_client_error() || status.is_server_error()) || is_json || is_page {
         return resp;
     }
     let (mut parts, body) = resp.into_parts();

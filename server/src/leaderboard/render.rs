@@ -108,11 +108,14 @@ fn table(board: &Leaderboard) -> String {
             (true, Some("cancelled")) => " (cancelled)",
             _ => "",
         };
+        // The entry's public summary: what this row shows, on a page of its own.
         let _ = write!(
             rows,
-            "<td class=n>{}{state}</td><td>{}</td></tr>",
-            r.submission_id,
-            escape(&r.submitted_at)
+            "<td class=n><a href=\"/leaderboard/{}/{}/{id}\">{id}</a>{state}</td><td>{}</td></tr>",
+            board.track.as_str(),
+            board.split,
+            escape(&r.submitted_at),
+            id = r.submission_id,
         );
     }
     if board.rows.is_empty() {
@@ -133,6 +136,19 @@ fn table(board: &Leaderboard) -> String {
         split = board.split,
     )
 }
+
+/// The integrity rules as an HTML list: the leaderboard page and the contest home show this
+/// one text.
+pub(crate) const INTEGRITY_RULES: &str = "<ul>\
+<li>Test-split feedback is aggregate only: a submission shows its scores and counts of failure \
+reasons, never a result per instruction or task.</li>\
+<li>A policy endpoint receives each task's sub-task sentence (a ground-truth plan step) but no \
+instruction id: episode ids are opaque.</li>\
+<li>Because a test-split policy run shows the endpoint the test plans' steps, a team's test plan \
+files created after its first test-split policy run are scored but not ranked, and an integrated \
+test run must link a plan file created before that run.</li>\
+<li>A policy that refuses or fails its offline (MSE) episodes is charged the failure penalty at \
+every decision point, as if it had answered badly.</li></ul>";
 
 /// The public page: one table per board, all of one split.
 pub(crate) fn page(split: Split, boards: &[Leaderboard], public_sample: bool) -> String {
@@ -157,17 +173,9 @@ they do not rank planners.</p>",
 table{{border-collapse:collapse;width:100%;margin-bottom:2rem}}th,td{{padding:.4rem .6rem;border-bottom:1px solid #ddd;text-align:left}}\
 td.n{{text-align:right;font-variant-numeric:tabular-nums}}th{{background:#f4f4f4}}tr.baseline{{color:#555;background:#fafafa}}\
 .banner{{background:#fff4d6;border:1px solid #e0b84a;padding:.6rem .8rem}}</style></head><body>\
-<h1>Kitchen-R leaderboard</h1>{banner}<p><b>{split}</b> split. <a href=\"/?split={other}\">Show the {other} split</a>. \
+<h1>Kitchen-R leaderboard</h1>{banner}<p><a href=\"/contest\">The contest: tracks, metrics, \
+how to take part, data and rules</a> · <a href=\"/team\">Team page</a></p><p><b>{split}</b> split. <a href=\"/?split={other}\">Show the {other} split</a>. \
 Baseline rows are organiser reference runs and take no rank.</p>{tables}\
-<h2>Rules that keep the test split honest</h2><ul>\
-<li>Test-split feedback is aggregate only: a submission shows its scores and counts of failure \
-reasons, never a result per instruction or task.</li>\
-<li>A policy endpoint receives each task's sub-task sentence (a ground-truth plan step) but no \
-instruction id: episode ids are opaque.</li>\
-<li>Because a test-split policy run shows the endpoint the test plans' steps, a team's test plan \
-files created after its first test-split policy run are scored but not ranked, and an integrated \
-test run must link a plan file created before that run.</li>\
-<li>A policy that refuses or fails its offline (MSE) episodes is charged the failure penalty at \
-every decision point, as if it had answered badly.</li></ul></body></html>"
+<h2>Rules that keep the test split honest</h2>{INTEGRITY_RULES}</body></html>"
     )
 }

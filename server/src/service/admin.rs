@@ -19,7 +19,7 @@
 
 mod page;
 
-pub(crate) use page::login as login_page;
+pub(crate) use page::{CSRF_SLOT, login as login_page};
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

@@ -108,16 +108,38 @@ async fn the_page_logs_in_with_a_strict_http_only_cookie() {
     let app = router(f.state.clone());
     let (status, headers, body) = call(&app, Request::get("/admin").body(Body::empty()).unwrap()).await;
     assert_eq!(status, StatusCode::UNAUTHORIZED);
-    assert!(String::from_utf8(body).unwrap().contains("name=token"));
+    assert_eq!(headers[header::CONTENT_TYPE], "text/html; charset=utf-8");
+    assert!(String::from_utf8(body.clone()).unwrap().contains("name=token"));
     assert_eq!(headers[header::CACHE_CONTROL], "no-store");
     assert!(headers.contains_key(header::CONTENT_SECURITY_POLICY));
 
+    // The form's CSRF field and the nonce cookie it is bound to.
+    let nonce = headers[header::SET_COOKIE].to_str().unwrap();
+    let nonce = nonce.split(';').next().unwrap().to_string();
+    let page = String::from_utf8(body).unwrap();
+    let csrf = page.split("name=csrf value=\"").nth(1).unwrap();
+    let csrf = csrf.split('"').next().unwrap().to_string();
     let login = |token: &str| {
         Request::post("/admin/login")
             .header(header::CONTENT_TYPE, "application/x-www-form-urlencoded")
-            .body(Body::from(format!("token={token}")))
+            .header(header::COOKIE, &nonce)
+            .body(Body::from(format!("token={token}&csrf={csrf}")))
             .unwrap()
     };
+    // Without the CSRF field, or with another one, the right token is refused.
+    for form in [format!("token={ADMIN}"), format!("token={ADMIN}&csrf=00")] {
+        let req = Request::post("/admin/login")
+            .header(header::CONTENT_TYPE, "application/x-www-form-urlencoded")
+            .header(header::COOKIE, &nonce)
+            .body(Body::from(form))
+            .unwrap();
+        let (status, headers, _) = call(&app, req).await;
+        assert_eq!(status, StatusCode::FORBIDDEN);
+        assert!(
+            !headers.contains_key(header::SET_COOKIE)
+                || !headers[header::SET_COOKIE].to_str().unwrap().starts_with(COOKIE)
+        );
+    }
     let (status, headers, _) = call(&app, login(&team)).await;
     assert_eq!(
         status,
@@ -129,7 +151,7 @@ async fn the_page_logs_in_with_a_strict_http_only_cookie() {
     let (status, headers, _) = call(&app, login(ADMIN)).await;
     assert_eq!(status, StatusCode::SEE_OTHER);
     let cookie = headers[header::SET_COOKIE].to_str().unwrap().to_string();
-    for attr in ["HttpOnly", "SameSite=Strict", "Path=/admin"] {
+    for attr in ["HttpOnly", "SameSite=Strict", "Path=/;"] {
         assert!(cookie.contains(attr), "{cookie}");
     }
     let pair = cookie.split(';').next().unwrap().to_string();

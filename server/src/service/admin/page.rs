@@ -215,20 +215,24 @@ td.n{{text-align:right;font-variant-numeric:tabular-nums}}th{{background:#f4f4f4
 form{{display:inline}}</style></head><body>\
 <h1>Kitchen-R organiser console</h1><p>As of {at} (refreshes every 15 s). Actions: \
 <code>kitchen-r admin cancel RUN</code>, <code>admin requeue RUN</code>, <code>admin backup FILE</code>. \
-<form method=post action=\"/admin/logout\"><button>Log out</button></form></p>{body}</body></html>",
+<form method=post action=\"/admin/logout\">{CSRF_SLOT}<button>Log out</button></form></p>{body}</body></html>",
         at = escape(&q.at),
     )
 }
 
-/// The login form (`GET /admin` without a valid session cookie).
-pub(crate) fn login(message: Option<&str>) -> String {
+/// Where the HTTP adapter puts the CSRF field of the console's forms (it owns the session).
+pub(crate) const CSRF_SLOT: &str = "<!--csrf-->";
+
+/// The login form (`GET /admin` without a valid session cookie); `csrf` is the form's hidden
+/// CSRF field, as the HTTP adapter renders it.
+pub(crate) fn login(message: Option<&str>, csrf: &str) -> String {
     let message = message.map_or_else(String::new, |m| format!("<p class=err>{}</p>", escape(m)));
     format!(
         "<!doctype html><html lang=en><head><meta charset=utf-8><title>Kitchen-R organiser console</title>\
 <meta name=viewport content=\"width=device-width,initial-scale=1\">\
 <style>body{{font-family:system-ui,sans-serif;margin:2rem auto;max-width:30rem;padding:0 1rem}}\
 input{{width:100%;padding:.4rem;margin:.5rem 0}}.err{{color:#a00}}</style></head><body>\
-<h1>Organiser console</h1>{message}<form method=post action=\"/admin/login\">\
+<h1>Organiser console</h1>{message}<form method=post action=\"/admin/login\">{csrf}\
 <label>Organiser token <input type=password name=token autocomplete=current-password required></label>\
 <button>Log in</button></form></body></html>"
     )

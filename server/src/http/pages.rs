@@ -1,0 +1,304 @@
+//! The participant pages: server-rendered HTML that needs no script and no build step.
+//!
+//! - `GET /contest`: the contest home ([`home`]): tracks, metrics, how to take part, data, rules;
+//! - `GET|POST /team/login`, `POST /team/logout`: the team token kept in a session cookie;
+//! - `GET /team`: the team's submissions and quota left ([`team`]);
+//! - `GET /submissions/{id}`: one submission, for its team or the organiser ([`submission`]);
+//! - `GET /leaderboard/{track}/{split}/{id}`: a leaderboard entry's public summary.
+//!
+//! Policy: a page that needs a team takes the token once (the login form) and keeps it in the
+//! `kitchen_r_team` cookie; the organiser's console cookie opens submission pages too. Cookies
+//! and CSRF follow [`super::session`]. Another team's submission answers 404, the same as one
+//! that does not exist, so a page never reveals which ids are taken. A leaderboard entry's page
+//! shows only what the leaderboard row shows, for ranked (and baseline) rows only.
+
+mod home;
+mod layout;
+mod submission;
+mod team;
+
+use std::collections::HashMap;
+
+use axum::Router;
+use axum::extract::{Form, State};
+use axum::http::{HeaderMap, StatusCode};
+use axum::response::Response;
+use axum::routing::{get, post};
+use kitchen_r_core::dataset::Split;
+use serde::Deserialize;
+
+use super::extract::{PathArg, QueryArgs};
+use super::{admin, session};
+use crate::error::ServiceError;
+use crate::leaderboard::Track;
+use crate::service::{AppState, Caller, Organiser};
+use crate::store::Team;
+use layout::Viewer;
+
+/// The team session cookie; its value is the team token, hex-encoded.
+pub(super) const TEAM_COOKIE: &str = "kitchen_r_team";
+const TEAM_SESSION_S: u32 = 7 * 24 * 3600;
+
+pub(super) fn routes() -> Router<AppState> {
+    Router::new()
+        .route("/contest", get(contest))
+        .route("/team", get(team_page))
+        .route("/team/login", get(login_form).post(login))
+        .route("/team/logout", post(logout))
+        .route("/submissions/{id}", get(submission_page))
+        .route("/leaderboard/{track}/{split}/{id}", get(entry_page))
+}
+
+/// Who opened a page: a bearer header first (scripts), then the team cookie, then the
+/// organiser's console cookie.
+enum Who {
+    Nobody,
+    Team(Team),
+    Organiser(Organiser),
+}
+
+async fn who(s: &AppState, caller: Caller, headers: &HeaderMap) -> Result<Who, ServiceError> {
+    match caller {
+        Caller::Team(t) => return Ok(Who::Team(t)),
+        Caller::Organiser(o) => return Ok(Who::Organiser(o)),
+        _ => {}
+    }
+    if let Some(token) = session::session_token(headers, TEAM_COOKIE)
+        && let Caller::Team(t) = s.caller(Some(&token)).await?
+    {
+        return Ok(Who::Team(t));
+    }
+    Ok(match admin::organiser_session(s, headers).await? {
+        Some(o) => Who::Organiser(o),
+        None => Who::Nobody,
+    })
+}
+
+/// Render `body` in the frame for `who`, with the logout form's CSRF field.
+fn respond(
+    headers: &HeaderMap,
+    who: &Who,
+    status: StatusCode,
+    title: &str,
+    refresh: Option<u32>,
+    body: &str,
+) -> Response {
+    let csrf = session::csrf(headers, TEAM_COOKIE);
+    let viewer = match who {
+        Who::Nobody => Viewer::Nobody,
+        Who::Team(t) => Viewer::Team {
+            name: &t.name,
+            csrf: &csrf.field,
+        },
+        Who::Organiser(_) => Viewer::Organiser,
+    };
+    session::html_with(status, layout::page(title, &viewer, refresh, body), &csrf)
+}
+
+fn not_found(headers: &HeaderMap, who: &Who, what: &str) -> Response {
+    let body = format!(
+        "<p>There is no {} here, or it is not yours to see.</p><p><a href=\"/team\">Your team page</a></p>",
+        layout::escape(what)
+    );
+    respond(headers, who, StatusCode::NOT_FOUND, "Not found", None, &body)
+}
+
+/// 303 to the login form, coming back to `next` afterwards.
+fn to_login(next: &str) -> Response {
+    session::see_other(&format!("/team/login?next={next}"), &[])
+}
+
+async fn contest(
+    State(s): State<AppState>,
+    caller: Caller,
+    headers: HeaderMap,
+) -> Result<Response, ServiceError> {
+    let who = who(&s, caller, &headers).await?;
+    Ok(respond(
+        &headers,
+        &who,
+        StatusCode::OK,
+        "Kitchen-R contest",
+        None,
+        &home::body(&s),
+    ))
+}
+
+async fn team_page(
+    State(s): State<AppState>,
+    caller: Caller,
+    headers: HeaderMap,
+) -> Result<Response, ServiceError> {
+    let who = who(&s, caller, &headers).await?;
+    let team = match &who {
+        Who::Team(t) => t,
+        Who::Organiser(_) => {
+            let body =
+                "<p>The organiser has no team. Teams' runs are on the <a href=\"/admin\">console</a>.</p>";
+            return Ok(respond(&headers, &who, StatusCode::OK, "Team page", None, body));
+        }
+        Who::Nobody => return Ok(to_login("/team")),
+    };
+    let quota = s.team_quota(team).await?;
+    let subs = s.team_submissions(team).await?;
+    let title = format!("Team {}", team.name);
+    Ok(respond(
+        &headers,
+        &who,
+        StatusCode::OK,
+        &title,
+        None,
+        &team::body(&quota, &subs),
+    ))
+}
+
+fn login_page(headers: &HeaderMap, status: StatusCode, message: Option<&str>, next: &str) -> Response {
+    let csrf = session::csrf(headers, TEAM_COOKIE);
+    let page = layout::page(
+        "Team login",
+        &Viewer::Nobody,
+        None,
+        &team::login(message, &csrf.field, next),
+    );
+    session::html_with(status, page, &csrf)
+}
+
+async fn login_form(headers: HeaderMap, QueryArgs(q): QueryArgs<HashMap<String, String>>) -> Response {
+    let next = session::local_path(q.get("next").map(String::as_str)).unwrap_or("/team");
+    login_page(&headers, StatusCode::OK, None, next)
+}
+
+#[derive(Debug, Deserialize)]
+struct LoginForm {
+    token: Option<String>,
+    csrf: Option<String>,
+    next: Option<String>,
+}
+
+/// `POST /team/login` (form `token`, `csrf`, `next`): a team token sets the session cookie.
+async fn login(
+    State(s): State<AppState>,
+    headers: HeaderMap,
+    form: Result<Form<LoginForm>, axum::extract::rejection::FormRejection>,
+) -> Result<Response, ServiceError> {
+    let form = form.map(|Form(f)| f).unwrap_or(LoginForm {
+        token: None,
+        csrf: None,
+        next: None,
+    });
+    let next = session::local_path(form.next.as_deref()).unwrap_or("/team");
+    if !session::csrf_ok(&headers, TEAM_COOKIE, form.csrf.as_deref()) {
+        return Ok(login_page(
+            &headers,
+            StatusCode::FORBIDDEN,
+            Some(session::CSRF_REFUSED),
+            next,
+        ));
+    }
+    let token = form.token.as_deref().map(str::trim).unwrap_or("");
+    let caller = match token {
+        "" => Caller::Anonymous,
+        t => s.caller(Some(t)).await?,
+    };
+    let message = match caller {
+        Caller::Team(t) => {
+            tracing::info!(team = %t.name, "team logged in to the pages");
+            let cookie =
+                session::session_cookie(TEAM_COOKIE, token, TEAM_SESSION_S, session::https(&headers));
+            return Ok(session::see_other(next, &[cookie]));
+        }
+        Caller::Organiser(_) => "That is the organiser token: log in on the console (/admin).",
+        _ => "That is not a team token.",
+    };
+    Ok(login_page(
+        &headers,
+        StatusCode::UNAUTHORIZED,
+        Some(message),
+        next,
+    ))
+}
+
+#[derive(Debug, Deserialize)]
+struct CsrfForm {
+    csrf: Option<String>,
+}
+
+/// `POST /team/logout` (form `csrf`): drop the team cookie.
+async fn logout(
+    headers: HeaderMap,
+    form: Result<Form<CsrfForm>, axum::extract::rejection::FormRejection>,
+) -> Response {
+    let sent = form.ok().and_then(|Form(f)| f.csrf);
+    if !session::csrf_ok(&headers, TEAM_COOKIE, sent.as_deref()) {
+        return login_page(
+            &headers,
+            StatusCode::FORBIDDEN,
+            Some(session::CSRF_REFUSED),
+            "/team",
+        );
+    }
+    let gone = session::set_cookie(TEAM_COOKIE, "", Some(0), session::https(&headers));
+    session::see_other("/contest", &[gone])
+}
+
+async fn submission_page(
+    State(s): State<AppState>,
+    PathArg(id): PathArg<String>,
+    caller: Caller,
+    headers: HeaderMap,
+) -> Result<Response, ServiceError> {
+    let who = who(&s, caller, &headers).await?;
+    let Ok(id) = id.parse::<i64>() else {
+        return Ok(not_found(&headers, &who, "such submission"));
+    };
+    let caller = match &who {
+        Who::Team(t) => Caller::Team(t.clone()),
+        Who::Organiser(o) => Caller::Organiser(*o),
+        Who::Nobody => return Ok(to_login(&format!("/submissions/{id}"))),
+    };
+    let view = match s.get_submission(&caller, id).await {
+        Ok(v) => v,
+        Err(ServiceError::NotFound { .. }) => return Ok(not_found(&headers, &who, "such submission")),
+        Err(e) => return Err(e),
+    };
+    let running = submission::running(&view);
+    let eta = match (&view.latest_run, running) {
+        (Some(run), true) => {
+            let e = run.evaluation.as_ref();
+            let (done, total) = e.map_or((0, 0), |e| (e.episodes_done, e.episodes_total));
+            s.run_eta(run.id, done, total).await?
+        }
+        _ => None,
+    };
+    let title = format!("Submission {id}");
+    let refresh = running.then_some(submission::REFRESH_S);
+    let body = submission::body(&view, eta.as_ref());
+    Ok(respond(&headers, &who, StatusCode::OK, &title, refresh, &body))
+}
+
+async fn entry_page(
+    State(s): State<AppState>,
+    PathArg((track, split, id)): PathArg<(String, String, String)>,
+    caller: Caller,
+    headers: HeaderMap,
+) -> Result<Response, ServiceError> {
+    let who = who(&s, caller, &headers).await?;
+    let parsed = (
+        track.parse::<Track>().ok().filter(|_| !track.is_empty()),
+        split.parse::<Split>().ok(),
+        id.parse::<i64>().ok(),
+    );
+    let (Some(track), Some(split), Some(id)) = parsed else {
+        return Ok(not_found(&headers, &who, "such leaderboard entry"));
+    };
+    let board = s.leaderboard(track, split).await?;
+    let Some(row) = board.rows.iter().find(|r| r.submission_id == id) else {
+        return Ok(not_found(&headers, &who, "such leaderboard entry"));
+    };
+    let title = format!("{} on the {} leaderboard", row.team, track.as_str());
+    let body = team::entry(track, split.as_str(), row);
+    Ok(respond(&headers, &who, StatusCode::OK, &title, None, &body))
+}
+
+#[cfg(test)]
+mod tests;

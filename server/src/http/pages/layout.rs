@@ -1,0 +1,98 @@
+//! The frame every participant page shares: head, small CSS, navigation. No script anywhere
+//! (the Content-Security-Policy of [`super::super::session::html`] allows none); pages that
+//! change while an evaluation runs reload themselves with `<meta http-equiv=refresh>`.
+
+use std::fmt::Write as _;
+
+pub(super) use crate::leaderboard::render::escape;
+use crate::scores::fmt_score;
+
+const CSS: &str = "body{font-family:system-ui,sans-serif;margin:1.5rem auto;max-width:64rem;padding:0 1rem;line-height:1.45}\
+nav{display:flex;flex-wrap:wrap;gap:.4rem 1rem;align-items:center;border-bottom:1px solid #ddd;padding-bottom:.5rem}\
+nav form{margin-left:auto}table{border-collapse:collapse;width:100%;margin:.5rem 0 1.5rem}\
+th,td{padding:.3rem .5rem;border-bottom:1px solid #ddd;text-align:left;vertical-align:top}\
+th{background:#f4f4f4}td.n{text-align:right;font-variant-numeric:tabular-nums}\
+.ok{color:#176b2c}.bad{color:#a00}.muted{color:#666}.banner{background:#fff4d6;border:1px solid #e0b84a;padding:.5rem .8rem}\
+.f{font-family:ui-monospace,monospace;background:#f7f7f7;padding:.3rem .5rem;overflow-x:auto}\
+.scroll{overflow-x:auto}img{max-width:100%;height:auto;border:1px solid #ddd}\
+figure{display:inline-block;margin:.5rem 1rem .5rem 0;vertical-align:top;max-width:20rem}\
+input[type=password]{width:100%;max-width:30rem;padding:.4rem;margin:.4rem 0}code{overflow-wrap:anywhere}";
+
+/// Who the page is for: drives the navigation's right end.
+pub(super) enum Viewer<'a> {
+    Nobody,
+    /// A logged-in team (and the CSRF field of its logout form).
+    Team {
+        name: &'a str,
+        csrf: &'a str,
+    },
+    Organiser,
+}
+
+/// A whole page: `title`, the navigation, `body`; `refresh_s` reloads it while something runs.
+pub(super) fn page(title: &str, viewer: &Viewer<'_>, refresh_s: Option<u32>, body: &str) -> String {
+    let refresh = refresh_s.map_or_else(String::new, |s| format!("<meta http-equiv=refresh content={s}>"));
+    let who = match viewer {
+        Viewer::Nobody => "<a href=\"/team/login\">Team login</a>".to_string(),
+        Viewer::Team { name, csrf } => format!(
+            "<span>Team <b>{}</b></span><form method=post action=\"/team/logout\">{csrf}<button>Log out</button></form>",
+            escape(name)
+        ),
+        Viewer::Organiser => "<span>Organiser (<a href=\"/admin\">console</a>)</span>".to_string(),
+    };
+    format!(
+        "<!doctype html><html lang=en><head><meta charset=utf-8><title>{title} · Kitchen-R</title>\
+<meta name=viewport content=\"width=device-width,initial-scale=1\">{refresh}<style>{CSS}</style></head><body>\
+<nav><a href=\"/contest\">Contest</a><a href=\"/\">Leaderboard</a><a href=\"/team\">Team page</a>{who}</nav>\
+<h1>{title}</h1>{body}</body></html>",
+        title = escape(title),
+    )
+}
+
+/// A score cell's text: six decimals, `inf`, or a dash when absent.
+pub(super) fn score(v: Option<f64>) -> String {
+    match fmt_score(v) {
+        s if s.is_empty() => "–".into(),
+        s => s,
+    }
+}
+
+/// A table of the scores that apply (EM, SR, MSE, M, P), with what each means.
+pub(super) fn scores_table(s: &crate::scores::Scores) -> String {
+    let mut out = String::from("<table><tr><th>Metric</th><th>Value</th><th>Meaning</th></tr>");
+    for (name, v, what) in [
+        ("EM", s.em, "plan steps exactly right (higher is better)"),
+        (
+            "SR",
+            s.sr,
+            "tasks the policy completed in time (higher is better)",
+        ),
+        (
+            "MSE",
+            s.mse,
+            "error against the expert's action chunks (lower is better)",
+        ),
+        ("M", s.m, "mean of EM_j + SR_j per task (higher is better)"),
+        ("P", s.p, "1/EM + mean task MSE (lower is better)"),
+    ] {
+        if v.is_some() {
+            let _ = write!(
+                out,
+                "<tr><td>{name}</td><td class=n>{}</td><td>{what}</td></tr>",
+                score(v)
+            );
+        }
+    }
+    out.push_str("</table>");
+    out
+}
+
+/// A number of seconds as `1h 02m`, `3m 05s` or `42s`.
+pub(super) fn duration(s: f64) -> String {
+    let s = s.max(0.0).round() as u64;
+    match s {
+        0..60 => format!("{s}s"),
+        60..3600 => format!("{}m {:02}s", s / 60, s % 60),
+        _ => format!("{}h {:02}m", s / 3600, (s % 3600) / 60),
+    }
+}

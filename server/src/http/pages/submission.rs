@@ -1,0 +1,253 @@
+//! `GET /submissions/{id}`: a submission as its team (or the organiser) sees it, rendered from
+//! the same [`SubmissionView`] the JSON API answers, so the page never shows more than the API.
+//!
+//! Policy: on the test split the page shows the aggregate view only (scores, progress counts,
+//! failure counts). It checks the split itself and renders no per-episode or per-instruction
+//! rows there even if a view carried some: the service already leaves them out, and a page must
+//! not be the place where that rule could break.
+
+use std::fmt::Write as _;
+
+use super::layout::{duration, escape, score, scores_table};
+use crate::service::portal::Eta;
+use crate::service::{EpisodeView, PolicyRunView, SubmissionView};
+
+/// Seconds between reloads while the evaluation is queued or running.
+pub(super) const REFRESH_S: u32 = 10;
+
+/// Whether the page should reload itself (an evaluation still going).
+pub(super) fn running(v: &SubmissionView) -> bool {
+    let state = v
+        .latest_run
+        .as_ref()
+        .and_then(|r| r.evaluation.as_ref())
+        .map(|e| e.state);
+    matches!(state, Some("queued" | "running"))
+}
+
+fn state_words(state: &str) -> &'static str {
+    match state {
+        "queued" => "queued: waiting for a simulation worker",
+        "running" => "running",
+        "finished" => "finished",
+        "platform_failed" => "failed on the platform's side (uses no quota)",
+        "cancelled" => "cancelled by the organiser (uses no quota)",
+        _ => "unknown",
+    }
+}
+
+/// The page body of `v`; `eta` while it runs.
+pub(super) fn body(v: &SubmissionView, eta: Option<&Eta>) -> String {
+    let test = v.split == "test";
+    let mut out = format!(
+        "<table><tr><th>Team</th><td>{}</td></tr><tr><th>Kind</th><td>{}</td></tr>\
+<tr><th>Split</th><td>{}</td></tr><tr><th>Submitted (UTC)</th><td>{}</td></tr>",
+        escape(&v.team),
+        if v.kind == "policy" {
+            "policy endpoint"
+        } else {
+            "plan file"
+        },
+        escape(&v.split),
+        escape(&v.created_at),
+    );
+    if let Some(p) = &v.policy {
+        let plans = p.plans.map_or_else(String::new, |id| {
+            format!(" (integrated: linked to plan submission <a href=\"/submissions/{id}\">{id}</a>)")
+        });
+        let _ = write!(
+            out,
+            "<tr><th>Endpoint</th><td><code>{}</code>{plans}</td></tr>",
+            escape(&p.endpoint)
+        );
+    }
+    let ranked = match &v.unranked_reason {
+        None => "yes".to_string(),
+        Some(why) => format!("no: {}", escape(why)),
+    };
+    let _ = write!(out, "<tr><th>Ranked</th><td>{ranked}</td></tr></table>");
+    if test {
+        out.push_str("<p class=muted>Test split: feedback is aggregate only (scores and counts).</p>");
+    }
+    let Some(run) = &v.latest_run else {
+        out.push_str("<p>Not scored yet.</p>");
+        return out;
+    };
+    if let Some(e) = &run.evaluation {
+        out.push_str(&progress(e, eta));
+    }
+    let _ = write!(
+        out,
+        "<h2>Scores</h2><p class=muted>Scoring run {} ({}), {}.</p>{}",
+        run.id,
+        escape(&run.scorer_version),
+        escape(&run.created_at),
+        scores_table(&run.scores)
+    );
+    if let (Some(total), Some(present)) = (run.instructions_total, run.instructions_present) {
+        let _ = write!(
+            out,
+            "<p>The file had a plan for {present} of {total} instructions.</p>"
+        );
+    }
+    if !test && !run.instructions.is_empty() {
+        out.push_str(&instructions(run));
+    }
+    if let Some(e) = &run.evaluation {
+        out.push_str(&failures(e));
+        if !test {
+            out.push_str(&episodes(e));
+        }
+    }
+    out
+}
+
+fn progress(e: &PolicyRunView, eta: Option<&Eta>) -> String {
+    let eta = match (e.state, eta) {
+        ("queued" | "running", Some(eta)) => {
+            format!(
+                " Estimated to finish in {} (at {} UTC).",
+                duration(eta.in_s),
+                escape(&eta.at)
+            )
+        }
+        ("queued" | "running", None) => " An estimate shows once the first episode has finished.".into(),
+        _ => String::new(),
+    };
+    let mut out = format!(
+        "<h2>Progress</h2><p><b>{}</b>. <progress max={} value={}></progress> {} of {} episodes done, \
+{} running{}.{eta}</p>",
+        state_words(e.state),
+        e.episodes_total.max(1),
+        e.episodes_done,
+        e.episodes_done,
+        e.episodes_total,
+        e.episodes_running,
+        match e.episodes_retrying {
+            0 => String::new(),
+            n => format!(", {n} being retried after a platform failure (no cost to you)"),
+        },
+    );
+    if let Some(at) = &e.finished_at {
+        let _ = write!(out, "<p>Finished at {} UTC.</p>", escape(at));
+    }
+    if e.needs_resimulation {
+        out.push_str("<p class=banner>The ground truth changed since these episodes ran: the scores are those of the old ground truth until the organiser simulates the run again.</p>");
+    }
+    if matches!(e.state, "queued" | "running") {
+        let _ = write!(
+            out,
+            "<p class=muted>This page reloads every {REFRESH_S} s while the run lasts.</p>"
+        );
+    }
+    out
+}
+
+fn failures(e: &PolicyRunView) -> String {
+    if e.failure_counts.is_empty() {
+        return String::new();
+    }
+    let mut out = String::from("<h2>Failures by kind</h2><table><tr><th>Reason</th><th>Times</th></tr>");
+    for c in &e.failure_counts {
+        let _ = write!(
+            out,
+            "<tr><td>{}</td><td class=n>{}</td></tr>",
+            escape(&c.reason),
+            c.count
+        );
+    }
+    out.push_str("</table>");
+    out
+}
+
+fn instructions(run: &crate::service::RunView) -> String {
+    let mut out = String::from(
+        "<h2>Per instruction</h2><div class=scroll><table><tr><th>Instruction</th><th>Plan given</th>\
+<th>Steps right</th><th>EM</th></tr>",
+    );
+    for i in &run.instructions {
+        let _ = write!(
+            out,
+            "<tr><td><code>{}</code></td><td>{}</td><td class=n>{} of {}</td><td class=n>{}</td></tr>",
+            escape(&i.id),
+            if i.present {
+                "yes"
+            } else {
+                "<span class=bad>missing</span>"
+            },
+            i.correct_steps,
+            i.total_steps,
+            score(Some(i.em)),
+        );
+    }
+    out.push_str("</table></div>");
+    out
+}
+
+fn episodes(e: &PolicyRunView) -> String {
+    let mut out = String::new();
+    if !e.retrying.is_empty() {
+        out.push_str("<h2>Being retried</h2><ul>");
+        for r in &e.retrying {
+            let _ = write!(
+                out,
+                "<li><code>{}</code>, attempt {}: {}</li>",
+                escape(&r.key),
+                r.attempt,
+                escape(&r.last_error)
+            );
+        }
+        out.push_str("</ul>");
+    }
+    if e.episodes.is_empty() {
+        return out;
+    }
+    out.push_str(
+        "<h2>Episodes</h2><div class=scroll><table><tr><th>Episode</th><th>Result</th><th>Tasks</th>\
+<th>Wall time</th></tr>",
+    );
+    for ep in &e.episodes {
+        out.push_str(&episode_row(ep));
+    }
+    out.push_str("</table></div>");
+    out
+}
+
+fn episode_row(ep: &EpisodeView) -> String {
+    let result = match (&ep.failure, ep.success_rate, ep.mse) {
+        (Some(f), _, _) => format!("<span class=bad>not run: {}</span>", escape(f)),
+        (None, Some(sr), _) => format!("SR {}", score(Some(sr))),
+        (None, None, Some(mse)) => format!("MSE {}", score(Some(mse))),
+        _ => "–".into(),
+    };
+    let mode = match ep.mode.as_str() {
+        "offline" => "offline (MSE against the expert)",
+        _ => "online (in the simulator)",
+    };
+    let mut tasks = String::from("<ol start=0>");
+    for t in ep.tasks.iter().flatten() {
+        let outcome = match (ep.mode.as_str(), t.success, t.failure_reason.is_empty()) {
+            ("offline", _, true) => format!("MSE {} over {} samples", score(Some(t.mse)), t.mse_samples),
+            (_, true, _) => format!("<span class=ok>done</span> in {:.1} s", t.completion_time_s),
+            (_, false, false) => format!("<span class=bad>failed</span>: {}", escape(&t.failure_reason)),
+            (_, false, true) => "<span class=bad>failed</span>".to_string(),
+        };
+        let _ = write!(tasks, "<li><code>{}</code>: {outcome}</li>", escape(&t.step));
+    }
+    tasks.push_str("</ol>");
+    format!(
+        "<tr><td><code>{}</code><br><span class=muted>{mode}, attempt {}</span>{}</td><td>{result}</td>\
+<td>{tasks}</td><td class=n>{}</td></tr>",
+        escape(&ep.key),
+        ep.attempt,
+        media(ep),
+        duration(ep.wall_ms as f64 / 1000.0),
+    )
+}
+
+/// The episode's video and path plot links (issue #15, items 1 and 2), placed under the
+/// episode's key. Neither is recorded yet, so nothing is shown: a row never links to media
+/// that does not exist.
+fn media(_ep: &EpisodeView) -> String {
+    String::new()
+}
