@@ -1,7 +1,6 @@
-//! Client commands (`team create`, `submit plans`, `submit policy`, `leaderboard`, `rescore`):
-//! thin HTTP calls to
-//! a running server's `/api/v1`. Output is for people (tables, one-line summaries) unless a
-//! machine format is asked for; a refused request exits non-zero with the server's own message.
+//! Client commands (`team create`, `submit plans`, `submit policy`, `leaderboard`, `rescore`;
+//! `submission show|wait` in `submission_cmd`): thin HTTP calls to a running server's `/api/v1`.
+//! Output is for people (tables, one-line summaries) unless a machine format is asked for; a refused request exits non-zero with the server's own message.
 
 use std::path::PathBuf;
 
@@ -115,7 +114,8 @@ pub(crate) fn url(server: &ServerArgs, path: &str) -> String {
     format!("{}{path}", server.server.trim_end_matches('/'))
 }
 
-/// Send, and turn a non-2xx answer into an error carrying the server's message.
+/// Send, and turn a non-2xx answer into an error carrying the server's message, error code and
+/// request id.
 pub(crate) async fn send(req: reqwest::RequestBuilder) -> anyhow::Result<reqwest::Response> {
     let resp = req.send().await.context("cannot reach the server")?;
     if resp.status().is_success() {
@@ -123,11 +123,7 @@ pub(crate) async fn send(req: reqwest::RequestBuilder) -> anyhow::Result<reqwest
     }
     let status = resp.status();
     let text = resp.text().await.unwrap_or_default();
-    let msg = serde_json::from_str::<Value>(&text)
-        .ok()
-        .and_then(|v| v.get("error").and_then(Value::as_str).map(str::to_string))
-        .unwrap_or(text);
-    bail!("{msg} (HTTP {})", status.as_u16())
+    bail!(crate::submission_view::error_message(status.as_u16(), &text))
 }
 
 pub(crate) async fn json(req: reqwest::RequestBuilder) -> anyhow::Result<Value> {

@@ -19,6 +19,8 @@ mod policy_submit;
 mod probe_glue;
 mod serve_cmd;
 mod sim_cmd;
+mod submission_cmd;
+mod submission_view;
 mod worker_cmd;
 
 use clap::{Parser, Subcommand};
@@ -44,6 +46,8 @@ enum Command {
     Team(client_cmd::TeamArgs),
     /// Upload a submission and print its scores.
     Submit(client_cmd::SubmitArgs),
+    /// A submission's progress and results: `show ID [--json]`, `wait ID [--timeout S]`.
+    Submission(submission_cmd::SubmissionArgs),
     /// Print the ranking.
     Leaderboard(client_cmd::LeaderboardArgs),
     /// Organiser: add a new scoring run to every submission.
@@ -76,6 +80,7 @@ fn main() -> anyhow::Result<()> {
         Some(Command::Worker(args)) => worker_cmd::worker(args),
         Some(Command::Team(args)) => client_cmd::team(args),
         Some(Command::Submit(args)) => client_cmd::submit(args),
+        Some(Command::Submission(args)) => submission_cmd::submission(args),
         Some(Command::Leaderboard(args)) => client_cmd::leaderboard(args),
         Some(Command::Rescore(args)) => client_cmd::rescore(args),
         Some(Command::Admin(args)) => admin_cmd::admin(args),

@@ -3,11 +3,11 @@
 
 use std::time::Duration;
 
-use anyhow::bail;
 use clap::Args;
-use serde_json::{Value, json};
+use serde_json::json;
 
 use crate::client_cmd::{ServerArgs, json as send_json, runtime, url};
+use crate::submission_cmd::{self, Auth};
 
 #[derive(Args, Debug)]
 pub(crate) struct PolicySubmitArgs {
@@ -30,9 +30,13 @@ pub(crate) struct PolicySubmitArgs {
     /// organiser token as --token.
     #[arg(long)]
     reference: bool,
-    /// Follow the run (progress on stderr) and print its scores when it finishes.
+    /// Follow the run (progress on stderr) and print it as `submission show` does when it ends;
+    /// exit 0 only if it finished (as `submission wait`).
     #[arg(long)]
     wait: bool,
+    /// With --wait: give up after this many seconds (exit code 124).
+    #[arg(long, value_name = "SECONDS", requires = "wait")]
+    timeout: Option<f64>,
     #[command(flatten)]
     server: ServerArgs,
     /// Team token (the organiser token with --reference).
@@ -78,84 +82,17 @@ pub(crate) fn submit_policy(a: PolicySubmitArgs) -> anyhow::Result<()> {
         );
         if !a.wait {
             println!("{id}");
-            eprintln!("follow it with GET /api/v1/submissions/{id} or rerun with --wait");
+            eprintln!("follow it with `kitchen-r submission wait {id}` (or `submission show {id}`)");
             return Ok(());
         }
-        let view = follow(&client, &a, id).await?;
-        if a.json {
-            println!("{view}");
-        } else {
-            print_scores(&view);
-        }
-        match view["latest_run"]["evaluation"]["state"].as_str() {
-            Some("finished") => Ok(()),
-            other => bail!("the run ended in state {}", other.unwrap_or("?")),
-        }
+        let auth = Auth {
+            server: ServerArgs {
+                server: a.server.server.clone(),
+            },
+            token: a.token.clone(),
+        };
+        let timeout = a.timeout.map(Duration::from_secs_f64);
+        let snap = submission_cmd::wait(&client, &auth, id, timeout).await?;
+        submission_cmd::finish(&snap, &a.server, a.json)
     })
-}
-
-/// Poll the submission until its run has finished; progress lines go to stderr.
-async fn follow(client: &reqwest::Client, a: &PolicySubmitArgs, id: i64) -> anyhow::Result<Value> {
-    let mut last = String::new();
-    loop {
-        let req = client
-            .get(url(&a.server, &format!("/api/v1/submissions/{id}")))
-            .bearer_auth(&a.token);
-        let v = send_json(req).await?;
-        let e = &v["latest_run"]["evaluation"];
-        let state = e["state"].as_str().unwrap_or("?").to_string();
-        let line = format!(
-            "{state}: {}/{} episodes done, {} running",
-            e["episodes_done"], e["episodes_total"], e["episodes_running"]
-        );
-        if line != last {
-            eprintln!("{line}");
-            last = line;
-        }
-        if state == "finished" || state == "platform_failed" {
-            return Ok(v);
-        }
-        tokio::time::sleep(Duration::from_secs(2)).await;
-    }
-}
-
-fn print_scores(view: &Value) {
-    let s = &view["latest_run"]["scores"];
-    let show = |k: &str| match &s[k] {
-        Value::Number(n) => n.as_f64().map(|f| format!("{k} = {f:.4}")),
-        Value::String(t) => Some(format!("{k} = {t}")),
-        _ => None,
-    };
-    let parts: Vec<String> = ["sr", "mse", "em", "m", "p"]
-        .iter()
-        .filter_map(|k| show(k))
-        .collect();
-    println!("submission {}: {}", view["id"], parts.join(", "));
-    // Both splits: how often each kind of failure happened (the test split shows only this).
-    for c in view["latest_run"]["evaluation"]["failure_counts"]
-        .as_array()
-        .into_iter()
-        .flatten()
-    {
-        println!("  {:>5} × {}", c["count"], c["reason"].as_str().unwrap_or("?"));
-    }
-    for e in view["latest_run"]["evaluation"]["episodes"]
-        .as_array()
-        .into_iter()
-        .flatten()
-    {
-        let reasons: Vec<&str> = e["failure_reasons"]
-            .as_array()
-            .into_iter()
-            .flatten()
-            .filter_map(Value::as_str)
-            .collect();
-        if !reasons.is_empty() || e["failure"].is_string() {
-            println!(
-                "  {}: {}",
-                e["key"].as_str().unwrap_or("?"),
-                e["failure"].as_str().map_or(reasons.join("; "), str::to_string)
-            );
-        }
-    }
 }

@@ -20,4 +20,5 @@ mod integrity;
 mod load_bench;
 mod metrics;
 mod planning;
+mod submission;
 mod workers;

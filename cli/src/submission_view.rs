@@ -1,0 +1,430 @@
+//! How `submission show`/`wait` print a submission view: state and progress with an ETA, the
+//! scores, failure counts, and on the dev split one row per episode (each task's result and
+//! failure reason) or per instruction (plan files). Test-split views carry aggregates only (the
+//! server leaves the rows out); this prints what is there.
+//!
+//! The ETA is the server's (`eta_s`) when it sends one, else the finished episodes' pace: time
+//! since the run was created, per finished episode, times the episodes left. "Now" is the
+//! answer's `Date` header, so a skewed client clock does not skew it.
+
+use serde_json::Value;
+
+use crate::client_cmd::{ServerArgs, url};
+
+/// One answer of `GET /api/v1/submissions/{id}`.
+pub(crate) struct Snapshot {
+    pub view: Value,
+    /// The server's clock when it answered (its `Date` header), in Unix milliseconds.
+    pub server_now_ms: Option<i64>,
+}
+
+/// The latest run's state: a policy run's `evaluation.state`; a plan run is scored at upload, so
+/// `finished`; `queued` when there is no run yet.
+pub(crate) fn state(view: &Value) -> &str {
+    let run = &view["latest_run"];
+    match run["evaluation"]["state"].as_str() {
+        Some(s) => s,
+        None if run.is_object() => "finished",
+        None => "queued",
+    }
+}
+
+pub(crate) fn ended(view: &Value) -> bool {
+    matches!(state(view), "finished" | "platform_failed" | "cancelled")
+}
+
+/// Words after "its run ended STATE" for a run that did not finish.
+pub(crate) fn why_not_finished(view: &Value) -> String {
+    let e = &view["latest_run"]["evaluation"];
+    let top = e["failure_counts"]
+        .as_array()
+        .and_then(|c| c.first())
+        .map(|c| format!("; most frequent failure: {} ({}×)", s(&c["reason"]), c["count"]));
+    match state(view) {
+        "cancelled" => " (stopped by the organiser; the quota was given back)".into(),
+        _ => top.unwrap_or_default(),
+    }
+}
+
+/// `running: 3/8 episodes done, 2 running, ETA 1m 20s`.
+pub(crate) fn progress_line(snap: &Snapshot) -> String {
+    let view = &snap.view;
+    let e = &view["latest_run"]["evaluation"];
+    let st = state(view);
+    if !e.is_object() {
+        return st.to_string();
+    }
+    let mut line = format!(
+        "{st}: {}/{} episodes done, {} running",
+        e["episodes_done"], e["episodes_total"], e["episodes_running"]
+    );
+    if e["episodes_retrying"].as_u64().unwrap_or(0) > 0 {
+        line.push_str(&format!(", {} retrying", e["episodes_retrying"]));
+    }
+    if let Some(eta) = eta_s(snap) {
+        line.push_str(&format!(", ETA {}", duration(eta)));
+    }
+    line
+}
+
+/// Seconds left, while the run is active and at least one episode has finished.
+pub(crate) fn eta_s(snap: &Snapshot) -> Option<f64> {
+    let run = &snap.view["latest_run"];
+    let e = &run["evaluation"];
+    if !matches!(e["state"].as_str(), Some("running" | "queued")) {
+        return None;
+    }
+    if let Some(s) = e["eta_s"].as_f64() {
+        return Some(s);
+    }
+    let done = e["episodes_done"].as_i64()?;
+    let left = e["episodes_total"].as_i64()? - done;
+    let created = parse_rfc3339_ms(run["created_at"].as_str()?)?;
+    let now = snap.server_now_ms.unwrap_or_else(now_ms);
+    (done > 0 && left > 0).then(|| (now - created).max(0) as f64 / 1000.0 / done as f64 * left as f64)
+}
+
+fn now_ms() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as i64)
+}
+
+/// The whole view, for people.
+pub(crate) fn print(snap: &Snapshot, server: &ServerArgs) {
+    let v = &snap.view;
+    println!(
+        "submission {}: {}, {} split, team {}, created {}",
+        v["id"],
+        if v["kind"] == "policy" {
+            "policy endpoint"
+        } else {
+            "plan file"
+        },
+        s(&v["split"]),
+        s(&v["team"]),
+        s(&v["created_at"])
+    );
+    let p = &v["policy"];
+    if p.is_object() {
+        let mut extra = Vec::new();
+        if p["reference"] == true {
+            extra.push("reference run".to_string());
+        }
+        if let Some(plans) = p["plans"].as_i64() {
+            extra.push(format!("with plan submission {plans}"));
+        }
+        extra.push(format!("max concurrency {}", p["max_concurrency"]));
+        println!("policy: {} ({})", s(&p["endpoint"]), extra.join(", "));
+    }
+    let run = &v["latest_run"];
+    if !run.is_object() {
+        println!("state: queued (no scoring run yet)");
+        return;
+    }
+    println!("run {}: {}", run["id"], progress_line(snap));
+    println!("scores: {}", scores(&run["scores"]));
+    if v["ranked"] == false {
+        println!("not ranked: {}", s(&v["unranked_reason"]));
+    }
+    match run["evaluation"].is_object() {
+        true => print_evaluation(&run["evaluation"], server),
+        false => print_instructions(run, v["split"] == "test"),
+    }
+}
+
+fn print_evaluation(e: &Value, server: &ServerArgs) {
+    if let Some(t) = e["finished_at"].as_str() {
+        println!("finished at {t}");
+    }
+    if e["needs_resimulation"] == true {
+        println!("note: the ground truth changed since these episodes ran; scores are the old ones");
+    }
+    if let Some(r) = e["rescored_from_run"].as_i64() {
+        println!("rescored from the episodes of run {r}");
+    }
+    let counts = arr(&e["failure_counts"]);
+    if !counts.is_empty() {
+        println!("failures:");
+        for c in counts {
+            println!("  {:>5} × {}", c["count"], s(&c["reason"]));
+        }
+    }
+    for r in arr(&e["retrying"]) {
+        println!(
+            "retrying {} (attempt {}): {}",
+            s(&r["key"]),
+            r["attempt"],
+            s(&r["last_error"])
+        );
+    }
+    let episodes = arr(&e["episodes"]);
+    if episodes.is_empty() {
+        if e["episodes_done"].as_i64().unwrap_or(0) > 0 {
+            println!("per-episode results are not shown on the test split (aggregate feedback only)");
+        }
+        return;
+    }
+    let width = episodes
+        .iter()
+        .map(|x| s(&x["key"]).len())
+        .max()
+        .unwrap_or(3)
+        .max(7);
+    println!("episodes:");
+    println!(
+        "  {:<width$}  {:<7}  {:<11}  {:>7}  attempt",
+        "episode", "mode", "result", "wall"
+    );
+    for x in episodes {
+        let result = match (&x["success_rate"], &x["mse"]) {
+            (Value::Number(sr), _) => format!("SR {:.2}", sr.as_f64().unwrap_or(f64::NAN)),
+            (_, Value::Number(m)) => format!("MSE {:.4}", m.as_f64().unwrap_or(f64::NAN)),
+            _ if x["failure"].is_string() => "not run".into(),
+            _ => "-".into(),
+        };
+        let wall = x["wall_ms"].as_f64().unwrap_or(0.0) / 1000.0;
+        println!(
+            "  {:<width$}  {:<7}  {:<11}  {:>6.1}s  {}",
+            s(&x["key"]),
+            s(&x["mode"]),
+            result,
+            wall,
+            x["attempt"]
+        );
+        print_tasks(x);
+        if let Some(f) = x["failure"].as_str() {
+            println!("      failure: {f}");
+        }
+        print_links(x, server);
+    }
+}
+
+/// One line per task: index, result, the plan step and why it failed.
+fn print_tasks(x: &Value) {
+    let online = x["mode"] == "online";
+    for t in arr(&x["tasks"]) {
+        let result = match online {
+            true if t["success"] == true => {
+                format!("ok {:.1} s", t["completion_time_s"].as_f64().unwrap_or(0.0))
+            }
+            true => "FAILED".to_string(),
+            false => format!(
+                "MSE {:.4} ({} samples)",
+                t["mse"].as_f64().unwrap_or(f64::NAN),
+                t["mse_samples"]
+            ),
+        };
+        let reason = t["failure_reason"].as_str().filter(|r| !r.is_empty());
+        println!(
+            "      task {:<2} {:<12} {}{}",
+            t["index"],
+            result,
+            s(&t["step"]),
+            reason.map(|r| format!(": {r}")).unwrap_or_default()
+        );
+    }
+}
+
+/// Links the server attaches to an episode (fields named `*_url`, e.g. a video or a path plot),
+/// made absolute.
+fn print_links(x: &Value, server: &ServerArgs) {
+    for (k, link) in x.as_object().into_iter().flatten() {
+        let (Some(name), Some(link)) = (k.strip_suffix("_url"), link.as_str()) else {
+            continue;
+        };
+        let link = match link.starts_with('/') {
+            true => url(server, link),
+            false => link.to_string(),
+        };
+        println!("      {name}: {link}");
+    }
+}
+
+fn print_instructions(run: &Value, test: bool) {
+    if let (Some(total), Some(present)) = (
+        run["instructions_total"].as_u64(),
+        run["instructions_present"].as_u64(),
+    ) {
+        println!("instructions: {present} of {total} have a plan in the file");
+    }
+    let rows = arr(&run["instructions"]);
+    if rows.is_empty() {
+        if test {
+            println!("per-instruction results are not shown on the test split (aggregate feedback only)");
+        }
+        return;
+    }
+    let width = rows.iter().map(|r| s(&r["id"]).len()).max().unwrap_or(2).max(11);
+    println!("  {:<width$}  {:>6}  correct steps", "instruction", "EM");
+    for r in rows {
+        let note = if r["present"] == false {
+            "  (no plan in the file)"
+        } else {
+            ""
+        };
+        println!(
+            "  {:<width$}  {:>6.4}  {}/{}{note}",
+            s(&r["id"]),
+            r["em"].as_f64().unwrap_or(0.0),
+            r["correct_steps"],
+            r["total_steps"]
+        );
+    }
+}
+
+/// `EM = 1.0000, SR = 0.9500`: the scores the run has, `inf` as the server sends it.
+fn scores(sc: &Value) -> String {
+    let parts: Vec<String> = [("em", "EM"), ("sr", "SR"), ("mse", "MSE"), ("m", "M"), ("p", "P")]
+        .iter()
+        .filter_map(|(k, name)| match &sc[*k] {
+            Value::Number(n) => n.as_f64().map(|f| format!("{name} = {f:.4}")),
+            Value::String(t) => Some(format!("{name} = {t}")),
+            _ => None,
+        })
+        .collect();
+    match parts.is_empty() {
+        true => "none yet".into(),
+        false => parts.join(", "),
+    }
+}
+
+fn s(v: &Value) -> &str {
+    v.as_str().unwrap_or("?")
+}
+
+fn arr(v: &Value) -> &[Value] {
+    v.as_array().map_or(&[], Vec::as_slice)
+}
+
+/// `45s`, `3m 05s`, `2h 10m`.
+pub(crate) fn duration(secs: f64) -> String {
+    let t = secs.max(0.0).round() as u64;
+    match t {
+        0..60 => format!("{t}s"),
+        60..3600 => format!("{}m {:02}s", t / 60, t % 60),
+        _ => format!("{}h {:02}m", t / 3600, (t % 3600) / 60),
+    }
+}
+
+/// A refused request in words: the server's message, status, error code and request id (to
+/// quote when reporting a problem).
+pub(crate) fn error_message(status: u16, body: &str) -> String {
+    let v: Value = serde_json::from_str(body).unwrap_or(Value::Null);
+    let Some(msg) = v["error"].as_str() else {
+        let body = body.trim();
+        return match body.is_empty() {
+            true => format!("the server answered HTTP {status}"),
+            false => format!("{body} (HTTP {status})"),
+        };
+    };
+    let mut tail = format!("HTTP {status}");
+    if let Some(c) = v["code"].as_str() {
+        tail.push_str(&format!(", code {c}"));
+    }
+    if let Some(r) = v["request_id"].as_str() {
+        tail.push_str(&format!(", request id {r}"));
+    }
+    format!("{msg} ({tail})")
+}
+
+/// Days since 1970-01-01 of a proleptic Gregorian date (Howard Hinnant's `days_from_civil`).
+fn days_from_civil(y: i64, m: i64, d: i64) -> i64 {
+    let y = if m <= 2 { y - 1 } else { y };
+    let era = y.div_euclid(400);
+    let yoe = y - era * 400;
+    let mp = (m + 9) % 12;
+    let doy = (153 * mp + 2) / 5 + d - 1;
+    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
+    era * 146_097 + doe - 719_468
+}
+
+fn unix_ms(y: i64, mo: i64, d: i64, h: i64, mi: i64, sec: i64) -> i64 {
+    ((days_from_civil(y, mo, d) * 24 + h) * 60 + mi) * 60_000 + sec * 1000
+}
+
+/// `2026-11-22T23:15:28.123Z` or `...+01:00` → Unix milliseconds.
+pub(crate) fn parse_rfc3339_ms(t: &str) -> Option<i64> {
+    let n = |a: usize, b: usize| t.get(a..b)?.parse::<i64>().ok();
+    let base = unix_ms(n(0, 4)?, n(5, 7)?, n(8, 10)?, n(11, 13)?, n(14, 16)?, n(17, 19)?);
+    let rest = t.get(19..)?;
+    let (digits, zone) = match rest.strip_prefix('.') {
+        Some(f) => f.split_at(f.find(|c: char| !c.is_ascii_digit()).unwrap_or(f.len())),
+        None => ("", rest),
+    };
+    let frac_ms = format!("{digits:0<3}").get(..3)?.parse::<i64>().ok()?;
+    let offset_min = match zone {
+        "Z" | "z" => 0,
+        z if z.len() == 6 => {
+            let sign = if z.starts_with('-') { -1 } else { 1 };
+            sign * (z.get(1..3)?.parse::<i64>().ok()? * 60 + z.get(4..6)?.parse::<i64>().ok()?)
+        }
+        _ => return None,
+    };
+    Some(base + frac_ms - offset_min * 60_000)
+}
+
+/// An HTTP `Date` (`Sun, 22 Nov 2026 23:15:28 GMT`) → Unix milliseconds.
+pub(crate) fn parse_http_date_ms(t: &str) -> Option<i64> {
+    let f: Vec<&str> = t.split_whitespace().collect();
+    let [_, day, month, year, clock, "GMT"] = f.as_slice() else {
+        return None;
+    };
+    const MONTHS: [&str; 12] = [
+        "Jan", "Feb", "Mar", "Apr", "May", "Jun", "Jul", "Aug", "Sep", "Oct", "Nov", "Dec",
+    ];
+    let mo = MONTHS.iter().position(|m| m == month)? as i64 + 1;
+    let hms: Vec<i64> = clock.split(':').map(|x| x.parse().ok()).collect::<Option<_>>()?;
+    let [h, mi, sec] = hms.as_slice() else {
+        return None;
+    };
+    Some(unix_ms(year.parse().ok()?, mo, day.parse().ok()?, *h, *mi, *sec))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    #[test]
+    fn dates_parse_to_the_same_instant() {
+        let a = parse_rfc3339_ms("2026-11-22T23:15:28Z").unwrap();
+        assert_eq!(parse_http_date_ms("Sun, 22 Nov 2026 23:15:28 GMT"), Some(a));
+        assert_eq!(parse_rfc3339_ms("2026-11-22T23:15:28.25Z"), Some(a + 250));
+        assert_eq!(parse_rfc3339_ms("2026-11-23T00:15:28+01:00"), Some(a));
+        assert_eq!(parse_rfc3339_ms("1970-01-01T00:00:01Z"), Some(1000));
+        assert_eq!(parse_rfc3339_ms("garbage"), None);
+    }
+
+    #[test]
+    fn eta_is_the_finished_episodes_pace_times_the_episodes_left() {
+        let view = json!({"latest_run": {"created_at": "2026-11-22T23:00:00Z", "evaluation": {
+            "state": "running", "episodes_done": 2, "episodes_total": 8, "episodes_running": 2}}});
+        let now = parse_rfc3339_ms("2026-11-22T23:01:00Z");
+        let snap = Snapshot {
+            view,
+            server_now_ms: now,
+        };
+        assert_eq!(eta_s(&snap), Some(180.0));
+        assert!(progress_line(&snap).ends_with("2/8 episodes done, 2 running, ETA 3m 00s"));
+    }
+
+    #[test]
+    fn errors_quote_code_and_request_id() {
+        let body = r#"{"error":"submission 9 not found","code":"not_found","request_id":"abc"}"#;
+        assert_eq!(
+            error_message(404, body),
+            "submission 9 not found (HTTP 404, code not_found, request id abc)"
+        );
+        assert_eq!(error_message(502, ""), "the server answered HTTP 502");
+    }
+
+    #[test]
+    fn plan_runs_are_finished_and_runless_submissions_queued() {
+        assert_eq!(state(&json!({"latest_run": {"scores": {}}})), "finished");
+        assert_eq!(state(&json!({"latest_run": null})), "queued");
+        assert!(!ended(
+            &json!({"latest_run": {"evaluation": {"state": "running"}}})
+        ));
+    }
+}
