@@ -318,14 +318,17 @@ pub(crate) fn error_message(status: u16, body: &str) -> String {
             false => format!("{body} (HTTP {status})"),
         };
     };
-    let mut tail = format!("HTTP {status}");
+    let mut extra = Vec::new();
     if let Some(c) = v["code"].as_str() {
-        tail.push_str(&format!(", code {c}"));
+        extra.push(format!("code {c}"));
     }
     if let Some(r) = v["request_id"].as_str() {
-        tail.push_str(&format!(", request id {r}"));
+        extra.push(format!("request id {r}"));
     }
-    format!("{msg} ({tail})")
+    match extra.is_empty() {
+        true => format!("{msg} (HTTP {status})"),
+        false => format!("{msg} (HTTP {status}) [{}]", extra.join(", ")),
+    }
 }
 
 /// Days since 1970-01-01 of a proleptic Gregorian date (Howard Hinnant's `days_from_civil`).
@@ -414,7 +417,7 @@ mod tests {
         let body = r#"{"error":"submission 9 not found","code":"not_found","request_id":"abc"}"#;
         assert_eq!(
             error_message(404, body),
-            "submission 9 not found (HTTP 404, code not_found, request id abc)"
+            "submission 9 not found (HTTP 404) [code not_found, request id abc]"
         );
         assert_eq!(error_message(502, ""), "the server answered HTTP 502");
     }
