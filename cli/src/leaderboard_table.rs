@@ -53,7 +53,7 @@ pub(crate) fn print_table(board: &Value) {
         }
         println!(
             "{line}  {:>10}  {:<9}  {}",
-            r["submission_id"],
+            r["submission_id"].to_string(),
             r["state"].as_str().unwrap_or("finished"),
             r["submitted_at"].as_str().unwrap_or("?")
         );

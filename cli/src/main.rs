@@ -8,6 +8,7 @@
 mod admin_cmd;
 mod check_policy_cmd;
 mod client_cmd;
+mod clock_parse;
 mod collect_cmd;
 mod dataset_cmd;
 mod episodes_cmd;

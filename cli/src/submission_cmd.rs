@@ -134,7 +134,7 @@ pub(crate) async fn fetch(client: &reqwest::Client, auth: &Auth, id: i64) -> Res
         .headers()
         .get(reqwest::header::DATE)
         .and_then(|d| d.to_str().ok())
-        .and_then(submission_view::parse_http_date_ms);
+        .and_then(crate::clock_parse::parse_http_date_ms);
     let retry_after = resp
         .headers()
         .get(reqwest::header::RETRY_AFTER)
