@@ -19,6 +19,7 @@ mod grpc;
 mod integrity;
 mod load_bench;
 mod metrics;
+mod pages;
 mod participant_client;
 mod planning;
 mod submission;
