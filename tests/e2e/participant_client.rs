@@ -137,6 +137,74 @@ fn the_python_client_submits_waits_shows_and_reads_the_leaderboard() {
 }
 
 #[test]
+fn the_python_client_follows_a_policy_run_and_times_out_like_the_rust_cli() {
+    let fx = ControlFixture::new("[control]\nlease_s = 4\nreaper_interval_s = 1\noffline_mse = false\n");
+    // No simulation slots yet: the run stays queued until a worker joins.
+    let server = fx.serve(0);
+    let (_oracle, url) = oracle_policy();
+    let admin = [("KITCHEN_R_TOKEN", ADMIN)];
+    let args = [
+        "submit",
+        "policy",
+        &url,
+        "--split",
+        "dev",
+        "--episodes",
+        "2",
+        "--reference",
+    ];
+    let reg = ok(client(&server, &args, &admin));
+    let id = out(&reg).trim().to_string();
+    assert!(id.parse::<i64>().is_ok(), "{}", out(&reg));
+
+    let timed_out = client(&server, &["submission", "wait", &id, "--timeout", "2"], &admin);
+    assert_eq!(timed_out.status.code(), Some(124), "{}", err(&timed_out));
+    assert!(
+        err(&timed_out).contains("not finished after 2 s"),
+        "{}",
+        err(&timed_out)
+    );
+
+    let _worker = worker(&server, 2, "py-worker");
+    let waited = ok(client(&server, &["submission", "wait", &id], &admin));
+    let table = squash(&out(&waited));
+    for want in [
+        "finished: 2/2 episodes done",
+        "SR = 1.0000",
+        "episodes:",
+        "task 0 ok",
+    ] {
+        assert!(table.contains(want), "{want:?} missing from:\n{table}");
+    }
+    // The same text as the Rust CLI prints.
+    let rust = Command::new(bin())
+        .args(["submission", "show", &id])
+        .env("KITCHEN_R_SERVER", &server.http)
+        .env("KITCHEN_R_TOKEN", ADMIN)
+        .output()
+        .unwrap();
+    assert_eq!(out(&rust), out(&waited));
+
+    let args = [
+        "submit",
+        "policy",
+        &url,
+        "--split",
+        "dev",
+        "--episodes",
+        "1",
+        "--reference",
+        "--wait",
+    ];
+    let direct = ok(client(&server, &args, &admin));
+    assert!(
+        out(&direct).contains("finished: 1/1 episodes done"),
+        "{}",
+        out(&direct)
+    );
+}
+
+#[test]
 fn pip_installs_the_console_script_without_the_policy_server() {
     let tmp = tempfile::tempdir().unwrap();
     // Build from a copy, so setuptools' build/ and egg-info stay out of the repository.
