@@ -16,7 +16,8 @@ th{background:#f4f4f4}td.n{text-align:right;font-variant-numeric:tabular-nums}\
 .f{font-family:ui-monospace,monospace;background:#f7f7f7;padding:.3rem .5rem;overflow-x:auto}\
 .scroll{overflow-x:auto}img{max-width:100%;height:auto;border:1px solid #ddd}\
 figure{display:inline-block;margin:.5rem 1rem .5rem 0;vertical-align:top;max-width:20rem}\
-input[type=password]{width:100%;max-width:30rem;padding:.4rem;margin:.4rem 0}code{overflow-wrap:anywhere}";
+input[type=password]{width:100%;max-width:30rem;padding:.4rem;margin:.4rem 0}code{overflow-wrap:anywhere}\
+ol{padding-left:1.4rem;margin:0}@media(max-width:40rem){table.stack tr:first-child{display:none}table.stack td{display:block;border:0}table.stack tr{display:block;border-bottom:1px solid #ddd}}";
 
 /// Who the page is for: drives the navigation's right end.
 pub(super) enum Viewer<'a> {

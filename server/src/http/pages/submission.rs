@@ -203,7 +203,7 @@ fn episodes(e: &PolicyRunView) -> String {
         return out;
     }
     out.push_str(
-        "<h2>Episodes</h2><div class=scroll><table><tr><th>Episode</th><th>Result</th><th>Tasks</th>\
+        "<h2>Episodes</h2><div class=scroll><table class=stack><tr><th>Episode</th><th>Result</th><th>Tasks</th>\
 <th>Wall time</th></tr>",
     );
     for ep in &e.episodes {
@@ -224,7 +224,7 @@ fn episode_row(ep: &EpisodeView) -> String {
         "offline" => "offline (MSE against the expert)",
         _ => "online (in the simulator)",
     };
-    let mut tasks = String::from("<ol start=0>");
+    let mut tasks = String::from("<ol>");
     for t in ep.tasks.iter().flatten() {
         let outcome = match (ep.mode.as_str(), t.success, t.failure_reason.is_empty()) {
             ("offline", _, true) => format!("MSE {} over {} samples", score(Some(t.mse)), t.mse_samples),

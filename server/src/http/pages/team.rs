@@ -23,7 +23,7 @@ fn state_words(s: &TeamSubmission) -> &'static str {
 /// The team page's body: quota left, then every submission newest first.
 pub(super) fn body(quota: &QuotaView, subs: &[TeamSubmission]) -> String {
     let mut out = String::from(
-        "<h2>Quota left today</h2><table><tr><th>Split</th><th>Per UTC day</th><th>Used today</th>\
+        "<h2>Quota left today</h2><div class=scroll><table><tr><th>Split</th><th>Per UTC day</th><th>Used today</th>\
 <th>Left</th><th>Resets at (UTC)</th></tr>",
     );
     for q in &quota.splits {
@@ -38,7 +38,7 @@ pub(super) fn body(quota: &QuotaView, subs: &[TeamSubmission]) -> String {
             escape(&q.resets_at),
         );
     }
-    out.push_str("</table><p>");
+    out.push_str("</table></div><p>");
     match quota.concurrent_runs {
         0 => {
             let _ = write!(out, "Policy runs evaluating now: {}. ", quota.active_runs);
