@@ -82,7 +82,10 @@ pub(crate) fn submit_policy(a: PolicySubmitArgs) -> anyhow::Result<()> {
         );
         if !a.wait {
             println!("{id}");
-            eprintln!("follow it with `kitchen-r submission wait {id}` (or `submission show {id}`)");
+            eprintln!(
+                "follow it with `kitchen-r submission wait {id}` (or `submission show {id}`, or {})",
+                url(&a.server, &format!("/submissions/{id}"))
+            );
             return Ok(());
         }
         let auth = Auth {

@@ -105,6 +105,7 @@ pub(crate) fn print(snap: &Snapshot, server: &ServerArgs) {
         s(&v["team"]),
         s(&v["created_at"])
     );
+    println!("page: {}", url(server, &format!("/submissions/{}", v["id"])));
     let p = &v["policy"];
     if p.is_object() {
         let mut extra = Vec::new();

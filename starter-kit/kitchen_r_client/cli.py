@@ -162,8 +162,8 @@ def cmd_submit_policy(a):
         sid, v.get("episodes"), v.get("instructions"), a.split, v.get("policy", "?")), file=sys.stderr)
     if not a.wait:
         print(sid)
-        print("follow it with `kitchen-r-client submission wait %s` (or `submission show %s`)" % (sid, sid),
-              file=sys.stderr)
+        print("follow it with `kitchen-r-client submission wait %s` (or `submission show %s`, or %s)" % (
+            sid, sid, client.url("/submissions/%s" % sid)), file=sys.stderr)
         return 0
     snap = wait_for(client, sid, a.timeout)
     return finish(snap, a.server, a.json)

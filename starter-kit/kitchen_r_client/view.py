@@ -132,6 +132,7 @@ def print_submission(view, server, server_now_ms=None, out=print):
     kind = "policy endpoint" if view.get("kind") == "policy" else "plan file"
     out("submission %s: %s, %s split, team %s, created %s" % (
         _j(view.get("id")), kind, _s(view.get("split")), _s(view.get("team")), _s(view.get("created_at"))))
+    out("page: %s/submissions/%s" % (server.rstrip("/"), _j(view.get("id"))))
     p = view.get("policy")
     if isinstance(p, dict):
         extra = []

@@ -62,6 +62,7 @@ async fn show_and_wait_a_plan_file_on_dev_and_on_test() {
     let table = out(&ok(run(&server, &["submission", "show", &id], &token)));
     for want in [
         &format!("submission {id}: plan file, dev split, team show team"),
+        &format!("page: {}/submissions/{id}", server.http),
         "run 1: finished",
         "scores: EM = ",
         "instructions: 2 of 3 have a plan in the file",
