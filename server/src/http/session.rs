@@ -188,10 +188,15 @@ pub(super) fn see_other(location: &str, cookies: &[HeaderValue]) -> Response {
     r
 }
 
-/// A local path to return to after a login: only `/…` paths of this site (not `//host`).
+/// A local path to return to after a login: only `/…` paths of this site. Not `//host` nor
+/// `/\host`, and no space or control character (browsers drop tabs and newlines from URLs,
+/// which would turn `/<TAB>/host` into `//host`).
 pub(super) fn local_path(next: Option<&str>) -> Option<&str> {
     next.filter(|n| {
-        n.starts_with('/') && !n.starts_with("//") && !n.contains(['\\', '\r', '\n']) && n.len() < 200
+        n.starts_with('/')
+            && !n.starts_with("//")
+            && n.len() < 200
+            && n.chars().all(|c| c.is_ascii_graphic() && c != '\\')
     })
 }
 
@@ -245,7 +250,14 @@ mod tests {
                 .ends_with("; Secure")
         );
         assert_eq!(local_path(Some("/submissions/3")), Some("/submissions/3"));
-        for bad in ["//evil.example", "https://evil.example", "/\\evil", ""] {
+        for bad in [
+            "//evil.example",
+            "https://evil.example",
+            "/\\evil",
+            "/\t/evil.example",
+            "/\n/x",
+            "",
+        ] {
             assert_eq!(local_path(Some(bad)), None, "{bad}");
         }
     }
