@@ -254,3 +254,16 @@ fn pip_installs_the_console_script_without_the_policy_server() {
         assert!(out(&help).contains(cmd), "{}", out(&help));
     }
 }
+
+/// The client's own unit tests (`starter-kit/tests`, standard library unittest).
+#[test]
+fn the_python_clients_unit_tests_pass() {
+    let run = Command::new("python3")
+        .args(["-m", "unittest", "discover", "-s"])
+        .arg(kit().join("tests"))
+        .env("PYTHONDONTWRITEBYTECODE", "1")
+        .env_remove("KITCHEN_R_TOKEN")
+        .output()
+        .unwrap();
+    assert!(run.status.success(), "{}", err(&run));
+}
