@@ -164,7 +164,48 @@ async fn the_page_logs_in_with_a_strict_http_only_cookie() {
     )
     .await;
     assert_eq!(status, StatusCode::OK);
-    assert!(String::from_utf8(body).unwrap().contains("organiser console"));
+    let console = String::from_utf8(body).unwrap();
+    assert!(console.contains("organiser console"));
+
+    // Logging out takes the console's CSRF field (bound to this session), not the login form's.
+    let logout = |csrf: &str| {
+        Request::post("/admin/logout")
+            .header(header::CONTENT_TYPE, "application/x-www-form-urlencoded")
+            .header(header::COOKIE, format!("{nonce}; {pair}"))
+            .body(Body::from(format!("csrf={csrf}")))
+            .unwrap()
+    };
+    let (status, _, _) = call(&app, logout(&csrf)).await;
+    assert_eq!(status, StatusCode::FORBIDDEN);
+    let (_, _, page) = call(
+        &app,
+        Request::get("/admin")
+            .header(header::COOKIE, format!("{nonce}; {pair}"))
+            .body(Body::empty())
+            .unwrap(),
+    )
+    .await;
+    let page = String::from_utf8(page).unwrap();
+    let field = page
+        .split("name=csrf value=\"")
+        .nth(1)
+        .unwrap()
+        .split('"')
+        .next()
+        .unwrap();
+    let (status, headers, _) = call(&app, logout(field)).await;
+    assert_eq!(status, StatusCode::SEE_OTHER);
+    let cleared: Vec<&str> = headers
+        .get_all(header::SET_COOKIE)
+        .iter()
+        .map(|v| v.to_str().unwrap())
+        .collect();
+    assert!(
+        cleared
+            .iter()
+            .any(|c| c.starts_with("kitchen_r_admin=;") && c.contains("Path=/;") && c.contains("Max-Age=0")),
+        "{cleared:?}"
+    );
 
     // A forged or team cookie is not a session.
     let forged = format!("{COOKIE}={}", hex::encode(&team));
