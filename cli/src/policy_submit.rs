@@ -35,7 +35,7 @@ pub(crate) struct PolicySubmitArgs {
     #[arg(long)]
     wait: bool,
     /// With --wait: give up after this many seconds (exit code 124).
-    #[arg(long, value_name = "SECONDS", requires = "wait")]
+    #[arg(long, value_name = "SECONDS", requires = "wait", value_parser = submission_cmd::seconds)]
     timeout: Option<f64>,
     #[command(flatten)]
     server: ServerArgs,

@@ -47,7 +47,7 @@ enum SubmissionCommand {
         /// The submission's id.
         id: i64,
         /// Give up after this many seconds (exit code 124); default: wait as long as it takes.
-        #[arg(long, value_name = "SECONDS")]
+        #[arg(long, value_name = "SECONDS", value_parser = seconds)]
         timeout: Option<f64>,
         /// Print the final JSON view instead of the summary.
         #[arg(long)]
@@ -88,6 +88,14 @@ pub(crate) fn submission(args: SubmissionArgs) -> anyhow::Result<()> {
             let snap = runtime()?.block_on(wait(&reqwest::Client::new(), &auth, id, timeout))?;
             finish(&snap, &auth.server, json)
         }
+    }
+}
+
+/// A `--timeout`: a finite number of seconds, at least 0.
+pub(crate) fn seconds(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= 0.0 && v < 1e9 => Ok(v),
+        _ => Err(format!("{s:?} is not a number of seconds (0 or more)")),
     }
 }
 

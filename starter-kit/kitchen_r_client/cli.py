@@ -27,6 +27,16 @@ DEFAULT_SERVER = "http://127.0.0.1:8080"
 TIMEOUT_EXIT = 124
 
 
+def _seconds(s):
+    try:
+        v = float(s)
+    except ValueError:
+        v = -1.0
+    if not (0.0 <= v < 1e9):
+        raise argparse.ArgumentTypeError("%r is not a number of seconds (0 or more)" % s)
+    return v
+
+
 class Failure(Exception):
     """An error to print as `Error: ...` with exit code 1 (as the Rust CLI's anyhow errors)."""
 
@@ -83,7 +93,7 @@ def build_parser():
              "bearer token the workers send to your endpoint", required=False)
     pol.add_argument("--reference", action="store_true", help="organiser: a reference (baseline) run")
     pol.add_argument("--wait", action="store_true", help="follow the run and print it when it ends")
-    pol.add_argument("--timeout", type=float, metavar="SECONDS", help="with --wait: give up after S seconds")
+    pol.add_argument("--timeout", type=_seconds, metavar="SECONDS", help="with --wait: give up after S seconds")
     pol.add_argument("--json", action="store_true", help="print the server's JSON answers")
     _auth(pol, "team token (the organiser token with --reference)")
     pol.set_defaults(func=cmd_submit_policy)
@@ -98,7 +108,7 @@ def build_parser():
     show.set_defaults(func=cmd_show)
     wait = subm.add_parser("wait", help="poll until the run ends; exit 0 only if it finished")
     wait.add_argument("id", type=int)
-    wait.add_argument("--timeout", type=float, metavar="SECONDS", help="give up after S seconds (exit 124)")
+    wait.add_argument("--timeout", type=_seconds, metavar="SECONDS", help="give up after S seconds (exit 124)")
     wait.add_argument("--json", action="store_true", help="print the final JSON view")
     _auth(wait)
     wait.set_defaults(func=cmd_wait)
