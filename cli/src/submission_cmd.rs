@@ -94,7 +94,7 @@ pub(crate) fn submission(args: SubmissionArgs) -> anyhow::Result<()> {
 /// A `--timeout`: a finite number of seconds, at least 0.
 pub(crate) fn seconds(s: &str) -> Result<f64, String> {
     match s.parse::<f64>() {
-        Ok(v) if v.is_finite() && v >= 0.0 && v < 1e9 => Ok(v),
+        Ok(v) if (0.0..1e9).contains(&v) => Ok(v),
         _ => Err(format!("{s:?} is not a number of seconds (0 or more)")),
     }
 }
