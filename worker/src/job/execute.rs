@@ -15,6 +15,7 @@ use kitchen_r_proto::worker::v1 as pb;
 use kitchen_r_sim::{Action, EpisodeConfig, Sim, Snapshot, StepInfo};
 
 use super::cores::{Cores, YieldsCore};
+use super::path::PathHook;
 use super::spec;
 use super::{JobContext, JobError};
 use kitchen_r_contract::{Credentials, RemotePolicy, SimCamera};
@@ -152,8 +153,9 @@ pub fn execute_job(job: &pb::Job, ctx: &JobContext, control: &JobControl) -> pb:
     let mut log = Log::default();
     let result = run(job, ctx, control, &mut log);
     let mut out = match result {
-        Ok(tasks) => pb::EpisodeResult {
+        Ok((tasks, path)) => pb::EpisodeResult {
             tasks,
+            path,
             ..Default::default()
         },
         Err(e) => {
@@ -167,6 +169,7 @@ pub fn execute_job(job: &pb::Job, ctx: &JobContext, control: &JobControl) -> pb:
     // A cancelled episode's tasks were cut short by us, not by the policy: never score them.
     if control.is_cancelled() && out.platform_error.is_empty() {
         out.tasks.clear();
+        out.path = None;
         out.platform_error = format!("cancelled: {}", control.reason());
     }
     out.wall_ms = started.elapsed().as_millis() as u64;
@@ -179,7 +182,7 @@ fn run(
     ctx: &JobContext,
     control: &JobControl,
     log: &mut Log,
-) -> Result<Vec<pb::TaskResult>, JobError> {
+) -> Result<(Vec<pb::TaskResult>, Option<pb::EpisodePath>), JobError> {
     let spec = job
         .episode
         .as_ref()
@@ -228,7 +231,7 @@ fn run(
             let reason = format!("policy unreachable: {e}");
             log.line(&reason);
             if mode != pb::EvalMode::Offline {
-                return Ok(all_failed(&cfg, n_tasks, &reason));
+                return Ok((all_failed(&cfg, n_tasks, &reason), None));
             }
             // The expert still drives and every decision point is a failed prediction, so an
             // endpoint that refuses its MSE episodes pays as much as one answering badly.
@@ -245,15 +248,16 @@ fn run(
         let mut expert = OraclePolicy::new(&ctx.assets);
         let opts = spec::offline_options(&run, ctx.sample_every);
         let out = run_offline(&mut sim, &mut expert, policy, &opts, watch)?;
-        return Ok(offline_results(&out, log));
+        return Ok((offline_results(&out, log), None));
     }
     let starts = if spec.teleport_on_failure {
         Some(expert_starts(&mut sim, &cfg, ctx)?)
     } else {
         None
     };
-    let out = run_episode(&mut sim, policy, &run, starts.as_deref(), watch)?;
-    Ok(online_results(&out, log))
+    let mut hook = PathHook::new(watch);
+    let out = run_episode(&mut sim, policy, &run, starts.as_deref(), &mut hook)?;
+    Ok((online_results(&out, log), Some(hook.into_path())))
 }
 
 /// Run the expert over the episode once, keeping its state at each task start, then reset.

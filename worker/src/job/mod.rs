@@ -8,6 +8,7 @@
 pub mod client;
 pub mod cores;
 mod execute;
+mod path;
 pub mod local;
 pub mod spec;
 

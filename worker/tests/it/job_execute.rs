@@ -83,6 +83,24 @@ fn a_privileged_online_job_with_the_oracle_succeeds() {
         r.log_tail
     );
     assert!(r.wall_ms > 0);
+    // Where the robot went: points tagged by task, one goal per task, the nav goal reached.
+    let path = r.path.as_ref().expect("an online episode carries its path");
+    let n = path.task.len();
+    assert!(n > 10 && n <= 4096, "{n} points");
+    assert_eq!((path.base_xy.len(), path.object_xy.len()), (2 * n, 2 * n));
+    assert!(path.task.windows(2).all(|w| w[0] <= w[1]), "task tags in order");
+    assert_eq!((path.task[0], path.task[n - 1]), (0, 1));
+    assert_eq!(path.goals.len(), 2);
+    for (i, g) in path.goals.iter().enumerate() {
+        assert_eq!(g.index as usize, i);
+        assert!(g.x.is_finite() && g.y.is_finite(), "{g:?}");
+        if g.kind == "nav" {
+            assert_eq!(g.radius, 0.10);
+            let d = ((g.end_x - g.x).powi(2) + (g.end_y - g.y).powi(2)).sqrt();
+            assert!(d < 0.5, "a successful nav ends near its goal: {g:?}");
+        }
+    }
+    assert!(path.base_xy.iter().all(|v| v.is_finite()));
 }
 
 #[test]
@@ -96,6 +114,7 @@ fn an_offline_job_reports_mse_per_task() {
     assert_eq!(r.platform_error, "", "{}", r.log_tail);
     let t = &r.tasks[0];
     assert!(t.mse_samples > 0 && t.mse < 1e-3 && !t.success, "{t:?}");
+    assert!(r.path.is_none(), "offline episodes carry no path");
     // Without privileged state the oracle cannot predict: every prediction fails, with the reason.
     let r = execute_job(
         &job(&server.url(), pb::EvalMode::Offline, 1, false),
