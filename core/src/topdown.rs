@@ -17,9 +17,11 @@ use crate::catalogue::Catalogue;
 use crate::scene::{Furniture, FurnitureKind, Scene};
 
 mod glyph;
+mod plot;
 
 pub use glyph::Glyph;
 use glyph::{HALO, OUTLINE, Paint};
+pub use plot::{PathPlot, PlotGoal, TASK_COLOURS, render_path_plot, task_colour};
 
 /// The resolution the CLI and server use unless told otherwise.
 pub const DEFAULT_PX_PER_M: u32 = 100;

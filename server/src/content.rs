@@ -183,6 +183,17 @@ impl Content {
         Some(png)
     }
 
+    /// An episode's path drawn over `scene`'s top-down map; `None` for an unknown scene.
+    pub(crate) fn path_png(&self, scene: &str, plot: &kitchen_r_core::topdown::PathPlot) -> Option<Vec<u8>> {
+        let scene = self.scene(scene)?;
+        Some(kitchen_r_core::topdown::render_path_plot(
+            scene,
+            &self.catalogue,
+            kitchen_r_core::topdown::DEFAULT_PX_PER_M,
+            plot,
+        ))
+    }
+
     pub(crate) fn scene_summaries(&self) -> Vec<SceneSummary> {
         self.scenes
             .iter()

@@ -89,16 +89,19 @@ impl Worker for WorkerService {
         let worker = caller(&req)?.worker()?;
         let m = req.into_inner();
         let result = m.result.unwrap_or_default();
+        let tasks: Vec<TaskOutcome> = result.tasks.iter().map(TaskOutcome::from).collect();
+        let path = crate::plots::from_report(result.path.as_ref(), &tasks);
         let report = Report {
             worker_id: m.worker_id,
             job_id: m.job_id,
             attempt: m.attempt,
             run_id: m.run_id,
             episode_key: m.episode_key,
-            tasks: result.tasks.iter().map(TaskOutcome::from).collect(),
+            tasks,
             platform_error: result.platform_error,
             log_tail: result.log_tail,
             wall_ms: result.wall_ms,
+            path,
         };
         let out = self.state.report_result(worker, report).await?;
         Ok(Response::new(pb::ReportResultResponse {

@@ -52,6 +52,10 @@ pub(crate) fn router(state: AppState) -> Router {
         .route("/api/v1/scenes/{id}/brief", get(brief))
         .route("/api/v1/submissions/plans", post(submit_plans))
         .route("/api/v1/submissions/{id}", get(submission))
+        .route(
+            "/api/v1/submissions/{id}/episodes/{episode_key}/path.png",
+            get(episode_plot),
+        )
         .route("/api/v1/leaderboard", get(leaderboard))
         .route("/api/v1/admin/resimulate", post(resimulate))
         .route("/api/v1/admin/stats", get(admin_stats))
@@ -274,6 +278,18 @@ async fn submission(
         .parse()
         .map_err(|_| ServiceError::not_found(format!("submission {id:?}")))?;
     Ok(axum::Json(s.get_submission(&caller, id).await?).into_response())
+}
+
+async fn episode_plot(
+    State(s): State<AppState>,
+    PathArg((id, key)): PathArg<(String, String)>,
+    caller: Caller,
+) -> Result<Response, ServiceError> {
+    let id: i64 = id
+        .parse()
+        .map_err(|_| ServiceError::not_found(format!("submission {id:?}")))?;
+    let png = s.episode_plot(&caller, id, &key).await?;
+    Ok(typed("image/png", Bytes::from(png)))
 }
 
 async fn leaderboard(State(s): State<AppState>, QueryArgs(q): Params) -> Result<Response, ServiceError> {

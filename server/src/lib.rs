@@ -28,6 +28,7 @@ mod http;
 mod leaderboard;
 pub mod metrics;
 pub mod plans;
+mod plots;
 mod probe;
 mod scores;
 mod service;

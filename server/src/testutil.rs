@@ -181,6 +181,7 @@ impl Fixture {
             platform_error: String::new(),
             log_tail: "ok".into(),
             wall_ms: 10,
+            path: None,
         }
     }
 }

@@ -46,6 +46,10 @@ pub(super) fn routes() -> Router<AppState> {
         .route("/team/login", get(login_form).post(login))
         .route("/team/logout", post(logout))
         .route("/submissions/{id}", get(submission_page))
+        .route(
+            "/submissions/{id}/episodes/{episode_key}/path.png",
+            get(episode_plot),
+        )
         .route("/leaderboard/{track}/{split}/{id}", get(entry_page))
 }
 
@@ -239,6 +243,28 @@ async fn logout(
     }
     let gone = session::set_cookie(TEAM_COOKIE, "", Some(0), session::https(&headers));
     session::see_other("/contest", &[gone])
+}
+
+/// An episode's path plot for the page's `<img>` (the API's `plot_url` takes a bearer token,
+/// which an image request cannot send): the same checks, by the page's session.
+async fn episode_plot(
+    State(s): State<AppState>,
+    PathArg((id, key)): PathArg<(String, String)>,
+    caller: Caller,
+    headers: HeaderMap,
+) -> Result<Response, ServiceError> {
+    let not_found = || ServiceError::not_found(format!("a plot of episode {key:?} of submission {id}"));
+    let caller = match who(&s, caller, &headers).await? {
+        Who::Team(t) => Caller::Team(t),
+        Who::Organiser(o) => Caller::Organiser(o),
+        Who::Nobody => return Err(not_found()),
+    };
+    let sub = id.parse::<i64>().map_err(|_| not_found())?;
+    let png = s.episode_plot(&caller, sub, &key).await?;
+    Ok(axum::response::IntoResponse::into_response((
+        [(axum::http::header::CONTENT_TYPE, "image/png")],
+        png,
+    )))
 }
 
 async fn submission_page(

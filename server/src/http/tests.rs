@@ -356,3 +356,126 @@ async fn a_look_alike_team_name_is_refused_with_409_naming_the_team() {
     let v = json_error(status, &headers, &body, "conflict");
     assert!(v["error"].as_str().unwrap().contains("\"rt-alpha\""), "{v}");
 }
+
+/// A path as a worker reports it: two tasks across the room, the second failed.
+fn reported_path(tasks: &[crate::episodes::TaskOutcome]) -> kitchen_r_core::topdown::PathPlot {
+    use kitchen_r_proto::worker::v1 as pb;
+    let mut p = pb::EpisodePath::default();
+    for k in 0..40u32 {
+        let t = k as f32 / 40.0;
+        p.base_xy.extend([0.8 + 2.5 * t, 0.8 + 1.5 * t]);
+        p.object_xy.extend([f32::NAN, f32::NAN]);
+        p.task.push(u32::from(k >= 20));
+    }
+    p.goals = vec![
+        pb::PathGoal {
+            index: 0,
+            kind: "nav".into(),
+            x: 2.05,
+            y: 1.55,
+            radius: 0.1,
+            end_x: 2.05,
+            end_y: 1.55,
+        },
+        pb::PathGoal {
+            index: 1,
+            kind: "place".into(),
+            x: 4.0,
+            y: 3.0,
+            radius: 0.05,
+            end_x: 3.3,
+            end_y: 2.3,
+        },
+    ];
+    crate::plots::from_report(Some(&p), tasks).expect("a well-formed path")
+}
+
+async fn fetch(app: &Router, path: &str, token: &str) -> (StatusCode, Option<String>, Vec<u8>) {
+    let req = Request::get(path)
+        .header(header::AUTHORIZATION, format!("Bearer {token}"))
+        .body(Body::empty())
+        .unwrap();
+    let resp = app.clone().oneshot(req).await.unwrap();
+    let status = resp.status();
+    let ct = (resp.headers().get(header::CONTENT_TYPE)).map(|v| v.to_str().unwrap().to_string());
+    (
+        status,
+        ct,
+        to_bytes(resp.into_body(), 8 << 20).await.unwrap().to_vec(),
+    )
+}
+
+#[tokio::test]
+async fn an_episode_path_is_a_png_on_dev_and_not_found_on_test_or_for_another_team() {
+    let f = fixture(FakeProbe::ok(8), |c| c.control.offline_mse = false).await;
+    let alpha = f.team("alpha").await;
+    let bravo = f.team("bravo").await;
+    let caller = f.caller(&alpha).await;
+    let dev = f
+        .state
+        .register_policy(&caller, f.request(Split::Dev))
+        .await
+        .unwrap()
+        .id;
+    let test = f
+        .state
+        .register_policy(&caller, f.request(Split::Test))
+        .await
+        .unwrap()
+        .id;
+    let worker = f.worker().await;
+    loop {
+        let jobs = f.lease("w1", 16).await;
+        if jobs.is_empty() {
+            break;
+        }
+        for job in jobs {
+            let mut report = f.report("w1", &job, |j| j == 0, 0.0);
+            report.path = Some(reported_path(&report.tasks));
+            f.state.report_result(worker, report).await.unwrap();
+        }
+    }
+    let app = router(f.state.clone());
+
+    let view = get(app.clone(), &format!("/api/v1/submissions/{dev}"), &alpha).await;
+    let episodes = view["latest_run"]["evaluation"]["episodes"].as_array().unwrap();
+    assert!(!episodes.is_empty(), "{view}");
+    let ep = &episodes[0];
+    let url = ep["plot_url"].as_str().expect("a dev episode links its plot");
+    let key = ep["key"].as_str().unwrap();
+    assert_eq!(url, format!("/api/v1/submissions/{dev}/episodes/{key}/path.png"));
+
+    let (status, ct, png) = fetch(&app, url, &alpha).await;
+    assert_eq!(status, StatusCode::OK);
+    assert_eq!(ct.as_deref(), Some("image/png"));
+    assert!(
+        png.starts_with(b"\x89PNG\r\n\x1a\n") && png.len() > 1000,
+        "{} bytes",
+        png.len()
+    );
+    if let Ok(dir) = std::env::var("KITCHEN_R_PLOT_PREVIEW") {
+        std::fs::write(std::path::Path::new(&dir).join("served-plot.png"), &png).unwrap();
+    }
+    // The organiser sees it; another team and nobody do not.
+    assert_eq!(fetch(&app, url, ADMIN).await.0, StatusCode::OK);
+    assert_eq!(fetch(&app, url, &bravo).await.0, StatusCode::NOT_FOUND);
+    assert_eq!(fetch(&app, url, "").await.0.is_success(), false);
+    let missing = format!("/api/v1/submissions/{dev}/episodes/dev-9999/path.png");
+    assert_eq!(fetch(&app, &missing, &alpha).await.0, StatusCode::NOT_FOUND);
+
+    // On test a path is stored but never served, nor linked, to anyone.
+    let view = get(app.clone(), &format!("/api/v1/submissions/{test}"), &alpha).await;
+    assert!(!view.to_string().contains("plot_url"), "{view}");
+    let test_key: String = sqlx::query_scalar(
+        "SELECT e.episode_key FROM episode_results e JOIN scoring_runs r ON r.id = e.run_id
+         WHERE r.submission_id = ? AND e.path_z IS NOT NULL LIMIT 1",
+    )
+    .bind(test)
+    .fetch_one(f.state.pool())
+    .await
+    .unwrap();
+    let url = format!("/api/v1/submissions/{test}/episodes/{test_key}/path.png");
+    for token in [alpha.as_str(), ADMIN, bravo.as_str()] {
+        assert_eq!(fetch(&app, &url, token).await.0, StatusCode::NOT_FOUND);
+    }
+}

@@ -65,6 +65,8 @@ pub(crate) struct Report {
     pub platform_error: String,
     pub log_tail: String,
     pub wall_ms: u64,
+    /// Where the robot went (online episodes; checked in [`crate::plots::from_report`]).
+    pub path: Option<kitchen_r_core::topdown::PathPlot>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -263,6 +265,7 @@ impl AppState {
                 wall_ms: i64::try_from(r.wall_ms).unwrap_or(i64::MAX),
                 log_tail: &r.log_tail,
                 worker_id: &r.worker_id,
+                path: r.path.as_ref(),
             };
             queue::insert_result(&mut tx, &result, now).await?;
             queue::close_job(&mut tx, job.id, JobState::Done, None, now).await?;

@@ -83,6 +83,9 @@ pub(crate) struct EpisodeView {
     pub tasks: Option<Vec<TaskOutcome>>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub log_tail: Option<String>,
+    /// The top-down plot of where the robot went (dev split, online episodes with a stored path).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub plot_url: Option<String>,
 }
 
 impl AppState {
@@ -90,6 +93,7 @@ impl AppState {
         &self,
         run: &RunRow,
         hidden: bool,
+        submission: i64,
     ) -> Result<PolicyRunView, ServiceError> {
         let source = run.episodes_run();
         let counts = run_store::job_counts(self.read_pool(), source).await?;
@@ -101,7 +105,16 @@ impl AppState {
             RunState::Active if counts.started == 0 => "queued",
             _ => "running",
         };
-        let episodes: Vec<EpisodeView> = results.into_iter().map(episode_view).collect();
+        let episodes: Vec<EpisodeView> = (results.into_iter())
+            .map(|r| {
+                let plot = !hidden && r.has_path;
+                let mut e = episode_view(r);
+                if plot {
+                    e.plot_url = Some(plot_url(submission, &e.key));
+                }
+                e
+            })
+            .collect();
         let failure_counts = failure_counts(&episodes, hidden);
         let retrying: Vec<RetryView> = run_store::retrying(self.read_pool(), source)
             .await?
@@ -177,6 +190,11 @@ pub(super) fn reason_kind(reason: &str) -> String {
     out
 }
 
+/// Where an episode's path plot is served.
+pub(crate) fn plot_url(submission: i64, episode_key: &str) -> String {
+    format!("/api/v1/submissions/{submission}/episodes/{episode_key}/path.png")
+}
+
 fn episode_view(r: ResultRow) -> EpisodeView {
     let tasks = r.tasks;
     let online = r.mode == "online";
@@ -207,6 +225,7 @@ fn episode_view(r: ResultRow) -> EpisodeView {
         attempt: r.attempt,
         tasks: Some(tasks),
         log_tail: Some(r.log_tail),
+        plot_url: None,
     }
 }
 
@@ -227,6 +246,7 @@ mod tests {
             attempt: 3,
             tasks: Some(Vec::new()),
             log_tail: None,
+            plot_url: None,
         };
         let hidden = failure_counts(std::slice::from_ref(&given_up), true);
         assert_eq!(hidden[0].reason, PLATFORM_GAVE_UP);

@@ -61,6 +61,39 @@ pub(crate) struct InstructionView {
 }
 
 impl AppState {
+    /// Where the robot went in one episode of a submission's latest run, as a PNG over the
+    /// scene's top-down map. Dev split only (a test plot would show the hidden plan's goals),
+    /// for the submission's own team or the organiser; anything else is not found.
+    pub(crate) async fn episode_plot(
+        &self,
+        caller: &Caller,
+        id: i64,
+        episode_key: &str,
+    ) -> Result<Vec<u8>, ServiceError> {
+        let not_found =
+            || ServiceError::not_found(format!("a plot of episode {episode_key:?} of submission {id}"));
+        let viewer = match caller {
+            Caller::Organiser(_) => None,
+            _ => Some(caller.team()?),
+        };
+        let sub = store::submission(self.read_pool(), id)
+            .await?
+            .filter(|s| viewer.as_ref().is_none_or(|t| t.id == s.team_id))
+            .filter(|s| s.split == Split::Dev.as_str() && s.kind == SubmissionKind::Policy)
+            .ok_or_else(not_found)?;
+        let run = store::latest_run(self.read_pool(), sub.id)
+            .await?
+            .ok_or_else(not_found)?;
+        let (plot, scene) = store::runs::episode_path(self.read_pool(), run.episodes_run(), episode_key)
+            .await?
+            .ok_or_else(not_found)?;
+        let state = self.clone();
+        tokio::task::spawn_blocking(move || state.content().path_png(&scene, &plot))
+            .await
+            .map_err(anyhow::Error::from)?
+            .ok_or_else(not_found)
+    }
+
     /// A submission with its latest run, for its own team or the organiser.
     pub(crate) async fn get_submission(
         &self,
@@ -81,7 +114,7 @@ impl AppState {
             None => None,
             Some(run) => {
                 let evaluation = match is_policy {
-                    true => Some(self.policy_run_view(&run, hidden).await?),
+                    true => Some(self.policy_run_view(&run, hidden, id).await?),
                     false => None,
                 };
                 let results = match is_policy {

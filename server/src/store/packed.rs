@@ -18,6 +18,15 @@ pub(crate) fn unpack(blob: &[u8]) -> sqlx::Result<Vec<u8>> {
     zstd::stream::decode_all(blob).map_err(|e| sqlx::Error::Decode(Box::new(e)))
 }
 
+/// An episode's path (issue #15) as compressed JSON.
+pub(crate) fn pack_path(path: &kitchen_r_core::topdown::PathPlot) -> Vec<u8> {
+    pack(&serde_json::to_vec(path).expect("an episode path serialises"))
+}
+
+pub(crate) fn unpack_path(blob: &[u8]) -> sqlx::Result<kitchen_r_core::topdown::PathPlot> {
+    serde_json::from_slice(&unpack(blob)?).map_err(|e| sqlx::Error::Decode(Box::new(e)))
+}
+
 pub(crate) fn pack_text(text: &str) -> Vec<u8> {
     pack(text.as_bytes())
 }

@@ -199,6 +199,8 @@ pub(crate) struct NewResult<'a> {
     pub wall_ms: i64,
     pub log_tail: &'a str,
     pub worker_id: &'a str,
+    /// Where the robot went, for the episode's plot (online episodes of newer workers).
+    pub path: Option<&'a kitchen_r_core::topdown::PathPlot>,
 }
 
 /// Record a result; `false` when `(run, episode)` was already recorded (nothing changes).
@@ -209,8 +211,8 @@ pub(crate) async fn insert_result(
 ) -> sqlx::Result<bool> {
     let done = sqlx::query(
         "INSERT INTO episode_results (run_id, episode_key, job_id, mode, tasks, failure, wall_ms, log_tail,
-                                      attempt, worker_id, recorded_at)
-         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) ON CONFLICT (run_id, episode_key) DO NOTHING",
+                                      attempt, worker_id, recorded_at, path_z)
+         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) ON CONFLICT (run_id, episode_key) DO NOTHING",
     )
     .bind(r.job.run_id)
     .bind(&r.job.episode_key)
@@ -224,6 +226,7 @@ pub(crate) async fn insert_result(
     .bind(r.job.attempt)
     .bind(r.worker_id)
     .bind(now)
+    .bind(r.path.map(super::packed::pack_path))
     .execute(&mut *conn)
     .await?;
     Ok(done.rows_affected() == 1)

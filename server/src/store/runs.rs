@@ -245,16 +245,39 @@ pub(crate) struct ResultRow {
     pub wall_ms: i64,
     pub log_tail: String,
     pub attempt: i64,
+    /// A path was stored with it (the episode has a plot).
+    pub has_path: bool,
 }
 
 pub(crate) async fn results(pool: &SqlitePool, run: i64) -> sqlx::Result<Vec<ResultRow>> {
     sqlx::query_as(
-        "SELECT episode_key, mode, tasks, failure, wall_ms, log_tail, attempt FROM episode_results
+        "SELECT episode_key, mode, tasks, failure, wall_ms, log_tail, attempt,
+                path_z IS NOT NULL AS has_path FROM episode_results
          WHERE run_id = ? ORDER BY episode_key",
     )
     .bind(run)
     .fetch_all(pool)
     .await
+}
+
+/// An episode's stored path and the scene it ran in; `None` when it has none.
+pub(crate) async fn episode_path(
+    pool: &SqlitePool,
+    run: i64,
+    key: &str,
+) -> sqlx::Result<Option<(kitchen_r_core::topdown::PathPlot, String)>> {
+    let row: Option<(Vec<u8>, sqlx::types::Json<crate::episodes::JobSpec>)> = sqlx::query_as(
+        "SELECT r.path_z, j.spec FROM episode_results r JOIN jobs j ON j.id = r.job_id
+         WHERE r.run_id = ? AND r.episode_key = ? AND r.path_z IS NOT NULL",
+    )
+    .bind(run)
+    .bind(key)
+    .fetch_optional(pool)
+    .await?;
+    match row {
+        None => Ok(None),
+        Some((blob, spec)) => Ok(Some((super::packed::unpack_path(&blob)?, spec.0.scene_id))),
+    }
 }
 
 /// A control or integrated leaderboard row (best entry per team, or a baseline).

@@ -117,6 +117,7 @@ async fn json_columns_round_trip_as_typed_values_in_the_stored_text() {
         wall_ms: 5,
         log_tail: "",
         worker_id: "w",
+        path: None,
     };
     assert!(queue::insert_result(&mut conn, &result, 30).await.unwrap());
     let text: String = sqlx::query_scalar("SELECT tasks FROM episode_results")

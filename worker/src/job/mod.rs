@@ -8,8 +8,8 @@
 pub mod client;
 pub mod cores;
 mod execute;
-mod path;
 pub mod local;
+mod path;
 pub mod spec;
 
 use std::path::{Path, PathBuf};

@@ -58,7 +58,7 @@ impl<'a> PathHook<'a> {
     /// Keep every second point, and sample half as often from now on.
     fn thin(&mut self) {
         let p = &mut self.path;
-        let keep = |i: usize| i % 2 == 0;
+        let keep = |i: usize| i.is_multiple_of(2);
         p.task = p
             .task
             .iter()
@@ -86,7 +86,7 @@ impl StepHook for PathHook<'_> {
                 g.end_x = info.base_pose[0] as f32;
                 g.end_y = info.base_pose[1] as f32;
             }
-            if self.seen % self.stride == 0 {
+            if self.seen.is_multiple_of(self.stride) {
                 self.sample(sim, t);
             }
             self.seen += 1;
@@ -129,5 +129,26 @@ impl StepHook for PathHook<'_> {
             end_y: base[1] as f32,
         });
         self.sample(sim, index);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn thinning_keeps_every_second_point_with_its_task_and_doubles_the_stride() {
+        let mut inner = ();
+        let mut h = PathHook::new(&mut inner);
+        for i in 0..6u32 {
+            h.path.base_xy.extend([i as f32, 0.0]);
+            h.path.object_xy.extend([0.0, i as f32]);
+            h.path.task.push(i / 3);
+        }
+        h.thin();
+        assert_eq!(h.path.task, vec![0, 0, 1]);
+        assert_eq!(h.path.base_xy, vec![0.0, 0.0, 2.0, 0.0, 4.0, 0.0]);
+        assert_eq!(h.path.object_xy, vec![0.0, 0.0, 0.0, 2.0, 0.0, 4.0]);
+        assert_eq!(h.stride, 2);
     }
 }

@@ -232,7 +232,19 @@ fn episode_row(ep: &EpisodeView) -> String {
             (_, false, false) => format!("<span class=bad>failed</span>: {}", escape(&t.failure_reason)),
             (_, false, true) => "<span class=bad>failed</span>".to_string(),
         };
-        let _ = write!(tasks, "<li><code>{}</code>: {outcome}</li>", escape(&t.step));
+        // With a plot, each task wears its path colour (the plot's legend).
+        let swatch = match ep.plot_url {
+            Some(_) => {
+                let [r, g, b] = kitchen_r_core::topdown::task_colour(t.index);
+                format!("<span style=\"color:#{r:02x}{g:02x}{b:02x}\" title=\"path colour\">&#9632;</span> ")
+            }
+            None => String::new(),
+        };
+        let _ = write!(
+            tasks,
+            "<li>{swatch}<code>{}</code>: {outcome}</li>",
+            escape(&t.step)
+        );
     }
     tasks.push_str("</ol>");
     format!(
@@ -246,8 +258,16 @@ fn episode_row(ep: &EpisodeView) -> String {
 }
 
 /// The episode's video and path plot links (issue #15, items 1 and 2), placed under the
-/// episode's key. Neither is recorded yet, so nothing is shown: a row never links to media
-/// that does not exist.
-fn media(_ep: &EpisodeView) -> String {
-    String::new()
+/// episode's key; only what exists is shown. The plot is served to the page's session at the
+/// API path less its `/api/v1` prefix.
+fn media(ep: &EpisodeView) -> String {
+    let Some(plot) = ep.plot_url.as_deref() else {
+        return String::new();
+    };
+    let src = escape(plot.strip_prefix("/api/v1").unwrap_or(plot));
+    format!(
+        "<br><a href=\"{src}\"><img class=plot src=\"{src}\" width=240 \
+alt=\"Where the robot went in {key}: the base path coloured by task, goal circles, a cross where a failed task ended\"></a>",
+        key = escape(&ep.key)
+    )
 }

@@ -450,3 +450,71 @@ async fn pages_render_without_script_and_the_leaderboard_links_public_summaries(
         }
     }
 }
+
+#[tokio::test]
+async fn a_dev_episode_row_shows_its_path_plot_to_the_session_and_a_test_page_none() {
+    let f = fixture(FakeProbe::ok(8), |c| c.control.offline_mse = false).await;
+    let alpha = f.team("alpha").await;
+    let bravo = f.team("bravo").await;
+    let caller = f.caller(&alpha).await;
+    let dev = f
+        .state
+        .register_policy(&caller, f.request(Split::Dev))
+        .await
+        .unwrap()
+        .id;
+    let test = f
+        .state
+        .register_policy(&caller, f.request(Split::Test))
+        .await
+        .unwrap()
+        .id;
+    let worker = f.worker().await;
+    let plot = kitchen_r_core::topdown::PathPlot {
+        base: vec![([1.0, 1.0], 0), ([2.0, 1.5], 0), ([3.0, 2.0], 1)],
+        object: vec![None, None, Some([3.0, 2.1])],
+        goals: Vec::new(),
+    };
+    loop {
+        let jobs = f.lease("w1", 16).await;
+        if jobs.is_empty() {
+            break;
+        }
+        for job in jobs {
+            let mut report = f.report("w1", &job, |j| j == 0, 0.0);
+            report.path = Some(plot.clone());
+            f.state.report_result(worker, report).await.unwrap();
+        }
+    }
+    let app = router(f.state.clone());
+    let cookies = login(&app, &alpha).await;
+    let page = call(&app, get(&format!("/submissions/{dev}"), &cookies)).await;
+    let prefix = format!("<img class=plot src=\"/submissions/{dev}/episodes/");
+    let at = page.body.find(&prefix).unwrap_or_else(|| panic!("{}", page.body));
+    let src_start = at + "<img class=plot src=\"".len();
+    let src: String = page.body[src_start..].chars().take_while(|c| *c != '"').collect();
+    assert!(src.ends_with("/path.png"), "{src}");
+    assert!(
+        page.body.contains("title=\"path colour\""),
+        "tasks wear their path colour"
+    );
+
+    let image = |cookies: String| {
+        let (app, src) = (app.clone(), src.clone());
+        async move {
+            let resp = app.oneshot(get(&src, &cookies)).await.unwrap();
+            let status = resp.status();
+            let bytes = to_bytes(resp.into_body(), 16 << 20).await.unwrap();
+            (status, bytes)
+        }
+    };
+    let (status, png) = image(cookies.clone()).await;
+    assert_eq!(status, StatusCode::OK);
+    assert!(png.starts_with(b"\x89PNG"));
+    assert_eq!(image(login(&app, &bravo).await).await.0, StatusCode::NOT_FOUND);
+    assert_eq!(image(String::new()).await.0, StatusCode::NOT_FOUND);
+
+    let page = call(&app, get(&format!("/submissions/{test}"), &cookies)).await;
+    assert_eq!(page.status, StatusCode::OK);
+    assert!(!page.body.contains("path.png"), "{}", page.body);
+}

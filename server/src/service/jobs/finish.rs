@@ -45,6 +45,7 @@ impl AppState {
             wall_ms: 0,
             log_tail: "",
             worker_id: worker,
+            path: None,
         };
         queue::insert_result(conn, &result, now).await?;
         queue::close_job(conn, job.id, JobState::Failed, Some(&attempt_reason), now).await?;
