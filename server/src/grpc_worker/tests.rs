@@ -160,6 +160,13 @@ async fn lease_heartbeat_and_report_over_grpc() {
                 }],
                 log_tail: "done".into(),
                 wall_ms: 12,
+                // Every report carries a path; only the online episode's is kept.
+                path: Some(pb::EpisodePath {
+                    base_xy: vec![1.0, 1.0, 1.5, 1.2],
+                    object_xy: vec![f32::NAN; 4],
+                    task: vec![0, 0],
+                    goals: Vec::new(),
+                }),
                 ..Default::default()
             }),
         };
@@ -183,7 +190,12 @@ async fn lease_heartbeat_and_report_over_grpc() {
         .unwrap()
         .latest_run
         .unwrap();
-    assert_eq!(run.evaluation.unwrap().state, "finished");
+    let evaluation = run.evaluation.unwrap();
+    assert_eq!(evaluation.state, "finished");
+    let plots: Vec<_> = (evaluation.episodes.iter())
+        .map(|e| (e.mode.as_str(), e.plot_url.is_some()))
+        .collect();
+    assert_eq!(plots, vec![("online", true), ("offline", false)], "{plots:?}");
     let sr = run.scores.sr.unwrap();
     assert!((sr - 1.0 / gt.plan.len() as f64).abs() < 1e-12);
     // Only task 0 was reported: each unreported task of the offline episode is one failed

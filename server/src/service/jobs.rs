@@ -265,7 +265,11 @@ impl AppState {
                 wall_ms: i64::try_from(r.wall_ms).unwrap_or(i64::MAX),
                 log_tail: &r.log_tail,
                 worker_id: &r.worker_id,
-                path: r.path.as_ref(),
+                // Only an online episode has a path to plot.
+                path: r
+                    .path
+                    .as_ref()
+                    .filter(|_| job.spec.mode == crate::episodes::Mode::Online),
             };
             queue::insert_result(&mut tx, &result, now).await?;
             queue::close_job(&mut tx, job.id, JobState::Done, None, now).await?;
