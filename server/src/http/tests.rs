@@ -459,7 +459,7 @@ async fn an_episode_path_is_a_png_on_dev_and_not_found_on_test_or_for_another_te
     // The organiser sees it; another team and nobody do not.
     assert_eq!(fetch(&app, url, ADMIN).await.0, StatusCode::OK);
     assert_eq!(fetch(&app, url, &bravo).await.0, StatusCode::NOT_FOUND);
-    assert_eq!(fetch(&app, url, "").await.0.is_success(), false);
+    assert!(!fetch(&app, url, "").await.0.is_success());
     let missing = format!("/api/v1/submissions/{dev}/episodes/dev-9999/path.png");
     assert_eq!(fetch(&app, &missing, &alpha).await.0, StatusCode::NOT_FOUND);
 
