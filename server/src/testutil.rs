@@ -184,4 +184,38 @@ impl Fixture {
             path: None,
         }
     }
+
+    /// Teams `alpha` and `bravo`; alpha registers a policy run on dev and one on test, and every
+    /// episode of both is reported (task 0 succeeds) with the path `path(report)` gives. Returns
+    /// the two tokens and the dev and test submission ids.
+    pub(crate) async fn runs_with_paths(
+        &self,
+        path: impl Fn(&Report) -> kitchen_r_core::topdown::PathPlot,
+    ) -> (String, String, i64, i64) {
+        let (alpha, bravo) = (self.team("alpha").await, self.team("bravo").await);
+        let caller = self.caller(&alpha).await;
+        let mut ids = Vec::new();
+        for split in [Split::Dev, Split::Test] {
+            let id = self
+                .state
+                .register_policy(&caller, self.request(split))
+                .await
+                .unwrap()
+                .id;
+            ids.push(id);
+        }
+        let worker = self.worker().await;
+        loop {
+            let jobs = self.lease("w1", 16).await;
+            if jobs.is_empty() {
+                break;
+            }
+            for job in jobs {
+                let mut report = self.report("w1", &job, |j| j == 0, 0.0);
+                report.path = Some(path(&report));
+                self.state.report_result(worker, report).await.unwrap();
+            }
+        }
+        (alpha, bravo, ids[0], ids[1])
+    }
 }

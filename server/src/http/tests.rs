@@ -408,33 +408,7 @@ async fn fetch(app: &Router, path: &str, token: &str) -> (StatusCode, Option<Str
 #[tokio::test]
 async fn an_episode_path_is_a_png_on_dev_and_not_found_on_test_or_for_another_team() {
     let f = fixture(FakeProbe::ok(8), |c| c.control.offline_mse = false).await;
-    let alpha = f.team("alpha").await;
-    let bravo = f.team("bravo").await;
-    let caller = f.caller(&alpha).await;
-    let dev = f
-        .state
-        .register_policy(&caller, f.request(Split::Dev))
-        .await
-        .unwrap()
-        .id;
-    let test = f
-        .state
-        .register_policy(&caller, f.request(Split::Test))
-        .await
-        .unwrap()
-        .id;
-    let worker = f.worker().await;
-    loop {
-        let jobs = f.lease("w1", 16).await;
-        if jobs.is_empty() {
-            break;
-        }
-        for job in jobs {
-            let mut report = f.report("w1", &job, |j| j == 0, 0.0);
-            report.path = Some(reported_path(&report.tasks));
-            f.state.report_result(worker, report).await.unwrap();
-        }
-    }
+    let (alpha, bravo, dev, test) = f.runs_with_paths(|r| reported_path(&r.tasks)).await;
     let app = router(f.state.clone());
 
     let view = get(app.clone(), &format!("/api/v1/submissions/{dev}"), &alpha).await;

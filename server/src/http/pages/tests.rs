@@ -454,38 +454,12 @@ async fn pages_render_without_script_and_the_leaderboard_links_public_summaries(
 #[tokio::test]
 async fn a_dev_episode_row_shows_its_path_plot_to_the_session_and_a_test_page_none() {
     let f = fixture(FakeProbe::ok(8), |c| c.control.offline_mse = false).await;
-    let alpha = f.team("alpha").await;
-    let bravo = f.team("bravo").await;
-    let caller = f.caller(&alpha).await;
-    let dev = f
-        .state
-        .register_policy(&caller, f.request(Split::Dev))
-        .await
-        .unwrap()
-        .id;
-    let test = f
-        .state
-        .register_policy(&caller, f.request(Split::Test))
-        .await
-        .unwrap()
-        .id;
-    let worker = f.worker().await;
     let plot = kitchen_r_core::topdown::PathPlot {
         base: vec![([1.0, 1.0], 0), ([2.0, 1.5], 0), ([3.0, 2.0], 1)],
         object: vec![None, None, Some([3.0, 2.1])],
         goals: Vec::new(),
     };
-    loop {
-        let jobs = f.lease("w1", 16).await;
-        if jobs.is_empty() {
-            break;
-        }
-        for job in jobs {
-            let mut report = f.report("w1", &job, |j| j == 0, 0.0);
-            report.path = Some(plot.clone());
-            f.state.report_result(worker, report).await.unwrap();
-        }
-    }
+    let (alpha, bravo, dev, test) = f.runs_with_paths(|_| plot.clone()).await;
     let app = router(f.state.clone());
     let cookies = login(&app, &alpha).await;
     let page = call(&app, get(&format!("/submissions/{dev}"), &cookies)).await;
