@@ -31,27 +31,6 @@ fn client(server: &Server, args: &[&str], envs: &[(&str, &str)]) -> Output {
     cmd.output().expect("run python3 -m kitchen_r_client")
 }
 
-fn out(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-/// Text with every run of spaces made one, so column widths do not matter.
-fn squash(s: &str) -> String {
-    s.split(' ')
-        .filter(|w| !w.is_empty())
-        .collect::<Vec<_>>()
-        .join(" ")
-}
-
-fn err(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn ok(o: Output) -> Output {
-    assert!(o.status.success(), "stdout:\n{}\nstderr:\n{}", out(&o), err(&o));
-    o
-}
-
 #[test]
 fn the_python_client_submits_waits_shows_and_reads_the_leaderboard() {
     let fx = Fixture::new("");

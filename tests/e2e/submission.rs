@@ -19,27 +19,6 @@ fn run(server: &Server, args: &[&str], token: &str) -> Output {
         .expect("run kitchen-r")
 }
 
-fn out(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-/// Text with every run of spaces made one, so column widths do not matter.
-fn squash(s: &str) -> String {
-    s.split(' ')
-        .filter(|w| !w.is_empty())
-        .collect::<Vec<_>>()
-        .join(" ")
-}
-
-fn err(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn ok(o: Output) -> Output {
-    assert!(o.status.success(), "stdout:\n{}\nstderr:\n{}", out(&o), err(&o));
-    o
-}
-
 #[tokio::test(flavor = "multi_thread")]
 async fn show_and_wait_a_plan_file_on_dev_and_on_test() {
     let fx = Fixture::new("");

@@ -395,3 +395,27 @@ pub(crate) async fn wait_for(
 pub(crate) fn finished(e: &Value) -> bool {
     e["state"] == "finished" || e["state"] == "platform_failed"
 }
+
+/// A command's stdout as text.
+pub(crate) fn out(o: &std::process::Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// A command's stderr as text.
+pub(crate) fn err(o: &std::process::Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// `o`, after asserting the command succeeded (both streams shown when not).
+pub(crate) fn ok(o: std::process::Output) -> std::process::Output {
+    assert!(o.status.success(), "stdout:\n{}\nstderr:\n{}", out(&o), err(&o));
+    o
+}
+
+/// Text with every run of spaces made one, so column widths do not matter.
+pub(crate) fn squash(s: &str) -> String {
+    s.split(' ')
+        .filter(|w| !w.is_empty())
+        .collect::<Vec<_>>()
+        .join(" ")
+}
