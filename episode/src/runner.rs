@@ -109,6 +109,10 @@ pub trait StepHook {
     /// Called before task `index` begins, with the world as the task will find it: the
     /// expert-start snapshots behind teleport-on-failure are taken here.
     fn on_task_start(&mut self, _sim: &Sim, _index: usize) {}
+
+    /// Called when a task that ran has ended, with its record (before any teleport to the next
+    /// task's start): an episode video captions the outcome here.
+    fn on_task_end(&mut self, _sim: &Sim, _task: &TaskRecord) {}
 }
 
 impl StepHook for () {
@@ -199,6 +203,7 @@ pub fn run_episode(
             started,
         };
         let task = run_task(sim, policy, opts, j, &mut state, hook)?;
+        hook.on_task_end(sim, &task);
         out.policy_calls += task.policy_calls;
         if task.aborts_episode {
             aborted = task.failure.clone();

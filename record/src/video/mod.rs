@@ -18,8 +18,13 @@
 //! An [`EncodedVideo`] can also be kept as samples ([`EncodedVideo::save`]/[`EncodedVideo::load`])
 //! and several joined into one file ([`EncodedVideo::concat`]): every clip starts on a key frame
 //! and the sequence header is the same for equal settings and size, so joining is copying samples.
+//!
+//! [`episode`] records an episode video (both cameras at the control rate with a [`caption`]
+//! bar) for the submission pages and `kitchen-r eval --record`.
 
 mod av1;
+pub mod caption;
+pub mod episode;
 mod mp4;
 mod stored;
 
