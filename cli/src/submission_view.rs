@@ -201,7 +201,8 @@ fn print_evaluation(e: &Value, server: &ServerArgs) {
     }
 }
 
-/// One line per task: index, result, the plan step and why it failed.
+/// One line per task: number (1-based, as the web pages and videos count tasks; the JSON keeps
+/// the 0-based `index`), result, the plan step and why it failed.
 fn print_tasks(x: &Value) {
     let online = x["mode"] == "online";
     for t in arr(&x["tasks"]) {
@@ -219,7 +220,9 @@ fn print_tasks(x: &Value) {
         let reason = t["failure_reason"].as_str().filter(|r| !r.is_empty());
         println!(
             "      task {:<2} {:<12} {}{}",
-            t["index"].to_string(),
+            t["index"]
+                .as_u64()
+                .map_or_else(|| t["index"].to_string(), |i| (i + 1).to_string()),
             result,
             s(&t["step"]),
             reason.map(|r| format!(": {r}")).unwrap_or_default()

@@ -208,8 +208,11 @@ def _print_tasks(x, out):
         else:
             result = "MSE %.4f (%s samples)" % (t.get("mse") or 0.0, _j(t.get("mse_samples")))
         reason = t.get("failure_reason") or ""
+        # 1-based, as the web pages and videos count tasks; the JSON keeps the 0-based index.
+        index = t.get("index")
+        number = index + 1 if isinstance(index, int) else _j(index)
         out("      task %-2s %-12s %s%s" % (
-            _j(t.get("index")), result, _s(t.get("step")), (": " + reason) if reason else ""))
+            number, result, _s(t.get("step")), (": " + reason) if reason else ""))
 
 
 def _print_instructions(run, test, out):

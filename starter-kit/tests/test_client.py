@@ -85,7 +85,7 @@ class Printing(unittest.TestCase):
         text = "\n".join(lines)
         self.assertIn("page: http://s/submissions/3", text)
         self.assertIn("scores: SR = 0.5000", text)
-        self.assertIn("task 1  FAILED       place the cup: time limit of 120 s reached", text)
+        self.assertIn("task 2  FAILED       place the cup: time limit of 120 s reached", text)
         self.assertIn("video: http://s/media/v.mp4", text)
 
 

@@ -151,7 +151,7 @@ fn the_python_client_follows_a_policy_run_and_times_out_like_the_rust_cli() {
         "finished: 2/2 episodes done",
         "SR = 1.0000",
         "episodes:",
-        "task 0 ok",
+        "task 1 ok",
     ] {
         assert!(table.contains(want), "{want:?} missing from:\n{table}");
     }

@@ -144,7 +144,7 @@ async fn wait_follows_a_policy_run_from_queued_to_finished() {
         "SR = 1.0000",
         "episodes:",
         "dev-",
-        "task 0",
+        "task 1",
         " ok ",
     ] {
         assert!(squash(&table).contains(want), "{want:?} missing from:\n{table}");
@@ -183,5 +183,5 @@ async fn wait_follows_a_policy_run_from_queued_to_finished() {
         "{}",
         out(&direct)
     );
-    assert!(out(&direct).contains("task 0"), "{}", out(&direct));
+    assert!(out(&direct).contains("task 1"), "{}", out(&direct));
 }
