@@ -1,29 +1,56 @@
-"""Grounded tokens to clauses: one request each ("put the cup on the table", "then go to the
-shelf"), in the order the robot should do them.
+"""Grounded tokens to clauses (one request each: "put the cup on the table", "then go to the
+shelf"), put in the order the robot should carry them out.
 
-Splits at punctuation, at connectives ("then", "after that", "once", "while") and at "and"
-when a verb follows it ("... and go to ..."), but not at "and" between two mentions ("the
-plate and the cup"). "Before X, Y" becomes Y, X; "Y after X" becomes X, Y.
+Splitting: at punctuation, at connectives ("then", "after that", "once", "while") and at "and"
+when a verb follows ("... and go to ..."), not at "and" between two mentions ("the plate and
+the cup"). Segments are the parts between ".", ";" and ":".
+
+Ordering, from how English marks time rather than from word order:
+- "Before X, Y" does Y, then X; a segment opening with "before that" goes before the segment
+  it refers to; "Y, once/after X" does X first.
+- A clause saying it comes last ("finish at", "in the end", "eventually") goes to the end.
+- A clause saying it comes first ("start by", "first visit", "your first stop") goes to the
+  front; "stop by the sink first" after a delivery is a stop on the way, left in place.
+- "Start with the cup" / "the cup first" reorders the deliveries it names.
 """
 
-from lexicon import AFTER, BEFORE, CONNECTIVES, VERBS
+from lexicon import AFTER, BEFORE, CONNECTIVES, END_MARKERS, FIRST_MARKERS, VERBS
 from mentions import Obj, Zone
 
 PUNCT = {",", ";", ".", ":", "!", "?"}
+SEGMENT_END = {".", "!", "?", ";", ":"}
 SENTENCE_END = {".", "!", "?"}
+PRIOR = {"that", "either", "this", "all", "those", "these", "both", "everything"}
 
 
 class Clause:
-    def __init__(self, items, sentence, sub=None):
+    def __init__(self, items, segment, sentence, sub=None, prior=False, context=None):
         self.items = items
-        self.sentence = sentence  # index of the sentence the clause is in
-        self.sub = sub  # "before" / "after" when the clause opened with one
+        self.context = context  # the object mentioned last up to the end of this clause
+        self.front = False  # "... before all of that": the very first thing to do
+        self.segment = segment
+        self.sentence = sentence
+        self.sub = sub  # "before" / "after" / "once" when the clause opened with one
+        self.prior = prior  # opened with "before that": goes before what was said before
 
     def words(self):
-        return [x for x in self.items if isinstance(x, str)]
+        """The plain words, pronouns included ("hold it")."""
+        return [x if isinstance(x, str) else x.word for x in self.items if isinstance(x, str) or getattr(x, "word", None)]
+
+    def objects(self):
+        return [x.name for x in self.items if isinstance(x, Obj)]
+
+    def zones(self):
+        return [x for x in self.items if isinstance(x, Zone)]
+
+    def has(self, phrase):
+        w = self.words()
+        n = len(phrase)
+        return any(tuple(w[i:i + n]) == phrase for i in range(len(w) - n + 1))
 
     def __repr__(self):
-        return "Clause(%r%s)" % (self.items, ", " + self.sub if self.sub else "")
+        tags = [t for t in (self.sub, "prior" if self.prior else None) if t]
+        return "Clause(%d %r%s)" % (self.segment, self.items, " " + ",".join(tags) if tags else "")
 
 
 def connective_at(items, k):
@@ -40,21 +67,41 @@ def connective_at(items, k):
 
 
 def split(items):
-    clauses, cur, sentence, sub = [], [], 0, None
+    clauses, cur = [], []
+    segment = sentence = 0
+    sub, prior = None, False
+    context = None
 
     def close():
-        nonlocal cur, sub
+        nonlocal cur, sub, prior
         if cur:
-            clauses.append(Clause(cur, sentence, sub))
-        cur, sub = [], None
+            clauses.append(Clause(cur, segment, sentence, sub, prior, context))
+            cur, sub, prior = [], None, False
 
     k = 0
     while k < len(items):
         it = items[k]
         if isinstance(it, str) and it in PUNCT:
             close()
-            if it in SENTENCE_END:
-                sentence += 1
+            segment += it in SEGMENT_END
+            sentence += it in SENTENCE_END
+            k += 1
+            continue
+        if it in (BEFORE,) and k + 1 < len(items) and items[k + 1] in PRIOR:
+            # "before that", "before all of that", "before either": refers back. At the end
+            # of a clause ("go to the shelf before all of that") it puts that clause first.
+            if cur:
+                close()
+                clauses[-1].front = True
+            else:
+                prior = True
+            k += 2
+            while k < len(items) and items[k] in {"of", "that", "this", "all", "those", "it"}:
+                k += 1
+            continue
+        if it == "once" or (it in (BEFORE, AFTER) and not (k + 1 < len(items) and items[k + 1] == "that")):
+            close()
+            sub = it
             k += 1
             continue
         n = connective_at(items, k)
@@ -64,37 +111,85 @@ def split(items):
             continue
         if it == "and" and k + 1 < len(items):
             nxt = items[k + 1]
-            if isinstance(nxt, str) and (nxt in VERBS or nxt in {"you", "please"}):
+            if isinstance(nxt, str) and (nxt in VERBS or nxt in {"you", "please", "finally", "lastly"}):
                 close()
                 k += 1
                 continue
-        if it in (BEFORE, AFTER) and not (k + 1 < len(items) and items[k + 1] == "that"):
-            close()
-            sub = it
-            k += 1
-            continue
+        if isinstance(it, Obj):
+            context = it.name
         cur.append(it)
         k += 1
     close()
-    return reorder([c for c in clauses if has_content(c)])
+    return order([c for c in clauses if has_content(c) or c.prior])
 
 
 def has_content(c):
     return any(isinstance(x, (Obj, Zone)) for x in c.items) or any(w in VERBS for w in c.words())
 
 
-def reorder(clauses):
-    """ "Before X, Y": Y first. "Y after X" (not at a sentence start): X first."""
-    out = list(clauses)
-    i = 0
-    while i < len(out):
-        c = out[i]
-        first_in_sentence = i == 0 or out[i - 1].sentence != c.sentence
-        if c.sub == BEFORE and first_in_sentence and i + 1 < len(out) and out[i + 1].sentence == c.sentence:
-            out[i], out[i + 1] = out[i + 1], out[i]
-            i += 2
-            continue
-        if c.sub == AFTER and not first_in_sentence:
-            out[i - 1], out[i] = out[i], out[i - 1]
-        i += 1
-    return out
+def segments_of(clauses):
+    segs = []
+    for c in clauses:
+        if segs and segs[-1][0].segment == c.segment:
+            segs[-1].append(c)
+        else:
+            segs.append([c])
+    return segs
+
+
+def order(clauses):
+    segs = [order_segment(s) for s in segments_of(clauses)]
+    # A segment opening with "before that" (or "before X, Y" after an earlier segment) goes
+    # before the segment it refers to.
+    out = []
+    for s in segs:
+        if out and (s[0].prior or (s[0].sub == BEFORE and len(s) > 1)):
+            head = s[1:] + s[:1] if s[0].sub == BEFORE else s
+            out[-1:-1] = [head]
+        else:
+            out.append(s)
+    flat = [c for s in out for c in s if has_content(c)]
+    # Explicit first (within its sentence, or of all with "before all of that") and last.
+    front = [c for c in flat if c.front]
+    flat = [c for c in flat if not c.front]
+    by_sentence = []
+    for c in flat:
+        if by_sentence and by_sentence[-1][0].sentence == c.sentence:
+            by_sentence[-1].append(c)
+        else:
+            by_sentence.append([c])
+    flat = []
+    for s in by_sentence:
+        flat += [c for c in s if says_first(c)] + [c for c in s if not says_first(c)]
+    last = [c for c in flat if says_last(c)]
+    return front + [c for c in flat if c not in last] + last
+
+
+def order_segment(s):
+    s = list(s)
+    # "Before X, Y": Y then X.
+    if len(s) > 1 and s[0].sub == BEFORE and not s[0].prior:
+        s = [s[1], s[0]] + s[2:]
+    # "Y, once X" / "Y after X" at the end of a segment: the subordinate part first.
+    if len(s) > 1 and s[-1].sub in (AFTER, "once") and not any(c.sub in (AFTER, "once") for c in s[:-1]):
+        return s[-1:] + s[:-1]
+    return s
+
+
+def says_last(c):
+    return any(c.has(m) for m in END_MARKERS)
+
+
+def says_first(c):
+    """ "start by ...", "first visit ...", "your first stop ...": "first" before the place or
+    the verb. "stop by the sink first" (after the place) is a stop on the way instead."""
+    if not any(c.has(m) for m in FIRST_MARKERS):
+        return False
+    words = c.items
+    k = next(i for i, x in enumerate(words) if isinstance(x, str) and x in {"first", "start", "begin", "starting", "beginning"})
+    mentions = [i for i, x in enumerate(words) if isinstance(x, (Zone, Obj))]
+    if not mentions:
+        return False
+    if any(isinstance(x, Obj) for x in words) and not any(isinstance(x, Zone) for x in words):
+        return False  # "start with the cup", "the cup first": an order of deliveries
+    return k < mentions[0] or any(isinstance(x, Obj) for x in words)

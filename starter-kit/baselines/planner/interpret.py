@@ -9,7 +9,8 @@ Step strings are the plan grammar's: `move to the <colour> zone`, `pick the <obj
 """
 
 from clauses import split
-from lexicon import CARRY, ITS_PLACE, MOVE, ONTO, PICK, PLACE, PRONOUNS, SOURCE, SWAP, VIA, VIA_FOLLOWUP
+from references import resolve
+from lexicon import CARRY, MOVE, ONTO, ORDER_MARKERS, PICK, PLACE, PUT, SOURCE, SWAP, SWAP_PHRASES, VIA, VIA_FOLLOWUP
 from mentions import Obj, Zone, ground
 
 
@@ -69,6 +70,18 @@ class World:
         for c in colours:
             self.move(c)
 
+    def insert_before_last_move(self, colours):
+        """ "head for the shelf, but go by the sink first": stops before the latest move."""
+        if not self.steps or not self.steps[-1].startswith("move to"):
+            return False
+        last = self.steps.pop()
+        self.robot = None
+        for c in colours:
+            self.move(c)
+        self.steps.append(last)
+        self.robot = last[len("move to the "):-len(" zone")]
+        return True
+
     def insert_vias(self, colours):
         """Stops on the way of the latest delivery: before the move that ended it."""
         k = self.last_place
@@ -81,19 +94,9 @@ class World:
         return True
 
     # --- reference resolution ---------------------------------------------------------------
-    def obj(self, it):
-        if isinstance(it, Obj):
-            return it.name
-        return self.last_obj  # a pronoun
-
     def zone(self, z, moving=None):
         if z.kind == "zone":
             return z.colour
-        if z.kind == "there":
-            return self.last_zone
-        if z.kind == "its":
-            ref = self.prev_obj if moving == self.last_obj else self.last_obj
-            return self.orig.get(ref) if ref else None
         name = z.obj or self.last_obj
         cur = self.loc.get(name) or self.robot
         # "the plate where the red cup is now": after the cup moved, its old place is meant.
@@ -109,37 +112,56 @@ class World:
 def plan(instruction, scene):
     """The plan steps for one instruction in one scene."""
     w = World(scene)
-    prev_sentence = None
-    for c in split(resolve_markers(ground(instruction, scene))):
-        interpret(w, c, same_sentence=(c.sentence == prev_sentence))
-        prev_sentence = c.sentence
+    clauses = split(resolve(ground(instruction, scene)))
+    clauses = apply_directives(clauses)
+    propagate_carry(clauses)
+    prev = None
+    for c in clauses:
+        interpret(w, c, same_sentence=(prev is not None and c.sentence == prev.sentence))
+        prev = c
     return w.steps
 
 
-def resolve_markers(items):
-    """Words that stand for places: "there", "its place", "where it was"."""
-    out = []
-    k = 0
-    while k < len(items):
-        it = items[k]
-        rest = tuple(x if isinstance(x, str) else None for x in items[k:k + 3])
-        hit = next((p for p in sorted(ITS_PLACE, key=len, reverse=True) if rest[:len(p)] == p), None)
-        if hit:
-            out.append(Zone("its"))
-            k += len(hit)
+def is_directive(c):
+    """ "start with the cup", "the cup first": names the delivery to do first, moves nothing."""
+    return bool(c.objects()) and not c.zones() and any(c.has(m) for m in ORDER_MARKERS) and not carries(c)
+
+
+def apply_directives(clauses):
+    out = [c for c in clauses]
+    for c in clauses:
+        if not is_directive(c):
             continue
-        if it == "there":
-            out.append(Zone("there"))
-        elif it == "where" and k + 1 < len(items) and items[k + 1] in PRONOUNS:
-            after = [x for x in items[k + 2:k + 5] if isinstance(x, str)]
-            from lexicon import ORIGINAL
-            out.append(Zone("of", obj=None, original=any(a in ORIGINAL for a in after)))
-            k += 2
+        name = c.objects()[0]
+        i = out.index(c)
+        movers = [j for j in range(i) if out[j].objects() and not is_directive(out[j])]
+        mine = [j for j in movers if name in out[j].objects()]
+        if not mine:
             continue
+        if movers[0] < mine[0]:
+            out.insert(movers[0], out.pop(mine[0]))
         else:
-            out.append(it)
-        k += 1
+            out[mine[0]].first_obj = name
     return out
+
+
+def carries(c):
+    return any(c.has(p) for p in CARRY)
+
+
+def propagate_carry(clauses):
+    """ "carry it to the counter, then the table, without letting go": the carry said at the
+    end covers the earlier clauses of the sentence about the same object, unless they say to
+    put it down."""
+    for i, c in enumerate(clauses):
+        c.carry = carries(c)
+    for i, c in enumerate(clauses):
+        if not c.carry or not c.objects():
+            continue
+        for e in reversed(clauses[:i]):
+            if e.sentence != c.sentence or e.objects() != c.objects()[:1] or any(w in PUT for w in e.words()):
+                break
+            e.carry = True
 
 
 def interpret(w, clause, same_sentence):
@@ -149,21 +171,24 @@ def interpret(w, clause, same_sentence):
     verb_before_obj = None
     first_verb = None
     for k, it in enumerate(items):
-        if isinstance(it, Obj) or (it in PRONOUNS and not (k + 1 < len(items) and items[k + 1] == "'s")):
-            if isinstance(it, str) and (w.last_obj is None or objs):
-                continue
-            objs.append(w.obj(it))
-            w.mention(objs[-1])
+        if isinstance(it, Obj):
+            if it.name not in objs:
+                objs.append(it.name)
+            w.mention(it.name)
         elif isinstance(it, Zone):
             zones.append((it, role(items, k, objs)))
         elif isinstance(it, str) and verb_class(it):
             first_verb = first_verb or verb_class(it)
             if not objs:
                 verb_before_obj = verb_class(it)
+    if is_directive(clause):
+        return
     # With no verb before the object, it is the subject: "the cup goes to the shelf".
     verb = verb_before_obj or ("place" if first_verb == "move" and objs else first_verb)
-    carry = any(has(words, p) for p in CARRY)
-    objs = [o for o in objs if o]
+    if any(clause.has(p) for p in SWAP_PHRASES):
+        verb = "swap"
+    carry = getattr(clause, "carry", False)
+    first = getattr(clause, "first_obj", None)
     # Zones that merely say where an object is, or where it comes from, are not targets.
     targets, vias = [], []
     for z, r in zones:
@@ -175,12 +200,16 @@ def interpret(w, clause, same_sentence):
         if r == "locative" and objs and colour == w.loc.get(objs[-1]):
             continue
         (vias if r == "via" else targets).append(colour)
-        w.last_zone = colour
 
-    if verb == "swap" and len(objs) >= 2:
-        a, b = objs[0], objs[1]
+    if verb == "swap" and (len(objs) >= 2 or (len(objs) == 1 and zones)):
+        a = objs[0]
+        b = objs[1] if len(objs) > 1 else zones[0][0].obj
+        if not b or b not in w.loc:
+            return
+        if first == b:
+            a, b = b, a
         to_a = w.orig[a] if w.loc[a] is None else w.loc[a]
-        w.deliver(a, w.loc[b])
+        w.deliver(a, w.loc[b] or w.orig[b])
         w.deliver(b, to_a)
         return
     if verb == "pick" and objs and not carry and not ({"take", "taking"} & set(words)):
@@ -191,20 +220,22 @@ def interpret(w, clause, same_sentence):
             for o in objs:
                 w.carry(o, vias + targets)
         elif len(objs) > 1 and len(objs) == len(targets):
-            for o, t in zip(objs, targets):
+            pairs = list(zip(objs, targets))
+            pairs.sort(key=lambda p: p[0] != first)
+            for o, t in pairs:
                 w.deliver(o, t)
         else:
             dest = targets[-1] if targets else vias.pop()
+            objs.sort(key=lambda o: o != first)
             for o in objs:
                 w.deliver(o, dest, vias + targets[:-1])
         return
     if objs:
-        if verb in ("move", None) or has(words, ("first",)):
-            return  # "starting with the plate", "the bowl first": order only
-        if verb == "place" and ("down" in words or w.held == objs[0]) and not carry:
-            if w.held == objs[0]:
-                w.put()
-                return
+        if verb in ("move", None) and not carry:
+            return
+        if verb == "place" and w.held == objs[0] and not carry:
+            w.put()
+            return
         if verb == "place" and w.held != objs[0] and "down" in words:
             return
         for o in objs:
@@ -212,8 +243,10 @@ def interpret(w, clause, same_sentence):
         return
     if targets or vias:
         colours = vias + targets
-        followup = same_sentence and any(has(words, p) for p in VIA_FOLLOWUP)
+        followup = same_sentence and (any(has(words, p) for p in VIA_FOLLOWUP) or (vias and not targets))
         if followup and w.last_place is not None and w.held is None and w.insert_vias(colours):
+            return
+        if followup and w.held is not None and w.insert_before_last_move(colours):
             return
         onto = any(has(words, p) for p in ONTO)
         if w.held and not carry and (verb == "place" or (verb is None and onto)):
@@ -222,8 +255,8 @@ def interpret(w, clause, same_sentence):
             w.put(colours[-1])
             return
         from_there = any(r == "source" for _, r in zones)
-        if verb is None and (onto or from_there) and w.last_obj and not carry:
-            w.deliver(w.last_obj, colours[-1], colours[:-1])
+        if verb is None and (onto or from_there) and clause.context and not carry:
+            w.deliver(clause.context, colours[-1], colours[:-1])
             return
         for c in colours:
             w.move(c)

@@ -32,7 +32,7 @@ VERBS = MOVE | PICK | PLACE | SWAP
 # Words and phrases that end one step of the instruction and start the next.
 CONNECTIVES = [
     ("and", "then"), ("after", "that"), ("and", "after", "that"), ("then",), ("afterwards",),
-    ("afterward",), ("finally",), ("once",), ("while",), ("lastly",), ("so",),
+    ("afterward",), ("while",), ("so",), ("followed", "by"),
 ]
 # Subordinators that may reorder: "before X, Y" does Y first.
 BEFORE = "before"
@@ -43,9 +43,14 @@ CARRY = [
     ("without", "putting"), ("without", "letting"), ("without", "setting"),
     ("without", "dropping"), ("keep", "it"), ("in", "hand"), ("hold", "on"), ("with", "you"),
     ("with", "it"), ("on", "a", "tour"), ("holding", "it"), ("still", "holding"), ("hold", "it"),
+    ("holding",), ("your", "hand"), ("never", "put"), ("never", "let"), ("don't", "put"),
+    ("do", "not", "put"), ("show", "it"), ("kept", "in"), ("keep", "holding"), ("keeping", "it"),
+    ("not", "put", "it", "down"), ("in", "your", "gripper"),
 ]
 # Words before a zone that make it a stop on the way, not the destination.
-VIA = [("by", "way", "of"), ("via",), ("past",), ("passing",), ("stopping",), ("through",)]
+VIA = [("by", "way", "of"), ("via",), ("past",), ("passing",), ("stopping",), ("through",),
+       ("detouring", "by"), ("detour", "by"), ("detour", "via"), ("detour", "past"), ("go", "by"),
+       ("carry", "it", "by"), ("stopping", "at"), ("stopping", "by"), ("calling", "at")]
 # Words in a follow-up clause that make its zones stops on the way of the previous delivery.
 VIA_FOLLOWUP = [("on", "the", "way"), ("passing",), ("stopping",), ("first",), ("beforehand",)]
 # Words before a zone that make it where the object comes from.
@@ -67,3 +72,18 @@ ITS_PLACE = [("its", "place"), ("its", "old", "place"), ("its", "spot"), ("inste
 # Words that make a zone-only follow-up put the held object down ("then onto the shelf").
 ONTO = [("onto",), ("into",)]
 PRONOUNS = {"it", "them", "one"}
+# Phrases that make a clause the last thing to do.
+END_MARKERS = [("finish",), ("finishes",), ("end",), ("ends",), ("eventually",), ("final",),
+               ("in", "the", "end"), ("at", "the", "end"), ("last",), ("lastly",), ("finally",)]
+# Phrases that make a clause the first thing to do (see clauses.says_first).
+FIRST_MARKERS = [("first",), ("start", "by"), ("begin", "by"), ("start", "at"), ("begin", "at"),
+                 ("starting", "at"), ("beginning", "at"), ("to", "begin")]
+# Phrases naming the delivery to do first: "start with the cup", "the cup first".
+ORDER_MARKERS = [("first",), ("start", "with"), ("begin", "with"), ("starting", "with"),
+                 ("beginning", "with"), ("start", "by"), ("begin", "by"), ("dealing", "with")]
+# Multi-word ways of saying swap.
+SWAP_PHRASES = [("change", "places"), ("trade", "places"), ("switch", "places"),
+                ("swap", "places"), ("exchange", "places"), ("vice", "versa"), ("trade", "spots"),
+                ("swap", "spots"), ("switch", "spots")]
+# Verbs that explicitly put an object down (a later "without letting go" does not undo them).
+PUT = {"put", "place", "set", "leave", "drop", "deposit", "placing", "setting", "leaving", "dropping", "putting"}

@@ -26,8 +26,11 @@ class Zone:
 
 
 class Obj:
-    def __init__(self, name):
+    """An object mention; `word` is the pronoun it was written as ("it"), if any."""
+
+    def __init__(self, name, word=None):
         self.name = name
+        self.word = word
 
     def __repr__(self):
         return "Obj(%s)" % self.name

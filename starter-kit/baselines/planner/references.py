@@ -1,0 +1,79 @@
+"""Pronouns and place words resolved in the order they are read, before clauses are
+reordered: "it" is the object mentioned last; "beside it" the object mentioned before the one
+being moved; "there" the place mentioned last; "its place" / "where it was" / "instead" the
+starting place of the object mentioned before.
+"""
+
+from lexicon import ITS_PLACE, ORIGINAL, PRONOUNS, RELATIVE
+from mentions import Obj, Zone, ends_with
+
+BOUNDARY = {",", ";", ".", ":", "!", "?", "then"}
+
+
+def resolve(items):
+    out = []
+    seen = []  # object names in reading order, with the index in `out` of each mention
+    last_zone = None
+    k = 0
+    while k < len(items):
+        it = items[k]
+        plain = [x if isinstance(x, str) else None for x in items]
+        rest = tuple(plain[k:k + 3])
+        hit = next((p for p in sorted(ITS_PLACE, key=len, reverse=True) if rest[:len(p)] == p), None)
+        if hit == ("instead",) and clause_has_zone(out):
+            k += 1  # "put it on the red zone instead": the place is said
+            continue
+        if hit:
+            ref = other_than_current(out, seen)
+            z = Zone("of", obj=ref, original=True) if ref else Zone("zone", colour=None)
+            out.append(z)
+            k += len(hit)
+            continue
+        if isinstance(it, Obj):
+            seen.append((it.name, len(out)))
+            out.append(it)
+        elif isinstance(it, Zone):
+            out.append(it)
+            last_zone = it
+        elif it == "there" and last_zone is not None:
+            out.append(last_zone)
+        elif it in PRONOUNS and seen:
+            relative = any(ends_with(plain, k, r) for r in RELATIVE) and not (
+                ends_with(plain, k, ("on", "to")) or ends_with(plain, k, ("up", "to")))
+            if it == "one" and not relative:
+                out.append(it)
+            elif relative:
+                after = [x for x in plain[k + 1:k + 4] if x]
+                ref = seen[-1][0] if out and out[-1] == "where" else other_than_current(out, seen)
+                if ref:
+                    out.append(Zone("of", obj=ref, original=any(a in ORIGINAL for a in after)))
+                    last_zone = out[-1]
+            else:
+                out.append(Obj(seen[-1][0], word=it))
+        else:
+            out.append(it)
+        k += 1
+    return out
+
+
+def other_than_current(out, seen):
+    """The object mentioned before the one of the current clause ("put the bowl beside it")."""
+    if not seen:
+        return None
+    name, at = seen[-1]
+    same_clause = not any(isinstance(x, str) and x in BOUNDARY for x in out[at:])
+    if same_clause:
+        for n, _ in reversed(seen):
+            if n != name:
+                return n
+        return None
+    return name
+
+
+def clause_has_zone(out):
+    for x in reversed(out):
+        if isinstance(x, str) and x in BOUNDARY:
+            return False
+        if isinstance(x, Zone):
+            return True
+    return False
