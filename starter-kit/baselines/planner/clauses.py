@@ -99,6 +99,12 @@ def split(items):
             while k < len(items) and items[k] in {"of", "that", "this", "all", "those", "it"}:
                 k += 1
             continue
+        if it in (BEFORE, AFTER) and k + 1 < len(items) and isinstance(items[k + 1], Obj) and (
+            k + 2 >= len(items) or items[k + 2] in PUNCT
+        ):
+            cur.append(it)  # "move the fork before the apple": an order of deliveries
+            k += 1
+            continue
         if it == "once" or (it in (BEFORE, AFTER) and not (k + 1 < len(items) and items[k + 1] == "that")):
             close()
             sub = it
@@ -170,13 +176,20 @@ def order_segment(s):
     # "Before X, Y": Y then X.
     if len(s) > 1 and s[0].sub == BEFORE and not s[0].prior:
         s = [s[1], s[0]] + s[2:]
-    # "Y, once X" / "Y after X" at the end of a segment: the subordinate part first.
-    if len(s) > 1 and s[-1].sub in (AFTER, "once") and not any(c.sub in (AFTER, "once") for c in s[:-1]):
+    # "Y, after X": X first. "Y, once X" at the end of a segment: X first.
+    for i in range(1, len(s)):
+        if s[i].sub == AFTER and s[i - 1].sub is None:
+            s[i - 1], s[i] = s[i], s[i - 1]
+            return s
+    if len(s) > 1 and s[-1].sub == "once" and not any(c.sub in (AFTER, "once") for c in s[:-1]):
         return s[-1:] + s[:-1]
     return s
 
 
 def says_last(c):
+    """ "finish at", "in the end"; not "the cup should end up on the shelf" (a destination)."""
+    if c.objects() and (c.has(("end", "up")) or c.has(("ends", "up"))):
+        return False
     return any(c.has(m) for m in END_MARKERS)
 
 

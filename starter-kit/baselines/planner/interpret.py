@@ -123,7 +123,8 @@ def plan(instruction, scene):
 
 
 def is_directive(c):
-    """ "start with the cup", "the cup first": names the delivery to do first, moves nothing."""
+    """ "start with the cup", "the cup first", "the fork before the apple": names the delivery
+    to do first, moves nothing."""
     return bool(c.objects()) and not c.zones() and any(c.has(m) for m in ORDER_MARKERS) and not carries(c)
 
 
@@ -133,8 +134,7 @@ def apply_directives(clauses):
         if not is_directive(c):
             continue
         name = c.objects()[0]
-        i = out.index(c)
-        movers = [j for j in range(i) if out[j].objects() and not is_directive(out[j])]
+        movers = [j for j in range(len(out)) if out[j].objects() and not is_directive(out[j])]
         mine = [j for j in movers if name in out[j].objects()]
         if not mine:
             continue
@@ -156,12 +156,18 @@ def propagate_carry(clauses):
     for i, c in enumerate(clauses):
         c.carry = carries(c)
     for i, c in enumerate(clauses):
-        if not c.carry or not c.objects():
+        if not c.carry:
             continue
+        obj = c.objects()[:1]
         for e in reversed(clauses[:i]):
-            if e.sentence != c.sentence or e.objects() != c.objects()[:1] or any(w in PUT for w in e.words()):
+            if e.sentence != c.sentence or any(w in PUT for w in e.words()):
+                break
+            if not e.objects():
+                continue
+            if obj and e.objects() != obj:
                 break
             e.carry = True
+            obj = obj or e.objects()[:1]
 
 
 def interpret(w, clause, same_sentence):
@@ -177,7 +183,7 @@ def interpret(w, clause, same_sentence):
             w.mention(it.name)
         elif isinstance(it, Zone):
             zones.append((it, role(items, k, objs)))
-        elif isinstance(it, str) and verb_class(it):
+        elif isinstance(it, str) and verb_class(it) and not (k and items[k - 1] in {"the", "its", "a"}):
             first_verb = first_verb or verb_class(it)
             if not objs:
                 verb_before_obj = verb_class(it)
@@ -215,6 +221,10 @@ def interpret(w, clause, same_sentence):
     if verb == "pick" and objs and not carry and not ({"take", "taking"} & set(words)):
         # "pick up the cup there": a zone where the object already is says where, not whither.
         targets = [t for t in targets if t != w.loc.get(objs[-1])]
+    if objs and vias and not targets and same_sentence and w.last_place is not None and w.held is None:
+        # "..., and on the way carry it past the shelf": stops of the delivery just made.
+        if w.steps[w.last_place] == "place the %s" % objs[0] and w.insert_vias(vias):
+            return
     if objs and (targets or vias):
         if carry or verb == "move":
             for o in objs:
@@ -241,6 +251,8 @@ def interpret(w, clause, same_sentence):
         for o in objs:
             w.hold(o)
         return
+    if not first_verb and zones and all(z.kind == "of" for z, _ in zones):
+        return  # "wherever the plate is": a description, not a request
     if targets or vias:
         colours = vias + targets
         followup = same_sentence and (any(has(words, p) for p in VIA_FOLLOWUP) or (vias and not targets))

@@ -15,14 +15,16 @@ MOVE = {
 # Verbs that ask the robot to take hold of an object.
 PICK = {
     "pick", "picking", "grab", "grabbing", "take", "taking", "fetch", "fetching", "get",
-    "getting", "lift", "collect", "hold", "holding", "retrieve", "seize", "keep",
+    "getting", "lift", "collect", "hold", "holding", "retrieve", "seize", "keep", "picked",
+    "held", "grabbed", "taken", "collected", "fetched", "lifted",
 }
 # Verbs that move an object to a place (put it down there).
 PLACE = {
     "put", "putting", "place", "placing", "set", "setting", "leave", "leaving", "left", "drop",
     "dropping", "move", "moves", "moved", "moving", "bring", "bringing", "carry", "carrying",
     "deliver", "transfer", "clear", "remove", "relocate", "belongs", "belong", "store", "rest",
-    "return", "returning",
+    "return", "returning", "placed", "dropped", "carried", "brought", "delivered", "returned",
+    "parade", "route", "relocated", "removed",
 }
 # Verbs that exchange the places of two objects.
 SWAP = {"swap", "trade", "exchange", "switch", "interchange"}
@@ -45,21 +47,24 @@ CARRY = [
     ("with", "it"), ("on", "a", "tour"), ("holding", "it"), ("still", "holding"), ("hold", "it"),
     ("holding",), ("your", "hand"), ("never", "put"), ("never", "let"), ("don't", "put"),
     ("do", "not", "put"), ("show", "it"), ("kept", "in"), ("keep", "holding"), ("keeping", "it"),
-    ("not", "put", "it", "down"), ("in", "your", "gripper"),
+    ("not", "put", "it", "down"), ("in", "your", "gripper"), ("never", "setting"),
+    ("never", "letting"), ("keep", "hold"), ("keeps", "hold"), ("without", "ever"),
 ]
 # Words before a zone that make it a stop on the way, not the destination.
 VIA = [("by", "way", "of"), ("via",), ("past",), ("passing",), ("stopping",), ("through",),
        ("detouring", "by"), ("detour", "by"), ("detour", "via"), ("detour", "past"), ("go", "by"),
-       ("carry", "it", "by"), ("stopping", "at"), ("stopping", "by"), ("calling", "at")]
+       ("carry", "it", "by"), ("stopping", "at"), ("stopping", "by"), ("calling", "at"),
+       ("a", "stop", "at"), ("route", "it", "past")]
 # Words in a follow-up clause that make its zones stops on the way of the previous delivery.
-VIA_FOLLOWUP = [("on", "the", "way"), ("passing",), ("stopping",), ("first",), ("beforehand",)]
+VIA_FOLLOWUP = [("on", "the", "way"), ("passing",), ("stopping",), ("first",), ("beforehand",),
+                ("along", "the", "way"), ("en", "route"), ("detour",), ("past",), ("via",)]
 # Words before a zone that make it where the object comes from.
 SOURCE = {"from", "off"}
 # Words between an object and the zone that merely says where it is ("the cup on the table").
 LOCATIVE = {"on", "in", "at", "from", "off"}
 # Words before an object mention that make it a place ("next to the apple").
 RELATIVE = [
-    ("next", "to"), ("beside",), ("by",), ("where",), ("near",), ("spot", "of"),
+    ("next", "to"), ("beside",), ("by",), ("where",), ("wherever",), ("near",), ("spot", "of"),
     ("over", "to"), ("to",), ("alongside",), ("place", "of"), ("position", "of"),
 ]
 # Words after an object mention that make it the subject, not a place ("where the cup belongs").

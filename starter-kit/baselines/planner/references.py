@@ -35,8 +35,15 @@ def resolve(items):
         elif isinstance(it, Zone):
             out.append(it)
             last_zone = it
-        elif it == "there" and last_zone is not None:
-            out.append(last_zone)
+        elif it == "there" and (last_zone is not None or seen):
+            # "there": the place said last, else where the object said last is.
+            out.append(last_zone if last_zone is not None else Zone("of", obj=seen[-1][0]))
+        elif it == "that" and tuple(plain[k + 1:k + 3]) == ("is", "where") and last_zone is not None:
+            out.append(last_zone)  # "wherever the plate is, that is where the cup goes"
+            k += 3
+            continue
+        elif it in PRONOUNS and k > 0 and plain[k - 1] == "without":
+            out.append(it)  # "come back without it": not a mention of what to move
         elif it in PRONOUNS and seen:
             relative = any(ends_with(plain, k, r) for r in RELATIVE) and not (
                 ends_with(plain, k, ("on", "to")) or ends_with(plain, k, ("up", "to")))
