@@ -12,6 +12,7 @@ mod remote_support;
 
 mod admin;
 mod audit;
+mod baseline_planner;
 mod cli;
 mod control;
 mod episodes;
