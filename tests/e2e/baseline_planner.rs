@@ -14,8 +14,9 @@ use serde_json::Value;
 use support::*;
 
 /// The README's figures (Baselines, Planning baseline): dev split and the public test sample.
-const DEV_EM: f64 = 0.995617879053462;
-const TEST_SAMPLE_EM: f64 = 0.955392857142857;
+const DEV_EM: f64 = 0.9973707274320772;
+/// The public sample is built from the public templates, like dev: it cannot rank planners.
+const TEST_SAMPLE_EM: f64 = 1.0;
 
 fn planner_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../starter-kit/baselines/planner")

@@ -28,6 +28,7 @@ class Clause:
         self.items = items
         self.context = context  # the object mentioned last up to the end of this clause
         self.front = False  # "... before all of that": the very first thing to do
+        self.ends_with_colon = False  # its segment ends with ":" (a summary, then the how)
         self.segment = segment
         self.sentence = sentence
         self.sub = sub  # "before" / "after" / "once" when the clause opened with one
@@ -83,6 +84,10 @@ def split(items):
         it = items[k]
         if isinstance(it, str) and it in PUNCT:
             close()
+            if it == ":":
+                for c in clauses:
+                    if c.segment == segment:
+                        c.ends_with_colon = True
             segment += it in SEGMENT_END
             sentence += it in SENTENCE_END
             k += 1
@@ -105,9 +110,9 @@ def split(items):
             cur.append(it)  # "move the fork before the apple": an order of deliveries
             k += 1
             continue
-        if it == "once" or (it in (BEFORE, AFTER) and not (k + 1 < len(items) and items[k + 1] == "that")):
+        if it == "when" and cur == [] or it == "once" or (it in (BEFORE, AFTER) and not (k + 1 < len(items) and items[k + 1] == "that")):
             close()
-            sub = it
+            sub = "once" if it == "when" else it
             k += 1
             continue
         n = connective_at(items, k)
@@ -126,7 +131,23 @@ def split(items):
         cur.append(it)
         k += 1
     close()
-    return order([c for c in clauses if has_content(c) or c.prior])
+    clauses = merge_object_lists([c for c in clauses if has_content(c) or c.prior])
+    return order(clauses)
+
+
+def merge_object_lists(clauses):
+    """ "collect the red cup and then the blue cup on the shelf": one request for both."""
+    out = []
+    for c in clauses:
+        prev = out[-1] if out else None
+        if (prev is not None and prev.sentence == c.sentence and c.sub is None and not c.prior
+                and prev.objects() and not prev.zones() and c.items and isinstance(c.items[0], Obj)
+                and c.zones() and not any(w in VERBS for w in c.words())):
+            prev.items = prev.items + ["and"] + c.items
+            prev.context = c.context
+            continue
+        out.append(c)
+    return out
 
 
 def has_content(c):

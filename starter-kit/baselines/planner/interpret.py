@@ -10,7 +10,10 @@ Step strings are the plan grammar's: `move to the <colour> zone`, `pick the <obj
 
 from clauses import split
 from references import resolve
-from lexicon import CARRY, MOVE, ONTO, ORDER_MARKERS, PICK, PLACE, PUT, SOURCE, SWAP, SWAP_PHRASES, VIA, VIA_FOLLOWUP
+from lexicon import (
+    CARRY, DESTINATION, MOVE, ONTO, ORDER_MARKERS, PICK, PLACE, PUT, REPLACE, SOURCE, SWAP, SWAP_PHRASES, VIA,
+    VIA_FOLLOWUP,
+)
 from mentions import Obj, Zone, ground
 
 
@@ -31,6 +34,9 @@ class World:
         self.last_zone = None
         self.steps = []
         self.last_place = None  # index in steps of the latest `place`
+        self.last_dest = None  # where the latest delivery went
+        self.intent = {}  # object -> the place a clause said it should go
+        self.last_clause_delivered = False
 
     # --- steps -----------------------------------------------------------------------------
     def move(self, colour):
@@ -55,6 +61,7 @@ class World:
         self.steps.append("place the %s" % self.held)
         self.loc[self.held] = self.robot
         self.last_place = len(self.steps) - 1
+        self.last_dest = self.robot
         self.held = None
 
     def deliver(self, obj, colour, vias=()):
@@ -116,10 +123,49 @@ def plan(instruction, scene):
     clauses = apply_directives(clauses)
     propagate_carry(clauses)
     prev = None
-    for c in clauses:
+    for c in summaries_skipped(clauses, w):
+        before = w.last_place
         interpret(w, c, same_sentence=(prev is not None and c.sentence == prev.sentence))
+        w.last_clause_delivered = w.last_place != before
         prev = c
     return w.steps
+
+
+def summaries_skipped(clauses, w):
+    """ "I want the cup on the table instead of the plate: move the plate to the shelf and
+    bring the cup over": the part before the colon says what the end state is, the part after
+    how to get there. Keep only the how, remembering where each object should go."""
+    out = []
+    i = 0
+    while i < len(clauses):
+        c = clauses[i]
+        seg = [x for x in clauses if x.segment == c.segment]
+        nxt = [x for x in clauses if x.segment == c.segment + 1]
+        said = {o for x in seg for o in x.objects()}
+        after = {o for x in nxt if not ({"without", "never", "not"} & set(x.words())) for o in x.objects()}
+        if c is seg[0] and c.ends_with_colon and said and said <= after:
+            for x in seg:
+                interpret(Intent(w), x, same_sentence=False)
+            i += len(seg)
+            continue
+        out.append(c)
+        i += 1
+    return out
+
+
+class Intent:
+    """A stand-in World that only records where clauses say objects should go."""
+
+    def __init__(self, w):
+        self.__dict__["w"] = w
+
+    def __getattr__(self, name):
+        if name in ("deliver", "carry", "hold", "put", "move", "insert_vias", "insert_before_last_move"):
+            return lambda *a, **k: False
+        return getattr(self.w, name)
+
+    def __setattr__(self, name, value):
+        setattr(self.w, name, value)
 
 
 def is_directive(c):
@@ -178,6 +224,9 @@ def interpret(w, clause, same_sentence):
     first_verb = None
     for k, it in enumerate(items):
         if isinstance(it, Obj):
+            plain = [x if isinstance(x, str) else None for x in items[max(0, k - 2):k]]
+            if plain in (["instead", "of"], ["rather", "than"]):
+                continue  # "the cup on the table instead of the plate": not what moves
             if it.name not in objs:
                 objs.append(it.name)
             w.mention(it.name)
@@ -203,10 +252,22 @@ def interpret(w, clause, same_sentence):
             continue
         if r == "source" and objs:
             continue
-        if r == "locative" and objs and colour == w.loc.get(objs[-1]):
-            continue
+        if isinstance(r, tuple) and colour == w.loc.get(r[1]):
+            continue  # "the cup on the table": where the cup is
         (vias if r == "via" else targets).append(colour)
+    destinations = sum(1 for _, r in zones if r == "destination")
+    for o in objs:
+        if targets:
+            w.intent[o] = targets[-1]
 
+    if any(x in REPLACE for x in words) and len(objs) >= 2 and not targets:
+        # "replace the plate with the cup" / "the plate is replaced by the cup": the cup moves.
+        w.deliver(objs[1], w.loc[objs[0]] or w.orig[objs[0]])
+        return
+    if clause.has(("the", "same")) and objs and not targets and w.last_dest:
+        for o in objs:  # "then do the same with the blue cup"
+            w.deliver(o, w.last_dest)
+        return
     if verb == "swap" and (len(objs) >= 2 or (len(objs) == 1 and zones)):
         a = objs[0]
         b = objs[1] if len(objs) > 1 else zones[0][0].obj
@@ -229,6 +290,10 @@ def interpret(w, clause, same_sentence):
         if carry or verb == "move":
             for o in objs:
                 w.carry(o, vias + targets)
+        elif len(objs) == 1 and len(targets) > 1 and destinations == len(targets):
+            for t in targets:  # "to the table and back to the shelf": put it down at each
+                w.deliver(objs[0], t, vias)
+                vias = []
         elif len(objs) > 1 and len(objs) == len(targets):
             pairs = list(zip(objs, targets))
             pairs.sort(key=lambda p: p[0] != first)
@@ -245,6 +310,9 @@ def interpret(w, clause, same_sentence):
             return
         if verb == "place" and w.held == objs[0] and not carry:
             w.put()
+            return
+        if verb == "place" and objs[0] in w.intent and ("over" in words or "here" in words):
+            w.deliver(objs[0], w.intent[objs[0]])  # "... and bring the cup over"
             return
         if verb == "place" and w.held != objs[0] and "down" in words:
             return
@@ -267,7 +335,12 @@ def interpret(w, clause, same_sentence):
             w.put(colours[-1])
             return
         from_there = any(r == "source" for _, r in zones)
-        if verb is None and (onto or from_there) and clause.context and not carry:
+        # "... to the shelf and then on to the table": a second leg of the same delivery.
+        lead = next(i for i, x in enumerate(items) if isinstance(x, Zone))
+        linking = {"and", "then", "on", "to", "onto", "back", "again", "first", "next", "from", "there", "finally"}
+        again = (same_sentence and w.last_clause_delivered and any(r == "destination" for _, r in zones)
+                 and all(x in linking for x in items[:lead]))
+        if verb is None and (onto or from_there or again) and clause.context and not carry:
             w.deliver(clause.context, colours[-1], colours[:-1])
             return
         for c in colours:
@@ -298,5 +371,7 @@ def role(items, k, objs):
     if before and before[-1] in SOURCE:
         return "source"
     if k >= 2 and isinstance(items[k - 2], Obj) and items[k - 1] in {"on", "in", "at", "from", "off"}:
-        return "locative"
+        return ("locative", items[k - 2].name)
+    if k >= 1 and items[k - 1] in DESTINATION:
+        return "destination"
     return "target"

@@ -10,7 +10,8 @@ MOVE = {
     "go", "goes", "going", "head", "heading", "walk", "walking", "navigate", "drive", "visit",
     "visiting", "stop", "stopping", "wait", "waiting", "check", "checking", "swing", "start",
     "starting", "continue", "finish", "finishing", "end", "ending",
-    "come", "look", "proceed", "travel", "pass", "passing", "stay", "park", "tour", "see",
+    "come", "look", "proceed", "travel", "pass", "passing", "stay", "park", "tour", "see", "find",
+    "pop",
 }
 # Verbs that ask the robot to take hold of an object.
 PICK = {
@@ -65,12 +66,14 @@ LOCATIVE = {"on", "in", "at", "from", "off"}
 # Words before an object mention that make it a place ("next to the apple").
 RELATIVE = [
     ("next", "to"), ("beside",), ("by",), ("where",), ("wherever",), ("near",), ("spot", "of"),
+    ("same", "spot", "as"), ("same", "place", "as"), ("the", "spot"), ("the", "place"),
     ("over", "to"), ("to",), ("alongside",), ("place", "of"), ("position", "of"),
 ]
 # Words after an object mention that make it the subject, not a place ("where the cup belongs").
 SUBJECT = {"belongs", "belong", "goes", "go", "should", "needs", "must"}
 # Words after such a mention that mean its starting place ("where the apple used to be").
-ORIGINAL = {"was", "used", "started", "now", "originally", "before", "initially", "earlier"}
+ORIGINAL = {"was", "used", "started", "now", "originally", "before", "initially", "earlier", "left",
+            "vacated", "had"}
 # Phrases for the starting place of the object mentioned before ("put the bowl in its place").
 ITS_PLACE = [("its", "place"), ("its", "old", "place"), ("its", "spot"), ("instead",),
              ("its", "old", "spot"), ("its", "former", "place")]
@@ -88,7 +91,16 @@ ORDER_MARKERS = [("first",), ("start", "with"), ("begin", "with"), ("starting", 
                  ("beginning", "with"), ("start", "by"), ("begin", "by"), ("dealing", "with")]
 # Multi-word ways of saying swap.
 SWAP_PHRASES = [("change", "places"), ("trade", "places"), ("switch", "places"),
+                ("changed", "places"), ("traded", "places"), ("switched", "places"),
+                ("swapped", "places"), ("exchanged", "places"), ("trade", "positions"),
                 ("swap", "places"), ("exchange", "places"), ("vice", "versa"), ("trade", "spots"),
                 ("swap", "spots"), ("switch", "spots")]
 # Verbs that explicitly put an object down (a later "without letting go" does not undo them).
 PUT = {"put", "place", "set", "leave", "drop", "deposit", "placing", "setting", "leaving", "dropping", "putting"}
+# Verbs of replacing: "replace the plate with the cup", "the plate is replaced by the cup".
+REPLACE = {"replace", "replaced", "replacing"}
+# Places that are "where the object mentioned before is": "leave the cup in the same place".
+SAME_PLACE = [("the", "same", "place"), ("the", "same", "spot")]
+# Prepositions that make each following place a destination of its own ("to the table and
+# back to the shelf": put it down at both).
+DESTINATION = {"to", "onto", "into"}

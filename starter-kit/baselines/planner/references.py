@@ -4,7 +4,7 @@ being moved; "there" the place mentioned last; "its place" / "where it was" / "i
 starting place of the object mentioned before.
 """
 
-from lexicon import ITS_PLACE, ORIGINAL, PRONOUNS, RELATIVE
+from lexicon import ITS_PLACE, ORIGINAL, PRONOUNS, RELATIVE, SAME_PLACE
 from mentions import Obj, Zone, ends_with
 
 BOUNDARY = {",", ";", ".", ":", "!", "?", "then"}
@@ -29,6 +29,20 @@ def resolve(items):
             out.append(z)
             k += len(hit)
             continue
+        same = next((p for p in SAME_PLACE if rest[:len(p)] == p), None)
+        if same and plain[k + len(same):k + len(same) + 1] != ["as"] and seen:
+            ref = other_than_current(out, seen)
+            if ref:
+                out.append(Zone("of", obj=ref))
+                k += len(same)
+                continue
+        if it == "where" and seen and plain[k + 1:k + 2] == ["you"]:
+            # "where you picked it up", "where you found it": the object's starting place.
+            j = next((i for i in range(k + 2, min(k + 6, len(plain))) if plain[i] in PRONOUNS), None)
+            if j is not None:
+                out.append(Zone("of", obj=seen[-1][0], original=True))
+                k = j + 1 + (plain[j + 1:j + 2] == ["up"])
+                continue
         if isinstance(it, Obj):
             seen.append((it.name, len(out)))
             out.append(it)
