@@ -6,11 +6,19 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 if ! python3 - <<'PY' 2>/dev/null
 import importlib.util, sys
-mods = ["mcap", "mcap_ros2", "h5py", "numpy", "grpc", "grpc_health", "grpc_tools", "google.protobuf"]
+mods = ["mcap", "mcap_ros2", "h5py", "numpy", "grpc", "grpc_health", "grpc_tools", "google.protobuf",
+        "playwright"]
 sys.exit(0 if all(importlib.util.find_spec(m) for m in mods) else 1)
 PY
 then
   echo "== installing the Python test readers (scripts/test-requirements.txt)"
   python3 -m pip install --quiet --disable-pip-version-check -r scripts/test-requirements.txt
+fi
+# The browser test (tests/e2e/browser.rs) drives Debian's Chromium: say so here rather than
+# fail (CI) or skip (elsewhere) deep inside the test run.
+if ! command -v chromium >/dev/null 2>&1; then
+  echo "== chromium is missing: the browser test (tests/e2e/browser.rs) needs it;" \
+    "install it with: apt-get install -y --no-install-recommends chromium" >&2
+  if [ "${CI:-}" = "true" ]; then exit 1; fi
 fi
 cargo test --workspace --locked "$@"

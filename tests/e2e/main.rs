@@ -13,6 +13,7 @@ mod remote_support;
 mod admin;
 mod audit;
 mod baseline_planner;
+mod browser;
 mod cli;
 mod control;
 mod episodes;

@@ -4,7 +4,8 @@
 //! - `GET|POST /team/login`, `POST /team/logout`: the team token kept in a session cookie;
 //! - `GET /team`: the team's submissions and quota left ([`team`]);
 //! - `GET /submissions/{id}`: one submission, for its team or the organiser ([`submission`]);
-//! - `GET /leaderboard/{track}/{split}/{id}`: a leaderboard entry's public summary.
+//! - `GET /leaderboard/{track}/{split}/{id}`: a leaderboard entry's public summary;
+//! - `GET /favicon.ico`: 204, no icon (the browser asks for it on its own).
 //!
 //! Policy: a page that needs a team takes the token once (the login form) and keeps it in the
 //! `kitchen_r_team` cookie; the organiser's console cookie opens submission pages too. Cookies
@@ -51,6 +52,17 @@ pub(super) fn routes() -> Router<AppState> {
             get(episode_plot),
         )
         .route("/leaderboard/{track}/{split}/{id}", get(entry_page))
+        .route("/favicon.ico", get(favicon))
+}
+
+/// Browsers ask every site for `/favicon.ico` by themselves; the pages have no icon. A 204
+/// (kept for a day) instead of a 404 keeps that request out of the browser console, where a
+/// real error would otherwise hide among them (tests/browser/check_pages.py fails on any).
+async fn favicon() -> Response {
+    axum::response::IntoResponse::into_response((
+        StatusCode::NO_CONTENT,
+        [(axum::http::header::CACHE_CONTROL, "public, max-age=86400")],
+    ))
 }
 
 /// Who opened a page: a bearer header first (scripts), then the team cookie, then the

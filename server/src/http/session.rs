@@ -15,7 +15,8 @@
 //!   rendered before a restart is refused with "reload the page". A request a browser marks
 //!   `Sec-Fetch-Site: cross-site` is refused outright.
 //! - Pages are `Cache-Control: no-store` with a Content-Security-Policy that allows no script
-//!   at all, and cannot be framed.
+//!   at all, images and media (the episode videos) from the server itself only, and cannot be
+//!   framed.
 
 use std::sync::OnceLock;
 
@@ -157,7 +158,7 @@ pub(super) fn html(status: StatusCode, body: String) -> Response {
     h.insert(
         header::CONTENT_SECURITY_POLICY,
         HeaderValue::from_static(
-            "default-src 'none'; img-src 'self'; style-src 'unsafe-inline'; form-action 'self'; frame-ancestors 'none'",
+            "default-src 'none'; img-src 'self'; media-src 'self'; style-src 'unsafe-inline'; form-action 'self'; frame-ancestors 'none'",
         ),
     );
     h.insert(header::X_FRAME_OPTIONS, HeaderValue::from_static("DENY"));

@@ -172,7 +172,8 @@ they do not rank planners.</p>",
 <style>body{{font-family:system-ui,sans-serif;margin:2rem auto;max-width:60rem;padding:0 1rem}}\
 table{{border-collapse:collapse;width:100%;margin-bottom:2rem}}th,td{{padding:.4rem .6rem;border-bottom:1px solid #ddd;text-align:left}}\
 td.n{{text-align:right;font-variant-numeric:tabular-nums}}th{{background:#f4f4f4}}tr.baseline{{color:#555;background:#fafafa}}\
-.banner{{background:#fff4d6;border:1px solid #e0b84a;padding:.6rem .8rem}}</style></head><body>\
+.banner{{background:#fff4d6;border:1px solid #e0b84a;padding:.6rem .8rem}}\
+@media(max-width:40rem){{table{{display:block;overflow-x:auto}}}}</style></head><body>\
 <h1>Kitchen-R leaderboard</h1>{banner}<p><a href=\"/contest\">The contest: tracks, metrics, \
 how to take part, data and rules</a> · <a href=\"/team\">Team page</a></p><p><b>{split}</b> split. <a href=\"/?split={other}\">Show the {other} split</a>. \
 Baseline rows are organiser reference runs and take no rank.</p>{tables}\

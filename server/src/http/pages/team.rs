@@ -67,14 +67,18 @@ pub(super) fn body(quota: &QuotaView, subs: &[TeamSubmission]) -> String {
         return out;
     }
     out.push_str(
-        "<div class=scroll><table><tr><th>Id</th><th>Submitted (UTC)</th><th>Split</th><th>Kind</th>\
+        "<div class=scroll><table class=cards><tr><th>Id</th><th>Submitted (UTC)</th><th>Split</th><th>Kind</th>\
 <th>State</th><th>EM</th><th>SR</th><th>MSE</th><th>M</th><th>P</th></tr>",
     );
+    // `data-label`: the column's name, shown before each value when a narrow screen turns the
+    // rows into cards (layout's `table.cards`).
     for s in subs {
         let _ = write!(
             out,
-            "<tr><td class=n><a href=\"/submissions/{id}\">{id}</a></td><td>{}</td><td>{}</td><td>{}</td>\
-<td>{}</td><td class=n>{}</td><td class=n>{}</td><td class=n>{}</td><td class=n>{}</td><td class=n>{}</td></tr>",
+            "<tr><td data-label=Id class=n><a href=\"/submissions/{id}\">{id}</a></td>\
+<td data-label=\"Submitted (UTC)\">{}</td><td data-label=Split>{}</td><td data-label=Kind>{}</td>\
+<td data-label=State>{}</td><td data-label=EM class=n>{}</td><td data-label=SR class=n>{}</td>\
+<td data-label=MSE class=n>{}</td><td data-label=M class=n>{}</td><td data-label=P class=n>{}</td></tr>",
             escape(&crate::clock::rfc3339(s.created_at)),
             escape(&s.split),
             if s.kind == SubmissionKind::Policy {

@@ -212,7 +212,7 @@ pub(super) fn console(c: &Console) -> String {
 <style>body{{font-family:system-ui,sans-serif;margin:2rem auto;max-width:80rem;padding:0 1rem}}\
 table{{border-collapse:collapse;width:100%;margin-bottom:1.5rem}}th,td{{padding:.3rem .5rem;border-bottom:1px solid #ddd;text-align:left;vertical-align:top}}\
 td.n{{text-align:right;font-variant-numeric:tabular-nums}}th{{background:#f4f4f4}}td.reason{{max-width:30rem;overflow-wrap:anywhere}}\
-form{{display:inline}}</style></head><body>\
+form{{display:inline}}@media(max-width:40rem){{table{{display:block;overflow-x:auto}}}}</style></head><body>\
 <h1>Kitchen-R organiser console</h1><p>As of {at} (refreshes every 15 s). Actions: \
 <code>kitchen-r admin cancel RUN</code>, <code>admin requeue RUN</code>, <code>admin backup FILE</code>. \
 <form method=post action=\"/admin/logout\">{CSRF_SLOT}<button>Log out</button></form></p>{body}</body></html>",
@@ -231,7 +231,7 @@ pub(crate) fn login(message: Option<&str>, csrf: &str) -> String {
         "<!doctype html><html lang=en><head><meta charset=utf-8><title>Kitchen-R organiser console</title>\
 <meta name=viewport content=\"width=device-width,initial-scale=1\">\
 <style>body{{font-family:system-ui,sans-serif;margin:2rem auto;max-width:30rem;padding:0 1rem}}\
-input{{width:100%;padding:.4rem;margin:.5rem 0}}.err{{color:#a00}}</style></head><body>\
+input{{width:100%;padding:.4rem;margin:.5rem 0;box-sizing:border-box}}.err{{color:#a00}}</style></head><body>\
 <h1>Organiser console</h1>{message}<form method=post action=\"/admin/login\">{csrf}\
 <label>Organiser token <input type=password name=token autocomplete=current-password required></label>\
 <button>Log in</button></form></body></html>"
