@@ -120,7 +120,9 @@ def state(frame):
     return hand + [frame.robot.gripper] + previous
 
 
-def make_servicer(pb2, pb2_grpc, policy, token, history=1, execute=0):
+def make_servicer(
+    pb2, pb2_grpc, policy, token, history=1, execute=0, name="starter-kit stand-still 0.2", max_concurrency=4
+):
     import grpc
 
     class Servicer(pb2_grpc.PolicyServicer):
@@ -144,8 +146,8 @@ def make_servicer(pb2, pb2_grpc, policy, token, history=1, execute=0):
                 cameras=cams,
                 horizon=HORIZON,
                 action_dim=ACTION_DIM,
-                max_concurrency=4,
-                name="starter-kit stand-still 0.2",
+                max_concurrency=max_concurrency,
+                name=name,
                 # v1.1: frames per Act (1..8), and actions executed per chunk (0 = the
                 # organiser's default, announced in request.actions_executed_per_chunk; else
                 # between request.min_actions_executed_per_chunk and 16).
@@ -184,29 +186,36 @@ def main():
     if not 0 <= args.execute <= HORIZON:
         sys.exit(f"--execute must be between 0 and {HORIZON}")
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(message)s")
+    serve(args.listen, args.token, args.proto_dir, args.threads, StarterPolicy(), args.history, args.execute)
 
+
+def serve(listen, token, proto, threads, policy, history, execute, name=None, max_concurrency=4):
+    """Serve `policy` (an object with `reset(episode_id, task_index, sub_task)` and
+    `decide(obs)`, as StarterPolicy) with the health service until interrupted; prints
+    `listening grpc=HOST:PORT` once it accepts calls. Learned policies (baselines/) reuse this."""
     import grpc
     from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 
-    pb2, pb2_grpc = load_stubs(proto_dir(args.proto_dir))
+    pb2, pb2_grpc = load_stubs(proto_dir(proto))
     opts = [
         ("grpc.max_receive_message_length", MAX_MESSAGE_BYTES),
         ("grpc.max_send_message_length", MAX_MESSAGE_BYTES),
     ]
-    server = grpc.server(futures.ThreadPoolExecutor(max_workers=args.threads), options=opts)
-    servicer = make_servicer(pb2, pb2_grpc, StarterPolicy(), args.token, args.history, args.execute)
+    server = grpc.server(futures.ThreadPoolExecutor(max_workers=threads), options=opts)
+    extra = {"name": name} if name else {}
+    servicer = make_servicer(pb2, pb2_grpc, policy, token, history, execute, max_concurrency=max_concurrency, **extra)
     pb2_grpc.add_PolicyServicer_to_server(servicer, server)
     h = health.HealthServicer()
-    for name in ("", "kitchen_r.policy.v1.Policy"):
-        h.set(name, health_pb2.HealthCheckResponse.SERVING)
+    for service in ("", "kitchen_r.policy.v1.Policy"):
+        h.set(service, health_pb2.HealthCheckResponse.SERVING)
     health_pb2_grpc.add_HealthServicer_to_server(h, server)
-    port = server.add_insecure_port(args.listen)
+    port = server.add_insecure_port(listen)
     if port == 0:
-        sys.exit(f"cannot listen on {args.listen}")
+        sys.exit(f"cannot listen on {listen}")
     server.start()
     # Stop cleanly on SIGTERM too (containers, `kill`), so the stub directory is removed.
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
-    host = args.listen.rsplit(":", 1)[0]
+    host = listen.rsplit(":", 1)[0]
     print(f"listening grpc={host}:{port}", flush=True)
     try:
         server.wait_for_termination()

@@ -1,0 +1,113 @@
+"""What the policy sees, computed the same way offline (from the LeRobot export) and online (from
+the policy contract's observations), so training and serving never disagree.
+
+- Robot state: the export's `observation.state`, 10 values (v, omega, x, y, z, qw, qx, qy, qz,
+  gripper) = measured base velocity, hand pose in the base frame, gripper opening. Online the
+  same values are `robot.base_v`, `robot.base_omega`, `robot.ee_pose` (7) and `robot.gripper`
+  (the worker and the recorder read them from the same simulator fields).
+- Timing: a row k of the export holds the observation *after* action k was executed (and
+  action k itself). The worker asks the policy right after an executed action too, so the
+  policy's frames are rows k-1, k and the actions it must predict are rows k+1 .. k+16.
+- Images: RGB uint8 at the export's 128x128, resized to the model's size with the same
+  swscale path (PyAV) in both places.
+- Sub-task: the sentence (`task` of a LeRobot frame, `sub_task` of Reset/Act), as word ids over a
+  vocabulary built from the training tasks (unknown words map to UNK).
+"""
+
+import re
+
+import numpy as np
+
+ACTION_DIM = 10
+STATE_DIM = 10
+HORIZON = 16
+MAX_WORDS = 12
+PAD, UNK = 0, 1
+CAMERAS = ("base", "gripper")
+
+
+def state_of_robot(robot):
+    """The 10-value `observation.state` of one online frame (a policy.proto RobotState)."""
+    hand = list(robot.ee_pose)
+    if len(hand) != 7:
+        # v1.0 workers left the hand pose empty; the baseline needs a v1.1 worker.
+        raise ValueError("observation has no hand pose (robot.ee_pose): the worker must speak contract v1.1")
+    return [robot.base_v, robot.base_omega] + hand + [robot.gripper]
+
+
+def resize_rgb(rgb, size):
+    """Resize an HxWx3 uint8 RGB array to size x size with swscale (bilinear), as for training."""
+    if rgb.shape[0] == size and rgb.shape[1] == size:
+        return np.ascontiguousarray(rgb)
+    import av
+
+    frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(rgb), format="rgb24")
+    return frame.reformat(width=size, height=size, format="rgb24", interpolation="BILINEAR").to_ndarray()
+
+
+def words(sentence):
+    return re.findall(r"[a-z0-9]+", sentence.lower())
+
+
+def build_vocab(sentences):
+    """Word list: index 0 PAD, 1 UNK, then every word of the training sentences, sorted."""
+    seen = sorted({w for s in sentences for w in words(s)})
+    return ["<pad>", "<unk>"] + seen
+
+
+def encode_sentence(sentence, vocab_index):
+    ids = [vocab_index.get(w, UNK) for w in words(sentence)][:MAX_WORDS]
+    return ids + [PAD] * (MAX_WORDS - len(ids))
+
+
+class Normaliser:
+    """Actions to [-1, 1] by their min/max (as Diffusion Policy does), states by mean/std.
+
+    Dimensions that barely move in the data (e.g. the quaternion's x and z) get a floor on their
+    range, so noise in them is not blown up.
+    """
+
+    RANGE_FLOOR = 1e-2
+    STD_FLOOR = 1e-2
+
+    def __init__(self, stats):
+        self.stats = {k: {n: np.asarray(v, dtype=np.float32) for n, v in d.items()} for k, d in stats.items()}
+        a = self.stats["action"]
+        self.a_mid = (a["max"] + a["min"]) / 2
+        self.a_half = np.maximum(a["max"] - a["min"], self.RANGE_FLOOR) / 2
+        s = self.stats["observation.state"]
+        self.s_mean = s["mean"]
+        self.s_std = np.maximum(s["std"], self.STD_FLOOR)
+
+    @staticmethod
+    def from_export(stats_json):
+        keep = {}
+        for key in ("action", "observation.state"):
+            d = stats_json[key]
+            keep[key] = {n: d[n] for n in ("min", "max", "mean", "std")}
+        return Normaliser(keep)
+
+    def to_dict(self):
+        return {k: {n: v.tolist() for n, v in d.items()} for k, d in self.stats.items()}
+
+    def action(self, a):
+        return (a - self.a_mid) / self.a_half
+
+    def unaction(self, a):
+        return a * self.a_half + self.a_mid
+
+    def state(self, s):
+        return (s - self.s_mean) / self.s_std
+
+
+def finish_actions(chunk):
+    """Make a predicted chunk valid for the contract: unit quaternions (sign kept with qw >= 0
+    where possible is not needed: q and -q are accepted), gripper in [0, 1], finite values."""
+    out = np.nan_to_num(np.asarray(chunk, dtype=np.float64), nan=0.0, posinf=0.0, neginf=0.0)
+    q = out[:, 5:9]
+    norm = np.linalg.norm(q, axis=1, keepdims=True)
+    bad = norm[:, 0] < 1e-6
+    q = np.where(bad[:, None], np.array([1.0, 0.0, 0.0, 0.0]), q / np.maximum(norm, 1e-6))
+    out[:, 5:9] = q
+    out[:, 9] = np.clip(out[:, 9], 0.0, 1.0)
+    return out

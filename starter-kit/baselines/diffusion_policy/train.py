@@ -1,0 +1,226 @@
+#!/usr/bin/env python3
+"""Train the diffusion-policy baseline on a LeRobot export of `kitchen-r collect --format lerobot`.
+
+    python train.py --dataset OUT/lerobot --out ckpt.pt --minutes 60 [--device auto] [--batch 256]
+
+AdamW (vision encoders at 10% of the learning rate, as in the paper), warm-up then cosine decay
+over the run (by steps, or by wall-clock time with --minutes), EMA of the weights (the EMA is
+what is saved), bf16 autocast on CUDA. Prints a progress line every --log-every seconds, writes
+the checkpoint (fp16 EMA weights, config, vocabulary, normalisation statistics; under 16 MiB)
+every --save-every minutes and at the end, and `train_log.json` beside it.
+"""
+
+import argparse
+import copy
+import json
+import math
+import os
+import platform
+import queue
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from checkpoint import MAX_CHECKPOINT_BYTES, save_checkpoint  # noqa: E402
+from dataset import LeRobotExport  # noqa: E402
+from features import CAMERAS, Normaliser  # noqa: E402
+from model import DEFAULT_CONFIG, DiffusionPolicy  # noqa: E402
+
+
+def pick_device(name):
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    d = torch.device(name)
+    if d.type == "cuda" and not torch.cuda.is_available():
+        sys.exit("--device cuda: torch sees no CUDA device (torch.cuda.is_available() is False)")
+    return d
+
+
+def random_shift(x, pad):
+    """Random translation by up to `pad` pixels (Diffusion Policy's crop augmentation, without
+    shrinking the image), the same shift for every frame of a sample. x: (B, n, S, S, 3)."""
+    if pad <= 0:
+        return x
+    B, n, S = x.shape[0], x.shape[1], x.shape[2]
+    img = x.permute(0, 1, 4, 2, 3).reshape(B, n * 3, S, S).float()
+    img = F.pad(img, (pad, pad, pad, pad), mode="replicate")
+    dx = torch.randint(0, 2 * pad + 1, (B,), device=x.device)
+    dy = torch.randint(0, 2 * pad + 1, (B,), device=x.device)
+    ar = torch.arange(S, device=x.device)
+    rows = (dy[:, None] + ar[None]).view(B, 1, S, 1).expand(B, n * 3, S, S + 2 * pad)
+    img = img.gather(2, rows)
+    cols = (dx[:, None] + ar[None]).view(B, 1, 1, S).expand(B, n * 3, S, S)
+    img = img.gather(3, cols)
+    return img.view(B, n, 3, S, S).permute(0, 1, 3, 4, 2)
+
+
+class Batches:
+    """Random batches assembled by `threads` threads ahead of the training loop."""
+
+    def __init__(self, data, batch, threads, seed):
+        self.data, self.batch = data, batch
+        self.q = queue.Queue(maxsize=max(2, 2 * threads))
+        self.stop = False
+        self.threads = [threading.Thread(target=self._run, args=(seed + i,), daemon=True) for i in range(threads)]
+        for t in self.threads:
+            t.start()
+
+    def _run(self, seed):
+        rng = np.random.default_rng(seed)
+        while not self.stop:
+            b = self.data.batch(rng.integers(0, len(self.data), self.batch))
+            out = {
+                "images": {c: torch.from_numpy(v).pin_memory() if torch.cuda.is_available() else torch.from_numpy(v) for c, v in b["images"].items()},
+                "state": torch.from_numpy(b["state"]),
+                "words": torch.from_numpy(b["words"]),
+                "action": torch.from_numpy(b["action"]),
+            }
+            while not self.stop:
+                try:
+                    self.q.put(out, timeout=0.5)
+                    break
+                except queue.Full:
+                    pass
+
+    def next(self):
+        return self.q.get()
+
+    def close(self):
+        self.stop = True
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--dataset", required=True, help="the LeRobot export (OUT or OUT/lerobot of `kitchen-r collect --format lerobot`)")
+    ap.add_argument("--out", required=True, help="checkpoint file to write (e.g. ckpt.pt)")
+    g = ap.add_mutually_exclusive_group(required=True)
+    g.add_argument("--minutes", type=float, help="train for this many minutes of wall-clock time")
+    g.add_argument("--steps", type=int, help="train for this many optimiser steps")
+    ap.add_argument("--device", default="auto", help="auto (CUDA if available), cpu, cuda, cuda:1, ...")
+    ap.add_argument("--batch", type=int, default=None, help="batch size (default 256 on CUDA, 16 on CPU)")
+    ap.add_argument("--workers", type=int, default=None, help="video-decoding processes and batch threads (default: the number of cores)")
+    ap.add_argument("--lr", type=float, default=3e-4, help="peak learning rate (vision encoders get 10%% of it)")
+    ap.add_argument("--warmup", type=int, default=500, help="linear warm-up steps")
+    ap.add_argument("--image-size", type=int, default=DEFAULT_CONFIG["image_size"], help="images are resized to this (square)")
+    ap.add_argument("--shift", type=int, default=4, help="random-shift augmentation, pixels")
+    ap.add_argument("--max-episodes", type=int, default=None, help="use only the first N episodes of the export")
+    ap.add_argument("--ema", type=float, default=0.999, help="EMA decay of the saved weights")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--log-every", type=float, default=10.0, help="seconds between progress lines")
+    ap.add_argument("--save-every", type=float, default=10.0, help="minutes between intermediate checkpoints")
+    ap.add_argument("--log", default=None, help="training log JSON (default: train_log.json beside --out)")
+    args = ap.parse_args()
+
+    torch.manual_seed(args.seed)
+    device = pick_device(args.device)
+    cores = os.cpu_count() or 1
+    workers = args.workers or cores
+    batch = args.batch or (256 if device.type == "cuda" else 16)
+    if device.type == "cpu":
+        torch.set_num_threads(max(1, min(cores, workers)))
+    t_start = time.time()
+    data = LeRobotExport(args.dataset, image_size=args.image_size, max_episodes=args.max_episodes, workers=workers)
+    norm = Normaliser.from_export(data.stats)
+    config = {**DEFAULT_CONFIG, "image_size": args.image_size}
+    model = DiffusionPolicy(config, len(data.vocab)).to(device)
+    params = sum(p.numel() for p in model.parameters())
+    if params * 2 + 1_000_000 > MAX_CHECKPOINT_BYTES:
+        sys.exit(f"the model has {params} parameters: its fp16 checkpoint would not fit in 16 MiB")
+    ema = copy.deepcopy(model).eval()
+    for p in ema.parameters():
+        p.requires_grad_(False)
+    vision = {id(p) for p in model.vision_parameters()}
+    groups = [
+        {"params": [p for p in model.parameters() if id(p) in vision], "lr": args.lr * 0.1, "base": 0.1},
+        {"params": [p for p in model.parameters() if id(p) not in vision], "lr": args.lr, "base": 1.0},
+    ]
+    opt = torch.optim.AdamW(groups, lr=args.lr, weight_decay=1e-6, betas=(0.95, 0.999))
+    amp = device.type == "cuda"
+    hw = torch.cuda.get_device_name(device) if device.type == "cuda" else f"CPU ({platform.processor() or platform.machine()})"
+    print(
+        f"training on {hw}: {len(data)} samples from {len(data.episodes)} episodes, batch {batch}, "
+        f"{params / 1e6:.2f} M parameters, " + (f"{args.minutes} min" if args.minutes else f"{args.steps} steps"),
+        flush=True,
+    )
+    s_mean, s_std = torch.tensor(norm.s_mean, device=device), torch.tensor(norm.s_std, device=device)
+    a_mid, a_half = torch.tensor(norm.a_mid, device=device), torch.tensor(norm.a_half, device=device)
+    feeder = Batches(data, batch, max(1, min(workers, 6)), args.seed)
+    extra = {"episodes": len(data.episodes), "frames": int(data.frames), "dataset": str(data.root)}
+    log_path = Path(args.log) if args.log else Path(args.out).resolve().parent / "train_log.json"
+    losses, curve = [], []
+    t0 = time.time()
+    last_log = last_save = t0
+    step = 0
+
+    def progress():
+        if args.minutes:
+            return (time.time() - t0) / (args.minutes * 60)
+        return step / args.steps
+
+    def write(final):
+        elapsed = (time.time() - t0) / 60
+        recent = float(np.mean(losses[-200:])) if losses else float("nan")
+        meta = {**extra, "steps": step, "train_minutes": round(elapsed, 2), "final_loss": recent, "hardware": hw}
+        size = save_checkpoint(args.out, ema, config, data.vocab, norm, meta)
+        log = {
+            **meta,
+            "samples": len(data),
+            "batch": batch,
+            "parameters": params,
+            "total_minutes": round((time.time() - t_start) / 60, 2),
+            "cpu_cores": cores,
+            "torch": torch.__version__,
+            "checkpoint_bytes": size,
+            "finished": final,
+            "loss_curve": curve,
+        }
+        log_path.write_text(json.dumps(log, indent=1) + "\n")
+        return size
+
+    model.train()
+    while progress() < 1.0:
+        b = feeder.next()
+        images = {c: random_shift(b["images"][c].to(device, non_blocking=True), args.shift) for c in CAMERAS}
+        state = (b["state"].to(device) - s_mean) / s_std
+        action = ((b["action"].to(device) - a_mid) / a_half).clamp(-1.5, 1.5)
+        words = b["words"].to(device)
+        p = progress()
+        scale = min(1.0, (step + 1) / args.warmup) * 0.5 * (1 + math.cos(math.pi * min(p, 1.0)))
+        for gr in opt.param_groups:
+            gr["lr"] = args.lr * gr["base"] * scale
+        with torch.autocast(device_type=device.type, dtype=torch.bfloat16, enabled=amp):
+            loss = model.loss(images, state, words, action)
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
+        opt.step()
+        decay = min(args.ema, (1 + step) / (10 + step))
+        with torch.no_grad():
+            for pe, pm in zip(ema.parameters(), model.parameters()):
+                pe.lerp_(pm, 1 - decay)
+        step += 1
+        losses.append(loss.item())
+        now = time.time()
+        if now - last_log >= args.log_every or progress() >= 1.0:
+            rate = step / (now - t0)
+            left = (1 - progress()) * ((args.minutes * 60) if args.minutes else args.steps / rate)
+            recent = float(np.mean(losses[-100:]))
+            curve.append([step, round(recent, 5)])
+            print(f"step {step} loss {recent:.4f} {rate:.2f} it/s lr {args.lr * scale:.2e} ETA {left / 60:.1f} min", flush=True)
+            last_log = now
+        if args.save_every and now - last_save >= args.save_every * 60:
+            write(False)
+            last_save = now
+    feeder.close()
+    size = write(True)
+    print(f"saved {args.out} ({size / 2**20:.2f} MiB) after {step} steps; log {log_path}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
