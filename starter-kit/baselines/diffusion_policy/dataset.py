@@ -82,6 +82,17 @@ def _shared_array(shape):
     return np.frombuffer(m, dtype=np.uint8, count=n).reshape(shape)
 
 
+def _available_memory():
+    """MemAvailable in bytes (0 when unknown)."""
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return 0
+
+
 class LeRobotExport:
     """Rows, tasks and decoded images of (the first `max_episodes` episodes of) an export."""
 
@@ -118,11 +129,27 @@ class LeRobotExport:
         index = index[order]
 
         def vec(name):
-            a = np.concatenate([np.stack(p.column(name).to_numpy(zero_copy_only=False)) for p in parts])
-            return a[order].astype(np.float32)
+            # Fixed-size-list columns: their flat values, reshaped (no per-row Python objects).
+            chunks = [c for p in parts for c in p.column(name).chunks]
+            a = np.concatenate([c.flatten().to_numpy(zero_copy_only=False) for c in chunks])
+            return a.reshape(len(index), -1)[order].astype(np.float32)
 
         all_state, all_action = vec("observation.state"), vec("action")
         all_task = np.concatenate([p.column("task_index").to_numpy() for p in parts])[order]
+
+        # The decoded images stay in memory: keep to what fits (most of the available memory).
+        budget = _available_memory() * 0.7
+        per_frame = 2 * image_size * image_size * 3
+        need = sum(int(e["length"]) for e in eps) * per_frame
+        if budget and need > budget:
+            kept, total = [], 0
+            for e in eps:
+                if (total + int(e["length"])) * per_frame > budget:
+                    break
+                kept.append(e)
+                total += int(e["length"])
+            log(f"the images of {len(eps)} episodes need {need / 1e9:.0f} GB, {budget / 1e9:.0f} GB may be used: training on the first {len(kept)}")
+            eps = kept
 
         # Rows of the selected episodes, contiguous in episode order.
         pos_of = {int(v): i for i, v in enumerate(index)} if not np.array_equal(index, np.arange(len(index))) else None

@@ -29,7 +29,7 @@ import torch.nn.functional as F
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from checkpoint import MAX_CHECKPOINT_BYTES, save_checkpoint  # noqa: E402
 from dataset import LeRobotExport  # noqa: E402
-from features import CAMERAS, Normaliser  # noqa: E402
+from features import CAMERAS, HORIZON, Normaliser  # noqa: E402
 from model import DEFAULT_CONFIG, DiffusionPolicy  # noqa: E402
 
 
@@ -95,6 +95,56 @@ class Batches:
         self.stop = True
 
 
+class DeviceBatches:
+    """Random batches gathered on the GPU from a copy of the whole dataset in GPU memory (no
+    host-side assembly or transfer per step)."""
+
+    def __init__(self, data, batch, device, seed):
+        self.batch, self.device = batch, device
+        self.images = {}
+        for cam in CAMERAS:
+            src = data.images[cam]
+            dst = torch.empty(src.shape, dtype=torch.uint8, device=device)
+            step = max(1, (1 << 30) // max(1, src[0].nbytes))
+            for i in range(0, len(src), step):
+                dst[i : i + step].copy_(torch.from_numpy(src[i : i + step]))
+            self.images[cam] = dst
+        self.state = torch.from_numpy(data.state).to(device)
+        self.action = torch.from_numpy(data.action).to(device)
+        self.k = torch.from_numpy(data.s_k).to(device)
+        self.prev = torch.from_numpy(data.s_prev).to(device)
+        self.end = torch.from_numpy(data.s_end).to(device)
+        table = np.zeros((int(max(data.task_words)) + 1, len(next(iter(data.task_words.values())))), dtype=np.int64)
+        for t, w in data.task_words.items():
+            table[t] = w
+        self.words = torch.from_numpy(table).to(device)[torch.from_numpy(data.s_task.astype(np.int64)).to(device)]
+        self.ar = torch.arange(1, HORIZON + 1, device=device)
+        self.gen = torch.Generator(device=device).manual_seed(seed)
+
+    @staticmethod
+    def fits(data, device):
+        if device.type != "cuda":
+            return False
+        free, _ = torch.cuda.mem_get_info(device)
+        need = sum(a.nbytes for a in data.images.values())
+        return need < 0.6 * free
+
+    def next(self):
+        i = torch.randint(0, len(self.k), (self.batch,), device=self.device, generator=self.gen)
+        k, prev, end = self.k[i], self.prev[i], self.end[i]
+        obs = torch.stack([prev, k], dim=1)
+        act = torch.minimum(k[:, None] + self.ar[None], end[:, None])
+        return {
+            "images": {c: v[obs] for c, v in self.images.items()},
+            "state": self.state[obs],
+            "words": self.words[i],
+            "action": self.action[act],
+        }
+
+    def close(self):
+        pass
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--dataset", required=True, help="the LeRobot export (OUT or OUT/lerobot of `kitchen-r collect --format lerobot`)")
@@ -114,6 +164,12 @@ def main():
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--log-every", type=float, default=10.0, help="seconds between progress lines")
     ap.add_argument("--save-every", type=float, default=10.0, help="minutes between intermediate checkpoints")
+    ap.add_argument(
+        "--data-on",
+        choices=["auto", "host", "device"],
+        default="auto",
+        help="where batches are assembled: auto = in GPU memory when the images fit in 60%% of it, else host",
+    )
     ap.add_argument("--log", default=None, help="training log JSON (default: train_log.json beside --out)")
     args = ap.parse_args()
 
@@ -150,7 +206,13 @@ def main():
     )
     s_mean, s_std = torch.tensor(norm.s_mean, device=device), torch.tensor(norm.s_std, device=device)
     a_mid, a_half = torch.tensor(norm.a_mid, device=device), torch.tensor(norm.a_half, device=device)
-    feeder = Batches(data, batch, max(1, min(workers, 6)), args.seed)
+    on_device = args.data_on == "device" or (args.data_on == "auto" and DeviceBatches.fits(data, device))
+    if on_device:
+        t = time.time()
+        feeder = DeviceBatches(data, batch, device, args.seed)
+        print(f"dataset copied to {device} memory in {time.time() - t:.1f} s", flush=True)
+    else:
+        feeder = Batches(data, batch, max(1, min(workers, 6)), args.seed)
     extra = {"episodes": len(data.episodes), "frames": int(data.frames), "dataset": str(data.root)}
     log_path = Path(args.log) if args.log else Path(args.out).resolve().parent / "train_log.json"
     losses, curve = [], []
@@ -184,6 +246,8 @@ def main():
         return size
 
     model.train()
+    ema_params, model_params = list(ema.parameters()), list(model.parameters())
+    pending = []
     while progress() < 1.0:
         b = feeder.next()
         images = {c: random_shift(b["images"][c].to(device, non_blocking=True), args.shift) for c in CAMERAS}
@@ -202,12 +266,14 @@ def main():
         opt.step()
         decay = min(args.ema, (1 + step) / (10 + step))
         with torch.no_grad():
-            for pe, pm in zip(ema.parameters(), model.parameters()):
-                pe.lerp_(pm, 1 - decay)
+            torch._foreach_lerp_(ema_params, model_params, 1 - decay)
         step += 1
-        losses.append(loss.item())
+        pending.append(loss.detach())
         now = time.time()
         if now - last_log >= args.log_every or progress() >= 1.0:
+            # One device sync per progress line, not per step.
+            losses.extend(torch.stack(pending).float().cpu().tolist())
+            pending.clear()
             rate = step / (now - t0)
             left = (1 - progress()) * ((args.minutes * 60) if args.minutes else args.steps / rate)
             recent = float(np.mean(losses[-100:]))
