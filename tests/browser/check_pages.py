@@ -31,6 +31,10 @@ A PNG screenshot of every page at both widths goes to `--screenshots` (default: 
 printed. Exit status: 0 when every check passed, 1 with every failure listed otherwise, 2 when
 the browser could not be started.
 
+`--save-submission-shot FILE` also saves the team's first dev submission page at desktop width,
+each video showing its middle frame: that is how `docs/img/submission-page.png` (the README's
+picture) is made, from a team's 3-episode dev run of the starter kit's policy.
+
 Chromium is the system's (`--chromium`, default /usr/bin/chromium: Debian's `chromium`
 package); Playwright downloads no browser of its own.
 """
@@ -114,6 +118,15 @@ VIDEO_JS = """async (timeoutMs) => {
     v.load();
   });
   return Promise.all(videos.map(one));
+}"""
+
+# Shows a frame from the middle of every <video> (for a screenshot): seek, wait until drawn.
+SEEK_JS = """async (timeoutMs) => {
+  await Promise.all([...document.querySelectorAll('video')].map((v) => new Promise((resolve) => {
+    const timer = setTimeout(resolve, timeoutMs);
+    v.addEventListener('seeked', () => { clearTimeout(timer); resolve(); }, { once: true });
+    v.currentTime = (v.duration || 0) / 2;
+  })));
 }"""
 
 OVERFLOW_JS = """() => {
@@ -386,6 +399,7 @@ def main() -> int:
                 v.page.set_viewport_size(DESKTOP)
                 v.page.goto(v.url(subs["team"][0]), wait_until="load")
                 v.page.evaluate(VIDEO_JS, VIDEO_TIMEOUT_MS)
+                v.page.evaluate(SEEK_JS, VIDEO_TIMEOUT_MS)
                 v.page.screenshot(path=a.save_submission_shot, full_page=True)
             if name == "team":
                 v.logout("/team", "/contest", "/team")

@@ -7,9 +7,9 @@ use std::fmt::Write as _;
 pub(super) use crate::leaderboard::render::escape;
 use crate::scores::fmt_score;
 
-/// At 40rem and narrower (phones, 375 px) the page never scrolls sideways: cells wrap anywhere,
-/// `table.stack` rows become blocks, and `table.cards` rows become cards whose cells carry their
-/// column name (`data-label`) in front of the value.
+/// At 40rem and narrower (phones, 375 px) the page never scrolls sideways: text cells wrap
+/// anywhere (number cells do not), `table.stack` rows become blocks, and `table.cards` rows
+/// become cards whose cells carry their column name (`data-label`) in front of the value.
 const CSS: &str = "body{font-family:system-ui,sans-serif;margin:1.5rem auto;max-width:64rem;padding:0 1rem;line-height:1.45}\
 nav{display:flex;flex-wrap:wrap;gap:.4rem 1rem;align-items:center;border-bottom:1px solid #ddd;padding-bottom:.5rem}\
 nav form{margin-left:auto}table{border-collapse:collapse;width:100%;margin:.5rem 0 1.5rem}\
@@ -21,7 +21,7 @@ th{background:#f4f4f4}td.n{text-align:right;font-variant-numeric:tabular-nums}\
 figure{display:inline-block;margin:.5rem 1rem .5rem 0;vertical-align:top;max-width:20rem}\
 input[type=password]{width:100%;max-width:30rem;padding:.4rem;margin:.4rem 0;box-sizing:border-box}code{overflow-wrap:anywhere}\
 ol{padding-left:1.4rem;margin:0}@media(max-width:40rem){table.stack tr:first-child{display:none}table.stack td{display:block;border:0}table.stack tr{display:block;border-bottom:1px solid #ddd}\
-th,td{padding:.25rem .35rem}td{overflow-wrap:anywhere}\
+th,td{padding:.25rem .35rem}td{overflow-wrap:anywhere}td.n{overflow-wrap:normal}\
 table.cards tr:first-child{display:none}table.cards tr{display:block;border-bottom:1px solid #ddd;padding:.3rem 0}\
 table.cards td{display:flex;justify-content:space-between;gap:1rem;border:0;padding:.1rem .35rem;text-align:right}\
 table.cards td::before{content:attr(data-label);font-weight:600;text-align:left;white-space:nowrap}}";
