@@ -21,4 +21,11 @@ if ! command -v chromium >/dev/null 2>&1; then
     "install it with: apt-get install -y --no-install-recommends chromium" >&2
   if [ "${CI:-}" = "true" ]; then exit 1; fi
 fi
+# The control baseline's test (tests/e2e/baseline_diffusion.rs) trains its policy on the CPU with
+# torch: from PyPI (scripts/test-requirements-torch.txt) when the Python it uses lacks it.
+TORCH_PY="${KITCHEN_R_TORCH_PYTHON:-python3}"
+if ! "$TORCH_PY" -c "import torch, torchvision" 2>/dev/null; then
+  echo "== installing torch for the control baseline's test (scripts/test-requirements-torch.txt)"
+  "$TORCH_PY" -m pip install --quiet --disable-pip-version-check -r scripts/test-requirements-torch.txt
+fi
 cargo test --workspace --locked "$@"

@@ -12,6 +12,7 @@ mod remote_support;
 
 mod admin;
 mod audit;
+mod baseline_diffusion;
 mod baseline_planner;
 mod browser;
 mod cli;
