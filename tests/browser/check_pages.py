@@ -234,7 +234,13 @@ class Visitor:
             if url in self.seen:
                 continue
             self.seen.add(url)
-            for link in self.visit(url, videos.get(urlsplit(url).path, 0)):
+            try:
+                links = self.visit(url, videos.get(urlsplit(url).path, 0))
+            except PlaywrightError as e:
+                self.report.fail(self.where(url), f"the browser failed on this page: {e}")
+                self.flush(self.where(url))
+                continue
+            for link in links:
                 if link not in self.seen and self._is_page(link):
                     queue.append(link)
 
