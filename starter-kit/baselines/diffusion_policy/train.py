@@ -127,7 +127,7 @@ class DeviceBatches:
             return False
         free, _ = torch.cuda.mem_get_info(device)
         need = sum(a.nbytes for a in data.images.values())
-        return need < 0.6 * free
+        return need < 0.75 * free
 
     def next(self):
         i = torch.randint(0, len(self.k), (self.batch,), device=self.device, generator=self.gen)
@@ -168,7 +168,7 @@ def main():
         "--data-on",
         choices=["auto", "host", "device"],
         default="auto",
-        help="where batches are assembled: auto = in GPU memory when the images fit in 60%% of it, else host",
+        help="where batches are assembled: auto = in GPU memory when the images fit in 75%% of its free memory, else host",
     )
     ap.add_argument("--log", default=None, help="training log JSON (default: train_log.json beside --out)")
     args = ap.parse_args()
