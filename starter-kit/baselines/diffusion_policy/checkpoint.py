@@ -17,7 +17,14 @@ FORMAT = "kitchen-r-diffusion-policy/1"
 
 def save_checkpoint(path, model, config, vocab, norm, meta):
     state = {k: (v.half() if v.is_floating_point() else v).cpu() for k, v in model.state_dict().items()}
-    blob = {"format": FORMAT, "config": config, "vocab": list(vocab), "stats": norm.to_dict(), "meta": meta, "model": state}
+    blob = {
+        "format": FORMAT,
+        "config": config,
+        "vocab": list(vocab),
+        "stats": norm.to_dict(),
+        "meta": meta,
+        "model": state,
+    }
     buf = io.BytesIO()
     torch.save(blob, buf)
     data = buf.getvalue()

@@ -30,7 +30,9 @@ N_OBS = 2
 def _parquets(root, sub):
     files = sorted((root / sub).glob("chunk-*/file-*.parquet"))
     if not files:
-        raise SystemExit(f"{root / sub}: no chunk-*/file-*.parquet; is {root} a `kitchen-r collect --format lerobot` export?")
+        raise SystemExit(
+            f"{root / sub}: no chunk-*/file-*.parquet; is {root} a `kitchen-r collect --format lerobot` export?"
+        )
     return files
 
 
@@ -40,7 +42,9 @@ def find_root(path):
     for cand in (p, p / "lerobot"):
         if (cand / "meta" / "info.json").is_file():
             return cand
-    raise SystemExit(f"{path}: no meta/info.json (pass the LeRobot export, e.g. OUT/lerobot of `kitchen-r collect --format lerobot`)")
+    raise SystemExit(
+        f"{path}: no meta/info.json (pass the LeRobot export, e.g. OUT/lerobot of `kitchen-r collect --format lerobot`)"
+    )
 
 
 # Shared images of the decode pool: set in the parent before forking, written by the workers.
@@ -148,7 +152,10 @@ class LeRobotExport:
                     break
                 kept.append(e)
                 total += int(e["length"])
-            log(f"the images of {len(eps)} episodes need {need / 1e9:.0f} GB, {budget / 1e9:.0f} GB may be used: training on the first {len(kept)}")
+            log(
+                f"the images of {len(eps)} episodes need {need / 1e9:.0f} GB, {budget / 1e9:.0f} GB may be used: "
+                f"training on the first {len(kept)}"
+            )
             eps = kept
 
         # Rows of the selected episodes, contiguous in episode order.
@@ -175,7 +182,10 @@ class LeRobotExport:
         self.task_ids = task_ids
         self.sentence_of = sentence_of
         self.image_size = image_size
-        log(f"dataset {root}: {len(eps)} episodes, {total} frames, {len(sentences)} sub-task sentences, vocabulary {len(self.vocab)}")
+        log(
+            f"dataset {root}: {len(eps)} episodes, {total} frames, {len(sentences)} sub-task sentences, "
+            f"vocabulary {len(self.vocab)}"
+        )
 
         # Decode the videos (one job per camera and file) into shared memory.
         self.images = {}

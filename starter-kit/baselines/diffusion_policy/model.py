@@ -120,7 +120,7 @@ class UNet1D(nn.Module):
         self.mid = nn.ModuleList([CrossAttnResBlock(m, m, tdim, d, heads, k) for _ in range(2)])
         self.up = nn.ModuleList()
         rev = list(reversed(list(zip(dims[1:-1], dims[2:]))))
-        for i, (a, b) in enumerate(rev):
+        for a, b in rev:
             self.up.append(
                 nn.ModuleList(
                     [

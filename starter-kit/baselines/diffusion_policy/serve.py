@@ -111,8 +111,15 @@ def main():
     ap.add_argument("--listen", default="127.0.0.1:50051", help="HOST:PORT; port 0 picks a free port")
     ap.add_argument("--device", default="auto", help="auto (CUDA if available), cpu, cuda, ...")
     ap.add_argument("--steps", type=int, default=10, help="DDIM denoising steps per chunk (of the 100 training steps)")
-    ap.add_argument("--execute", type=int, default=8, help="actions of each 16-action chunk executed before the next Act (contract v1.1)")
-    ap.add_argument("--concurrency", type=int, default=16, help="Act calls the policy accepts at once (max_concurrency)")
+    ap.add_argument(
+        "--execute",
+        type=int,
+        default=8,
+        help="actions of each 16-action chunk executed before the next Act (contract v1.1)",
+    )
+    ap.add_argument(
+        "--concurrency", type=int, default=16, help="Act calls the policy accepts at once (max_concurrency)"
+    )
     ap.add_argument("--token", default=os.environ.get("POLICY_TOKEN"), help="require this bearer token")
     ap.add_argument("--proto-dir", default=None, help="directory with kitchen_r/policy/v1/policy.proto")
     ap.add_argument("--threads", type=int, default=None, help="gRPC threads (default: --concurrency + 4)")
@@ -122,12 +129,21 @@ def main():
     if not 1 <= args.steps <= 100:
         sys.exit("--steps must be between 1 and 100")
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(message)s")
-    device = torch.device("cuda" if args.device == "auto" and torch.cuda.is_available() else ("cpu" if args.device == "auto" else args.device))
+    device = torch.device(
+        "cuda"
+        if args.device == "auto" and torch.cuda.is_available()
+        else ("cpu" if args.device == "auto" else args.device)
+    )
     runner = DiffusionRunner(args.checkpoint, device, args.steps)
     meta = runner.meta
     logging.info(
         "checkpoint %s: %s episodes, %s steps, on %s; serving on %s with %d denoising steps",
-        args.checkpoint, meta.get("episodes"), meta.get("steps"), meta.get("hardware"), device, args.steps,
+        args.checkpoint,
+        meta.get("episodes"),
+        meta.get("steps"),
+        meta.get("hardware"),
+        device,
+        args.steps,
     )
     kit.serve(
         args.listen,

@@ -76,7 +76,10 @@ class Batches:
         while not self.stop:
             b = self.data.batch(rng.integers(0, len(self.data), self.batch))
             out = {
-                "images": {c: torch.from_numpy(v).pin_memory() if torch.cuda.is_available() else torch.from_numpy(v) for c, v in b["images"].items()},
+                "images": {
+                    c: torch.from_numpy(v).pin_memory() if torch.cuda.is_available() else torch.from_numpy(v)
+                    for c, v in b["images"].items()
+                },
                 "state": torch.from_numpy(b["state"]),
                 "words": torch.from_numpy(b["words"]),
                 "action": torch.from_numpy(b["action"]),
@@ -147,17 +150,28 @@ class DeviceBatches:
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--dataset", required=True, help="the LeRobot export (OUT or OUT/lerobot of `kitchen-r collect --format lerobot`)")
+    ap.add_argument(
+        "--dataset",
+        required=True,
+        help="the LeRobot export (OUT or OUT/lerobot of `kitchen-r collect --format lerobot`)",
+    )
     ap.add_argument("--out", required=True, help="checkpoint file to write (e.g. ckpt.pt)")
     g = ap.add_mutually_exclusive_group(required=True)
     g.add_argument("--minutes", type=float, help="train for this many minutes of wall-clock time")
     g.add_argument("--steps", type=int, help="train for this many optimiser steps")
     ap.add_argument("--device", default="auto", help="auto (CUDA if available), cpu, cuda, cuda:1, ...")
     ap.add_argument("--batch", type=int, default=None, help="batch size (default 256 on CUDA, 16 on CPU)")
-    ap.add_argument("--workers", type=int, default=None, help="video-decoding processes and batch threads (default: the number of cores)")
+    ap.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help="video-decoding processes and batch threads (default: the number of cores)",
+    )
     ap.add_argument("--lr", type=float, default=3e-4, help="peak learning rate (vision encoders get 10%% of it)")
     ap.add_argument("--warmup", type=int, default=500, help="linear warm-up steps")
-    ap.add_argument("--image-size", type=int, default=DEFAULT_CONFIG["image_size"], help="images are resized to this (square)")
+    ap.add_argument(
+        "--image-size", type=int, default=DEFAULT_CONFIG["image_size"], help="images are resized to this (square)"
+    )
     ap.add_argument("--shift", type=int, default=4, help="random-shift augmentation, pixels")
     ap.add_argument("--max-episodes", type=int, default=None, help="use only the first N episodes of the export")
     ap.add_argument("--ema", type=float, default=0.999, help="EMA decay of the saved weights")
@@ -168,7 +182,8 @@ def main():
         "--data-on",
         choices=["auto", "host", "device"],
         default="auto",
-        help="where batches are assembled: auto = in GPU memory when the images fit in 75%% of its free memory, else host",
+        help="where batches are assembled: auto = in GPU memory when the images fit in 75%% of its free memory, "
+        "else host",
     )
     ap.add_argument("--log", default=None, help="training log JSON (default: train_log.json beside --out)")
     args = ap.parse_args()
@@ -198,7 +213,11 @@ def main():
     ]
     opt = torch.optim.AdamW(groups, lr=args.lr, weight_decay=1e-6, betas=(0.95, 0.999))
     amp = device.type == "cuda"
-    hw = torch.cuda.get_device_name(device) if device.type == "cuda" else f"CPU ({platform.processor() or platform.machine()})"
+    hw = (
+        torch.cuda.get_device_name(device)
+        if device.type == "cuda"
+        else f"CPU ({platform.processor() or platform.machine()})"
+    )
     print(
         f"training on {hw}: {len(data)} samples from {len(data.episodes)} episodes, batch {batch}, "
         f"{params / 1e6:.2f} M parameters, " + (f"{args.minutes} min" if args.minutes else f"{args.steps} steps"),
@@ -278,7 +297,10 @@ def main():
             left = (1 - progress()) * ((args.minutes * 60) if args.minutes else args.steps / rate)
             recent = float(np.mean(losses[-100:]))
             curve.append([step, round(recent, 5)])
-            print(f"step {step} loss {recent:.4f} {rate:.2f} it/s lr {args.lr * scale:.2e} ETA {left / 60:.1f} min", flush=True)
+            print(
+                f"step {step} loss {recent:.4f} {rate:.2f} it/s lr {args.lr * scale:.2e} ETA {left / 60:.1f} min",
+                flush=True,
+            )
             last_log = now
         if args.save_every and now - last_save >= args.save_every * 60:
             write(False)
