@@ -55,7 +55,7 @@ def _decode_file(job):
     """Decode one video file and write the wanted frames into the shared image array."""
     import av
 
-    cam, path, segments, size = job
+    cam, path, segments, size, fps = job
     buf = _SHARED[cam]
     # segments: (first file frame, count, first destination row)
     want = {}
@@ -66,7 +66,6 @@ def _decode_file(job):
     with av.open(str(path)) as c:
         s = c.streams.video[0]
         s.thread_type = "AUTO"
-        fps = float(s.average_rate or 10)
         for frame in c.decode(s):
             i = int(round(float(frame.pts * s.time_base) * fps))
             row = want.get(i)
@@ -201,7 +200,7 @@ class LeRobotExport:
                 by_file.setdefault((ck, fi), []).append((first, int(e["length"]), dest))
             for (ck, fi), segs in sorted(by_file.items()):
                 path = root / self.info["video_path"].format(video_key=key, chunk_index=ck, file_index=fi)
-                jobs.append((cam, path, segs, image_size))
+                jobs.append((cam, path, segs, image_size, self.fps))
         workers = max(1, min(workers or os.cpu_count() or 1, len(jobs)))
         gb = 2 * total * image_size * image_size * 3 / 1e9
         log(f"decoding {len(jobs)} video files with {workers} processes into {gb:.1f} GB of memory")

@@ -42,7 +42,8 @@ def resize_rgb(rgb, size):
     import av
 
     frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(rgb), format="rgb24")
-    return frame.reformat(width=size, height=size, format="rgb24", interpolation="BILINEAR").to_ndarray()
+    # PyAV's default swscale interpolation is bilinear (the argument's spelling changed across versions).
+    return frame.reformat(width=size, height=size, format="rgb24").to_ndarray()
 
 
 def words(sentence):
