@@ -138,10 +138,11 @@ OVERFLOW_JS = """() => {
       let p = el.parentElement, clipped = false;
       while (p && p !== document.body) {
         const s = getComputedStyle(p);
-        if (s.overflowX === 'auto' || s.overflowX === 'scroll' || s.overflowX === 'hidden') { clipped = true; break; }
+        if (['auto', 'scroll', 'hidden'].includes(s.overflowX)) { clipped = true; break; }
         p = p.parentElement;
       }
-      if (!clipped) wide.push(`${el.tagName.toLowerCase()}${el.className ? '.' + el.className : ''} (right edge ${r.right.toFixed(1)} px)`);
+      const name = el.tagName.toLowerCase() + (el.className ? '.' + el.className : '');
+      if (!clipped) wide.push(`${name} (right edge ${r.right.toFixed(1)} px)`);
     }
   }
   // The innermost culprits first: their ancestors only contain them.
@@ -361,7 +362,7 @@ def main() -> int:
         metavar="VISITOR:ID",
         help="a finished dev policy submission to open as `team` or `admin`, e.g. team:2 (repeatable)",
     )
-    ap.add_argument("--videos", type=int, default=0, help="<video> elements each dev submission page must have")
+    ap.add_argument("--videos", type=int, default=0, help="<video> elements a dev submission page must have")
     ap.add_argument("--page", action="append", default=[], help="another path to start from (repeatable)")
     ap.add_argument("--chromium", default="/usr/bin/chromium", help="the Chromium binary")
     ap.add_argument("--screenshots", default=os.environ.get("KITCHEN_R_SCREENSHOTS"), help="where PNGs go")
