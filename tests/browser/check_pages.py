@@ -162,6 +162,8 @@ class Visitor:
         self.report = report
         self.max_pages = max_pages
         self.context = browser.new_context(viewport=DESKTOP)
+        # Generous: CI runs this beside the other end-to-end tests on two cores.
+        self.context.set_default_timeout(60_000)
         self.page = self.context.new_page()
         self.events: list[str] = []
         self.links: dict[str, int] = {}
