@@ -7,7 +7,7 @@ cd "$(dirname "$0")/.."
 if ! python3 - <<'PY' 2>/dev/null
 import importlib.util, sys
 mods = ["mcap", "mcap_ros2", "h5py", "numpy", "grpc", "grpc_health", "grpc_tools", "google.protobuf",
-        "playwright"]
+        "playwright", "schemathesis"]
 sys.exit(0 if all(importlib.util.find_spec(m) for m in mods) else 1)
 PY
 then

@@ -111,7 +111,7 @@ pub struct PlanLimits {
 /// What one team may submit (`[quota]`). The defaults bound every split, so no team can fill the
 /// disk: a team stores at most `*_per_day` submissions of at most `max_body_bytes` per split
 /// and day, and reaches that no faster than `per_minute`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct Quota {
     /// Submissions (plan files and policy registrations) per team, per split, per UTC day;

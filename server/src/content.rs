@@ -25,7 +25,7 @@ use serde::Serialize;
 use crate::plans::IdIndex;
 
 /// What kind of test split the server holds.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum TestSetKind {
     /// Generated from public phrasings and/or a published seed: its answers are public.
@@ -35,7 +35,7 @@ pub enum TestSetKind {
 }
 
 /// The test split's provenance, as `GET /api/v1/dataset/manifest` and the start-up line show it.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, utoipa::ToSchema)]
 pub struct TestSetInfo {
     pub kind: TestSetKind,
     pub instructions: usize,
@@ -66,7 +66,7 @@ pub(crate) struct Content {
 }
 
 /// What the scene list shows about a scene.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
 pub(crate) struct SceneSummary {
     pub id: String,
     pub name: String,

@@ -19,7 +19,6 @@ use axum::response::{Html, IntoResponse, Response};
 use axum::routing::{get, post};
 use bytes::Bytes;
 use kitchen_r_core::dataset::Split;
-use serde_json::json;
 use tokio_stream::StreamExt;
 
 use crate::content::TestSetKind;
@@ -29,11 +28,15 @@ use crate::service::auth::bearer_token;
 use crate::service::{AppState, Caller, RegisterPolicy};
 
 use extract::{BodyBytes, PathArg, QueryArgs};
+// The route tests (`tests.rs`, `use super::*`) build expected bodies with it.
+#[cfg(test)]
+use serde_json::json;
 
 type Params = QueryArgs<HashMap<String, String>>;
 
 mod admin;
 mod extract;
+pub(crate) mod openapi;
 mod pages;
 mod session;
 pub(crate) mod stack;
@@ -43,6 +46,7 @@ pub(crate) fn router(state: AppState) -> Router {
     let quick = Router::new()
         .route("/", get(index))
         .route("/healthz", get(healthz))
+        .route("/api/v1/openapi.json", get(openapi::openapi_json))
         .route("/api/v1/teams", post(create_team))
         .route("/api/v1/dataset/manifest", get(dataset_manifest))
         .route("/api/v1/dataset/{split}", get(dataset))
@@ -123,10 +127,28 @@ fn typed(content_type: &'static str, body: Bytes) -> Response {
         .into_response()
 }
 
+#[utoipa::path(
+    get,
+    path = "/healthz",
+    tag = "service",
+    summary = "Liveness: the server answers",
+    responses((status = 200, description = "The server is up", body = openapi::Health))
+)]
 async fn healthz() -> impl IntoResponse {
-    axum::Json(json!({ "status": "ok" }))
+    axum::Json(openapi::Health { status: "ok" })
 }
 
+#[utoipa::path(
+    get,
+    path = "/metrics",
+    tag = "service",
+    summary = "Prometheus metrics (text exposition format)",
+    description = "No token: see `service::metrics` for why nothing in it is secret. Absent (404) when `metrics = false`.",
+    responses(
+        (status = 200, description = "The metrics", content_type = "text/plain; version=0.0.4", body = String),
+        (status = 404, description = "Metrics are turned off (`metrics = false`)", body = openapi::ErrorBody),
+    )
+)]
 async fn metrics(State(s): State<AppState>) -> Result<Response, ServiceError> {
     let text = s.metrics_text().await?;
     Ok(typed(crate::metrics::CONTENT_TYPE, Bytes::from(text)))
@@ -152,6 +174,20 @@ fn body_field<T: serde::de::DeserializeOwned>(
         .ok_or_else(|| ServiceError::BadRequest(format!("expected {shape}")))
 }
 
+#[utoipa::path(
+    post,
+    path = "/api/v1/teams",
+    tag = "organiser",
+    summary = "Create a team and its token",
+    request_body = openapi::TeamRequest,
+    security(("organiser_token" = [])),
+    responses(
+        (status = 201, description = "The team and its token (shown once)", body = crate::service::NewTeam),
+        (status = 400, description = "The body is not `{\"name\": \"...\"}` or the name is not allowed", body = openapi::ErrorBody),
+        (status = 409, description = "A team of that name exists", body = openapi::ErrorBody),
+        (status = 413, description = "The body is over `max_body_bytes`", body = openapi::ErrorBody),
+    )
+)]
 async fn create_team(
     State(s): State<AppState>,
     caller: Caller,
@@ -163,6 +199,19 @@ async fn create_team(
     Ok((StatusCode::CREATED, axum::Json(team)).into_response())
 }
 
+#[utoipa::path(
+    get,
+    path = "/api/v1/dataset/{split}",
+    tag = "dataset",
+    summary = "A split's instructions (JSON Lines)",
+    description = "One JSON object a line: the instruction's id, scene and text; on the dev split also its plan. The `x-kitchen-r-split-kind` header says `dev`, `public-sample` or `private`.",
+    params(("split" = openapi::SplitName, Path, description = "`dev` or `test`", example = "dev")),
+    responses(
+        (status = 200, description = "The instructions, one JSON object a line", content_type = "application/x-ndjson", body = String,
+            headers(("x-kitchen-r-split-kind" = String, description = "`dev`, `public-sample` or `private`"))),
+        (status = 400, description = "Not a split name", body = openapi::ErrorBody),
+    )
+)]
 async fn dataset(
     State(s): State<AppState>,
     PathArg(split): PathArg<String>,
@@ -183,16 +232,37 @@ async fn dataset(
 
 /// What the dataset splits are: the dev split (public, with plans) and the test split's
 /// provenance (public sample or private set), with a notice to show participants.
+#[utoipa::path(
+    get,
+    path = "/api/v1/dataset/manifest",
+    tag = "dataset",
+    summary = "What the dataset splits are",
+    responses((status = 200, description = "The splits' sizes and the test split's provenance", body = openapi::DatasetManifest))
+)]
 async fn dataset_manifest(State(s): State<AppState>) -> impl IntoResponse {
     let c = s.content();
-    axum::Json(json!({
-        "dev": { "instructions": c.dataset.dev.len(), "plans": "public" },
-        "test": c.test_set,
-    }))
+    axum::Json(openapi::DatasetManifest {
+        dev: openapi::DevSplitInfo {
+            instructions: c.dataset.dev.len(),
+            plans: "public",
+        },
+        test: c.test_set.clone(),
+    })
 }
 
 /// The English scene description planners read (zones, the furniture that holds them and the
 /// names instructions may use for them, and where each key object starts).
+#[utoipa::path(
+    get,
+    path = "/api/v1/scenes/{id}/brief",
+    tag = "dataset",
+    summary = "A scene described in English for planners",
+    params(("id" = String, Path, description = "A scene id from `GET /api/v1/scenes`", example = "kitchen_a")),
+    responses(
+        (status = 200, description = "The planner brief", content_type = "text/plain; charset=utf-8", body = String),
+        (status = 404, description = "No such scene", body = openapi::ErrorBody),
+    )
+)]
 async fn brief(State(s): State<AppState>, PathArg(id): PathArg<String>) -> Result<Response, ServiceError> {
     let scene = s
         .content()
@@ -204,10 +274,29 @@ async fn brief(State(s): State<AppState>, PathArg(id): PathArg<String>) -> Resul
     ))
 }
 
+#[utoipa::path(
+    get,
+    path = "/api/v1/scenes",
+    tag = "dataset",
+    summary = "The scenes",
+    responses((status = 200, description = "Every scene, in short", body = Vec<crate::content::SceneSummary>))
+)]
 async fn scenes(State(s): State<AppState>) -> impl IntoResponse {
     axum::Json(s.content().scene_summaries())
 }
 
+#[utoipa::path(
+    get,
+    path = "/api/v1/scenes/{id}",
+    tag = "dataset",
+    summary = "One scene in full",
+    description = "Its zones, furniture and key objects with their poses, as the simulator loads them.",
+    params(("id" = String, Path, description = "A scene id from `GET /api/v1/scenes`", example = "kitchen_a")),
+    responses(
+        (status = 200, description = "The scene", body = Object),
+        (status = 404, description = "No such scene", body = openapi::ErrorBody),
+    )
+)]
 async fn scene(State(s): State<AppState>, PathArg(id): PathArg<String>) -> Result<Response, ServiceError> {
     let scene = s
         .content()
@@ -216,6 +305,17 @@ async fn scene(State(s): State<AppState>, PathArg(id): PathArg<String>) -> Resul
     Ok(axum::Json(scene).into_response())
 }
 
+#[utoipa::path(
+    get,
+    path = "/api/v1/scenes/{id}/topdown.png",
+    tag = "dataset",
+    summary = "A scene's top-down map",
+    params(("id" = String, Path, description = "A scene id from `GET /api/v1/scenes`", example = "kitchen_a")),
+    responses(
+        (status = 200, description = "The map", content_type = "image/png", body = Vec<u8>),
+        (status = 404, description = "No such scene", body = openapi::ErrorBody),
+    )
+)]
 async fn topdown(State(s): State<AppState>, PathArg(id): PathArg<String>) -> Result<Response, ServiceError> {
     let scene = id.clone();
     let png = tokio::task::spawn_blocking(move || s.content().topdown_png(&scene))
@@ -241,6 +341,25 @@ async fn read_limited(body: Body, limit: usize) -> Result<Vec<u8>, ServiceError>
     Ok(buf)
 }
 
+#[utoipa::path(
+    post,
+    path = "/api/v1/submissions/plans",
+    tag = "submissions",
+    summary = "Submit a plan file (planning track)",
+    description = "The body is JSON Lines: one object a line, `{\"id\": instruction id, \"plan\": [sub-task sentences]}`. It is scored at once; on the dev split per-instruction results follow on the submission.",
+    params(("split" = openapi::SplitName, Query, description = "`dev` or `test`", example = "dev")),
+    request_body(content = String, content_type = "application/x-ndjson", description = "The plan file: one JSON object a line",
+        example = json!("{\"id\": \"dev-0001\", \"plan\": [\"move to the blue zone\", \"pick the bowl\", \"move to the red zone\", \"place the bowl\"]}\n")),
+    security(("team_token" = [])),
+    responses(
+        (status = 201, description = "Scored and stored", body = crate::service::Submitted),
+        (status = 400, description = "A missing or unknown split, or a plan file that does not parse (`line` says where)", body = openapi::ErrorBody),
+        (status = 403, description = "Not a team's token", body = openapi::ErrorBody),
+        (status = 413, description = "The file is over `max_body_bytes` or a plan limit", body = openapi::ErrorBody),
+        (status = 429, description = "The daily quota or the per-minute rate limit", body = openapi::ErrorBody,
+            headers(("retry-after" = u64, description = "Seconds until a retry can succeed"))),
+    )
+)]
 async fn submit_plans(
     State(s): State<AppState>,
     QueryArgs(q): Params,
@@ -255,6 +374,24 @@ async fn submit_plans(
     Ok((StatusCode::CREATED, axum::Json(done)).into_response())
 }
 
+#[utoipa::path(
+    post,
+    path = "/api/v1/submissions/policies",
+    tag = "submissions",
+    summary = "Register a policy endpoint for evaluation (control and integrated tracks)",
+    description = "The server probes the endpoint (health, GetSpec) before it answers, then queues one episode job per instruction. `reference` is for the organiser's baseline runs.",
+    request_body = crate::service::RegisterPolicy,
+    security(("team_token" = []), ("organiser_token" = [])),
+    responses(
+        (status = 201, description = "Registered and queued", body = crate::service::policies::Registered),
+        (status = 400, description = "A body that is not a registration, or an endpoint that is not allowed", body = openapi::ErrorBody),
+        (status = 403, description = "A reference run without the organiser token", body = openapi::ErrorBody),
+        (status = 404, description = "The `plans` submission is not the team's", body = openapi::ErrorBody),
+        (status = 413, description = "The body is over `max_body_bytes`", body = openapi::ErrorBody),
+        (status = 422, description = "The endpoint did not pass the probe", body = openapi::ErrorBody),
+        (status = 429, description = "The daily quota, the rate limit or the concurrent-runs limit", body = openapi::ErrorBody),
+    )
+)]
 async fn register_policy(
     State(s): State<AppState>,
     caller: Caller,
@@ -269,6 +406,19 @@ async fn register_policy(
     Ok((StatusCode::CREATED, axum::Json(done)).into_response())
 }
 
+#[utoipa::path(
+    get,
+    path = "/api/v1/submissions/{id}",
+    tag = "submissions",
+    summary = "A submission and its latest run",
+    description = "For its team or the organiser. Dev runs list per-instruction (plans) or per-episode (policies) results; test runs are aggregate only.",
+    params(("id" = i64, Path, description = "The submission id", example = 1)),
+    security(("team_token" = []), ("organiser_token" = [])),
+    responses(
+        (status = 200, description = "The submission", body = crate::service::SubmissionView),
+        (status = 404, description = "No such submission, or another team's", body = openapi::ErrorBody),
+    )
+)]
 async fn submission(
     State(s): State<AppState>,
     PathArg(id): PathArg<String>,
@@ -280,6 +430,19 @@ async fn submission(
     Ok(axum::Json(s.get_submission(&caller, id).await?).into_response())
 }
 
+#[utoipa::path(
+    get,
+    path = "/api/v1/submissions/{id}/episodes/{episode_key}/path.png",
+    tag = "submissions",
+    summary = "Where the robot went in one dev episode",
+    description = "A top-down plot on the scene map: the base path coloured by task, the object's path, each task's goal and where failed tasks ended. Dev split only.",
+    params(("id" = i64, Path, description = "The submission id", example = 1), ("episode_key" = String, Path, description = "The episode's key, e.g. `dev-0007`", example = "dev-0001")),
+    security(("team_token" = []), ("organiser_token" = [])),
+    responses(
+        (status = 200, description = "The plot", content_type = "image/png", body = Vec<u8>),
+        (status = 404, description = "No such submission or episode, not the caller's, on the test split, or no path recorded", body = openapi::ErrorBody),
+    )
+)]
 async fn episode_plot(
     State(s): State<AppState>,
     PathArg((id, key)): PathArg<(String, String)>,
@@ -292,6 +455,25 @@ async fn episode_plot(
     Ok(typed("image/png", Bytes::from(png)))
 }
 
+#[utoipa::path(
+    get,
+    path = "/api/v1/leaderboard",
+    tag = "leaderboard",
+    summary = "One track's leaderboard",
+    params(
+        ("track" = Option<openapi::TrackParam>, Query, description = "`planning` (default), `control` or `integrated`"),
+        ("split" = Option<openapi::SplitParam>, Query, description = "`test` (default) or `dev`"),
+        ("format" = Option<openapi::FormatParam>, Query, description = "`json` (default), `csv` or `html`"),
+    ),
+    responses(
+        (status = 200, description = "The ranked rows", content(
+            (crate::leaderboard::Leaderboard = "application/json"),
+            (String = "text/csv; charset=utf-8"),
+            (String = "text/html; charset=utf-8"),
+        )),
+        (status = 400, description = "An unknown track, split or format", body = openapi::ErrorBody),
+    )
+)]
 async fn leaderboard(State(s): State<AppState>, QueryArgs(q): Params) -> Result<Response, ServiceError> {
     let track: Track = q.get("track").map_or("", String::as_str).parse()?;
     let split = split_param(q.get("split"), Some(Split::Test))?;
@@ -309,11 +491,34 @@ async fn leaderboard(State(s): State<AppState>, QueryArgs(q): Params) -> Result<
     Ok(typed(content_type, body))
 }
 
+#[utoipa::path(
+    post,
+    path = "/api/v1/admin/rescore",
+    tag = "organiser",
+    summary = "Rescore every submission against the current ground truth",
+    security(("organiser_token" = [])),
+    responses((status = 200, description = "What was rescored, and what could not be", body = crate::service::RescoreReport))
+)]
 async fn rescore(State(s): State<AppState>, caller: Caller) -> Result<Response, ServiceError> {
     Ok(axum::Json(s.rescore_all(caller.organiser()?).await?).into_response())
 }
 
 /// Organiser: `{"submission": ID}` → a new run simulating that policy submission again.
+#[utoipa::path(
+    post,
+    path = "/api/v1/admin/resimulate",
+    tag = "organiser",
+    summary = "Simulate a policy submission again",
+    request_body = openapi::ResimulateRequest,
+    security(("organiser_token" = [])),
+    responses(
+        (status = 201, description = "A new run, queued", body = crate::service::policies::Registered),
+        (status = 400, description = "The body is not `{\"submission\": ID}`", body = openapi::ErrorBody),
+        (status = 404, description = "No such policy submission", body = openapi::ErrorBody),
+        (status = 409, description = "It is still evaluating", body = openapi::ErrorBody),
+        (status = 413, description = "The body is over `max_body_bytes`", body = openapi::ErrorBody),
+    )
+)]
 async fn resimulate(
     State(s): State<AppState>,
     caller: Caller,
@@ -327,6 +532,14 @@ async fn resimulate(
 
 /// Organiser: what the server refused since it started (rate limits and daily quotas, per
 /// split) and the limits in force.
+#[utoipa::path(
+    get,
+    path = "/api/v1/admin/stats",
+    tag = "organiser",
+    summary = "Refused uploads since start, and the limits in force",
+    security(("organiser_token" = [])),
+    responses((status = 200, description = "The counts", body = crate::service::AdminStats))
+)]
 async fn admin_stats(State(s): State<AppState>, caller: Caller) -> Result<Response, ServiceError> {
     Ok(axum::Json(s.admin_stats(caller.organiser()?)).into_response())
 }

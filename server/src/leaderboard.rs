@@ -28,7 +28,7 @@ use crate::error::ServiceError;
 use crate::scores::Scores;
 
 /// The ranked tracks.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case")]
 pub(crate) enum Track {
     Planning,
@@ -69,14 +69,15 @@ pub(crate) enum Format {
     Html,
 }
 
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
 pub(crate) struct Leaderboard {
     pub track: Track,
+    #[schema(value_type = crate::http::openapi::SplitName)]
     pub split: Split,
     pub rows: Vec<Row>,
 }
 
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
 pub(crate) struct Row {
     /// 1-based position among teams' entries; absent for baseline rows.
     pub rank: Option<usize>,

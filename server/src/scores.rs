@@ -12,16 +12,21 @@ use serde::{Serialize, Serializer};
 
 use kitchen_r_core::scoring::RunScores;
 
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, utoipa::ToSchema)]
 pub(crate) struct Scores {
+    #[schema(schema_with = crate::http::openapi::score_schema)]
     #[serde(serialize_with = "score")]
     pub em: Option<f64>,
+    #[schema(schema_with = crate::http::openapi::score_schema)]
     #[serde(serialize_with = "score", skip_serializing_if = "Option::is_none")]
     pub sr: Option<f64>,
+    #[schema(schema_with = crate::http::openapi::score_schema)]
     #[serde(serialize_with = "score", skip_serializing_if = "Option::is_none")]
     pub mse: Option<f64>,
+    #[schema(schema_with = crate::http::openapi::score_schema)]
     #[serde(serialize_with = "score", skip_serializing_if = "Option::is_none")]
     pub m: Option<f64>,
+    #[schema(schema_with = crate::http::openapi::score_schema)]
     #[serde(serialize_with = "score", skip_serializing_if = "Option::is_none")]
     pub p: Option<f64>,
 }

@@ -49,6 +49,8 @@ pub(crate) use auth::{Caller, Organiser, WorkerCred, hash_token, new_token};
 pub(crate) use policies::RegisterPolicy;
 pub(crate) use progress::{EpisodeView, PolicyRunView};
 pub(crate) use submissions::{RunView, SubmissionView};
+// Answers of HTTP routes, named by the OpenAPI document (`http::openapi`).
+pub(crate) use {limits::AdminStats, plan_uploads::Submitted, rescore::RescoreReport, teams::NewTeam};
 
 /// Version of the planning scorer; part of every scoring run's `scorer_version`.
 pub(crate) const PLANNING_SCORER: &str = "planning-em/1";

@@ -22,6 +22,7 @@ mod grpc;
 mod integrity;
 mod load_bench;
 mod metrics;
+mod openapi;
 mod pages;
 mod participant_client;
 mod planning;

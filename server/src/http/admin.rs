@@ -56,19 +56,57 @@ fn run_id(id: &str) -> Result<i64, ServiceError> {
         .ok_or_else(|| ServiceError::BadRequest(format!("a run id is a positive integer, not {id:?}")))
 }
 
-async fn queue(State(s): State<AppState>, caller: Caller) -> Result<Response, ServiceError> {
+#[utoipa::path(
+    get,
+    path = "/api/v1/admin/queue",
+    tag = "organiser",
+    summary = "The job queue: counts by state, each team's share, stuck, retrying and failed jobs",
+    security(("organiser_token" = [])),
+    responses((status = 200, description = "The queue", body = crate::service::admin::QueueView))
+)]
+pub(super) async fn queue(State(s): State<AppState>, caller: Caller) -> Result<Response, ServiceError> {
     Ok(axum::Json(s.admin_queue(caller.organiser()?).await?).into_response())
 }
 
-async fn workers(State(s): State<AppState>, caller: Caller) -> Result<Response, ServiceError> {
+#[utoipa::path(
+    get,
+    path = "/api/v1/admin/workers",
+    tag = "organiser",
+    summary = "The workers seen, when last, and what they hold now",
+    security(("organiser_token" = [])),
+    responses((status = 200, description = "The workers", body = crate::service::admin::WorkersView))
+)]
+pub(super) async fn workers(State(s): State<AppState>, caller: Caller) -> Result<Response, ServiceError> {
     Ok(axum::Json(s.admin_workers(caller.organiser()?).await?).into_response())
 }
 
-async fn runs(State(s): State<AppState>, caller: Caller) -> Result<Response, ServiceError> {
+#[utoipa::path(
+    get,
+    path = "/api/v1/admin/runs",
+    tag = "organiser",
+    summary = "Policy runs: progress, timing and ETA",
+    security(("organiser_token" = [])),
+    responses((status = 200, description = "The runs, newest first", body = crate::service::admin::RunsView))
+)]
+pub(super) async fn runs(State(s): State<AppState>, caller: Caller) -> Result<Response, ServiceError> {
     Ok(axum::Json(s.admin_runs(caller.organiser()?).await?).into_response())
 }
 
-async fn cancel(
+#[utoipa::path(
+    post,
+    path = "/api/v1/admin/runs/{id}/cancel",
+    tag = "organiser",
+    summary = "Cancel a policy run: its open jobs stop and it uses no quota",
+    params(("id" = i64, Path, minimum = 1, description = "The run id (`GET /api/v1/admin/runs`)", example = 1)),
+    security(("organiser_token" = [])),
+    responses(
+        (status = 200, description = "Cancelled", body = crate::service::admin::Cancelled),
+        (status = 400, description = "The id is not a positive integer", body = super::openapi::ErrorBody),
+        (status = 404, description = "No such run", body = super::openapi::ErrorBody),
+        (status = 409, description = "The run is not active", body = super::openapi::ErrorBody),
+    )
+)]
+pub(super) async fn cancel(
     State(s): State<AppState>,
     caller: Caller,
     PathArg(id): PathArg<String>,
@@ -77,7 +115,21 @@ async fn cancel(
     Ok(axum::Json(s.cancel_run(admin, run_id(&id)?).await?).into_response())
 }
 
-async fn requeue(
+#[utoipa::path(
+    post,
+    path = "/api/v1/admin/runs/{id}/requeue",
+    tag = "organiser",
+    summary = "Put a run's failed and stuck jobs back in the queue",
+    params(("id" = i64, Path, minimum = 1, description = "The run id (`GET /api/v1/admin/runs`)", example = 1)),
+    security(("organiser_token" = [])),
+    responses(
+        (status = 200, description = "Requeued", body = crate::service::admin::Requeued),
+        (status = 400, description = "The id is not a positive integer", body = super::openapi::ErrorBody),
+        (status = 404, description = "No such run", body = super::openapi::ErrorBody),
+        (status = 409, description = "Nothing to requeue", body = super::openapi::ErrorBody),
+    )
+)]
+pub(super) async fn requeue(
     State(s): State<AppState>,
     caller: Caller,
     PathArg(id): PathArg<String>,
@@ -87,7 +139,16 @@ async fn requeue(
 }
 
 /// The database copy as `application/vnd.sqlite3`, streamed in 64 KiB chunks.
-async fn backup(State(s): State<AppState>, caller: Caller) -> Result<Response, ServiceError> {
+#[utoipa::path(
+    post,
+    path = "/api/v1/admin/backup",
+    tag = "organiser",
+    summary = "A consistent copy of the database (SQLite file), streamed",
+    security(("organiser_token" = [])),
+    responses((status = 200, description = "The database copy", content_type = "application/vnd.sqlite3", body = Vec<u8>,
+        headers(("content-disposition" = String, description = "`attachment; filename=\"kitchen-r-<UTC time>.db\"`"))))
+)]
+pub(super) async fn backup(State(s): State<AppState>, caller: Caller) -> Result<Response, ServiceError> {
     let b = s.backup(caller.organiser()?).await?;
     let stream = futures_util::stream::unfold(Some(b.file), |file| async move {
         let mut f = file?;

@@ -13,6 +13,7 @@
 //! that does not exist, so a page never reveals which ids are taken. A leaderboard entry's page
 //! shows only what the leaderboard row shows, for ranked (and baseline) rows only.
 
+mod api_docs;
 mod home;
 mod layout;
 mod submission;
@@ -43,6 +44,7 @@ const TEAM_SESSION_S: u32 = 7 * 24 * 3600;
 pub(super) fn routes() -> Router<AppState> {
     Router::new()
         .route("/contest", get(contest))
+        .route("/api/docs", get(api_docs::page))
         .route("/team", get(team_page))
         .route("/team/login", get(login_form).post(login))
         .route("/team/logout", post(logout))

@@ -42,7 +42,7 @@ const PROBLEM_JOBS: i64 = 200;
 const ORGANISER: &str = "organiser";
 
 /// `GET /api/v1/admin/queue`.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
 pub(crate) struct QueueView {
     pub at: String,
     /// Jobs by state: queued, leased, done, failed, cancelled.
@@ -62,7 +62,7 @@ pub(crate) struct QueueView {
     pub failed: Vec<JobView>,
 }
 
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
 pub(crate) struct TeamShare {
     pub team: String,
     pub in_flight: i64,
@@ -72,7 +72,7 @@ pub(crate) struct TeamShare {
     pub share: f64,
 }
 
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
 pub(crate) struct JobView {
     pub job: i64,
     pub run: i64,
@@ -91,13 +91,13 @@ pub(crate) struct JobView {
 }
 
 /// `GET /api/v1/admin/workers`.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
 pub(crate) struct WorkersView {
     pub at: String,
     pub workers: Vec<WorkerView>,
 }
 
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
 pub(crate) struct WorkerView {
     pub worker: String,
     /// The later of its last lease or heartbeat and its last report.
@@ -114,7 +114,7 @@ pub(crate) struct WorkerView {
     pub current: Vec<CurrentEpisode>,
 }
 
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
 pub(crate) struct CurrentEpisode {
     pub job: i64,
     pub run: i64,
@@ -126,13 +126,14 @@ pub(crate) struct CurrentEpisode {
 }
 
 /// `GET /api/v1/admin/runs`.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
 pub(crate) struct RunsView {
     pub at: String,
     pub runs: Vec<RunView>,
 }
 
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
+#[schema(as = AdminRunView)]
 pub(crate) struct RunView {
     pub run: i64,
     pub submission: i64,
@@ -169,7 +170,7 @@ pub(crate) struct RunView {
 }
 
 /// The answer to a cancel.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
 pub(crate) struct Cancelled {
     pub run: i64,
     pub state: RunState,
@@ -182,7 +183,7 @@ pub(crate) struct Cancelled {
 }
 
 /// The answer to a requeue.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
 pub(crate) struct Requeued {
     pub run: i64,
     /// Failed and stuck jobs put back in the queue.

@@ -88,20 +88,20 @@ impl Refusals {
 }
 
 /// Uploads refused since the server started, by kind and split.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, utoipa::ToSchema)]
 pub(crate) struct RefusalCounts {
     pub rate_limited: PerSplit,
     pub daily_quota: PerSplit,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, utoipa::ToSchema)]
 pub(crate) struct PerSplit {
     pub dev: u64,
     pub test: u64,
 }
 
 /// `GET /api/v1/admin/stats`.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
 pub(crate) struct AdminStats {
     /// When the counts started (this process's start; they are not persisted).
     pub counting_since: String,

@@ -14,9 +14,10 @@ use crate::store::{self, NewRun, Team};
 const DAY_MS: i64 = 86_400_000;
 
 /// The answer to an accepted plan file.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
 pub(crate) struct Submitted {
     pub id: i64,
+    #[schema(value_type = crate::http::openapi::SplitName)]
     pub split: Split,
     pub scores: Scores,
     pub warnings: Vec<String>,

@@ -27,11 +27,12 @@ const MAX_URL_CHARS: usize = 2048;
 const MAX_TOKEN_CHARS: usize = 4096;
 
 /// `POST /api/v1/submissions/policies` and `RegisterPolicy`.
-#[derive(Debug, Clone, PartialEq, Eq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RegisterPolicy {
     /// `http://host:port` or `https://host:port`.
     pub endpoint: String,
+    #[schema(value_type = crate::http::openapi::SplitName)]
     pub split: Split,
     /// Bearer token the evaluator sends to the endpoint.
     #[serde(default)]
@@ -48,10 +49,11 @@ pub(crate) struct RegisterPolicy {
 }
 
 /// The answer to an accepted registration.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
 pub(crate) struct Registered {
     pub id: i64,
     pub run_id: i64,
+    #[schema(value_type = crate::http::openapi::SplitName)]
     pub split: Split,
     /// Instructions evaluated.
     pub instructions: usize,
@@ -79,7 +81,7 @@ pub(crate) struct PolicyBody {
 }
 
 /// The endpoint as the submission page shows it: everything but the token.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, utoipa::ToSchema)]
 pub(crate) struct PolicyInfo {
     pub endpoint: String,
     pub has_token: bool,

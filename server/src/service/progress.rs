@@ -15,7 +15,7 @@ use crate::states::RunState;
 use crate::store::RunRow;
 use crate::store::runs::{self as run_store, ResultRow};
 
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
 pub(crate) struct PolicyRunView {
     /// `queued` (no episode started), `running`, `finished`, `platform_failed` or `cancelled`
     /// (stopped by the organiser).
@@ -47,13 +47,13 @@ pub(crate) struct PolicyRunView {
     pub episodes_retrying: usize,
 }
 
-#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, utoipa::ToSchema)]
 pub(crate) struct ReasonCount {
     pub reason: String,
     pub count: usize,
 }
 
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
 pub(crate) struct RetryView {
     pub key: String,
     /// Leases so far.
@@ -61,7 +61,7 @@ pub(crate) struct RetryView {
     pub last_error: String,
 }
 
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
 pub(crate) struct EpisodeView {
     /// `dev-0007` (online) or `dev-0007/offline`.
     pub key: String,
@@ -79,7 +79,9 @@ pub(crate) struct EpisodeView {
     pub failure_reasons: Vec<String>,
     pub wall_ms: i64,
     pub attempt: i64,
+    /// Online: each task of the plan, in order (sub-task, success, failure reason, time).
     #[serde(skip_serializing_if = "Option::is_none")]
+    #[schema(value_type = Option<Vec<Object>>)]
     pub tasks: Option<Vec<TaskOutcome>>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub log_tail: Option<String>,

@@ -24,7 +24,7 @@ use crate::store::queue;
 use crate::store::runs as run_store;
 use crate::store::{self, NewRun};
 
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
 pub(crate) struct RescoreReport {
     /// Plan submissions rescored.
     pub rescored: usize,
@@ -39,7 +39,7 @@ pub(crate) struct RescoreReport {
     pub skipped: Vec<RescoreFailure>,
 }
 
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
 pub(crate) struct RescoreFailure {
     pub id: i64,
     pub error: String,

@@ -11,7 +11,7 @@ use crate::plans::InstructionScore;
 use crate::states::SubmissionKind;
 use crate::store;
 
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
 pub(crate) struct SubmissionView {
     pub id: i64,
     pub team: String,
@@ -30,7 +30,7 @@ pub(crate) struct SubmissionView {
     pub latest_run: Option<RunView>,
 }
 
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
 pub(crate) struct RunView {
     pub id: i64,
     pub scorer_version: String,
@@ -51,7 +51,7 @@ pub(crate) struct RunView {
 
 /// Per-instruction result of a dev plan run (test runs show none: per-instruction EM would turn
 /// every upload into hundreds of probes of the hidden answers).
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
 pub(crate) struct InstructionView {
     pub id: String,
     pub present: bool,

@@ -11,7 +11,7 @@ use crate::error::ServiceError;
 use crate::store::{self, NameKeys};
 
 /// A new team and its token (shown once: only its hash is stored).
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
 pub(crate) struct NewTeam {
     pub id: i64,
     pub name: String,

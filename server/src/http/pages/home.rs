@@ -213,7 +213,9 @@ See the <a href=\"/\">leaderboard</a>.</p>\
 (<code>?track=planning|control|integrated&amp;split=dev|test&amp;format=json|csv|html</code>), \
 <code>POST /api/v1/submissions/plans?split=</code>, <code>POST /api/v1/submissions/policies</code>, \
 <code>GET /api/v1/submissions/ID</code>, <a href=\"/api/v1/scenes\">scenes</a>, \
-<a href=\"/api/v1/dataset/manifest\">dataset</a>. Errors are <code>{{\"error\", \"code\", \"request_id\"}}</code>.</p>",
+<a href=\"/api/v1/dataset/manifest\">dataset</a>. Errors are <code>{{\"error\", \"code\", \"request_id\"}}</code>.</p>\
+<p>Every route, its parameters, bodies and answers: the <a href=\"/api/docs\">API reference</a> \
+(<a href=\"/api/v1/openapi.json\">OpenAPI document</a>).</p>",
         metrics(),
         steps(s),
         downloads(s),

@@ -1,0 +1,346 @@
+//! The HTTP API described: an OpenAPI 3.1 document generated from the handlers' `#[utoipa::path]`
+//! annotations and the response types' `ToSchema` derives, served at `GET /api/v1/openapi.json`
+//! and rendered as the page `/api/docs` ([`super::pages`]).
+//!
+//! Policy: every `/api/v1` route, `/healthz` and `/metrics` is in the document (a unit test
+//! compares it with the router's route lines, so a new route without an annotation fails), and
+//! every status a route can answer is listed, so a client (and the schemathesis fuzz in
+//! `tests/e2e/openapi.rs`) can rely on it. The statuses every route shares are added here once
+//! by [`Shared`] instead of on each handler: 500 and 503 everywhere, 401 where a token is
+//! needed, 403 where the organiser's is.
+
+use std::sync::OnceLock;
+
+use axum::http::{HeaderValue, header};
+use axum::response::{IntoResponse, Response};
+use serde::{Deserialize, Serialize};
+use utoipa::openapi::path::Operation;
+use utoipa::openapi::schema::{ObjectBuilder, OneOfBuilder, Schema, SchemaType, Type};
+use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityScheme};
+use utoipa::openapi::{ContentBuilder, OpenApi as Document, RefOr, ResponseBuilder};
+use utoipa::{Modify, OpenApi, ToSchema};
+
+/// The security scheme of routes that take a team's token.
+pub(crate) const TEAM: &str = "team_token";
+/// The security scheme of routes that take the organiser's token.
+pub(crate) const ORGANISER: &str = "organiser_token";
+
+#[derive(OpenApi)]
+#[openapi(
+    info(
+        title = "Kitchen-R evaluation server",
+        description = "The HTTP API of a Kitchen-R contest server: the dataset and scenes, plan and \
+policy submissions, their results, the leaderboard, and the organiser's console. Errors are always \
+JSON: `{\"error\": message, \"code\": stable identifier, \"request_id\": ...}` (quote the request id \
+when reporting a problem). Send tokens as `Authorization: Bearer <token>`.",
+    ),
+    paths(
+        super::healthz,
+        super::metrics,
+        openapi_json,
+        super::create_team,
+        super::dataset_manifest,
+        super::dataset,
+        super::scenes,
+        super::scene,
+        super::topdown,
+        super::brief,
+        super::submit_plans,
+        super::register_policy,
+        super::submission,
+        super::episode_plot,
+        super::leaderboard,
+        super::rescore,
+        super::resimulate,
+        super::admin_stats,
+        super::admin::queue,
+        super::admin::workers,
+        super::admin::runs,
+        super::admin::cancel,
+        super::admin::requeue,
+        super::admin::backup,
+    ),
+    // The schemas only parameters name (utoipa registers those of bodies and answers itself).
+    components(schemas(ErrorBody, SplitName, SplitParam, TrackParam, FormatParam)),
+    modifiers(&Shared),
+    tags(
+        (name = "service", description = "Health, metrics and this description."),
+        (name = "dataset", description = "The instructions and the scenes they happen in."),
+        (name = "submissions", description = "Plan files and policy endpoints, and their results."),
+        (name = "leaderboard", description = "The ranked tracks."),
+        (name = "organiser", description = "Teams, rescoring and the console: the organiser token only."),
+    )
+)]
+pub(crate) struct ApiDoc;
+
+/// The document, built once: it only depends on the code.
+pub(crate) fn document() -> &'static Document {
+    static DOC: OnceLock<Document> = OnceLock::new();
+    DOC.get_or_init(ApiDoc::openapi)
+}
+
+/// The document as JSON text, serialised once.
+pub(crate) fn document_json() -> &'static str {
+    static JSON: OnceLock<String> = OnceLock::new();
+    JSON.get_or_init(|| {
+        document()
+            .to_pretty_json()
+            .expect("the OpenAPI document serialises")
+    })
+}
+
+/// `GET /api/v1/openapi.json`.
+#[utoipa::path(
+    get,
+    path = "/api/v1/openapi.json",
+    tag = "service",
+    summary = "This API's OpenAPI 3.1 document",
+    responses((status = 200, description = "The OpenAPI document", content_type = "application/json", body = Object))
+)]
+pub(super) async fn openapi_json() -> Response {
+    (
+        [(header::CONTENT_TYPE, HeaderValue::from_static("application/json"))],
+        document_json(),
+    )
+        .into_response()
+}
+
+/// Every error answer: the message to show, a stable code, the request id, and details some
+/// errors add.
+#[derive(Debug, Serialize, ToSchema)]
+pub(crate) struct ErrorBody {
+    /// What went wrong and what to do, meant to be shown as is.
+    pub error: String,
+    /// A stable identifier to match on: `missing_token`, `bad_token`, `not_admin`,
+    /// `bad_request`, `not_found`, `conflict`, `quota_exceeded`, `rate_limited`, `unavailable`,
+    /// `busy`, `endpoint_refused`, `policy_probe_failed`, `policy_evaluation_disabled`,
+    /// `concurrent_runs_exceeded`, `timeout`, `method_not_allowed`, `body_too_large`,
+    /// `internal`, or a plan-file code.
+    pub code: String,
+    /// The id of the request (also the `x-request-id` header): quote it when reporting.
+    pub request_id: Option<String>,
+    /// Plan files: the 1-based line the error is on.
+    pub line: Option<u64>,
+    /// Daily quota: when it resets (RFC 3339).
+    pub resets_at: Option<String>,
+    /// 413: the largest body accepted.
+    pub limit_bytes: Option<u64>,
+    /// 429 and 503 refusals that know it: seconds after which a retry can succeed (also the
+    /// `Retry-After` header).
+    pub retry_after_s: Option<u64>,
+}
+
+/// A dataset split as named in paths, queries and bodies.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub(crate) enum SplitName {
+    Dev,
+    Test,
+}
+
+/// A query parameter's values, and the empty string (as an HTML form sends an unset field),
+/// which means the default. utoipa's derive cannot name an empty enum value, hence by hand.
+fn choice_schema(values: &[&str], description: &str) -> RefOr<Schema> {
+    ObjectBuilder::new()
+        .schema_type(SchemaType::new(Type::String))
+        .enum_values(Some(values.iter().copied()))
+        .description(Some(description))
+        .into()
+}
+
+/// `track` of `GET /api/v1/leaderboard`.
+pub(crate) struct TrackParam;
+
+impl utoipa::PartialSchema for TrackParam {
+    fn schema() -> RefOr<Schema> {
+        choice_schema(
+            &["", "planning", "control", "integrated"],
+            "A ranked track; empty means `planning`.",
+        )
+    }
+}
+
+impl ToSchema for TrackParam {}
+
+/// An optional `split` query parameter.
+pub(crate) struct SplitParam;
+
+impl utoipa::PartialSchema for SplitParam {
+    fn schema() -> RefOr<Schema> {
+        choice_schema(&["", "dev", "test"], "A dataset split; empty means the default.")
+    }
+}
+
+impl ToSchema for SplitParam {}
+
+/// `format` of `GET /api/v1/leaderboard`.
+pub(crate) struct FormatParam;
+
+impl utoipa::PartialSchema for FormatParam {
+    fn schema() -> RefOr<Schema> {
+        choice_schema(
+            &["", "json", "csv", "html"],
+            "The answer's format; empty means `json`.",
+        )
+    }
+}
+
+impl ToSchema for FormatParam {}
+
+/// `GET /healthz`.
+#[derive(Debug, Serialize, ToSchema)]
+pub(crate) struct Health {
+    /// Always `ok`: the server answers.
+    #[schema(example = "ok")]
+    pub status: &'static str,
+}
+
+/// `GET /api/v1/dataset/manifest`.
+#[derive(Debug, Serialize, ToSchema)]
+pub(crate) struct DatasetManifest {
+    pub dev: DevSplitInfo,
+    pub test: crate::content::TestSetInfo,
+}
+
+/// The dev split: public, with its plans.
+#[derive(Debug, Serialize, ToSchema)]
+pub(crate) struct DevSplitInfo {
+    pub instructions: usize,
+    /// Always `public`.
+    #[schema(example = "public")]
+    pub plans: &'static str,
+}
+
+/// `POST /api/v1/teams`.
+#[derive(Debug, Deserialize, ToSchema)]
+#[allow(dead_code)] // read by `body_field`; the struct is the schema
+pub(crate) struct TeamRequest {
+    /// The team's name as shown on the leaderboard.
+    pub name: String,
+}
+
+/// `POST /api/v1/admin/resimulate`.
+#[derive(Debug, Deserialize, ToSchema)]
+#[allow(dead_code)] // read by `body_field`; the struct is the schema
+pub(crate) struct ResimulateRequest {
+    /// The policy submission to simulate again.
+    pub submission: i64,
+}
+
+/// A score: a number, `null` when it cannot be computed (no episode, NaN), or the strings
+/// `inf` / `-inf` (JSON has no infinities).
+pub(crate) fn score_schema() -> impl Into<RefOr<Schema>> {
+    OneOfBuilder::new()
+        .item(ObjectBuilder::new().schema_type(SchemaType::new(Type::Number)))
+        .item(ObjectBuilder::new().schema_type(SchemaType::new(Type::Null)))
+        .item(
+            ObjectBuilder::new()
+                .schema_type(SchemaType::new(Type::String))
+                .enum_values(Some(["inf", "-inf"])),
+        )
+        .description(Some(
+            "A number; null when it cannot be computed; \"inf\" or \"-inf\" when infinite.",
+        ))
+}
+
+/// Adds the security schemes and the error answers every route shares.
+struct Shared;
+
+impl Modify for Shared {
+    fn modify(&self, doc: &mut Document) {
+        let components = doc.components.get_or_insert_with(Default::default);
+        components.add_security_scheme(
+            TEAM,
+            SecurityScheme::Http(
+                HttpBuilder::new()
+                    .scheme(HttpAuthScheme::Bearer)
+                    .description(Some(
+                        "A team's token, from the organiser (`kitchen-r team create`).",
+                    ))
+                    .build(),
+            ),
+        );
+        components.add_security_scheme(
+            ORGANISER,
+            SecurityScheme::Http(
+                HttpBuilder::new()
+                    .scheme(HttpAuthScheme::Bearer)
+                    .description(Some(
+                        "The organiser token (`admin_token` in the server's config).",
+                    ))
+                    .build(),
+            ),
+        );
+        for item in doc.paths.paths.values_mut() {
+            for op in [
+                &mut item.get,
+                &mut item.post,
+                &mut item.put,
+                &mut item.delete,
+                &mut item.patch,
+                &mut item.head,
+            ]
+            .into_iter()
+            .flatten()
+            {
+                add_shared_errors(op);
+            }
+        }
+    }
+}
+
+/// 500 and 503 on every operation; 401 where a token is required; 403 where the organiser's is.
+fn add_shared_errors(op: &mut Operation) {
+    let schemes: Vec<String> = (op.security.iter().flatten())
+        .flat_map(|req| {
+            serde_json::to_value(req)
+                .ok()
+                .and_then(|v| v.as_object().map(|o| o.keys().cloned().collect::<Vec<_>>()))
+                .unwrap_or_default()
+        })
+        .collect();
+    let mut add = |status: &str, description: &str| {
+        if !op.responses.responses.contains_key(status) {
+            op.responses
+                .responses
+                .insert(status.to_string(), RefOr::T(error_response(description)));
+        }
+    };
+    if !schemes.is_empty() {
+        add(
+            "401",
+            "No token (`missing_token`) or a token the server does not know (`bad_token`).",
+        );
+    }
+    if schemes.iter().any(|s| s == ORGANISER) {
+        add("403", "A valid token that is not the organiser's (`not_admin`).");
+    }
+    add(
+        "500",
+        "An internal error (`internal`): logged with the request id.",
+    );
+    add(
+        "503",
+        "The request ran past its time budget (`timeout`) or the server is saturated (`busy`, \
+         with `retry_after_s`).",
+    );
+}
+
+/// A response with the JSON error body.
+pub(crate) fn error_response(description: &str) -> utoipa::openapi::Response {
+    ResponseBuilder::new()
+        .description(description)
+        .content(
+            "application/json",
+            ContentBuilder::new()
+                .schema(Some(RefOr::Ref(utoipa::openapi::Ref::from_schema_name(
+                    "ErrorBody",
+                ))))
+                .build(),
+        )
+        .build()
+}
+
+#[cfg(test)]
+#[path = "openapi_tests.rs"]
+mod tests;
