@@ -65,6 +65,11 @@ pub(crate) struct EvalArgs {
     /// Evaluation settings [default: configs/eval.toml].
     #[arg(long, value_name = "FILE")]
     config: Option<PathBuf>,
+    /// Write each online episode's video to DIR/<episode key>.mp4, as the server's workers
+    /// record it (both cameras at the control rate with the caption bar; AV1 MP4). The built-in
+    /// oracle is then served on a loopback port and run through the workers' path.
+    #[arg(long, value_name = "DIR")]
+    record: Option<PathBuf>,
 }
 
 pub(crate) fn eval(args: EvalArgs) -> anyhow::Result<()> {
@@ -83,6 +88,16 @@ pub(crate) fn eval(args: EvalArgs) -> anyhow::Result<()> {
         return eval_endpoint(args, &config, batch);
     }
     let policy: PolicyChoice = args.policy.parse()?;
+    if args.record.is_some() {
+        // Videos are recorded by the workers' runner: serve the oracle as an endpoint for it.
+        let oracle = crate::eval_record::LoopbackOracle::start()?;
+        let args = EvalArgs {
+            policy: oracle.url().to_string(),
+            privileged: true,
+            ..args
+        };
+        return eval_endpoint(args, &config, batch);
+    }
     let opts = EvalOptions {
         policy,
         split: args.split,
@@ -172,7 +187,11 @@ fn eval_endpoint(
         jobs: args
             .jobs
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
+        record: args.record.clone(),
     };
+    if let Some(dir) = &args.record {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
     let n = args.episodes.unwrap_or(usize::MAX);
     let mut done = 0;
     let mut progress = |e: &LocalEpisode| {
@@ -196,6 +215,7 @@ fn eval_endpoint(
         for t in e.tasks.iter().filter(|t| !t.failure_reason.is_empty()) {
             eprintln!("    {:?}: {}", t.step, t.failure_reason);
         }
+        crate::eval_record::print_video(e);
     };
     let report = match &batch {
         Some(b) => {
@@ -255,4 +275,5 @@ fn print_local(r: &LocalReport) {
         );
     }
     println!("total wall time {:.1} s", r.total_wall_s);
+    crate::eval_record::print_video_totals(r);
 }

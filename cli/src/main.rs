@@ -13,6 +13,7 @@ mod collect_cmd;
 mod dataset_cmd;
 mod episodes_cmd;
 mod eval_cmd;
+mod eval_record;
 mod leaderboard_table;
 mod load_bench;
 mod policy_cmd;

@@ -11,6 +11,9 @@ use figment::Figment;
 use figment::providers::{Env, Format, Serialized, Toml};
 use serde::{Deserialize, Serialize};
 
+mod video;
+pub(crate) use video::VideoConfig;
+
 /// Environment variables read into the configuration (`KITCHEN_R_<KEY>`). Listed explicitly so
 /// the client-side variables (`KITCHEN_R_SERVER`, `KITCHEN_R_TOKEN`) are not mistaken for keys.
 const ENV_KEYS: [&str; 12] = [
@@ -71,6 +74,7 @@ pub struct Config {
     pub db_pool: DbPool,
     pub control: ControlConfig,
     pub policy: PolicyConfig,
+    pub video: VideoConfig,
 }
 
 /// How requests share the database (`[db_pool]`). Writes have one connection of their own
@@ -209,6 +213,7 @@ impl Default for Config {
             db_pool: DbPool::default(),
             control: ControlConfig::default(),
             policy: PolicyConfig::default(),
+            video: VideoConfig::default(),
         }
     }
 }
@@ -346,6 +351,7 @@ impl Config {
         if !self.worker_token.is_empty() && self.worker_token.len() < 16 {
             return invalid("worker_token", "must be at least 16 characters".into());
         }
+        self.video.validate()?;
         self.validate_control()
     }
 

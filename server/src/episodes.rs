@@ -84,6 +84,9 @@ impl JobSpec {
                 })
                 .collect(),
             policy_episode_id: policy_episode_id.to_string(),
+            // Set at lease from `[video]` (grpc_worker), not stored with the job.
+            record_video: false,
+            video_max_bytes: 0,
         }
     }
 

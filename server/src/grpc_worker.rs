@@ -30,14 +30,19 @@ impl WorkerService {
     }
 }
 
-fn job(j: LeasedJob) -> pb::Job {
+/// A leased job on the wire; whether to record a video is the server's `[video]` setting now,
+/// not stored with the job, so the organiser can turn it off for queued work too.
+fn job(j: LeasedJob, video: &crate::config::VideoConfig, store_ok: bool) -> pb::Job {
+    let mut episode = j.spec.episode_proto(&j.policy_episode_id);
+    episode.record_video = video.enabled && store_ok && episode.mode == pb::EvalMode::Online as i32;
+    episode.video_max_bytes = video.max_bytes;
     pb::Job {
         job_id: j.id,
         attempt: j.attempt,
         lease_expires_at_ms: j.lease_expires_at_ms,
         run_id: j.run_id,
         episode_key: j.episode_key,
-        episode: Some(j.spec.episode_proto(&j.policy_episode_id)),
+        episode: Some(episode),
         policy: Some(j.spec.endpoint_proto()),
     }
 }
@@ -50,8 +55,10 @@ impl Worker for WorkerService {
         let jobs = (self.state)
             .lease(worker, &m.worker_id, m.max_jobs, m.wait_ms)
             .await?;
+        let store_ok = self.state.video_dir().is_some();
+        let video = &self.state.config().video;
         Ok(Response::new(pb::LeaseResponse {
-            jobs: jobs.into_iter().map(job).collect(),
+            jobs: jobs.into_iter().map(|j| job(j, video, store_ok)).collect(),
         }))
     }
 
@@ -109,7 +116,18 @@ impl Worker for WorkerService {
             duplicate: out.duplicate,
         }))
     }
+
+    async fn upload_video(
+        &self,
+        req: Request<tonic::Streaming<pb::VideoChunk>>,
+    ) -> Result<Response<pb::UploadVideoResponse>, Status> {
+        caller(&req)?.worker()?;
+        let (sha256, bytes) = upload::receive(&self.state, req.into_inner()).await?;
+        Ok(Response::new(pb::UploadVideoResponse { sha256, bytes }))
+    }
 }
+
+mod upload;
 
 #[cfg(test)]
 mod tests;

@@ -40,6 +40,7 @@ pub(crate) mod openapi;
 mod pages;
 mod session;
 pub(crate) mod stack;
+mod video;
 
 pub(crate) fn router(state: AppState) -> Router {
     let cfg = state.config();
@@ -59,6 +60,10 @@ pub(crate) fn router(state: AppState) -> Router {
         .route(
             "/api/v1/submissions/{id}/episodes/{episode_key}/path.png",
             get(episode_plot),
+        )
+        .route(
+            "/api/v1/submissions/{id}/episodes/{episode_key}/video.mp4",
+            get(video::api_video),
         )
         .route("/api/v1/leaderboard", get(leaderboard))
         .route("/api/v1/admin/resimulate", post(resimulate))

@@ -36,6 +36,7 @@ mod states;
 mod store;
 #[cfg(test)]
 pub(crate) mod testutil;
+mod videos;
 
 use std::future::Future;
 use std::net::SocketAddr;
@@ -151,6 +152,7 @@ impl Server {
             let _ = rx.wait_for(|stop| *stop).await;
         };
         tokio::spawn(reaper(self.state.clone(), rx.clone()));
+        tokio::spawn(videos::sweeper(self.state.clone(), rx.clone()));
         let app = http::router(self.state.clone());
         let http_server = axum::serve(http, app).with_graceful_shutdown(wait(rx.clone()));
         let grpc_server = grpc_routes(self.state.clone())

@@ -27,4 +27,5 @@ mod pages;
 mod participant_client;
 mod planning;
 mod submission;
+mod video;
 mod workers;

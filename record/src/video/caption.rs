@@ -1,7 +1,8 @@
 //! One frame of an episode video: the cameras side by side, a caption bar under them.
 //!
 //! The bar has two lines of 8×8 text (`font8x8`'s public-domain ASCII glyphs, drawn at 1×):
-//! the task (1-based, as the web pages number tasks) and its sub-task sentence, then the sim
+//! the task number of the plan's tasks (`2/5`, 1-based as the web pages number tasks) and its
+//! sub-task sentence, then the sim
 //! time and, once the task has ended, its outcome in green or red. Text that does not fit is cut
 //! with `~`, so the frame size never depends on the text.
 
@@ -48,7 +49,8 @@ pub struct Caption<'a> {
 impl Caption<'_> {
     /// The two lines of text and the colour of the second.
     pub fn lines(&self) -> (String, String, [u8; 3]) {
-        let first = format!("task {}/{}: {}", self.task + 1, self.tasks, self.step);
+        // `6/6: move to the yellow zone` (the longest plan step) fits a 256-pixel line.
+        let first = format!("{}/{}: {}", self.task + 1, self.tasks, self.step);
         let time = format!("t {:.1} s", self.sim_time);
         match self.outcome {
             None => (first, time, DIM),
@@ -115,7 +117,14 @@ impl FrameLayout {
         let (first, second, colour) = caption.lines();
         let cols = self.columns();
         text(out, w, PAD, bar_top + PAD, &fit(&first, cols), TEXT);
-        text(out, w, PAD, bar_top + 2 * PAD + GLYPH, &fit(&second, cols), colour);
+        text(
+            out,
+            w,
+            PAD,
+            bar_top + 2 * PAD + GLYPH,
+            &fit(&second, cols),
+            colour,
+        );
     }
 }
 
@@ -210,7 +219,7 @@ mod tests {
             outcome: None,
         };
         let (first, second, colour) = cap.lines();
-        assert_eq!(first, "task 1/4: move to the blue zone");
+        assert_eq!(first, "1/4: move to the blue zone");
         assert_eq!((second.as_str(), colour), ("t 3.0 s", DIM));
         cap.outcome = Some(&failed);
         let (_, second, colour) = cap.lines();

@@ -53,6 +53,10 @@ pub(super) fn routes() -> Router<AppState> {
             "/submissions/{id}/episodes/{episode_key}/path.png",
             get(episode_plot),
         )
+        .route(
+            "/submissions/{id}/episodes/{episode_key}/video.mp4",
+            get(super::video::page_video),
+        )
         .route("/leaderboard/{track}/{split}/{id}", get(entry_page))
         .route("/favicon.ico", get(favicon))
 }
@@ -69,13 +73,13 @@ async fn favicon() -> Response {
 
 /// Who opened a page: a bearer header first (scripts), then the team cookie, then the
 /// organiser's console cookie.
-enum Who {
+pub(super) enum Who {
     Nobody,
     Team(Team),
     Organiser(Organiser),
 }
 
-async fn who(s: &AppState, caller: Caller, headers: &HeaderMap) -> Result<Who, ServiceError> {
+pub(super) async fn who(s: &AppState, caller: Caller, headers: &HeaderMap) -> Result<Who, ServiceError> {
     match caller {
         Caller::Team(t) => return Ok(Who::Team(t)),
         Caller::Organiser(o) => return Ok(Who::Organiser(o)),

@@ -88,6 +88,9 @@ pub(crate) struct EpisodeView {
     /// The top-down plot of where the robot went (dev split, online episodes with a stored path).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub plot_url: Option<String>,
+    /// The episode video (dev split, online episodes with a stored video; `[video]`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub video_url: Option<String>,
 }
 
 impl AppState {
@@ -100,6 +103,10 @@ impl AppState {
         let source = run.episodes_run();
         let counts = run_store::job_counts(self.read_pool(), source).await?;
         let results = run_store::results(self.read_pool(), source).await?;
+        let videos = match hidden {
+            true => Vec::new(),
+            false => self.video_keys(source).await?,
+        };
         let state = match run.state {
             RunState::Finished => "finished",
             RunState::PlatformFailed => "platform_failed",
@@ -113,6 +120,9 @@ impl AppState {
                 let mut e = episode_view(r);
                 if plot {
                     e.plot_url = Some(plot_url(submission, &e.key));
+                }
+                if videos.contains(&e.key) {
+                    e.video_url = Some(video_url(submission, &e.key));
                 }
                 e
             })
@@ -192,6 +202,11 @@ pub(super) fn reason_kind(reason: &str) -> String {
     out
 }
 
+/// Where an episode's video is served.
+pub(crate) fn video_url(submission: i64, episode_key: &str) -> String {
+    format!("/api/v1/submissions/{submission}/episodes/{episode_key}/video.mp4")
+}
+
 /// Where an episode's path plot is served.
 pub(crate) fn plot_url(submission: i64, episode_key: &str) -> String {
     format!("/api/v1/submissions/{submission}/episodes/{episode_key}/path.png")
@@ -228,6 +243,7 @@ fn episode_view(r: ResultRow) -> EpisodeView {
         tasks: Some(tasks),
         log_tail: Some(r.log_tail),
         plot_url: None,
+        video_url: None,
     }
 }
 
@@ -249,6 +265,7 @@ mod tests {
             tasks: Some(Vec::new()),
             log_tail: None,
             plot_url: None,
+            video_url: None,
         };
         let hidden = failure_counts(std::slice::from_ref(&given_up), true);
         assert_eq!(hidden[0].reason, PLATFORM_GAVE_UP);

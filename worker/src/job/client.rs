@@ -37,8 +37,9 @@ use tonic::{Code, Request, Status};
 use tracing::{Instrument, error, info, info_span, warn};
 
 use super::cores::Cores;
-use super::execute::{JobControl, execute_job};
+use super::execute::{JobControl, execute_job_recording};
 use super::{JobContext, WorkerConfig, WorkerError};
+use kitchen_r_record::video::episode::RecordedVideo;
 
 /// How long a shutting-down worker keeps trying to hand in its last result.
 const SHUTDOWN_GRACE: Duration = Duration::from_secs(5);
@@ -56,7 +57,7 @@ const MAX_BACKOFF: Duration = Duration::from_secs(30);
 
 /// Adds `authorization: Bearer <worker token>` to every call.
 #[derive(Debug, Clone)]
-struct Auth(MetadataValue<Ascii>);
+pub(crate) struct Auth(MetadataValue<Ascii>);
 
 impl Interceptor for Auth {
     fn call(&mut self, mut req: Request<()>) -> Result<Request<()>, Status> {
@@ -65,7 +66,7 @@ impl Interceptor for Auth {
     }
 }
 
-type Client = WorkerClient<InterceptedService<Channel, Auth>>;
+pub(crate) type Client = WorkerClient<InterceptedService<Channel, Auth>>;
 
 /// A worker ready to run: configuration checked, assets and dataset loaded.
 pub struct Worker {
@@ -283,10 +284,10 @@ impl Worker {
             // When draining began: the episode may run until `drain + grace`.
             let mut drain = (*stop.borrow()).then(Instant::now);
             let (mut released, mut dropped) = (false, false);
-            let result = loop {
+            let (result, video) = loop {
                 let cut = drain.map(|t| tokio::time::Instant::from_std(t + grace));
                 tokio::select! {
-                    r = &mut done => break r.unwrap_or_else(|_| platform("the episode thread panicked")),
+                    r = &mut done => break r.unwrap_or_else(|_| (platform("the episode thread panicked"), None)),
                     () = tokio::time::sleep(next) => {
                         next = self.heartbeat(&job, &control, &mut dropped).await;
                     }
@@ -318,6 +319,9 @@ impl Worker {
                 "episode finished"
             );
             self.report(&job, result, drain.is_some(), stop).await;
+            if let Some(v) = video {
+                super::upload::upload_video(&self.client, &self.id, &job, v.mp4).await;
+            }
         }
         .instrument(span)
         .await;
@@ -505,11 +509,11 @@ fn spawn_episode(
     job: pb::Job,
     ctx: Arc<JobContext>,
     control: JobControl,
-) -> oneshot::Receiver<pb::EpisodeResult> {
+) -> oneshot::Receiver<(pb::EpisodeResult, Option<RecordedVideo>)> {
     let (tx, rx) = oneshot::channel();
     let name = format!("episode-{}", job.job_id);
     let spawned = std::thread::Builder::new().name(name).spawn(move || {
-        let _ = tx.send(execute_job(&job, &ctx, &control));
+        let _ = tx.send(execute_job_recording(&job, &ctx, &control));
     });
     if let Err(e) = spawned {
         // `tx` went with the closure; the dropped sender reads as a platform error.
@@ -539,7 +543,7 @@ fn heartbeat_in(expires_at_ms: i64) -> Duration {
 
 /// Transport trouble and server hiccups are retried; a refusal (stale attempt, bad request) is
 /// final.
-fn retryable(s: &Status) -> bool {
+pub(crate) fn retryable(s: &Status) -> bool {
     matches!(
         s.code(),
         Code::Unavailable

@@ -23,6 +23,7 @@ use kitchen_r_episode::offline::{OfflineOutcome, run_offline};
 use kitchen_r_episode::oracle::{OraclePolicy, expert_options};
 use kitchen_r_episode::policy::{Corrections, Policy, Unreachable};
 use kitchen_r_episode::runner::{EpisodeOutcome, StepHook, run_episode};
+use kitchen_r_record::video::episode::{EpisodeVideo, RecordedVideo, VideoHook};
 
 /// The log tail kept with a result (the contract's cap).
 const LOG_CAP: usize = 64 << 10;
@@ -149,40 +150,68 @@ pub(crate) fn random_episode_id() -> String {
 /// Run `job` to its result. Never panics on what the policy does; the simulator is built here
 /// (a fresh world per job).
 pub fn execute_job(job: &pb::Job, ctx: &JobContext, control: &JobControl) -> pb::EpisodeResult {
+    execute_job_recording(job, ctx, control).0
+}
+
+/// As [`execute_job`], with the episode video (MP4) when the job asks for one
+/// (`record_video`, online episodes). The video never changes the result: a recording that
+/// failed is a line in the log tail and no video.
+pub fn execute_job_recording(
+    job: &pb::Job,
+    ctx: &JobContext,
+    control: &JobControl,
+) -> (pb::EpisodeResult, Option<RecordedVideo>) {
     let started = Instant::now();
     let mut log = Log::default();
     let result = run(job, ctx, control, &mut log);
-    let mut out = match result {
-        Ok((tasks, path)) => pb::EpisodeResult {
-            tasks,
-            path,
-            ..Default::default()
-        },
+    let (mut out, mut video) = match result {
+        Ok(Ran { tasks, path, video }) => (
+            pb::EpisodeResult {
+                tasks,
+                path,
+                ..Default::default()
+            },
+            video,
+        ),
         Err(e) => {
             log.line(format!("platform error: {e}"));
-            pb::EpisodeResult {
+            let out = pb::EpisodeResult {
                 platform_error: e.to_string(),
                 ..Default::default()
-            }
+            };
+            (out, None)
         }
     };
     // A cancelled episode's tasks were cut short by us, not by the policy: never score them.
     if control.is_cancelled() && out.platform_error.is_empty() {
         out.tasks.clear();
         out.path = None;
+        video = None;
         out.platform_error = format!("cancelled: {}", control.reason());
     }
     out.wall_ms = started.elapsed().as_millis() as u64;
     out.log_tail = log.into_tail();
-    out
+    (out, video)
 }
 
-fn run(
-    job: &pb::Job,
-    ctx: &JobContext,
-    control: &JobControl,
-    log: &mut Log,
-) -> Result<(Vec<pb::TaskResult>, Option<pb::EpisodePath>), JobError> {
+/// What an episode that ran hands back.
+struct Ran {
+    tasks: Vec<pb::TaskResult>,
+    path: Option<pb::EpisodePath>,
+    video: Option<RecordedVideo>,
+}
+
+impl Ran {
+    fn tasks(tasks: Vec<pb::TaskResult>) -> Ran {
+        Ran {
+            tasks,
+            path: None,
+            video: None,
+        }
+    }
+}
+
+fn run(job: &pb::Job, ctx: &JobContext, control: &JobControl, log: &mut Log) -> Result<Ran, JobError> {
     let spec = job
         .episode
         .as_ref()
@@ -231,7 +260,7 @@ fn run(
             let reason = format!("policy unreachable: {e}");
             log.line(&reason);
             if mode != pb::EvalMode::Offline {
-                return Ok((all_failed(&cfg, n_tasks, &reason), None));
+                return Ok(Ran::tasks(all_failed(&cfg, n_tasks, &reason)));
             }
             // The expert still drives and every decision point is a failed prediction, so an
             // endpoint that refuses its MSE episodes pays as much as one answering badly.
@@ -248,7 +277,7 @@ fn run(
         let mut expert = OraclePolicy::new(&ctx.assets);
         let opts = spec::offline_options(&run, ctx.sample_every);
         let out = run_offline(&mut sim, &mut expert, policy, &opts, watch)?;
-        return Ok((offline_results(&out, log), None));
+        return Ok(Ran::tasks(offline_results(&out, log)));
     }
     let starts = if spec.teleport_on_failure {
         Some(expert_starts(&mut sim, &cfg, ctx)?)
@@ -256,8 +285,42 @@ fn run(
         None
     };
     let mut hook = PathHook::new(watch);
-    let out = run_episode(&mut sim, policy, &run, starts.as_deref(), &mut hook)?;
-    Ok((online_results(&out, log), Some(hook.into_path())))
+    let (out, recording) = if spec.record_video {
+        let video = EpisodeVideo::new(&cfg.plan, n_tasks, spec.video_max_bytes as usize);
+        let mut recorder = VideoHook::new(&mut hook, video);
+        let out = run_episode(&mut sim, policy, &run, starts.as_deref(), &mut recorder)?;
+        (out, Some(recorder.into_video()))
+    } else {
+        (
+            run_episode(&mut sim, policy, &run, starts.as_deref(), &mut hook)?,
+            None,
+        )
+    };
+    let video = recording.and_then(|r| finish_video(r, log));
+    Ok(Ran {
+        tasks: online_results(&out, log),
+        path: Some(hook.into_path()),
+        video,
+    })
+}
+
+/// The episode's MP4, its cost logged; a failed recording is logged and dropped.
+fn finish_video(video: EpisodeVideo, log: &mut Log) -> Option<RecordedVideo> {
+    match video.finish() {
+        Ok(v) => {
+            log.line(format!(
+                "video: {} frames, {} bytes, composed and encoded in {:.2} s",
+                v.frames,
+                v.mp4.len(),
+                v.encode_time.as_secs_f64()
+            ));
+            Some(v)
+        }
+        Err(e) => {
+            log.line(format!("{e} (the result is not affected)"));
+            None
+        }
+    }
 }
 
 /// Run the expert over the episode once, keeping its state at each task start, then reset.

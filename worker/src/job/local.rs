@@ -1,6 +1,6 @@
 //! `kitchen-r eval --policy http://HOST:PORT`: local evaluation of a policy endpoint through the
 //! workers' own path. Each instruction becomes the job the server would lease for it (same run
-//! seed, same settings, same episode key) and runs through [`execute_job`], so the numbers a
+//! seed, same settings, same episode key) and runs through [`execute_job_recording`], so the numbers a
 //! participant gets here are the numbers the leaderboard will show for the same settings.
 //!
 //! Aggregation is the server's own (`kitchen_r_core::scoring::aggregate`): SR is the mean over
@@ -12,6 +12,7 @@
 //! configuration reaches the job's set-up through the context's episode parameters.
 
 use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
@@ -22,12 +23,13 @@ use kitchen_r_core::scoring::{self, TaskOutcome};
 use kitchen_r_proto::worker::v1 as pb;
 use serde::{Deserialize, Serialize};
 
-use super::execute::{JobControl, execute_job};
+use super::execute::{JobControl, execute_job_recording};
 use super::{JobContext, JobError};
 use kitchen_r_contract::probe::{ProbeFailure, probe_endpoint};
 use kitchen_r_contract::{AllowedNetworks, RemoteConfig};
 use kitchen_r_episode::eval::{Sr, task_kinds};
 use kitchen_r_episode::runner::RunOptions;
+use kitchen_r_record::video::episode::RecordedVideo;
 use kitchen_r_sim::EpisodeConfig;
 use kitchen_r_sim::episode::as_instruction;
 
@@ -43,6 +45,10 @@ pub struct LocalSettings {
     pub privileged: bool,
     /// Parallel episodes, capped by the endpoint's announced max concurrency.
     pub jobs: usize,
+    /// `eval --record DIR`: write each online episode's video, as the workers record it, to
+    /// `DIR/<episode key>.mp4`.
+    #[serde(default)]
+    pub record: Option<PathBuf>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -53,9 +59,25 @@ pub struct LocalEpisode {
     pub tasks: Vec<TaskOutcome>,
     pub platform_error: String,
     pub wall_s: f64,
+    /// `--record`: the episode video written, and what it cost.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub video: Option<LocalVideo>,
+    /// `--record`: why the video could not be written (the episode's result is not affected).
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub video_error: String,
     /// What scoring needs of the job (not printed).
     #[serde(skip)]
     pub scoring: Option<scoring::Episode>,
+}
+
+/// One episode video written by `eval --record`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LocalVideo {
+    pub path: PathBuf,
+    pub bytes: u64,
+    pub frames: usize,
+    /// Composing the frames and encoding them (rendering the cameras is the simulator's).
+    pub encode_s: f64,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -114,6 +136,8 @@ pub(crate) fn local_job(ins: &Instruction, url: &str, s: &LocalSettings, remote:
             privileged: s.privileged,
             place_targets: super::spec::place_targets(ins),
             policy_episode_id: String::new(),
+            record_video: s.record.is_some(),
+            video_max_bytes: 0,
         }),
         policy: Some(pb::PolicyEndpoint {
             url: url.to_string(),
@@ -205,8 +229,15 @@ fn evaluate_endpoint_with(
                     let i = next.fetch_add(1, Ordering::SeqCst);
                     let Some(job) = jobs.get(i) else { break };
                     let t = Instant::now();
-                    let r = execute_job(job, ctx, &JobControl::default());
-                    if tx.send((i, episode(job, &r, t.elapsed().as_secs_f64()))).is_err() {
+                    let (r, video) = execute_job_recording(job, ctx, &JobControl::default());
+                    let mut ep = episode(job, &r, t.elapsed().as_secs_f64());
+                    if let (Some(dir), Some(v)) = (&s.record, video) {
+                        match write_video(dir, &job.episode_key, v) {
+                            Ok(v) => ep.video = Some(v),
+                            Err(e) => ep.video_error = e,
+                        }
+                    }
+                    if tx.send((i, ep)).is_err() {
                         break;
                     }
                 }
@@ -243,6 +274,22 @@ fn episode(job: &pb::Job, r: &pb::EpisodeResult, wall_s: f64) -> LocalEpisode {
         tasks,
         platform_error: r.platform_error.clone(),
         wall_s,
+        video: None,
+        video_error: String::new(),
+    }
+}
+
+/// Write `v` as `DIR/<key>.mp4`.
+fn write_video(dir: &Path, key: &str, v: RecordedVideo) -> Result<LocalVideo, String> {
+    let path = dir.join(format!("{key}.mp4"));
+    match std::fs::write(&path, &v.mp4) {
+        Ok(()) => Ok(LocalVideo {
+            path,
+            bytes: v.mp4.len() as u64,
+            frames: v.frames,
+            encode_s: v.encode_time.as_secs_f64(),
+        }),
+        Err(e) => Err(format!("writing the video {}: {e}", path.display())),
     }
 }
 
@@ -328,6 +375,7 @@ mod tests {
             bearer_token: None,
             privileged: false,
             jobs: 1,
+            record: None,
         }
     }
 

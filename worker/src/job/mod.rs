@@ -11,6 +11,7 @@ mod execute;
 pub mod local;
 mod path;
 pub mod spec;
+mod upload;
 
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -19,7 +20,7 @@ use kitchen_r_sim::{Assets, EpisodeParams, SensorsConfig, SimConfig, SimError};
 use serde::{Deserialize, Serialize};
 
 pub use client::run_worker;
-pub use execute::{JobControl, execute_job};
+pub use execute::{JobControl, execute_job, execute_job_recording};
 
 use kitchen_r_contract::{AllowedNetworks, RemoteConfig};
 use kitchen_r_episode::runner::RunError;

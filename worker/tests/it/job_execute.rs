@@ -50,6 +50,8 @@ pub(crate) fn job(url: &str, mode: pb::EvalMode, steps: u32, privileged: bool) -
             privileged,
             place_targets: kitchen_r_worker::job::spec::place_targets(ins),
             policy_episode_id: "ep-0123456789abcdef01234567".into(),
+            record_video: false,
+            video_max_bytes: 0,
         }),
         policy: Some(pb::PolicyEndpoint {
             url: url.to_string(),
@@ -213,6 +215,7 @@ fn local_eval_of_an_endpoint_gives_the_workers_numbers() {
         bearer_token: None,
         privileged: true,
         jobs: 4,
+        record: None,
     };
     let local = evaluate_endpoint(
         &server.url(),

@@ -28,6 +28,10 @@ struct State {
     lease_delay: Duration,
     /// The most jobs one Lease call asked for.
     max_jobs_asked: u32,
+    /// Episode videos uploaded: the first chunk (with no data) and the joined bytes, with how
+    /// many reports had arrived when each upload began.
+    videos: Vec<(pb::VideoChunk, Vec<u8>, usize)>,
+    upload_calls: u32,
 }
 
 #[derive(Clone)]
@@ -107,6 +111,35 @@ impl Worker for TestWorkerServer {
             duplicate: false,
         }))
     }
+
+    async fn upload_video(
+        &self,
+        req: Request<tonic::Streaming<pb::VideoChunk>>,
+    ) -> Result<Response<pb::UploadVideoResponse>, Status> {
+        authed(&req)?;
+        let reports = {
+            let mut s = self.0.lock().unwrap();
+            s.upload_calls += 1;
+            if s.upload_calls == 1 {
+                return Err(Status::unavailable("the disk is busy"));
+            }
+            s.reports.len()
+        };
+        let mut stream = req.into_inner();
+        let mut first: Option<pb::VideoChunk> = None;
+        let mut bytes = Vec::new();
+        while let Some(mut c) = stream.message().await? {
+            bytes.append(&mut c.data);
+            first.get_or_insert(c);
+        }
+        let first = first.ok_or_else(|| Status::invalid_argument("empty"))?;
+        let n = bytes.len() as u64;
+        self.0.lock().unwrap().videos.push((first, bytes, reports));
+        Ok(Response::new(pb::UploadVideoResponse {
+            sha256: String::new(),
+            bytes: n,
+        }))
+    }
 }
 
 fn start(state: Arc<Mutex<State>>, rt: &tokio::runtime::Runtime) -> String {
@@ -159,6 +192,8 @@ fn job(id: i64, policy: &str) -> pb::Job {
             privileged: false,
             place_targets: kitchen_r_worker::job::spec::place_targets(ins),
             policy_episode_id: String::new(),
+            record_video: false,
+            video_max_bytes: 0,
         }),
         policy: Some(pb::PolicyEndpoint {
             url: policy.to_string(),
@@ -434,4 +469,42 @@ fn episodes_waiting_on_a_slow_policy_share_one_slot() {
             res.tasks
         );
     }
+}
+
+/// The standalone worker's video path: a job that asks for a video gets its MP4 uploaded in
+/// chunks over `UploadVideo` after its result is reported, and a failed upload is retried.
+#[test]
+fn a_recorded_episode_video_is_uploaded_in_chunks_after_its_report() {
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let policy = slow_still();
+    let mut recorded = job(1, &policy.url());
+    if let Some(e) = recorded.episode.as_mut() {
+        e.record_video = true;
+    }
+    let state = Arc::new(Mutex::new(State {
+        queue: vec![recorded],
+        ..State::default()
+    }));
+    let url = start(state.clone(), &rt);
+    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+    let worker = rt.spawn(run_worker(config(&url, "worker-secret"), async {
+        let _ = stop_rx.await;
+    }));
+    let t = Instant::now();
+    while state.lock().unwrap().videos.is_empty() {
+        assert!(t.elapsed() < Duration::from_secs(120), "the video never arrived");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    stop_tx.send(()).unwrap();
+    rt.block_on(worker).unwrap().unwrap();
+    let s = state.lock().unwrap();
+    assert_eq!(s.upload_calls, 2, "the failed upload is retried once");
+    let (first, mp4, reports_before) = &s.videos[0];
+    assert_eq!(*reports_before, 1, "the result is reported before the video is sent");
+    assert_eq!((first.job_id, first.attempt, first.run_id), (1, 1, 1));
+    assert_eq!(first.worker_id, "test-worker");
+    assert_eq!(first.total_bytes, mp4.len() as u64);
+    assert_eq!(&mp4[4..8], b"ftyp");
+    let log = &s.reports[0].result.as_ref().unwrap().log_tail;
+    assert!(log.contains("video: 20 frames"), "{log}");
 }

@@ -257,17 +257,31 @@ fn episode_row(ep: &EpisodeView) -> String {
     )
 }
 
-/// The episode's video and path plot links (issue #15, items 1 and 2), placed under the
-/// episode's key; only what exists is shown. The plot is served to the page's session at the
-/// API path less its `/api/v1` prefix.
+/// The episode's video and path plot (issue #15, items 1 and 2), placed under the episode's
+/// key; only what exists is shown (neither ever on the test split: the view has no URL there).
+/// Both are served to the page's session at the API path less its `/api/v1` prefix.
 fn media(ep: &EpisodeView) -> String {
-    let Some(plot) = ep.plot_url.as_deref() else {
-        return String::new();
-    };
-    let src = escape(plot.strip_prefix("/api/v1").unwrap_or(plot));
-    format!(
-        "<br><a href=\"{src}\"><img class=plot src=\"{src}\" width=240 \
-alt=\"Where the robot went in {key}: the base path coloured by task, goal circles, a cross where a failed task ended\"></a>",
-        key = escape(&ep.key)
-    )
+    let page = |url: &str| escape(url.strip_prefix("/api/v1").unwrap_or(url));
+    let key = escape(&ep.key);
+    let mut out = String::new();
+    if let Some(video) = ep.video_url.as_deref() {
+        let src = page(video);
+        // `preload=metadata`: a page of many episodes fetches only each file's header (the
+        // server answers byte ranges) until one is played.
+        let _ = write!(
+            out,
+            "<br><video class=episode-video controls preload=\"metadata\" width=256 src=\"{src}\" \
+aria-label=\"Episode {key}: both cameras with the task and time captioned\">\
+<a href=\"{src}\">the episode video (MP4)</a></video>"
+        );
+    }
+    if let Some(plot) = ep.plot_url.as_deref() {
+        let src = page(plot);
+        let _ = write!(
+            out,
+            "<br><a href=\"{src}\"><img class=plot src=\"{src}\" width=240 \
+alt=\"Where the robot went in {key}: the base path coloured by task, goal circles, a cross where a failed task ended\"></a>"
+        );
+    }
+    out
 }

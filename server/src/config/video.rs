@@ -1,0 +1,95 @@
+//! `[video]`: episode videos (issue #15). The organiser decides centrally: the setting travels
+//! to the workers with every leased job (`EpisodeSpec.record_video`, `video_max_bytes`).
+
+use std::path::PathBuf;
+
+use serde::{Deserialize, Serialize};
+
+use super::ConfigError;
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct VideoConfig {
+    /// Workers record a video of every online episode and upload it; false: none is recorded,
+    /// and stored ones are no longer served.
+    pub enabled: bool,
+    /// Delete videos older than this many days (a sweep runs at start and every hour); 0 keeps
+    /// them forever.
+    pub retention_days: u32,
+    /// Largest video file accepted, bytes (workers do not upload a larger one).
+    pub max_bytes: u64,
+    /// Where the files are stored (`<aa>/<sha256>.mp4`); empty means `videos/` beside the
+    /// database file (no videos with an in-memory database).
+    pub dir: PathBuf,
+}
+
+impl Default for VideoConfig {
+    fn default() -> Self {
+        VideoConfig {
+            enabled: true,
+            retention_days: 30,
+            max_bytes: 64 << 20,
+            dir: PathBuf::new(),
+        }
+    }
+}
+
+impl VideoConfig {
+    pub(super) fn validate(&self) -> Result<(), ConfigError> {
+        if !(1024..=(1 << 30)).contains(&self.max_bytes) {
+            return Err(ConfigError::Invalid {
+                key: "video.max_bytes",
+                message: "must be between 1 KiB and 1 GiB".into(),
+            });
+        }
+        Ok(())
+    }
+
+    /// The directory videos live in for a server whose database is `db`; `None` when there is
+    /// nowhere to put them (an in-memory database and no `dir`).
+    pub fn directory(&self, db: &str) -> Option<PathBuf> {
+        if !self.dir.as_os_str().is_empty() {
+            return Some(self.dir.clone());
+        }
+        let path = db
+            .strip_prefix("sqlite://")
+            .or_else(|| db.strip_prefix("sqlite:"))?;
+        let path = path.split('?').next().unwrap_or_default();
+        if path.is_empty()
+            || path.contains(":memory:")
+            || path.starts_with("file:") && path.contains("mode=memory")
+        {
+            return None;
+        }
+        let parent = std::path::Path::new(path)
+            .parent()
+            .map(PathBuf::from)
+            .unwrap_or_default();
+        Some(parent.join("videos"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn videos_live_beside_the_database_unless_a_dir_is_given() {
+        let v = VideoConfig::default();
+        assert_eq!(
+            v.directory("sqlite://data/kitchen-r.db"),
+            Some(PathBuf::from("data/videos"))
+        );
+        assert_eq!(
+            v.directory("sqlite:/srv/k.db?mode=rwc"),
+            Some(PathBuf::from("/srv/videos"))
+        );
+        assert_eq!(v.directory("sqlite::memory:"), None);
+        let v = VideoConfig {
+            dir: "/v".into(),
+            ..VideoConfig::default()
+        };
+        assert_eq!(v.directory("sqlite::memory:"), Some(PathBuf::from("/v")));
+        assert!(VideoConfig { max_bytes: 5, ..v }.validate().is_err());
+    }
+}

@@ -1,0 +1,62 @@
+//! `UploadVideo`: an episode video streamed in chunks after the episode's result. The first
+//! chunk names the job; the upload is accepted only for a job whose result that attempt
+//! reported, so a worker token cannot attach a file to any other episode.
+
+use kitchen_r_proto::worker::v1 as pb;
+use tonic::{Status, Streaming};
+
+use crate::service::AppState;
+use crate::store;
+use crate::videos::{Incoming, UploadError};
+
+/// Read the stream to its end, store the file and link it; returns its sha256 and size.
+pub(super) async fn receive(
+    state: &AppState,
+    mut stream: Streaming<pb::VideoChunk>,
+) -> Result<(String, u64), Status> {
+    let Some(dir) = state.video_dir() else {
+        return Err(Status::failed_precondition(
+            "this server does not store episode videos (`[video] enabled` is false or it has no video directory)",
+        ));
+    };
+    let first = stream
+        .message()
+        .await?
+        .ok_or_else(|| Status::invalid_argument("an empty upload: the first chunk must name the job"))?;
+    let known = store::videos::reported_job(
+        state.read_pool(),
+        first.job_id,
+        first.attempt,
+        first.run_id,
+        &first.episode_key,
+    )
+    .await
+    .map_err(|e| Status::internal(e.to_string()))?;
+    if !known {
+        return Err(Status::failed_precondition(format!(
+            "job {} attempt {} has no reported result for run {} episode {:?}",
+            first.job_id, first.attempt, first.run_id, first.episode_key
+        )));
+    }
+    let limit = state.config().video.max_bytes;
+    let mut file = Incoming::start(&dir, first.total_bytes, limit)
+        .await
+        .map_err(refused)?;
+    file.write(&first.data).await.map_err(refused)?;
+    while let Some(chunk) = stream.message().await? {
+        file.write(&chunk.data).await.map_err(refused)?;
+    }
+    let (sha, bytes) = file.finish(&dir).await.map_err(refused)?;
+    state
+        .link_video(first.run_id, &first.episode_key, &sha, bytes)
+        .await?;
+    tracing::info!(run = first.run_id, episode = %first.episode_key, bytes, sha256 = %sha, "episode video stored");
+    Ok((sha, bytes))
+}
+
+fn refused(e: UploadError) -> Status {
+    match e {
+        UploadError::Io(e) => Status::internal(format!("storing the video: {e}")),
+        e => Status::invalid_argument(e.to_string()),
+    }
+}

@@ -1,0 +1,209 @@
+use kitchen_r_core::dataset::Split;
+use kitchen_r_proto::worker::v1 as pb;
+use kitchen_r_proto::worker::v1::worker_client::WorkerClient;
+use tokio_stream::wrappers::TcpListenerStream;
+use tonic::transport::Channel;
+use tonic::{Code, Request};
+
+use super::*;
+use crate::testutil::{FakeProbe, Fixture, WORKER, fixture};
+
+async fn serve(f: &Fixture) -> WorkerClient<Channel> {
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    let routes = crate::grpc_routes(f.state.clone()).await.unwrap();
+    tokio::spawn(routes.serve_with_incoming(TcpListenerStream::new(listener)));
+    WorkerClient::connect(format!("http://{addr}")).await.unwrap()
+}
+
+/// `(job id, attempt, run, key)` of every reported online job, dev run first.
+async fn done_jobs(f: &Fixture) -> Vec<(i64, i64, i64, String)> {
+    sqlx::query_as(
+        "SELECT id, attempt, run_id, episode_key FROM jobs WHERE state = 'done'
+         AND episode_key NOT LIKE '%/offline' ORDER BY run_id, id",
+    )
+    .fetch_all(f.state.pool())
+    .await
+    .unwrap()
+}
+
+/// The upload stream of `data` for `job`, in chunks of 3 bytes, announcing `total` bytes.
+fn upload(
+    job: &(i64, i64, i64, String),
+    data: &[u8],
+    total: u64,
+) -> Request<tokio_stream::Iter<std::vec::IntoIter<pb::VideoChunk>>> {
+    let mut chunks: Vec<pb::VideoChunk> = data
+        .chunks(3)
+        .map(|d| pb::VideoChunk {
+            data: d.to_vec(),
+            ..Default::default()
+        })
+        .collect();
+    let first = &mut chunks[0];
+    (first.job_id, first.attempt, first.run_id) = (job.0, job.1 as u32, job.2);
+    first.episode_key = job.3.clone();
+    first.worker_id = "w1".into();
+    first.total_bytes = total;
+    let mut req = Request::new(tokio_stream::iter(chunks));
+    req.metadata_mut()
+        .insert("authorization", format!("Bearer {WORKER}").parse().unwrap());
+    req
+}
+
+fn files(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir(dir).into_iter().flatten().flatten() {
+        let p = e.path();
+        if p.is_dir() {
+            out.extend(files(&p));
+        } else {
+            out.push(p);
+        }
+    }
+    out
+}
+
+#[tokio::test]
+async fn uploads_are_stored_once_by_content_and_shown_only_to_who_may_see_the_episode() {
+    let f = fixture(FakeProbe::ok(8), |c| c.control.dev_episodes = 1).await;
+    let (alpha, bravo, dev, test) = f.runs_with_paths(|_| Default::default()).await;
+    let mut client = serve(&f).await;
+    let jobs = done_jobs(&f).await;
+    let (dev_job, test_job) = (&jobs[0], jobs.last().unwrap());
+    assert_ne!(dev_job.2, test_job.2, "{jobs:?}");
+    let mp4 = b"not really an mp4, but bytes".to_vec();
+    let answer = client
+        .upload_video(upload(dev_job, &mp4, mp4.len() as u64))
+        .await
+        .unwrap()
+        .into_inner();
+    assert_eq!(answer.sha256, hex::encode(Sha256::digest(&mp4)));
+    assert_eq!(answer.bytes, mp4.len() as u64);
+    // The same bytes for another episode: linked, not stored twice.
+    client
+        .upload_video(upload(test_job, &mp4, mp4.len() as u64))
+        .await
+        .unwrap();
+    let dir = f.state.video_dir().unwrap();
+    assert_eq!(files(&dir), vec![file_path(&dir, &answer.sha256)]);
+
+    // A job that reported nothing, a stream shorter or longer than announced: refused, no file.
+    let stranger = (dev_job.0, dev_job.1 + 1, dev_job.2, dev_job.3.clone());
+    let e = client
+        .upload_video(upload(&stranger, &mp4, mp4.len() as u64))
+        .await
+        .unwrap_err();
+    assert_eq!(e.code(), Code::FailedPrecondition, "{e:?}");
+    let e = client
+        .upload_video(upload(dev_job, &mp4, mp4.len() as u64 + 1))
+        .await
+        .unwrap_err();
+    assert_eq!(e.code(), Code::InvalidArgument, "{e:?}");
+    let e = client.upload_video(upload(dev_job, &mp4, 4)).await.unwrap_err();
+    assert_eq!(e.code(), Code::InvalidArgument, "{e:?}");
+    assert_eq!(
+        files(&dir).len(),
+        1,
+        "a refused upload left a file: {:?}",
+        files(&dir)
+    );
+
+    let key = &dev_job.3;
+    let own = f.caller(&alpha).await;
+    let v = f.state.episode_video(&own, dev, key).await.unwrap();
+    assert_eq!(std::fs::read(&v.path).unwrap(), mp4);
+    let other = f.caller(&bravo).await;
+    let not_found = |r: Result<StoredVideo, ServiceError>| matches!(r, Err(ServiceError::NotFound { .. }));
+    assert!(not_found(f.state.episode_video(&other, dev, key).await));
+    // Test split: recorded and stored, shown to the organiser only.
+    assert!(not_found(f.state.episode_video(&own, test, &test_job.3).await));
+    let organiser = Caller::Organiser(f.admin().await);
+    assert!(f.state.episode_video(&organiser, test, &test_job.3).await.is_ok());
+    assert!(f.state.episode_video(&organiser, dev, key).await.is_ok());
+    // The submission JSON links the dev video, never a test one.
+    let view = f.state.get_submission(&own, dev).await.unwrap();
+    let eps = view.latest_run.unwrap().evaluation.unwrap().episodes;
+    let url = eps.iter().find(|e| &e.key == key).unwrap().video_url.clone();
+    assert_eq!(
+        url.unwrap(),
+        format!("/api/v1/submissions/{dev}/episodes/{key}/video.mp4")
+    );
+    let view = f.state.get_submission(&organiser, test).await.unwrap();
+    let eps = view.latest_run.unwrap().evaluation.unwrap().episodes;
+    assert!(eps.iter().all(|e| e.video_url.is_none()));
+}
+
+#[tokio::test]
+async fn the_retention_sweep_deletes_old_links_and_files_no_link_names() {
+    let f = fixture(FakeProbe::ok(8), |c| {
+        c.control.dev_episodes = 1;
+        c.video.retention_days = 2;
+    })
+    .await;
+    f.runs_with_paths(|_| Default::default()).await;
+    let jobs = done_jobs(&f).await;
+    let dir = f.state.video_dir().unwrap();
+    let store_file = |bytes: &'static [u8]| {
+        let dir = dir.clone();
+        async move {
+            let mut up = Incoming::start(&dir, bytes.len() as u64, 1 << 20).await.unwrap();
+            up.write(bytes).await.unwrap();
+            up.finish(&dir).await.unwrap().0
+        }
+    };
+    let (old, shared) = (store_file(b"old").await, store_file(b"shared").await);
+    let now = 100 * DAY_MS;
+    let (a, b) = (&jobs[0], jobs.last().unwrap());
+    let pool = f.state.pool();
+    store::videos::link(pool, a.2, &a.3, &old, 3, now - 3 * DAY_MS)
+        .await
+        .unwrap();
+    // `shared` is linked by an old row and a recent one: the file stays.
+    store::videos::link(pool, b.2, &b.3, &shared, 6, now - 3 * DAY_MS)
+        .await
+        .unwrap();
+    store::videos::link(pool, a.2, "other-key", &shared, 6, now - DAY_MS)
+        .await
+        .unwrap();
+    assert_eq!(f.state.sweep_videos(now).await.unwrap(), 1);
+    assert!(!file_path(&dir, &old).exists());
+    assert!(file_path(&dir, &shared).exists());
+    assert!(store::videos::video(pool, a.2, &a.3).await.unwrap().is_none());
+    assert!(
+        store::videos::video(pool, a.2, "other-key")
+            .await
+            .unwrap()
+            .is_some()
+    );
+    // retention_days = 0 keeps everything.
+    let keep = fixture(FakeProbe::ok(8), |c| c.video.retention_days = 0).await;
+    assert_eq!(keep.state.sweep_videos(now).await.unwrap(), 0);
+}
+
+#[tokio::test]
+async fn turning_videos_off_stops_recording_and_serving() {
+    let f = fixture(FakeProbe::ok(8), |c| {
+        c.control.dev_episodes = 1;
+        c.video.enabled = false;
+    })
+    .await;
+    let token = f.team("alpha").await;
+    let caller = f.caller(&token).await;
+    f.state
+        .register_policy(&caller, f.request(Split::Dev))
+        .await
+        .unwrap();
+    assert!(f.state.video_dir().is_none());
+    let mut client = serve(&f).await;
+    let mut req = Request::new(pb::LeaseRequest {
+        worker_id: "w1".into(),
+        max_jobs: 4,
+        wait_ms: 0,
+    });
+    req.metadata_mut()
+        .insert("authorization", format!("Bearer {WORKER}").parse().unwrap());
+    let jobs = client.lease(req).await.unwrap().into_inner().jobs;
+    assert!(!jobs.is_empty());
+    assert!(jobs.iter().all(|j| !j.episode.as_ref().unwrap().record_video));
+}
