@@ -271,6 +271,7 @@ impl Modify for Shared {
                     .build(),
             ),
         );
+        doc.paths.paths.insert(VIDEO_PATH.to_string(), video_item());
         for item in doc.paths.paths.values_mut() {
             for op in [
                 &mut item.get,
@@ -287,6 +288,48 @@ impl Modify for Shared {
             }
         }
     }
+}
+
+const VIDEO_PATH: &str = "/api/v1/submissions/{id}/episodes/{episode_key}/video.mp4";
+
+/// `GET /api/v1/submissions/{id}/episodes/{episode_key}/video.mp4` (`super::video`), written out
+/// here: its handler's file belongs to the video feature, and its answers (ranges) are plain
+/// HTTP rather than the service's types.
+fn video_item() -> utoipa::openapi::PathItem {
+    let error = |d: &str| serde_json::json!({"description": d, "content": {"application/json": {"schema": {"$ref": "#/components/schemas/ErrorBody"}}}});
+    let video = |d: &str| {
+        serde_json::json!({
+            "description": d,
+            "headers": {
+                "accept-ranges": {"schema": {"type": "string"}, "description": "Always `bytes`"},
+                "etag": {"schema": {"type": "string"}, "description": "The file's sha256, quoted"},
+                "content-range": {"schema": {"type": "string"}, "description": "206: `bytes FIRST-LAST/SIZE`"},
+            },
+            "content": {"video/mp4": {"schema": {"type": "string", "format": "binary"}}},
+        })
+    };
+    let item = serde_json::json!({
+        "get": {
+            "tags": ["submissions"],
+            "summary": "One episode's video (AV1 in MP4), with byte ranges",
+            "description": "Both cameras side by side with a caption bar. The team sees its dev episodes; the organiser dev and test. One `bytes=` range is answered 206; several ranges, a malformed `Range` or an `If-Range` that does not match the ETag get the whole file.",
+            "operationId": "api_video",
+            "parameters": [
+                {"name": "id", "in": "path", "required": true, "description": "The submission id", "schema": {"type": "integer", "format": "int64"}, "example": 1},
+                {"name": "episode_key", "in": "path", "required": true, "description": "The episode's key, e.g. `dev-0007`", "schema": {"type": "string"}, "example": "dev-0001"},
+                {"name": "range", "in": "header", "required": false, "description": "`bytes=FIRST-LAST`, `bytes=FIRST-` or `bytes=-SUFFIX`", "schema": {"type": "string"}},
+                {"name": "if-range", "in": "header", "required": false, "description": "Honour `Range` only if the video's ETag still matches", "schema": {"type": "string"}},
+            ],
+            "responses": {
+                "200": video("The whole video"),
+                "206": video("The requested byte range"),
+                "404": error("No such submission, episode or video, or not the caller's (a team never sees its test-split videos)"),
+                "416": {"description": "The range starts past the end (`Content-Range: bytes */SIZE`)", "headers": {"content-range": {"schema": {"type": "string"}}}},
+            },
+            "security": [{TEAM: []}, {ORGANISER: []}],
+        }
+    });
+    serde_json::from_value(item).expect("the video route's description is a path item")
 }
 
 /// 500 and 503 on every operation; 401 where a token is required; 403 where the organiser's is.
