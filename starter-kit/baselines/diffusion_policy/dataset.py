@@ -63,11 +63,17 @@ def _decode_file(job):
         for j in range(count):
             want[first + j] = dest + j
     done = 0
+    lo, hi = min(want), max(want)
     with av.open(str(path)) as c:
         s = c.streams.video[0]
-        s.thread_type = "AUTO"
+        # One episode per job and a process per core: seek to the key frame before the
+        # episode's first frame instead of decoding the file from its start.
+        if lo > 0:
+            c.seek(int(lo / fps / s.time_base), stream=s, backward=True, any_frame=False)
         for frame in c.decode(s):
             i = int(round(float(frame.pts * s.time_base) * fps))
+            if i > hi:
+                break
             row = want.get(i)
             if row is None:
                 continue
@@ -200,10 +206,11 @@ class LeRobotExport:
                 by_file.setdefault((ck, fi), []).append((first, int(e["length"]), dest))
             for (ck, fi), segs in sorted(by_file.items()):
                 path = root / self.info["video_path"].format(video_key=key, chunk_index=ck, file_index=fi)
-                jobs.append((cam, path, segs, image_size, self.fps))
+                # A job per episode: a file holds many episodes, and the cores should share them.
+                jobs.extend((cam, path, [seg], image_size, self.fps) for seg in segs)
         workers = max(1, min(workers or os.cpu_count() or 1, len(jobs)))
         gb = 2 * total * image_size * image_size * 3 / 1e9
-        log(f"decoding {len(jobs)} video files with {workers} processes into {gb:.1f} GB of memory")
+        log(f"decoding {len(jobs)} episode videos with {workers} processes into {gb:.1f} GB of memory")
         if workers == 1:
             for j in jobs:
                 _decode_file(j)
