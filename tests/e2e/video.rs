@@ -128,6 +128,10 @@ fn a_dev_episode_video_is_served_with_ranges_to_its_team_only_and_test_videos_to
             .unwrap();
         assert_eq!(r.status(), 206);
         assert_eq!(r.bytes().await.unwrap().as_ref(), &mp4[..4]);
+        // The submission page plays it inline, at the page route.
+        let html = page_html(&server, &format!("/submissions/{dev}"), &alpha).await;
+        assert!(html.contains("<video"), "{html}");
+        assert!(html.contains(&format!("src=\"{page}\"")), "{html}");
 
         // Test split: the organiser sees the first episode's video once stored; the team never.
         let test_url = format!("/api/v1/submissions/{test}/episodes/test-0001/video.mp4");
@@ -149,7 +153,21 @@ fn a_dev_episode_video_is_served_with_ranges_to_its_team_only_and_test_videos_to
             !v.to_string().contains("video"),
             "a test view names a video: {v:#}"
         );
+        let html = page_html(&server, &format!("/submissions/{test}"), &alpha).await;
+        assert!(!html.contains("<video"), "a test page shows a video: {html}");
     });
+}
+
+/// A page as the team's browser gets it (session cookie).
+async fn page_html(server: &Server, path: &str, token: &str) -> String {
+    let r = client()
+        .get(server.url(path))
+        .header("cookie", format!("kitchen_r_team={}", hex_token(token)))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200, "{path}");
+    r.text().await.unwrap()
 }
 
 /// The team cookie's value: the token, hex-encoded (`pages::TEAM_COOKIE`).
