@@ -61,7 +61,7 @@ when reporting a problem). Send tokens as `Authorization: Bearer <token>`.",
         super::admin::backup,
     ),
     // The schemas only parameters name (utoipa registers those of bodies and answers itself).
-    components(schemas(ErrorBody, SplitName, SplitParam, TrackParam, FormatParam)),
+    components(schemas(ErrorBody, SplitName, SplitParam, TrackParam, FormatParam, FlagParam)),
     modifiers(&Shared),
     tags(
         (name = "service", description = "Health, metrics and this description."),
@@ -186,6 +186,20 @@ impl utoipa::PartialSchema for FormatParam {
 }
 
 impl ToSchema for FormatParam {}
+
+/// A yes/no query parameter as the handlers read it: `true`/`1`, `false`/`0`, or empty (no).
+pub(crate) struct FlagParam;
+
+impl utoipa::PartialSchema for FlagParam {
+    fn schema() -> RefOr<Schema> {
+        choice_schema(
+            &["", "true", "false", "1", "0"],
+            "Yes (`true`, `1`) or no (`false`, `0`, empty).",
+        )
+    }
+}
+
+impl ToSchema for FlagParam {}
 
 /// `GET /healthz`.
 #[derive(Debug, Serialize, ToSchema)]
