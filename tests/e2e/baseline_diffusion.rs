@@ -3,7 +3,8 @@
 //! the checkpoint saved (under 16 MiB) and loaded again by the server that serves it over the
 //! policy contract, `kitchen-r check-policy` passing against it, and an organiser reference run
 //! of it finishing on a server this test starts, where it shows as a baseline row of the dev
-//! control leaderboard. The score is not asserted: a few steps teach the policy nothing.
+//! control leaderboard. The score is not asserted: a few steps teach the policy nothing. The
+//! baseline's Python unit tests (sample timing and padding, valid actions) run here too.
 //!
 //! Needs a Python with torch, torchvision, pyarrow, av and the starter kit's gRPC modules:
 //! `KITCHEN_R_TORCH_PYTHON`, else `python3` (scripts/test.sh and .ci/run install torch from
@@ -84,6 +85,16 @@ fn short_batch(dir: &Path) -> PathBuf {
     let short = dir.join("short.json");
     std::fs::write(&short, batch.to_string()).unwrap();
     short
+}
+
+#[test]
+fn the_diffusion_baselines_python_unit_tests_pass() {
+    assert_python_ready();
+    let tests = baseline_dir().join("tests");
+    let run = ok(py(&["-m", "unittest", "discover", "-s", tests.to_str().unwrap()])
+        .output()
+        .expect("run python -m unittest"));
+    assert!(err(&run).contains("OK"), "{}", err(&run));
 }
 
 #[tokio::test(flavor = "multi_thread")]
