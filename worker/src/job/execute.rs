@@ -296,7 +296,11 @@ fn run(job: &pb::Job, ctx: &JobContext, control: &JobControl, log: &mut Log) -> 
             None,
         )
     };
-    let video = recording.and_then(|r| finish_video(r, log));
+    // A cancelled episode is not scored, so its video is not worth the encoder's flush.
+    let video = match control.is_cancelled() {
+        true => None,
+        false => recording.and_then(|r| finish_video(r, log)),
+    };
     Ok(Ran {
         tasks: online_results(&out, log),
         path: Some(hook.into_path()),
