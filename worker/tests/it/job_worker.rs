@@ -500,7 +500,10 @@ fn a_recorded_episode_video_is_uploaded_in_chunks_after_its_report() {
     let s = state.lock().unwrap();
     assert_eq!(s.upload_calls, 2, "the failed upload is retried once");
     let (first, mp4, reports_before) = &s.videos[0];
-    assert_eq!(*reports_before, 1, "the result is reported before the video is sent");
+    assert_eq!(
+        *reports_before, 1,
+        "the result is reported before the video is sent"
+    );
     assert_eq!((first.job_id, first.attempt, first.run_id), (1, 1, 1));
     assert_eq!(first.worker_id, "test-worker");
     assert_eq!(first.total_bytes, mp4.len() as u64);
