@@ -31,7 +31,8 @@ pub struct RunOptions {
     pub privileged: bool,
     /// Abort the episode after this many successive policy timeouts.
     pub max_consecutive_timeouts: u32,
-    /// Wall-clock budget for the whole episode.
+    /// Wall-clock budget for the whole episode, less what the hook spends on its own
+    /// ([`StepHook::overhead`]: recording a video must not cost the policy its budget).
     pub wall_budget: Option<Duration>,
     /// How far a chunk may be off before it fails the task; slips within are corrected.
     #[serde(default)]
@@ -113,6 +114,12 @@ pub trait StepHook {
     /// Called when a task that ran has ended, with its record (before any teleport to the next
     /// task's start): an episode video captions the outcome here.
     fn on_task_end(&mut self, _sim: &Sim, _task: &TaskRecord) {}
+
+    /// Wall time the hook itself has spent so far (an episode video's encoding): the episode's
+    /// wall budget is the policy's, so it does not count this.
+    fn overhead(&self) -> Duration {
+        Duration::ZERO
+    }
 }
 
 impl StepHook for () {
@@ -327,7 +334,8 @@ fn run_task(
     };
     history.push(sim, first, *ep.last_action);
     loop {
-        if opts.wall_budget.is_some_and(|b| ep.started.elapsed() > b) {
+        let spent = ep.started.elapsed().saturating_sub(hook.overhead());
+        if opts.wall_budget.is_some_and(|b| spent > b) {
             let why = "wall-clock budget exceeded".to_string();
             return end(sim, Some((why, true)), calls, corrections);
         }
