@@ -50,9 +50,13 @@ enum SubmitCommand {
         /// Which split the plans are for.
         #[arg(long, value_parser = ["dev", "test"])]
         split: String,
+        /// Organiser: file it as the planning board's baseline row (no quota); needs the
+        /// organiser token as --token.
+        #[arg(long)]
+        reference: bool,
         #[command(flatten)]
         server: ServerArgs,
-        /// Team token.
+        /// Team token (the organiser token with --reference).
         #[arg(long, env = "KITCHEN_R_TOKEN", hide_env_values = true)]
         token: String,
         /// Print the server's JSON answer instead of a summary.
@@ -158,20 +162,24 @@ pub(crate) fn team(args: TeamArgs) -> anyhow::Result<()> {
 }
 
 pub(crate) fn submit(args: SubmitArgs) -> anyhow::Result<()> {
-    let (file, split, server, token, raw) = match args.command {
+    let (file, split, reference, server, token, raw) = match args.command {
         SubmitCommand::Plans {
             file,
             split,
+            reference,
             server,
             token,
             json,
-        } => (file, split, server, token, json),
+        } => (file, split, reference, server, token, json),
         SubmitCommand::Policy(a) => return crate::policy_submit::submit_policy(a),
     };
     let body = std::fs::read(&file).with_context(|| format!("cannot read {}", file.display()))?;
     runtime()?.block_on(async {
         let req = reqwest::Client::new()
-            .post(url(&server, &format!("/api/v1/submissions/plans?split={split}")))
+            .post(url(
+                &server,
+                &format!("/api/v1/submissions/plans?split={split}&reference={reference}"),
+            ))
             .bearer_auth(token)
             .header(reqwest::header::CONTENT_TYPE, "application/x-ndjson")
             .body(body);

@@ -352,14 +352,15 @@ async fn read_limited(body: Body, limit: usize) -> Result<Vec<u8>, ServiceError>
     tag = "submissions",
     summary = "Submit a plan file (planning track)",
     description = "The body is JSON Lines: one object a line, `{\"id\": instruction id, \"plan\": [sub-task sentences]}`. It is scored at once; on the dev split per-instruction results follow on the submission.",
-    params(("split" = openapi::SplitName, Query, description = "`dev` or `test`", example = "dev")),
+    params(("split" = openapi::SplitName, Query, description = "`dev` or `test`", example = "dev"),
+        ("reference" = Option<openapi::FlagParam>, Query, description = "Organiser only: file it as the planning board's baseline row (reserved `(baseline)` team, no quota)")),
     request_body(content = String, content_type = "application/x-ndjson", description = "The plan file: one JSON object a line",
         example = json!("{\"id\": \"dev-0001\", \"plan\": [\"move to the blue zone\", \"pick the bowl\", \"move to the red zone\", \"place the bowl\"]}\n")),
-    security(("team_token" = [])),
+    security(("team_token" = []), ("organiser_token" = [])),
     responses(
         (status = 201, description = "Scored and stored", body = crate::service::Submitted),
         (status = 400, description = "A missing or unknown split, or a plan file that does not parse (`line` says where)", body = openapi::ErrorBody),
-        (status = 403, description = "Not a team's token", body = openapi::ErrorBody),
+        (status = 403, description = "Not a team's token (or, with `reference`, not the organiser's)", body = openapi::ErrorBody),
         (status = 413, description = "The file is over `max_body_bytes` or a plan limit", body = openapi::ErrorBody),
         (status = 429, description = "The daily quota or the per-minute rate limit", body = openapi::ErrorBody,
             headers(("retry-after" = u64, description = "Seconds until a retry can succeed"))),
@@ -372,10 +373,26 @@ async fn submit_plans(
     body: Body,
 ) -> Result<Response, ServiceError> {
     // Refuse bad credentials and parameters before reading a possibly large body.
-    let team = caller.team()?;
+    let reference = match q.get("reference").map(String::as_str) {
+        None | Some("" | "false" | "0") => false,
+        Some("true" | "1") => true,
+        Some(other) => {
+            return Err(ServiceError::BadRequest(format!(
+                "`reference` must be `true` or `false`, not {other:?}"
+            )));
+        }
+    };
+    if reference {
+        caller.organiser()?;
+    } else {
+        caller.team()?;
+    }
     let split = split_param(q.get("split"), None)?;
     let body = read_limited(body, s.config().max_body_bytes).await?;
-    let done = s.submit_plans(team, split, &body).await?;
+    let done = match reference {
+        true => s.submit_reference_plans(&caller, split, &body).await?,
+        false => s.submit_plans(caller.team()?, split, &body).await?,
+    };
     Ok((StatusCode::CREATED, axum::Json(done)).into_response())
 }
 

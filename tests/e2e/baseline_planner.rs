@@ -49,9 +49,9 @@ fn cli(server: &Server, args: &[&str], token: &str) -> Output {
         .expect("run kitchen-r")
 }
 
-/// The organiser's documented way to publish the baseline: a team of its own.
+/// A team of its own for the planner (the LLM test; the reference row needs no team).
 fn baseline_team(server: &Server) -> String {
-    let created = ok(cli(server, &["team", "create", "Baseline planner"], ""));
+    let created = ok(cli(server, &["team", "create", "Planner team"], ""));
     out(&created)
         .lines()
         .find_map(|l| l.strip_prefix("token: "))
@@ -68,7 +68,6 @@ fn submitted_em(o: Output) -> f64 {
 fn the_parser_reproduces_its_em_through_the_server_and_shows_on_the_leaderboard() {
     let fx = ControlFixture::new("");
     let server = fx.serve(0);
-    let token = baseline_team(&server);
     let dir = fx.dir.path();
 
     for (split, expected) in [("dev", DEV_EM), ("test", TEST_SAMPLE_EM)] {
@@ -100,9 +99,11 @@ fn the_parser_reproduces_its_em_through_the_server_and_shows_on_the_leaderboard(
                 file.to_str().unwrap(),
                 "--split",
                 split,
+                "--reference",
                 "--json",
             ],
-            &token,
+            // The organiser's reference row: the organiser token, no team, no quota.
+            ADMIN,
         ));
         assert!(
             (em - expected).abs() < 1e-12,
@@ -136,7 +137,9 @@ fn the_parser_reproduces_its_em_through_the_server_and_shows_on_the_leaderboard(
     ));
     let v: Value = serde_json::from_str(&out(&board)).unwrap();
     let row = &v["rows"][0];
-    assert_eq!(row["team"], "Baseline planner", "{v}");
+    assert_eq!(row["team"], "(baseline)", "{v}");
+    assert_eq!(row["baseline"], true, "a marked baseline row: {v}");
+    assert!(row["rank"].is_null(), "baseline rows are not ranked: {v}");
     assert!(
         (row["scores"]["em"].as_f64().unwrap() - TEST_SAMPLE_EM).abs() < 1e-12,
         "{v}"

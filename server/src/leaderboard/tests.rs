@@ -417,3 +417,49 @@ async fn maintained_boards_equal_a_rebuild_after_every_kind_of_write() {
     f.state.rescore_all(f.admin().await).await.unwrap();
     check("a rescore").await;
 }
+
+#[tokio::test]
+async fn an_organiser_reference_plan_file_is_a_baseline_row_without_quota() {
+    let f = fixture(FakeProbe::ok(8), |c| c.quota.dev_per_day = 1).await;
+    let gt = f.state.content().ground_truth(Split::Dev).to_vec();
+    let perfect: String = (gt.iter())
+        .map(|i| serde_json::json!({"id": i.id, "plan": i.plan}).to_string() + "\n")
+        .collect();
+    let half: String = (gt.iter().take(gt.len() / 2))
+        .map(|i| serde_json::json!({"id": i.id, "plan": i.plan}).to_string() + "\n")
+        .collect();
+    let token = f.team("alpha").await;
+    let alpha = f.team_of(&token).await;
+    let team = f
+        .state
+        .submit_plans(&alpha, Split::Dev, half.as_bytes())
+        .await
+        .unwrap();
+    // A team cannot file a reference row.
+    let refused = f
+        .state
+        .submit_reference_plans(&f.caller(&token).await, Split::Dev, perfect.as_bytes())
+        .await;
+    assert!(refused.is_err(), "a team token filed a reference plan file");
+    // The organiser can, twice, past the daily quota of 1.
+    let admin = f.caller(crate::testutil::ADMIN).await;
+    for _ in 0..2 {
+        f.state
+            .submit_reference_plans(&admin, Split::Dev, perfect.as_bytes())
+            .await
+            .unwrap();
+    }
+    let board = f.state.leaderboard(Track::Planning, Split::Dev).await.unwrap();
+    let rows: Vec<(String, Option<usize>, bool)> = (board.rows.iter())
+        .map(|r| (r.team.clone(), r.rank, r.baseline))
+        .collect();
+    assert_eq!(
+        rows,
+        vec![
+            ("(baseline)".to_string(), None, true),
+            ("alpha".to_string(), Some(1), false)
+        ],
+        "team {} ranks first among teams; the baseline is marked and unranked",
+        team.id
+    );
+}

@@ -5,7 +5,8 @@
 //! The ranking rules live here, once, in [`refresh_team`]: planning by the latest run's EM;
 //! control by SR then MSE, integrated by M then P (only finished runs have keys; integrated
 //! counts only runs linked to a plans submission); ties to the earlier submission, then the
-//! lower id; unscored entries last; organiser reference runs are each their own row; on the test
+//! lower id; unscored entries last; organiser reference runs are each their own row (reference
+//! plan files: the baseline team's best, marked as a baseline); on the test
 //! split a plan file created after the team's first test policy submission is not ranked.
 
 use kitchen_r_core::dataset::Split;
@@ -130,7 +131,9 @@ async fn refresh_track(conn: &mut SqliteConnection, track: &str, team: i64, spli
 const PLANNING_BEST: &str = "
     INSERT INTO leaderboard_entries
         (track, split, team_id, entry, submission_id, k1, k2, created_at, state, em, baseline)
-    SELECT ?1, s.split, s.team_id, 0, s.id, r.em, NULL, s.created_at, NULL, r.em, 0
+    SELECT ?1, s.split, s.team_id, 0, s.id, r.em, NULL, s.created_at, NULL, r.em,
+           -- The organiser's reference plan files are filed under the reserved team.
+           EXISTS (SELECT 1 FROM teams t WHERE t.id = s.team_id AND t.name = '(baseline)')
     FROM submissions s
     LEFT JOIN scoring_runs r ON r.id = (SELECT MAX(id) FROM scoring_runs WHERE submission_id = s.id)
     WHERE s.split = ?2 AND s.team_id = ?3 AND s.kind = 'plans'
