@@ -155,6 +155,11 @@ impl Content {
     }
 
     /// Ground truth of a split: for scoring only.
+    /// Whether `id` names a test-split instruction.
+    pub(crate) fn is_test(&self, id: &str) -> bool {
+        self.ground_truth(Split::Test).iter().any(|i| i.id == id)
+    }
+
     pub(crate) fn ground_truth(&self, split: Split) -> &[Instruction] {
         self.dataset.split(split)
     }

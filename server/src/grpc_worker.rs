@@ -31,10 +31,14 @@ impl WorkerService {
 }
 
 /// A leased job on the wire; whether to record a video is the server's `[video]` setting now,
-/// not stored with the job, so the organiser can turn it off for queued work too.
-fn job(j: LeasedJob, video: &crate::config::VideoConfig, store_ok: bool) -> pb::Job {
+/// not stored with the job, so the organiser can turn it off for queued work too. `test` says
+/// the episode is of the test split (recorded only with `[video] test_split`).
+fn job(j: LeasedJob, video: &crate::config::VideoConfig, store_ok: bool, test: bool) -> pb::Job {
     let mut episode = j.spec.episode_proto(&j.policy_episode_id);
-    episode.record_video = video.enabled && store_ok && episode.mode == pb::EvalMode::Online as i32;
+    episode.record_video = video.enabled
+        && store_ok
+        && (video.test_split || !test)
+        && episode.mode == pb::EvalMode::Online as i32;
     episode.video_max_bytes = video.max_bytes;
     pb::Job {
         job_id: j.id,
@@ -58,7 +62,12 @@ impl Worker for WorkerService {
         let store_ok = self.state.video_dir().is_some();
         let video = &self.state.config().video;
         Ok(Response::new(pb::LeaseResponse {
-            jobs: jobs.into_iter().map(|j| job(j, video, store_ok)).collect(),
+            jobs: (jobs.into_iter())
+                .map(|j| {
+                    let test = self.state.content().is_test(&j.spec.instruction_id);
+                    job(j, video, store_ok, test)
+                })
+                .collect(),
         }))
     }
 

@@ -15,7 +15,7 @@ use support::*;
 
 /// One-task episodes of 3 s of sim time: 30 control steps, so 30 frames.
 const CONFIG: &str = "[control]\noffline_mse = false\nmax_plan_steps = 1\ntask_time_limit_s = 3.0\n\
-                      [quota]\nconcurrent_runs = 0\n";
+                      [quota]\nconcurrent_runs = 0\n[video]\ntest_split = true\n";
 const FRAMES: i64 = 30;
 
 async fn get(server: &Server, path: &str, token: &str, range: Option<&str>) -> reqwest::Response {

@@ -10,9 +10,13 @@ use super::ConfigError;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct VideoConfig {
-    /// Workers record a video of every online episode and upload it; false: none is recorded,
-    /// and stored ones are no longer served.
+    /// Workers record a video of every online dev-split episode and upload it; false: none is
+    /// recorded, and stored ones are no longer served.
     pub enabled: bool,
+    /// Record test-split episodes too (shown to the organiser only). Off by default: a video
+    /// costs about 13 s of a core per episode (README, "Episode video"), and a test run is the
+    /// contest's largest, run by every team at the deadline.
+    pub test_split: bool,
     /// Delete videos older than this many days (a sweep runs at start and every hour); 0 keeps
     /// them forever.
     pub retention_days: u32,
@@ -27,6 +31,7 @@ impl Default for VideoConfig {
     fn default() -> Self {
         VideoConfig {
             enabled: true,
+            test_split: false,
             retention_days: 30,
             max_bytes: 64 << 20,
             dir: PathBuf::new(),

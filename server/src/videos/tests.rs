@@ -207,3 +207,60 @@ async fn turning_videos_off_stops_recording_and_serving() {
     assert!(!jobs.is_empty());
     assert!(jobs.iter().all(|j| !j.episode.as_ref().unwrap().record_video));
 }
+
+/// Which leased jobs ask for a video: `(dev jobs recording, test jobs recording, test jobs)`.
+async fn recording(test_split: bool) -> (usize, usize, usize) {
+    let f = fixture(FakeProbe::ok(64), |c| {
+        c.control.dev_episodes = 1;
+        c.control.offline_mse = false;
+        c.quota.concurrent_runs = 0;
+        c.video.test_split = test_split;
+    })
+    .await;
+    let token = f.team("alpha").await;
+    let caller = f.caller(&token).await;
+    for split in [Split::Dev, Split::Test] {
+        f.state.register_policy(&caller, f.request(split)).await.unwrap();
+    }
+    let mut client = serve(&f).await;
+    let (mut dev, mut test, mut tests) = (0, 0, 0);
+    loop {
+        let mut req = Request::new(pb::LeaseRequest {
+            worker_id: "w1".into(),
+            max_jobs: 64,
+            wait_ms: 0,
+        });
+        req.metadata_mut()
+            .insert("authorization", format!("Bearer {WORKER}").parse().unwrap());
+        let jobs = client.lease(req).await.unwrap().into_inner().jobs;
+        if jobs.is_empty() {
+            break;
+        }
+        for j in jobs {
+            let on = j.episode.as_ref().unwrap().record_video;
+            if f.state
+                .content()
+                .is_test(&j.episode.as_ref().unwrap().instruction_id)
+            {
+                tests += 1;
+                test += usize::from(on);
+            } else {
+                dev += usize::from(on);
+            }
+        }
+    }
+    (dev, test, tests)
+}
+
+#[tokio::test]
+async fn test_split_episodes_are_recorded_only_when_the_organiser_asks() {
+    let (dev, test, tests) = recording(false).await;
+    assert_eq!((dev, test), (1, 0), "default: dev recorded, test not");
+    assert!(tests > 0, "the test run leased its jobs");
+    let (dev, test, tests) = recording(true).await;
+    assert_eq!(
+        (dev, test),
+        (1, tests),
+        "[video] test_split = true records every test episode"
+    );
+}
