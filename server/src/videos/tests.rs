@@ -196,16 +196,21 @@ async fn turning_videos_off_stops_recording_and_serving() {
         .unwrap();
     assert!(f.state.video_dir().is_none());
     let mut client = serve(&f).await;
+    let jobs = client.lease(lease(4)).await.unwrap().into_inner().jobs;
+    assert!(!jobs.is_empty());
+    assert!(jobs.iter().all(|j| !j.episode.as_ref().unwrap().record_video));
+}
+
+/// A worker's lease of up to `max_jobs` jobs, not waiting.
+fn lease(max_jobs: u32) -> Request<pb::LeaseRequest> {
     let mut req = Request::new(pb::LeaseRequest {
         worker_id: "w1".into(),
-        max_jobs: 4,
+        max_jobs,
         wait_ms: 0,
     });
     req.metadata_mut()
         .insert("authorization", format!("Bearer {WORKER}").parse().unwrap());
-    let jobs = client.lease(req).await.unwrap().into_inner().jobs;
-    assert!(!jobs.is_empty());
-    assert!(jobs.iter().all(|j| !j.episode.as_ref().unwrap().record_video));
+    req
 }
 
 /// Which leased jobs ask for a video: `(dev jobs recording, test jobs recording, test jobs)`.
@@ -225,14 +230,7 @@ async fn recording(test_split: bool) -> (usize, usize, usize) {
     let mut client = serve(&f).await;
     let (mut dev, mut test, mut tests) = (0, 0, 0);
     loop {
-        let mut req = Request::new(pb::LeaseRequest {
-            worker_id: "w1".into(),
-            max_jobs: 64,
-            wait_ms: 0,
-        });
-        req.metadata_mut()
-            .insert("authorization", format!("Bearer {WORKER}").parse().unwrap());
-        let jobs = client.lease(req).await.unwrap().into_inner().jobs;
+        let jobs = client.lease(lease(64)).await.unwrap().into_inner().jobs;
         if jobs.is_empty() {
             break;
         }
