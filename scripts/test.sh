@@ -14,8 +14,13 @@ then
   echo "== installing the Python test readers (scripts/test-requirements.txt)"
   python3 -m pip install --quiet --disable-pip-version-check -r scripts/test-requirements.txt
 fi
-# The browser test (tests/e2e/browser.rs) drives Debian's Chromium: say so here rather than
-# fail (CI) or skip (elsewhere) deep inside the test run.
+# The browser test (tests/e2e/browser.rs) drives Debian's Chromium: installed here when this
+# is root on a machine with apt (as CI and a fresh container are); else said here rather than
+# failing (CI) or skipping (elsewhere) deep inside the test run.
+if ! command -v chromium >/dev/null 2>&1 && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+  echo "== installing chromium (the browser test)"
+  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends chromium >/dev/null || true
+fi
 if ! command -v chromium >/dev/null 2>&1; then
   echo "== chromium is missing: the browser test (tests/e2e/browser.rs) needs it;" \
     "install it with: apt-get install -y --no-install-recommends chromium" >&2
