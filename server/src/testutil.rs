@@ -88,6 +88,21 @@ pub(crate) async fn fixture(probe: Arc<dyn PolicyProbe>, tweak: impl FnOnce(&mut
 }
 
 impl Fixture {
+    /// The real gRPC routes on 127.0.0.1:0; a connected worker-service client.
+    pub(crate) async fn worker_client(
+        &self,
+    ) -> kitchen_r_proto::worker::v1::worker_client::WorkerClient<tonic::transport::Channel> {
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let addr = listener.local_addr().unwrap();
+        let routes = crate::grpc_routes(self.state.clone()).await.unwrap();
+        let incoming = tokio_stream::wrappers::TcpListenerStream::new(listener);
+        tokio::spawn(routes.serve_with_incoming(incoming));
+        let url = format!("http://{addr}");
+        kitchen_r_proto::worker::v1::worker_client::WorkerClient::connect(url)
+            .await
+            .unwrap()
+    }
+
     /// A second server process on the same database file (a restart).
     pub(crate) async fn reopen(&self, probe: Arc<dyn PolicyProbe>) -> AppState {
         let config = self.state.config().clone();

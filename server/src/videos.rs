@@ -170,16 +170,13 @@ impl AppState {
     ) -> Result<StoredVideo, ServiceError> {
         let not_found =
             || ServiceError::not_found(format!("a video of episode {episode_key:?} of submission {id}"));
-        let viewer = match caller {
-            Caller::Organiser(_) => None,
-            _ => Some(caller.team()?),
-        };
+        let visible = self.visible_submission(caller, id).await?;
         let dir = self.video_dir().ok_or_else(not_found)?;
-        let sub = store::submission(self.read_pool(), id)
-            .await?
-            .filter(|s| viewer.as_ref().is_none_or(|t| t.id == s.team_id))
-            .filter(|s| s.kind == SubmissionKind::Policy)
-            .filter(|s| viewer.is_none() || s.split == Split::Dev.as_str())
+        // Test-split videos are the organiser's alone.
+        let (sub, _) = visible
+            .filter(|(s, organiser)| {
+                s.kind == SubmissionKind::Policy && (*organiser || s.split == Split::Dev.as_str())
+            })
             .ok_or_else(not_found)?;
         let run = store::latest_run(self.read_pool(), sub.id)
             .await?

@@ -1,20 +1,8 @@
 use kitchen_r_core::dataset::Split;
-use kitchen_r_proto::worker::v1::worker_client::WorkerClient;
-use tokio_stream::wrappers::TcpListenerStream;
 use tonic::Code;
-use tonic::transport::Channel;
 
 use super::*;
-use crate::testutil::{FakeProbe, Fixture, WORKER, fixture};
-
-/// The real gRPC routes on 127.0.0.1:0; returns a connected client.
-async fn serve(f: &Fixture) -> WorkerClient<Channel> {
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-    let addr = listener.local_addr().unwrap();
-    let routes = crate::grpc_routes(f.state.clone()).await.unwrap();
-    tokio::spawn(routes.serve_with_incoming(TcpListenerStream::new(listener)));
-    WorkerClient::connect(format!("http://{addr}")).await.unwrap()
-}
+use crate::testutil::{FakeProbe, WORKER, fixture};
 
 fn with_token<T>(msg: T, token: &str) -> Request<T> {
     let mut req = Request::new(msg);
@@ -34,7 +22,7 @@ fn lease_req() -> pb::LeaseRequest {
 #[tokio::test]
 async fn unauthenticated_workers_are_refused() {
     let f = fixture(FakeProbe::ok(1), |_| {}).await;
-    let mut client = serve(&f).await;
+    let mut client = f.worker_client().await;
     let e = client.lease(lease_req()).await.unwrap_err();
     assert_eq!(e.code(), Code::Unauthenticated);
     let e = client.lease(with_token(lease_req(), "wrong")).await.unwrap_err();
@@ -55,7 +43,7 @@ async fn lease_heartbeat_and_report_over_grpc() {
         c.control.seed = 1234;
     })
     .await;
-    let mut client = serve(&f).await;
+    let mut client = f.worker_client().await;
     let token = f.team("alpha").await;
     let mut reference = f.request(Split::Dev);
     reference.token = Some("participant-secret".into());
@@ -212,7 +200,7 @@ async fn lease_heartbeat_and_report_over_grpc() {
 #[tokio::test]
 async fn reference_runs_reach_workers_as_privileged() {
     let f = fixture(FakeProbe::ok(8), |c| c.control.dev_episodes = 1).await;
-    let mut client = serve(&f).await;
+    let mut client = f.worker_client().await;
     let mut reference = f.request(Split::Dev);
     reference.reference = true;
     f.state

@@ -73,13 +73,13 @@ async fn favicon() -> Response {
 
 /// Who opened a page: a bearer header first (scripts), then the team cookie, then the
 /// organiser's console cookie.
-pub(super) enum Who {
+enum Who {
     Nobody,
     Team(Team),
     Organiser(Organiser),
 }
 
-pub(super) async fn who(s: &AppState, caller: Caller, headers: &HeaderMap) -> Result<Who, ServiceError> {
+async fn who(s: &AppState, caller: Caller, headers: &HeaderMap) -> Result<Who, ServiceError> {
     match caller {
         Caller::Team(t) => return Ok(Who::Team(t)),
         Caller::Organiser(o) => return Ok(Who::Organiser(o)),
@@ -263,6 +263,20 @@ async fn logout(
     session::see_other("/contest", &[gone])
 }
 
+/// The caller a page's media request acts as: the team or organiser of its session cookie (or
+/// bearer header); `None` for nobody, whom media routes answer as not found.
+pub(super) async fn session_caller(
+    s: &AppState,
+    caller: Caller,
+    headers: &HeaderMap,
+) -> Result<Option<Caller>, ServiceError> {
+    Ok(match who(s, caller, headers).await? {
+        Who::Team(t) => Some(Caller::Team(t)),
+        Who::Organiser(o) => Some(Caller::Organiser(o)),
+        Who::Nobody => None,
+    })
+}
+
 /// An episode's path plot for the page's `<img>` (the API's `plot_url` takes a bearer token,
 /// which an image request cannot send): the same checks, by the page's session.
 async fn episode_plot(
@@ -272,11 +286,9 @@ async fn episode_plot(
     headers: HeaderMap,
 ) -> Result<Response, ServiceError> {
     let not_found = || ServiceError::not_found(format!("a plot of episode {key:?} of submission {id}"));
-    let caller = match who(&s, caller, &headers).await? {
-        Who::Team(t) => Caller::Team(t),
-        Who::Organiser(o) => Caller::Organiser(o),
-        Who::Nobody => return Err(not_found()),
-    };
+    let caller = session_caller(&s, caller, &headers)
+        .await?
+        .ok_or_else(not_found)?;
     let sub = id.parse::<i64>().map_err(|_| not_found())?;
     let png = s.episode_plot(&caller, sub, &key).await?;
     Ok(axum::response::IntoResponse::into_response((

@@ -19,7 +19,7 @@ use bytes::Bytes;
 use tokio::io::{AsyncReadExt, AsyncSeekExt};
 
 use super::extract::PathArg;
-use super::pages::{Who, who};
+use super::pages::session_caller;
 use crate::error::ServiceError;
 use crate::service::{AppState, Caller};
 use crate::videos::StoredVideo;
@@ -49,11 +49,9 @@ pub(super) async fn page_video(
     headers: HeaderMap,
 ) -> Result<Response, ServiceError> {
     let not_found = || ServiceError::not_found(format!("a video of episode {key:?} of submission {id}"));
-    let caller = match who(&s, caller, &headers).await? {
-        Who::Team(t) => Caller::Team(t),
-        Who::Organiser(o) => Caller::Organiser(o),
-        Who::Nobody => return Err(not_found()),
-    };
+    let caller = session_caller(&s, caller, &headers)
+        .await?
+        .ok_or_else(not_found)?;
     let sub = id.parse::<i64>().map_err(|_| not_found())?;
     let video = s.episode_video(&caller, sub, &key).await?;
     respond(&video, &headers).await

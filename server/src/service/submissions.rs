@@ -72,14 +72,8 @@ impl AppState {
     ) -> Result<Vec<u8>, ServiceError> {
         let not_found =
             || ServiceError::not_found(format!("a plot of episode {episode_key:?} of submission {id}"));
-        let viewer = match caller {
-            Caller::Organiser(_) => None,
-            _ => Some(caller.team()?),
-        };
-        let sub = store::submission(self.read_pool(), id)
-            .await?
-            .filter(|s| viewer.as_ref().is_none_or(|t| t.id == s.team_id))
-            .filter(|s| s.split == Split::Dev.as_str() && s.kind == SubmissionKind::Policy)
+        let (sub, _) = (self.visible_submission(caller, id).await?)
+            .filter(|(s, _)| s.split == Split::Dev.as_str() && s.kind == SubmissionKind::Policy)
             .ok_or_else(not_found)?;
         let run = store::latest_run(self.read_pool(), sub.id)
             .await?
@@ -94,19 +88,30 @@ impl AppState {
             .ok_or_else(not_found)
     }
 
+    /// Submission `id` if `caller` may see it (its own team's, or any for the organiser), with
+    /// whether the caller is the organiser: the one ownership rule of every per-submission read.
+    pub(crate) async fn visible_submission(
+        &self,
+        caller: &Caller,
+        id: i64,
+    ) -> Result<Option<(store::SubmissionRow, bool)>, ServiceError> {
+        let viewer = match caller {
+            Caller::Organiser(_) => None,
+            _ => Some(caller.team()?),
+        };
+        let sub = store::submission(self.read_pool(), id).await?;
+        Ok(sub
+            .filter(|s| viewer.as_ref().is_none_or(|t| t.id == s.team_id))
+            .map(|s| (s, viewer.is_none())))
+    }
+
     /// A submission with its latest run, for its own team or the organiser.
     pub(crate) async fn get_submission(
         &self,
         caller: &Caller,
         id: i64,
     ) -> Result<SubmissionView, ServiceError> {
-        let viewer = match caller {
-            Caller::Organiser(_) => None,
-            _ => Some(caller.team()?),
-        };
-        let sub = store::submission(self.read_pool(), id)
-            .await?
-            .filter(|s| viewer.as_ref().is_none_or(|t| t.id == s.team_id))
+        let (sub, _) = (self.visible_submission(caller, id).await?)
             .ok_or_else(|| ServiceError::not_found(format!("submission {id}")))?;
         let hidden = sub.split == Split::Test.as_str();
         let is_policy = sub.kind == SubmissionKind::Policy;

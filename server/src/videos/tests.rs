@@ -1,20 +1,9 @@
 use kitchen_r_core::dataset::Split;
 use kitchen_r_proto::worker::v1 as pb;
-use kitchen_r_proto::worker::v1::worker_client::WorkerClient;
-use tokio_stream::wrappers::TcpListenerStream;
-use tonic::transport::Channel;
 use tonic::{Code, Request};
 
 use super::*;
 use crate::testutil::{FakeProbe, Fixture, WORKER, fixture};
-
-async fn serve(f: &Fixture) -> WorkerClient<Channel> {
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-    let addr = listener.local_addr().unwrap();
-    let routes = crate::grpc_routes(f.state.clone()).await.unwrap();
-    tokio::spawn(routes.serve_with_incoming(TcpListenerStream::new(listener)));
-    WorkerClient::connect(format!("http://{addr}")).await.unwrap()
-}
 
 /// `(job id, attempt, run, key)` of every reported online job, dev run first.
 async fn done_jobs(f: &Fixture) -> Vec<(i64, i64, i64, String)> {
@@ -68,7 +57,7 @@ fn files(dir: &Path) -> Vec<PathBuf> {
 async fn uploads_are_stored_once_by_content_and_shown_only_to_who_may_see_the_episode() {
     let f = fixture(FakeProbe::ok(8), |c| c.control.dev_episodes = 1).await;
     let (alpha, bravo, dev, test) = f.runs_with_paths(|_| Default::default()).await;
-    let mut client = serve(&f).await;
+    let mut client = f.worker_client().await;
     let jobs = done_jobs(&f).await;
     let (dev_job, test_job) = (&jobs[0], jobs.last().unwrap());
     assert_ne!(dev_job.2, test_job.2, "{jobs:?}");
@@ -195,7 +184,7 @@ async fn turning_videos_off_stops_recording_and_serving() {
         .await
         .unwrap();
     assert!(f.state.video_dir().is_none());
-    let mut client = serve(&f).await;
+    let mut client = f.worker_client().await;
     let jobs = client.lease(lease(4)).await.unwrap().into_inner().jobs;
     assert!(!jobs.is_empty());
     assert!(jobs.iter().all(|j| !j.episode.as_ref().unwrap().record_video));
@@ -227,7 +216,7 @@ async fn recording(test_split: bool) -> (usize, usize, usize) {
     for split in [Split::Dev, Split::Test] {
         f.state.register_policy(&caller, f.request(split)).await.unwrap();
     }
-    let mut client = serve(&f).await;
+    let mut client = f.worker_client().await;
     let (mut dev, mut test, mut tests) = (0, 0, 0);
     loop {
         let jobs = client.lease(lease(64)).await.unwrap().into_inner().jobs;
