@@ -44,7 +44,8 @@ pub struct Frame {
     pub cameras: Vec<CameraFrame>,
     /// LiDAR points in the `lidar` frame, if the LiDAR was read at this step.
     pub lidar: Option<Vec<[f32; 3]>>,
-    /// Odometry: `[x, y, yaw]` in the world (`odom`) frame.
+    /// Odometry `[x, y, yaw]`: the base pose relative to its pose at the episode's start (the
+    /// `odom` frame), the same values as the policy contract's `RobotState.base_x/y/yaw`.
     pub base_pose: [f64; 3],
     /// Measured base velocities `[v, ω]`.
     pub base_twist: [f64; 2],

@@ -93,6 +93,9 @@ impl Recorder {
 
     fn frame(&mut self, sim: &Sim, action: &Action, info: &StepInfo, task: usize) -> Frame {
         let obs = self.latest.take().unwrap_or_else(|| sim.observe());
+        // Odometry as the policy contract gives it (relative to the episode's start pose), not
+        // the world pose in `info`: a policy trained on recordings must see what it is sent.
+        let base_pose = obs.odometry.pose;
         let (_, qd) = sim.joints();
         let mut qpos = info.joints.to_vec();
         qpos.push(info.gripper);
@@ -112,7 +115,7 @@ impl Recorder {
                 })
                 .collect(),
             lidar: obs.lidar.map(|l| l.points),
-            base_pose: info.base_pose,
+            base_pose,
             base_twist: info.base_velocity,
             action: action.0,
             qpos,

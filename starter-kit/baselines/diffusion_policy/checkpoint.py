@@ -43,7 +43,9 @@ def load_checkpoint(path, device="cpu"):
     blob = torch.load(path, map_location="cpu", weights_only=True)
     if blob.get("format") != FORMAT:
         raise SystemExit(f"{path}: not a diffusion-policy checkpoint of this baseline (format {blob.get('format')!r})")
-    model = DiffusionPolicy(blob["config"], len(blob["vocab"]))
+    # Checkpoints written before the odometry features had none (DEFAULT_CONFIG turns them on).
+    config = {"odometry": False, **blob["config"]}
+    model = DiffusionPolicy(config, len(blob["vocab"]))
     model.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in blob["model"].items()})
     model.to(device).eval()
     return model, Normaliser(blob["stats"]), blob["vocab"], blob.get("meta", {})

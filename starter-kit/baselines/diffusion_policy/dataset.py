@@ -66,6 +66,8 @@ def _decode_file(job):
     lo, hi = min(want), max(want)
     with av.open(str(path)) as c:
         s = c.streams.video[0]
+        # A process per core already: one decoding thread each, not a thread per core each.
+        s.codec_context.thread_count = 1
         # One episode per job and a process per core: seek to the key frame before the
         # episode's first frame instead of decoding the file from its start.
         if lo > 0:
@@ -105,7 +107,9 @@ def _available_memory():
 class LeRobotExport:
     """Rows, tasks and decoded images of (the first `max_episodes` episodes of) an export."""
 
-    def __init__(self, path, image_size=96, max_episodes=None, workers=None, episodes=None, log=print):
+    def __init__(
+        self, path, image_size=96, max_episodes=None, workers=None, episodes=None, odometry=True, log=print
+    ):
         import pyarrow.parquet as pq
 
         t0 = time.time()
@@ -132,6 +136,8 @@ class LeRobotExport:
             raise SystemExit(f"{root}: no episodes selected")
 
         cols = ["index", "episode_index", "task_index", "observation.state", "action"]
+        if odometry:
+            cols.append("observation.base_pose")
         parts = [pq.read_table(f, columns=cols) for f in _parquets(root, "data")]
         index = np.concatenate([p.column("index").to_numpy() for p in parts])
         order = np.argsort(index, kind="stable")
@@ -144,6 +150,11 @@ class LeRobotExport:
             return a.reshape(len(index), -1)[order].astype(np.float32)
 
         all_state, all_action = vec("observation.state"), vec("action")
+        if odometry:
+            # (x, y, yaw) -> (x, y, cos yaw, sin yaw), as features.odometry_features online.
+            pose = vec("observation.base_pose")
+            odo = np.stack([pose[:, 0], pose[:, 1], np.cos(pose[:, 2]), np.sin(pose[:, 2])], axis=1)
+            all_state = np.concatenate([all_state, odo.astype(np.float32)], axis=1)
         all_task = np.concatenate([p.column("task_index").to_numpy() for p in parts])[order]
 
         # The decoded images stay in memory: keep to what fits (most of the available memory).
@@ -220,6 +231,12 @@ class LeRobotExport:
                     pass
         log(f"dataset ready in {time.time() - t0:.1f} s")
         self._index_samples()
+
+    def retokenise(self, vocab):
+        """Encode the sub-task sentences with another vocabulary (a checkpoint's, to fine-tune it)."""
+        vi = {w: i for i, w in enumerate(vocab)}
+        self.vocab = list(vocab)
+        self.task_words = {t: encode_sentence(self.sentence_of[t], vi) for t in self.task_words}
 
     def _index_samples(self):
         """Per sample: the row it is asked at, its history row, its task's last row and task."""

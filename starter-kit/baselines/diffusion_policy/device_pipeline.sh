@@ -18,6 +18,8 @@
 #   EVAL_JOBS      parallel eval episodes                      [16]
 #   TASK_TIME_LIMIT, MAX_PLAN_STEPS  eval and leaderboard run: sim seconds per task, plan steps
 #                  per episode (0 = all); smaller only for a quick trial [120, 0]
+#   INIT           start training from this checkpoint (train.py --init: fine-tune on new data) []
+#   STOP_AFTER     stop after this step (collect, train, check_policy, eval_online, eval_offline) []
 #   WORK           working directory                          [/tmp/kr-diffusion]
 #   PYTHON         python with torch, torchvision, pyarrow, av, grpcio(-tools, -health-checking) [python3]
 #   KITCHEN_R_ASSETS, KITCHEN_R_CONFIGS                       [REPO/assets, REPO/configs]
@@ -83,6 +85,13 @@ step() {
   log "step $name: done in $((SECONDS - t0)) s -> $result"
   echo "{\"step\":\"$name\",\"seconds\":$((SECONDS - t0)),\"at\":\"$(date -u +%Y-%m-%dT%H:%M:%SZ)\"}" >>"$RES/steps.jsonl"
 }
+# Stop here when STOP_AFTER names step NAME (a later run resumes after it).
+stop_after() {
+  if [ "${STOP_AFTER:-}" = "$1" ]; then
+    log "stopping after step $1 (STOP_AFTER)"
+    exit 0
+  fi
+}
 
 # Wait for a line starting with PREFIX in FILE (from a background process PID); print the line.
 await_line() {
@@ -114,17 +123,20 @@ collect() {
     mv "$WORK/collect.json.part" "$RES/collect.json"
 }
 step collect "$RES/collect.json" -- collect
+stop_after collect
 
 # 2. Train on the GPU (the checkpoint is rewritten every 10 min; train_log.json comes last).
 train() {
   rm -f "$RES/train_log.json"
   # shellcheck disable=SC2086
   "$PYTHON" "$HERE/train.py" --dataset "$WORK/collect/lerobot" --out "$RES/ckpt.pt" --minutes "$TRAIN_MIN" \
-    --device "$DEVICE" --log "$WORK/train_log.json.part" $TRAIN_ARGS >"$WORK/train.log" 2>&1 &&
+    --device "$DEVICE" --log "$WORK/train_log.json.part" ${INIT:+--init "$INIT"} $TRAIN_ARGS >"$WORK/train.log" 2>&1 &&
     mv "$WORK/train_log.json.part" "$RES/train_log.json"
 }
 step train "$RES/train_log.json" -- train
-tail -n 2 "$WORK/train.log" | while read -r l; do log "train: $l"; done
+# (No train.log when the checkpoint came from elsewhere and the step was skipped.)
+if [ -f "$WORK/train.log" ]; then tail -n 2 "$WORK/train.log" | while read -r l; do log "train: $l"; done; fi
+stop_after train
 
 # 3. Serve the checkpoint (for every later step; stopped when the script exits).
 ADDR=""
@@ -148,6 +160,7 @@ check() {
   "$KR_BIN" check-policy "http://$ADDR" >"$WORK/check_policy.part" 2>&1 && mv "$WORK/check_policy.part" "$RES/check_policy.txt"
 }
 step check_policy "$RES/check_policy.txt" -- check
+stop_after check_policy
 
 # 5. Local evaluation on dev: online (SR per task kind) and offline (MSE against the expert).
 sed -e "s/^task_time_limit = .*/task_time_limit = $TASK_TIME_LIMIT/" -e "s/^max_plan_steps = .*/max_plan_steps = $MAX_PLAN_STEPS/" \
@@ -157,12 +170,14 @@ eval_online() {
     --config "$WORK/eval.toml" >"$WORK/eval_dev.part" 2>"$WORK/eval_online.log" && mv "$WORK/eval_dev.part" "$RES/eval_dev.json"
 }
 step eval_online "$RES/eval_dev.json" -- eval_online
+stop_after eval_online
 eval_offline() {
   "$KR_BIN" eval --policy "http://$ADDR" --mode offline --split dev --episodes "$EVAL_EPISODES" --json \
     --jobs "$EVAL_JOBS" --config "$WORK/eval.toml" >"$WORK/eval_offline.part" 2>"$WORK/eval_offline.log" &&
     mv "$WORK/eval_offline.part" "$RES/eval_dev_offline.json"
 }
 step eval_offline "$RES/eval_dev_offline.json" -- eval_offline
+stop_after eval_offline
 
 # 6. An organiser reference run (baseline row) on a local server's dev control leaderboard.
 leaderboard() {

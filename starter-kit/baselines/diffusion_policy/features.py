@@ -4,7 +4,10 @@ the policy contract's observations), so training and serving never disagree.
 - Robot state: the export's `observation.state`, 10 values (v, omega, x, y, z, qw, qx, qy, qz,
   gripper) = measured base velocity, hand pose in the base frame, gripper opening. Online the
   same values are `robot.base_v`, `robot.base_omega`, `robot.ee_pose` (7) and `robot.gripper`
-  (the worker and the recorder read them from the same simulator fields).
+  (the worker and the recorder read them from the same simulator fields). With the model's
+  `odometry` switch (on for new checkpoints) 4 more: the export's `observation.base_pose` as
+  (x, y, cos yaw, sin yaw), online `robot.base_x`, `base_y`, `base_yaw`: the base pose relative
+  to the episode's start, which tells a navigating policy its heading and how far it came.
 - Timing: a row k of the export holds the observation *after* action k was executed (and
   action k itself). The worker asks the policy right after an executed action too, so the
   policy's frames are rows k-1, k and the actions it must predict are rows k+1 .. k+16.
@@ -14,25 +17,41 @@ the policy contract's observations), so training and serving never disagree.
   vocabulary built from the training tasks (unknown words map to UNK).
 """
 
+import math
 import re
 
 import numpy as np
 
 ACTION_DIM = 10
 STATE_DIM = 10
+ODOMETRY_DIM = 4
 HORIZON = 16
 MAX_WORDS = 12
 PAD, UNK = 0, 1
 CAMERAS = ("base", "gripper")
 
 
-def state_of_robot(robot):
-    """The 10-value `observation.state` of one online frame (a policy.proto RobotState)."""
+def state_dim(config):
+    """Values per state frame of a model config (old checkpoints have no `odometry` key)."""
+    return STATE_DIM + (ODOMETRY_DIM if config.get("odometry") else 0)
+
+
+def odometry_features(x, y, yaw):
+    """(x, y, cos yaw, sin yaw): yaw as a point on the circle, so +pi and -pi are the same."""
+    return [x, y, math.cos(yaw), math.sin(yaw)]
+
+
+def state_of_robot(robot, odometry=False):
+    """The state of one online frame (a policy.proto RobotState): the 10 `observation.state`
+    values, then with `odometry` the 4 odometry features."""
     hand = list(robot.ee_pose)
     if len(hand) != 7:
         # v1.0 workers left the hand pose empty; the baseline needs a v1.1 worker.
         raise ValueError("observation has no hand pose (robot.ee_pose): the worker must speak contract v1.1")
-    return [robot.base_v, robot.base_omega] + hand + [robot.gripper]
+    out = [robot.base_v, robot.base_omega] + hand + [robot.gripper]
+    if odometry:
+        out += odometry_features(robot.base_x, robot.base_y, robot.base_yaw)
+    return out
 
 
 def resize_rgb(rgb, size):
@@ -81,11 +100,22 @@ class Normaliser:
         self.s_std = np.maximum(s["std"], self.STD_FLOOR)
 
     @staticmethod
-    def from_export(stats_json):
+    def from_export(stats_json, state=None):
+        """Action statistics from the export's `meta/stats.json`; state statistics from it too,
+        or, given `state` (the training rows, N x state values), computed from those rows (the
+        export has no statistics for the odometry features)."""
         keep = {}
         for key in ("action", "observation.state"):
             d = stats_json[key]
             keep[key] = {n: d[n] for n in ("min", "max", "mean", "std")}
+        if state is not None:
+            s = np.asarray(state, dtype=np.float64)
+            keep["observation.state"] = {
+                "min": s.min(0).tolist(),
+                "max": s.max(0).tolist(),
+                "mean": s.mean(0).tolist(),
+                "std": s.std(0).tolist(),
+            }
         return Normaliser(keep)
 
     def to_dict(self):

@@ -5,7 +5,8 @@
   convolution and average pooling to a small grid of spatial tokens (the paper's "spatial
   features with a compression layer"). layer3 and layer4 are left out so that the checkpoint
   stays under 16 MiB in fp16 (the whole model has about 7.7 M parameters).
-- The robot state of each history frame through a linear layer, one token per frame; the
+- The robot state of each history frame (with odometry: 14 values) through a linear layer, one
+  token per frame; the
   sub-task sentence as learned word embeddings, one token per word.
 - The tokens (with learned camera/frame/position embeddings) pass a small transformer encoder and
   form the condition sequence that every residual block of a 1-D temporal U-Net (the reference's
@@ -21,7 +22,7 @@ import torch
 import torch.nn as nn
 import torch.nn.functional as F
 
-from features import ACTION_DIM, CAMERAS, HORIZON, MAX_WORDS, STATE_DIM
+from features import ACTION_DIM, CAMERAS, HORIZON, MAX_WORDS, state_dim
 
 DEFAULT_CONFIG = {
     "image_size": 96,
@@ -34,6 +35,8 @@ DEFAULT_CONFIG = {
     "down_dims": [64, 128, 256],
     "kernel": 5,
     "diffusion_steps": 100,
+    # The odometry features in the state (features.py); checkpoints without the key predate them.
+    "odometry": True,
 }
 
 
@@ -157,7 +160,7 @@ class DiffusionPolicy(nn.Module):
         d, g, n = c["d_model"], c["grid"], c["n_obs"]
         self.cams = nn.ModuleDict({cam: CameraEncoder(d, g) for cam in CAMERAS})
         self.img_pos = nn.Parameter(torch.randn(len(CAMERAS), n, g * g, d) * 0.02)
-        self.state_proj = nn.Linear(STATE_DIM, d)
+        self.state_proj = nn.Linear(state_dim(c), d)
         self.state_pos = nn.Parameter(torch.randn(n, d) * 0.02)
         self.word = nn.Embedding(vocab_size, d, padding_idx=0)
         self.word_pos = nn.Parameter(torch.randn(MAX_WORDS, d) * 0.02)

@@ -61,7 +61,8 @@ class DiffusionRunner:
         frames = [frames[0]] * max(0, n - len(frames)) + frames[-n:]
         size = self.cfg["image_size"]
         images = {c: np.stack([resize_rgb(image_of(f, c), size) for f in frames]) for c in CAMERAS}
-        state = np.array([state_of_robot(f.robot) for f in frames], dtype=np.float32)
+        odometry = self.cfg.get("odometry", False)
+        state = np.array([state_of_robot(f.robot, odometry) for f in frames], dtype=np.float32)
         words = np.array(encode_sentence(obs.sub_task, self.vocab_index), dtype=np.int64)
         # The same observation always gets the same noise, so answers are reproducible.
         seed = int.from_bytes(hashlib.sha256(f"{obs.episode_id}/{obs.step}".encode()).digest()[:8], "little")

@@ -27,7 +27,7 @@ import torch
 import torch.nn.functional as F
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from checkpoint import MAX_CHECKPOINT_BYTES, save_checkpoint  # noqa: E402
+from checkpoint import MAX_CHECKPOINT_BYTES, load_checkpoint, save_checkpoint  # noqa: E402
 from dataset import LeRobotExport  # noqa: E402
 from features import CAMERAS, HORIZON, Normaliser  # noqa: E402
 from model import DEFAULT_CONFIG, DiffusionPolicy  # noqa: E402
@@ -172,6 +172,11 @@ def main():
     ap.add_argument(
         "--image-size", type=int, default=DEFAULT_CONFIG["image_size"], help="images are resized to this (square)"
     )
+    ap.add_argument(
+        "--no-odometry",
+        action="store_true",
+        help="leave the odometry (base pose relative to the episode's start) out of the state",
+    )
     ap.add_argument("--shift", type=int, default=4, help="random-shift augmentation, pixels")
     ap.add_argument("--max-episodes", type=int, default=None, help="use only the first N episodes of the export")
     ap.add_argument("--ema", type=float, default=0.999, help="EMA decay of the saved weights")
@@ -185,6 +190,20 @@ def main():
         help="where batches are assembled: auto = in GPU memory when the images fit in 75%% of its free memory, "
         "else host",
     )
+    ap.add_argument(
+        "--compile",
+        action="store_true",
+        help="torch.compile the loss (fuses the many small GroupNorm/Mish/attention kernels; a minute "
+        "or two of compiling first; see profile_train.py for what it gains on your GPU)",
+    )
+    ap.add_argument(
+        "--channels-last", action="store_true", help="keep the vision encoders' weights in channels-last layout"
+    )
+    ap.add_argument(
+        "--init",
+        default=None,
+        help="start from this checkpoint's weights, vocabulary and normalisation (fine-tuning on more data)",
+    )
     ap.add_argument("--log", default=None, help="training log JSON (default: train_log.json beside --out)")
     args = ap.parse_args()
 
@@ -196,10 +215,26 @@ def main():
     if device.type == "cpu":
         torch.set_num_threads(max(1, min(cores, workers)))
     t_start = time.time()
-    data = LeRobotExport(args.dataset, image_size=args.image_size, max_episodes=args.max_episodes, workers=workers)
-    norm = Normaliser.from_export(data.stats)
-    config = {**DEFAULT_CONFIG, "image_size": args.image_size}
-    model = DiffusionPolicy(config, len(data.vocab)).to(device)
+    odometry = not args.no_odometry
+    data = LeRobotExport(
+        args.dataset, image_size=args.image_size, max_episodes=args.max_episodes, workers=workers, odometry=odometry
+    )
+    norm = Normaliser.from_export(data.stats, data.state)
+    config = {**DEFAULT_CONFIG, "image_size": args.image_size, "odometry": odometry}
+    vocab = data.vocab
+    if args.init:
+        start, norm, vocab, init_meta = load_checkpoint(args.init, "cpu")
+        if start.config["odometry"] != odometry or start.config["image_size"] != args.image_size:
+            sys.exit(f"--init {args.init}: its odometry/image size differ from this run's; pass the same settings")
+        config = start.config
+        # The checkpoint's vocabulary: a word it never saw maps to UNK, as when serving.
+        data.retokenise(vocab)
+        print(f"starting from {args.init} ({init_meta.get('steps')} steps on {init_meta.get('episodes')} episodes)")
+    model = DiffusionPolicy(config, len(vocab)).to(device)
+    if args.init:
+        model.load_state_dict(start.state_dict())
+    if args.channels_last:
+        model.cams.to(memory_format=torch.channels_last)
     params = sum(p.numel() for p in model.parameters())
     if params * 2 + 1_000_000 > MAX_CHECKPOINT_BYTES:
         sys.exit(f"the model has {params} parameters: its fp16 checkpoint would not fit in 16 MiB")
@@ -232,7 +267,7 @@ def main():
         print(f"dataset copied to {device} memory in {time.time() - t:.1f} s", flush=True)
     else:
         feeder = Batches(data, batch, max(1, min(workers, 6)), args.seed)
-    extra = {"episodes": len(data.episodes), "frames": int(data.frames), "dataset": str(data.root)}
+    extra = {"episodes": len(data.episodes), "init": args.init, "frames": int(data.frames), "dataset": str(data.root)}
     log_path = Path(args.log) if args.log else Path(args.out).resolve().parent / "train_log.json"
     losses, curve = [], []
     t0 = time.time()
@@ -248,7 +283,7 @@ def main():
         elapsed = (time.time() - t0) / 60
         recent = float(np.mean(losses[-200:])) if losses else float("nan")
         meta = {**extra, "steps": step, "train_minutes": round(elapsed, 2), "final_loss": recent, "hardware": hw}
-        size = save_checkpoint(args.out, ema, config, data.vocab, norm, meta)
+        size = save_checkpoint(args.out, ema, config, vocab, norm, meta)
         log = {
             **meta,
             "samples": len(data),
@@ -265,6 +300,7 @@ def main():
         return size
 
     model.train()
+    loss_fn = torch.compile(model.loss) if args.compile else model.loss
     ema_params, model_params = list(ema.parameters()), list(model.parameters())
     pending = []
     while progress() < 1.0:
@@ -278,7 +314,7 @@ def main():
         for gr in opt.param_groups:
             gr["lr"] = args.lr * gr["base"] * scale
         with torch.autocast(device_type=device.type, dtype=torch.bfloat16, enabled=amp):
-            loss = model.loss(images, state, words, action)
+            loss = loss_fn(images, state, words, action)
         opt.zero_grad(set_to_none=True)
         loss.backward()
         torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)

@@ -99,6 +99,15 @@ fn two_collected_episodes_read_back_in_the_reference_readers() {
             Some(32 * 24 * 3)
         );
         assert_eq!(m["first"]["/lidar/points"]["width"].as_u64(), Some(360));
+        // Odometry is relative to the episode's start, as the policy receives it: after the
+        // first 0.1 s step from rest the base is centimetres from the origin (its start in the
+        // world is metres from the world's origin).
+        let odom = &m["first"]["/odom"];
+        let (x, y) = (odom["x"].as_f64().unwrap(), odom["y"].as_f64().unwrap());
+        assert!(
+            x.hypot(y) < 0.05,
+            "the first /odom ({x}, {y}) is not relative to the episode's start"
+        );
         let shape = |k: &str| h["shapes"][k].clone();
         assert_eq!(
             shape("observations/images/base"),

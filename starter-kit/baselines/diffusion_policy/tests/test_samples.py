@@ -9,7 +9,17 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from dataset import LeRobotExport  # noqa: E402
-from features import MAX_WORDS, UNK, build_vocab, encode_sentence, finish_actions  # noqa: E402
+from features import (  # noqa: E402
+    MAX_WORDS,
+    UNK,
+    Normaliser,
+    build_vocab,
+    encode_sentence,
+    finish_actions,
+    odometry_features,
+    state_dim,
+    state_of_robot,
+)
 
 
 def export(tasks_per_episode):
@@ -81,6 +91,50 @@ class Features(unittest.TestCase):
         self.assertTrue(np.allclose(np.linalg.norm(out[:, 5:9], axis=1), 1.0))
         self.assertTrue(((out[:, 9] >= 0) & (out[:, 9] <= 1)).all())
         self.assertTrue(np.isfinite(out).all())
+
+
+class Robot:
+    """A stand-in for a policy.proto RobotState."""
+
+    base_x, base_y, base_yaw, base_v, base_omega, gripper = 1.5, -0.5, np.pi / 2, 0.2, 0.1, 0.8
+    ee_pose = [0.3, 0.0, 0.4, 1.0, 0.0, 0.0, 0.0]
+
+
+class Odometry(unittest.TestCase):
+    def test_the_online_state_is_the_export_state_then_the_odometry_features(self):
+        self.assertEqual(len(state_of_robot(Robot())), 10)
+        s = state_of_robot(Robot(), odometry=True)
+        self.assertEqual(len(s), 14)
+        self.assertEqual(s[:10], [0.2, 0.1, 0.3, 0.0, 0.4, 1.0, 0.0, 0.0, 0.0, 0.8])
+        self.assertTrue(np.allclose(s[10:], [1.5, -0.5, 0.0, 1.0]))
+
+    def test_yaw_plus_and_minus_pi_give_the_same_features(self):
+        self.assertTrue(np.allclose(odometry_features(0, 0, np.pi), odometry_features(0, 0, -np.pi)))
+
+    def test_checkpoints_without_the_odometry_key_keep_ten_state_values(self):
+        self.assertEqual(state_dim({}), 10)
+        self.assertEqual(state_dim({"odometry": False}), 10)
+        self.assertEqual(state_dim({"odometry": True}), 14)
+
+    def test_state_statistics_come_from_the_training_rows_when_given(self):
+        stats = {
+            "action": {"min": [-1.0] * 10, "max": [1.0] * 10, "mean": [0.0] * 10, "std": [1.0] * 10},
+            "observation.state": {"min": [0.0] * 10, "max": [1.0] * 10, "mean": [9.0] * 10, "std": [9.0] * 10},
+        }
+        rows = np.array([[0.0] * 14, [2.0] * 14])
+        n = Normaliser.from_export(stats, rows)
+        self.assertEqual(n.s_mean.tolist(), [1.0] * 14)
+        self.assertEqual(n.s_std.tolist(), [1.0] * 14)
+        self.assertEqual(Normaliser.from_export(stats).s_mean.tolist(), [9.0] * 10)
+
+    def test_fine_tuning_encodes_sentences_with_the_checkpoints_vocabulary(self):
+        d = export([[0] * 5 + [1] * 5])
+        d.sentence_of = {0: "pick the cup", 1: "move to the teal zone"}
+        vocab = build_vocab(["pick the cup", "move to the red zone"])
+        d.retokenise(vocab)
+        self.assertEqual(d.vocab, vocab)
+        self.assertEqual(d.task_words[1][3], UNK)
+        self.assertEqual([vocab[i] for i in d.task_words[0][:3]], ["pick", "the", "cup"])
 
 
 if __name__ == "__main__":
