@@ -400,7 +400,10 @@ fn run_task(
                 return end(sim, None, calls, corrections);
             }
             if elapsed >= opts.task_time_limit - 1e-9 {
-                let why = format!("time limit of {} s reached", opts.task_time_limit);
+                let mut why = format!("time limit of {} s reached", opts.task_time_limit);
+                if let Some(gap) = sim.task_shortfall() {
+                    why = format!("{why}: {gap}");
+                }
                 return end(sim, Some((why, false)), calls, corrections);
             }
             if capture {

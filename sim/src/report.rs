@@ -70,6 +70,17 @@ impl Sim {
             .collect()
     }
 
+    /// How far the current task is from success, in words (see [`Task::shortfall`]).
+    pub fn task_shortfall(&self) -> Option<String> {
+        let task = self.dynamic.task.as_ref()?;
+        let name = |i: usize| {
+            self.objects
+                .get(i)
+                .map_or_else(|| format!("object {i}"), |o| o.name.clone())
+        };
+        Some(task.shortfall(&self.config.success, &self.facts(), &name))
+    }
+
     /// The current task's target, if any.
     pub fn current_task(&self) -> Option<&Task> {
         self.dynamic.task.as_ref()

@@ -172,6 +172,42 @@ impl Task {
         }
     }
 
+    /// How far the task is from its success criterion, in words, for a failure reason (a
+    /// participant sees *why* a task failed: "never moved" and "stopped 12 cm short" call for
+    /// different fixes). `name` gives key object `i`'s name.
+    pub fn shortfall(&self, s: &SuccessConfig, f: &Facts, name: &dyn Fn(usize) -> String) -> String {
+        match self.target {
+            TaskTarget::Base { x, y, .. } => format!(
+                "the base centre ended {:.2} m from the zone's approach point (success within {:.2} m)",
+                dist2(f.base_xy, [x, y]),
+                s.navigation_tolerance
+            ),
+            TaskTarget::Pick { object } if f.held == Some(object) => format!(
+                "the {} was grasped but lifted {:.1} cm (success from {:.1} cm)",
+                name(object),
+                100.0 * (f.bottoms[object] - self.support).max(0.0),
+                100.0 * s.lift_clearance
+            ),
+            TaskTarget::Pick { object } => format!(
+                "the {} was not grasped; the gripper ended {:.2} m from its grasp point",
+                name(object),
+                f.tcp_to_grasp[object]
+            ),
+            TaskTarget::Place { object, target } => {
+                let d = dist3(f.objects[object], target);
+                if f.held == Some(object) {
+                    format!("the {} was still held, {d:.2} m from its target", name(object))
+                } else {
+                    format!(
+                        "the {} ended {d:.2} m from its target (success within {:.2} m)",
+                        name(object),
+                        s.manipulation_tolerance
+                    )
+                }
+            }
+        }
+    }
+
     /// Monitors evaluated when the task ends (paper, Monitoring Module).
     pub fn end_checks(&self, m: &MonitorConfig, f: &Facts) -> Option<MonitorTrip> {
         match self.target {
@@ -199,4 +235,78 @@ pub fn objects_on_floor(m: &MonitorConfig, f: &Facts, names: &[String]) -> Vec<M
         .filter(|(p, _)| p[2] < m.floor_height)
         .map(|(_, n)| MonitorTrip::ObjectOnFloor { object: n.clone() })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn facts(base: [f64; 2], object: [f64; 3], held: Option<usize>) -> Facts {
+        Facts {
+            time: 0.0,
+            base_xy: base,
+            objects: vec![object],
+            bottoms: vec![object[2] - 0.05],
+            held,
+            tcp_to_grasp: vec![0.25],
+        }
+    }
+
+    fn task(target: TaskTarget, f: &Facts) -> Task {
+        Task::new(0, "step".into(), target, f)
+    }
+
+    fn name(_: usize) -> String {
+        "red cup".into()
+    }
+
+    #[test]
+    fn a_failed_move_says_how_far_the_base_ended_from_the_approach_point() {
+        let f = facts([1.0, 1.0], [0.0; 3], None);
+        let t = task(
+            TaskTarget::Base {
+                x: 1.3,
+                y: 1.4,
+                yaw: 0.0,
+            },
+            &f,
+        );
+        assert_eq!(
+            t.shortfall(&SuccessConfig::default(), &f, &name),
+            "the base centre ended 0.50 m from the zone's approach point (success within 0.10 m)"
+        );
+    }
+
+    #[test]
+    fn a_failed_pick_says_whether_the_object_was_grasped_and_how_far_it_was_lifted() {
+        let start = facts([0.0; 2], [2.0, 0.0, 0.90], None);
+        let t = task(TaskTarget::Pick { object: 0 }, &start);
+        let s = SuccessConfig::default();
+        assert_eq!(
+            t.shortfall(&s, &start, &name),
+            "the red cup was not grasped; the gripper ended 0.25 m from its grasp point"
+        );
+        let lifted = facts([0.0; 2], [2.0, 0.0, 0.91], Some(0));
+        assert_eq!(
+            t.shortfall(&s, &lifted, &name),
+            "the red cup was grasped but lifted 1.0 cm (success from 3.0 cm)"
+        );
+    }
+
+    #[test]
+    fn a_failed_place_says_how_far_the_object_is_from_its_target() {
+        let target = [1.0, 1.0, 0.8];
+        let f = facts([0.0; 2], [1.0, 1.2, 0.8], None);
+        let t = task(TaskTarget::Place { object: 0, target }, &f);
+        let s = SuccessConfig::default();
+        assert_eq!(
+            t.shortfall(&s, &f, &name),
+            "the red cup ended 0.20 m from its target (success within 0.05 m)"
+        );
+        let held = facts([0.0; 2], [1.0, 1.2, 0.8], Some(0));
+        assert_eq!(
+            t.shortfall(&s, &held, &name),
+            "the red cup was still held, 0.20 m from its target"
+        );
+    }
 }

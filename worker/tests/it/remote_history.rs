@@ -114,7 +114,8 @@ fn run(url: &str) -> Truth {
         ..RunOptions::default()
     };
     let out = run_episode(&mut sim, &mut remote, &opts, None, &mut truth).unwrap();
-    assert_eq!(out.tasks[0].failure.as_deref(), Some("time limit of 3 s reached"));
+    let f = out.tasks[0].failure.as_deref().unwrap_or_default();
+    assert!(f.starts_with("time limit of 3 s reached"), "{f}");
     truth
 }
 

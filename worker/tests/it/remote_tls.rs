@@ -52,7 +52,8 @@ fn a_tls_endpoint_is_called_over_https_with_its_ca() {
     };
     let out = kitchen_r_episode::runner::run_episode(&mut sim, &mut p, &opts, None, &mut ()).unwrap();
     // The still policy never succeeds, but every call went through: the task ran to its limit.
-    assert_eq!(out.tasks[0].failure.as_deref(), Some("time limit of 1 s reached"));
+    let f = out.tasks[0].failure.as_deref().unwrap_or_default();
+    assert!(f.starts_with("time limit of 1 s reached"), "{f}");
     assert!(out.policy_calls >= 2);
 }
 
