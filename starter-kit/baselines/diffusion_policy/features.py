@@ -131,6 +131,17 @@ class Normaliser:
         return (s - self.s_mean) / self.s_std
 
 
+def deadband(chunk, v_min, omega_min):
+    """Base commands smaller than (`v_min` m/s, `omega_min` rad/s) set to 0. The expert's base
+    speed is 0 at the bottom of its range, which the normalised actions clamp to -1, so a
+    denoised "stand still" comes out as a small positive speed; over a 60 s pick that creeps
+    the base metres away from the object."""
+    out = np.array(chunk, dtype=np.float64)
+    out[np.abs(out[:, 0]) < v_min, 0] = 0.0
+    out[np.abs(out[:, 1]) < omega_min, 1] = 0.0
+    return out
+
+
 def finish_actions(chunk):
     """Make a predicted chunk valid for the contract: unit quaternions (sign kept with qw >= 0
     where possible is not needed: q and -q are accepted), gripper in [0, 1], finite values."""

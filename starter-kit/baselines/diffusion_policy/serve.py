@@ -26,7 +26,7 @@ sys.path.insert(1, str(HERE.parent.parent))  # starter-kit/, for policy_server
 
 import policy_server as kit  # noqa: E402
 from checkpoint import load_checkpoint  # noqa: E402
-from features import CAMERAS, encode_sentence, finish_actions, resize_rgb, state_of_robot  # noqa: E402
+from features import CAMERAS, deadband, encode_sentence, finish_actions, resize_rgb, state_of_robot  # noqa: E402
 
 
 def image_of(frame, cam):
@@ -41,12 +41,13 @@ def image_of(frame, cam):
 class DiffusionRunner:
     """The policy object `policy_server.serve` drives: one Act in, 16 actions out."""
 
-    def __init__(self, checkpoint, device, steps, max_batch=32):
+    def __init__(self, checkpoint, device, steps, max_batch=32, deadband=(0.0, 0.0)):
         self.device = device
         self.model, self.norm, self.vocab, self.meta = load_checkpoint(checkpoint, device)
         self.vocab_index = {w: i for i, w in enumerate(self.vocab)}
         self.cfg = self.model.config
         self.steps = steps
+        self.deadband = deadband
         self.max_batch = max_batch
         self.cond = threading.Condition()
         self.pending = []
@@ -103,7 +104,7 @@ class DiffusionRunner:
         noise = torch.stack([it["x"][3] for it in batch])
         out = self.model.sample(images, state, words, steps=self.steps, noise=noise).float().cpu().numpy()
         for it, a in zip(batch, out):
-            it["y"] = finish_actions(self.norm.unaction(a))
+            it["y"] = finish_actions(deadband(self.norm.unaction(a), *self.deadband))
 
 
 def main():
@@ -121,6 +122,11 @@ def main():
     ap.add_argument(
         "--concurrency", type=int, default=16, help="Act calls the policy accepts at once (max_concurrency)"
     )
+    ap.add_argument(
+        "--deadband",
+        default="0,0",
+        help="V,OMEGA: base commands below V m/s and OMEGA rad/s are sent as 0 (e.g. 0.01,0.02); off by default",
+    )
     ap.add_argument("--token", default=os.environ.get("POLICY_TOKEN"), help="require this bearer token")
     ap.add_argument("--proto-dir", default=None, help="directory with kitchen_r/policy/v1/policy.proto")
     ap.add_argument("--threads", type=int, default=None, help="gRPC threads (default: --concurrency + 4)")
@@ -135,7 +141,13 @@ def main():
         if args.device == "auto" and torch.cuda.is_available()
         else ("cpu" if args.device == "auto" else args.device)
     )
-    runner = DiffusionRunner(args.checkpoint, device, args.steps)
+    try:
+        band = tuple(float(x) for x in args.deadband.split(","))
+        if len(band) != 2 or min(band) < 0:
+            raise ValueError
+    except ValueError:
+        sys.exit(f"--deadband {args.deadband!r}: give two non-negative numbers, V,OMEGA (e.g. 0.01,0.02)")
+    runner = DiffusionRunner(args.checkpoint, device, args.steps, deadband=band)
     meta = runner.meta
     logging.info(
         "checkpoint %s: %s episodes, %s steps, on %s; serving on %s with %d denoising steps",

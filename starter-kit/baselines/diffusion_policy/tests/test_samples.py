@@ -14,6 +14,7 @@ from features import (  # noqa: E402
     UNK,
     Normaliser,
     build_vocab,
+    deadband,
     encode_sentence,
     finish_actions,
     odometry_features,
@@ -91,6 +92,18 @@ class Features(unittest.TestCase):
         self.assertTrue(np.allclose(np.linalg.norm(out[:, 5:9], axis=1), 1.0))
         self.assertTrue(((out[:, 9] >= 0) & (out[:, 9] <= 1)).all())
         self.assertTrue(np.isfinite(out).all())
+
+
+    def test_the_deadband_zeroes_only_small_base_commands(self):
+        chunk = np.zeros((3, 10))
+        chunk[:, 0] = [0.005, -0.004, 0.05]
+        chunk[:, 1] = [0.01, 0.3, -0.015]
+        chunk[:, 2] = 0.004
+        out = deadband(chunk, 0.01, 0.02)
+        self.assertEqual(out[:, 0].tolist(), [0.0, 0.0, 0.05])
+        self.assertEqual(out[:, 1].tolist(), [0.0, 0.3, 0.0])
+        self.assertEqual(out[:, 2].tolist(), [0.004] * 3)
+        self.assertEqual(deadband(chunk, 0.0, 0.0).tolist(), chunk.tolist())
 
 
 class Robot:
