@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from features import CAMERAS, HORIZON, build_vocab, encode_sentence, resize_rgb
+from features import CAMERAS, HORIZON, build_vocab, encode_sentence, odometry_features, resize_rgb
 
 N_OBS = 2
 
@@ -151,9 +151,9 @@ class LeRobotExport:
 
         all_state, all_action = vec("observation.state"), vec("action")
         if odometry:
-            # (x, y, yaw) -> (x, y, cos yaw, sin yaw), as features.odometry_features online.
+            # (x, y, yaw) -> (x, y, cos yaw, sin yaw), by the rule serving uses.
             pose = vec("observation.base_pose")
-            odo = np.stack([pose[:, 0], pose[:, 1], np.cos(pose[:, 2]), np.sin(pose[:, 2])], axis=1)
+            odo = np.stack(odometry_features(pose[:, 0], pose[:, 1], pose[:, 2]), axis=1)
             all_state = np.concatenate([all_state, odo.astype(np.float32)], axis=1)
         all_task = np.concatenate([p.column("task_index").to_numpy() for p in parts])[order]
 

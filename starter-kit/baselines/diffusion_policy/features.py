@@ -17,7 +17,6 @@ the policy contract's observations), so training and serving never disagree.
   vocabulary built from the training tasks (unknown words map to UNK).
 """
 
-import math
 import re
 
 import numpy as np
@@ -37,8 +36,9 @@ def state_dim(config):
 
 
 def odometry_features(x, y, yaw):
-    """(x, y, cos yaw, sin yaw): yaw as a point on the circle, so +pi and -pi are the same."""
-    return [x, y, math.cos(yaw), math.sin(yaw)]
+    """(x, y, cos yaw, sin yaw): yaw as a point on the circle, so +pi and -pi are the same.
+    Scalars online, or numpy columns for a whole export (the same rule for both)."""
+    return [x, y, np.cos(yaw), np.sin(yaw)]
 
 
 def state_of_robot(robot, odometry=False):
@@ -50,7 +50,7 @@ def state_of_robot(robot, odometry=False):
         raise ValueError("observation has no hand pose (robot.ee_pose): the worker must speak contract v1.1")
     out = [robot.base_v, robot.base_omega] + hand + [robot.gripper]
     if odometry:
-        out += odometry_features(robot.base_x, robot.base_y, robot.base_yaw)
+        out += [float(v) for v in odometry_features(robot.base_x, robot.base_y, robot.base_yaw)]
     return out
 
 
