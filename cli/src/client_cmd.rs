@@ -1,4 +1,4 @@
-//! Client commands (`team create`, `submit plans`, `submit policy`, `leaderboard`, `rescore`;
+//! Client commands (`team create|rotate-token`, `submit plans`, `submit policy`, `leaderboard`, `rescore`;
 //! `submission show|wait` in `submission_cmd`): thin HTTP calls to a running server's `/api/v1`.
 //! Output is for people (tables, one-line summaries) unless a machine format is asked for; a refused request exits non-zero with the server's own message.
 
@@ -32,6 +32,26 @@ enum TeamCommand {
         /// Organiser token.
         #[arg(long, env = "KITCHEN_R_ADMIN_TOKEN", hide_env_values = true)]
         admin_token: String,
+    },
+    /// Give a team a new token and print it (shown once). The old token stops working at once
+    /// and every page session opened with it ends. Organiser token (`--admin-token`), or the
+    /// team's own token (`--token`) to rotate one's own.
+    RotateToken {
+        /// The team's id (`team create` printed it; `submission show` names it too).
+        id: i64,
+        #[command(flatten)]
+        server: ServerArgs,
+        /// Organiser token.
+        #[arg(
+            long,
+            env = "KITCHEN_R_ADMIN_TOKEN",
+            hide_env_values = true,
+            conflicts_with = "token"
+        )]
+        admin_token: Option<String>,
+        /// The team's current token (to rotate one's own).
+        #[arg(long, env = "KITCHEN_R_TOKEN", hide_env_values = true)]
+        token: Option<String>,
     },
 }
 
@@ -139,26 +159,56 @@ pub(crate) async fn json(req: reqwest::RequestBuilder) -> anyhow::Result<Value> 
 }
 
 pub(crate) fn team(args: TeamArgs) -> anyhow::Result<()> {
-    let TeamCommand::Create {
-        name,
-        server,
-        admin_token,
-    } = args.command;
-    runtime()?.block_on(async {
-        let req = reqwest::Client::new()
-            .post(url(&server, "/api/v1/teams"))
-            .bearer_auth(admin_token)
-            .json(&serde_json::json!({ "name": name }));
-        let v = json(req).await?;
-        println!(
-            "team {} created (id {})",
-            v["name"].as_str().unwrap_or("?"),
-            v["id"]
-        );
-        println!("token: {}", v["token"].as_str().unwrap_or("?"));
-        println!("keep it: it is shown only once; participants pass it as --token or KITCHEN_R_TOKEN");
-        Ok(())
-    })
+    match args.command {
+        TeamCommand::Create {
+            name,
+            server,
+            admin_token,
+        } => runtime()?.block_on(async {
+            let req = reqwest::Client::new()
+                .post(url(&server, "/api/v1/teams"))
+                .bearer_auth(admin_token)
+                .json(&serde_json::json!({ "name": name }));
+            let v = json(req).await?;
+            println!(
+                "team {} created (id {})",
+                v["name"].as_str().unwrap_or("?"),
+                v["id"]
+            );
+            print_token(&v);
+            Ok(())
+        }),
+        TeamCommand::RotateToken {
+            id,
+            server,
+            admin_token,
+            token,
+        } => {
+            let Some(bearer) = admin_token.or(token) else {
+                bail!(
+                    "give the organiser token (--admin-token or KITCHEN_R_ADMIN_TOKEN) or the team's own (--token or KITCHEN_R_TOKEN)"
+                );
+            };
+            runtime()?.block_on(async {
+                let req = reqwest::Client::new()
+                    .post(url(&server, &format!("/api/v1/teams/{id}/token")))
+                    .bearer_auth(bearer);
+                let v = json(req).await?;
+                println!(
+                    "team {} (id {}) has a new token; the old one no longer works and its page sessions ended",
+                    v["name"].as_str().unwrap_or("?"),
+                    v["id"]
+                );
+                print_token(&v);
+                Ok(())
+            })
+        }
+    }
+}
+
+fn print_token(v: &Value) {
+    println!("token: {}", v["token"].as_str().unwrap_or("?"));
+    println!("keep it: it is shown only once; participants pass it as --token or KITCHEN_R_TOKEN");
 }
 
 pub(crate) fn submit(args: SubmitArgs) -> anyhow::Result<()> {

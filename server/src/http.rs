@@ -49,6 +49,7 @@ pub(crate) fn router(state: AppState) -> Router {
         .route("/healthz", get(healthz))
         .route("/api/v1/openapi.json", get(openapi::openapi_json))
         .route("/api/v1/teams", post(create_team))
+        .route("/api/v1/teams/{id}/token", post(rotate_team_token))
         .route("/api/v1/dataset/manifest", get(dataset_manifest))
         .route("/api/v1/dataset/{split}", get(dataset))
         .route("/api/v1/scenes", get(scenes))
@@ -202,6 +203,31 @@ async fn create_team(
     let name: String = body_field(&body, "name", r#"{"name": "..."}"#)?;
     let team = s.create_team(admin, &name).await?;
     Ok((StatusCode::CREATED, axum::Json(team)).into_response())
+}
+
+#[utoipa::path(
+    post,
+    path = "/api/v1/teams/{id}/token",
+    tag = "organiser",
+    summary = "Give a team a new token",
+    description = "The organiser, or the team itself with its current token. The old token stops working at once and every page session of the team ends.",
+    params(("id" = i64, Path, description = "The team's id")),
+    security(("organiser_token" = []), ("team_token" = [])),
+    responses(
+        (status = 200, description = "The team and its new token (shown once)", body = crate::service::NewTeam),
+        (status = 401, description = "No token, or one that is no team's nor the organiser's", body = openapi::ErrorBody),
+        (status = 404, description = "No such team (or another team's id, or the baseline team)", body = openapi::ErrorBody),
+    )
+)]
+async fn rotate_team_token(
+    State(s): State<AppState>,
+    caller: Caller,
+    PathArg(id): PathArg<String>,
+) -> Result<Response, ServiceError> {
+    let id: i64 = id
+        .parse()
+        .map_err(|_| ServiceError::not_found(format!("team {id:?}")))?;
+    Ok(axum::Json(s.rotate_team_token(&caller, id).await?).into_response())
 }
 
 #[utoipa::path(

@@ -154,6 +154,8 @@ impl Server {
         tokio::spawn(reaper(self.state.clone(), rx.clone()));
         tokio::spawn(videos::sweeper(self.state.clone(), rx.clone()));
         let app = http::router(self.state.clone());
+        // The peer's address reaches handlers (the login throttle counts failures per address).
+        let app = app.into_make_service_with_connect_info::<std::net::SocketAddr>();
         let http_server = axum::serve(http, app).with_graceful_shutdown(wait(rx.clone()));
         let grpc_server = grpc_routes(self.state.clone())
             .await?

@@ -24,12 +24,14 @@ pub(crate) mod auth;
 mod board;
 pub(crate) mod jobs;
 mod limits;
+mod login_throttle;
 mod metrics;
 mod plan_uploads;
 pub(crate) mod policies;
 pub(crate) mod portal;
 mod progress;
 mod rescore;
+pub(crate) mod sessions;
 mod submissions;
 mod teams;
 
@@ -78,6 +80,8 @@ struct Inner {
     stopping: std::sync::atomic::AtomicBool,
     /// Per-team upload rate limits and refusal counts (in memory: see [`limits`]).
     limits: limits::Limits,
+    /// Failed page logins, per client address and in all (in memory: see [`login_throttle`]).
+    logins: login_throttle::LoginThrottle,
     /// What `/metrics` reads when scraped (workers seen, cached queue gauges).
     telemetry: metrics::Telemetry,
 }
@@ -110,6 +114,10 @@ impl AppState {
                 db,
                 limits: limits::Limits::new(config.quota.per_minute, now_ms()),
                 telemetry: metrics::Telemetry::new(),
+                logins: login_throttle::LoginThrottle::new(
+                    config.sessions.failures_per_minute_per_address,
+                    config.sessions.failures_per_minute,
+                ),
                 config,
                 content,
                 admin_hash: hash_token(tokens.admin),

@@ -171,7 +171,9 @@ async fn a_team_logs_in_through_the_form_and_reads_its_team_and_submission_pages
         .unwrap();
     assert_eq!(r.status(), StatusCode::NOT_FOUND);
 
-    // Logging out (with the page's CSRF field) ends the session.
+    // Logging out (with the page's CSRF field) ends the session, on the server too: a copy of
+    // the cookie taken before (another browser's, a stolen one) opens nothing afterwards.
+    let copied = jar.header();
     let (_, team_page) = open(&server, &mut jar, "/team").await;
     let r = send_form(
         &server,
@@ -184,4 +186,27 @@ async fn a_team_logs_in_through_the_form_and_reads_its_team_and_submission_pages
     assert!(!jar.0.contains_key("kitchen_r_team"));
     let (status, _) = open(&server, &mut jar, &format!("/submissions/{id}")).await;
     assert_eq!(status, StatusCode::SEE_OTHER);
+    let r = browser()
+        .get(server.url("/team"))
+        .header(COOKIE, copied)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(
+        r.status(),
+        StatusCode::SEE_OTHER,
+        "a logged-out cookie still works"
+    );
+
+    // Guessing is throttled per client address (`[sessions]`: 10 failures a minute): the 11th
+    // wrong token in a row is answered 429 with Retry-After, whatever its token.
+    let (_, form) = open(&server, &mut jar, "/team/login").await;
+    let guess = |t: &str| format!("token={t}&csrf={}&next=/team", csrf_of(&form));
+    for i in 0..10 {
+        let r = send_form(&server, &mut jar, "/team/login", guess(&format!("kr_{i:064}"))).await;
+        assert_eq!(r.status(), StatusCode::UNAUTHORIZED);
+    }
+    let r = send_form(&server, &mut jar, "/team/login", guess(&token)).await;
+    assert_eq!(r.status(), StatusCode::TOO_MANY_REQUESTS);
+    assert!(r.headers().contains_key("retry-after"));
 }

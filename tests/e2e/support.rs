@@ -223,6 +223,42 @@ pub(crate) async fn team(server: &Server, name: &str) -> String {
     v["token"].as_str().unwrap().to_string()
 }
 
+/// Log `token`'s team in through the page's login form, as a browser does; returns the
+/// `Cookie` header a browser would then send (CSRF nonce and the session).
+pub(crate) async fn page_session(server: &Server, token: &str) -> String {
+    let c = reqwest::Client::builder()
+        .redirect(reqwest::redirect::Policy::none())
+        .timeout(Duration::from_secs(30))
+        .build()
+        .unwrap();
+    let pair = |r: &reqwest::Response, name: &str| {
+        (r.headers().get_all("set-cookie").iter())
+            .map(|v| v.to_str().unwrap().split(';').next().unwrap().to_string())
+            .find(|p| p.starts_with(&format!("{name}=")))
+            .unwrap_or_else(|| panic!("no {name} cookie"))
+    };
+    let form = c.get(server.url("/team/login")).send().await.unwrap();
+    let nonce = pair(&form, "kitchen_r_csrf");
+    let page = form.text().await.unwrap();
+    let csrf = page
+        .split("name=csrf value=\"")
+        .nth(1)
+        .unwrap()
+        .split('"')
+        .next()
+        .unwrap();
+    let r = c
+        .post(server.url("/team/login"))
+        .header("cookie", &nonce)
+        .header("content-type", "application/x-www-form-urlencoded")
+        .body(format!("token={token}&csrf={csrf}&next=/team"))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 303, "login refused");
+    format!("{nonce}; {}", pair(&r, "kitchen_r_team"))
+}
+
 /// POST a plan file; returns (status, JSON body).
 pub(crate) async fn submit(
     server: &Server,

@@ -121,7 +121,7 @@ fn a_dev_episode_video_is_served_with_ranges_to_its_team_only_and_test_videos_to
         let page = url.trim_start_matches("/api/v1");
         let r = client()
             .get(server.url(page))
-            .header("cookie", format!("kitchen_r_team={}", hex_token(&alpha)))
+            .header("cookie", page_session(&server, &alpha).await)
             .header("range", "bytes=0-3")
             .send()
             .await
@@ -162,15 +162,10 @@ fn a_dev_episode_video_is_served_with_ranges_to_its_team_only_and_test_videos_to
 async fn page_html(server: &Server, path: &str, token: &str) -> String {
     let r = client()
         .get(server.url(path))
-        .header("cookie", format!("kitchen_r_team={}", hex_token(token)))
+        .header("cookie", page_session(server, token).await)
         .send()
         .await
         .unwrap();
     assert_eq!(r.status(), 200, "{path}");
     r.text().await.unwrap()
-}
-
-/// The team cookie's value: the token, hex-encoded (`pages::TEAM_COOKIE`).
-fn hex_token(token: &str) -> String {
-    token.bytes().map(|b| format!("{b:02x}")).collect()
 }

@@ -3,7 +3,8 @@
 //! HTML page `GET /admin`.
 //!
 //! A browser cannot send a bearer header from a plain page, so `/admin` has a login form that
-//! takes the organiser token and keeps it in a session cookie for 8 hours (attributes and CSRF
+//! takes the organiser token and opens a server-side session (`crate::service::sessions`;
+//! `[sessions] organiser_hours`, 8 by default) whose id a cookie holds (attributes and CSRF
 //! in [`super::session`]). The cookie is `Path=/` so that the participant pages
 //! (`/submissions/{id}`) also open for the organiser; no API route reads it. It authorises
 //! only *reading* pages: every action (cancel, requeue, backup) stays on the bearer-token API
@@ -20,15 +21,15 @@ use bytes::Bytes;
 use serde::Deserialize;
 use tokio::io::AsyncReadExt;
 
-use super::extract::PathArg;
+use super::extract::{ClientAddr, PathArg};
 use super::session;
 use crate::error::ServiceError;
 use crate::service::admin::{CSRF_SLOT, login_page};
+use crate::service::sessions::{Login, Role};
 use crate::service::{AppState, Caller};
 
-/// The session cookie's name; its value is the organiser token, hex-encoded.
+/// The session cookie's name; its value is a session id (`crate::service::sessions`).
 pub(super) const COOKIE: &str = "kitchen_r_admin";
-const SESSION_S: u32 = 8 * 3600;
 
 /// Routes answered within the request budget.
 pub(super) fn quick_routes() -> Router<AppState> {
@@ -209,8 +210,8 @@ pub(super) async fn organiser_session(
     s: &AppState,
     headers: &HeaderMap,
 ) -> Result<Option<crate::service::Organiser>, ServiceError> {
-    Ok(match session::session_token(headers, COOKIE) {
-        Some(t) => s.caller(Some(&t)).await?.organiser().ok(),
+    Ok(match session::session_id(headers, COOKIE) {
+        Some(id) => s.session(id).await?.organiser().ok(),
         None => None,
     })
 }
@@ -232,9 +233,10 @@ fn login_again(headers: &HeaderMap, status: StatusCode, message: &str) -> Respon
     session::html_with(status, login_page(Some(message), &csrf.field), &csrf)
 }
 
-/// `POST /admin/login` (form `token=...&csrf=...`): the organiser token sets the session cookie.
+/// `POST /admin/login` (form `token=...&csrf=...`): the organiser token opens a session.
 async fn login(
     State(s): State<AppState>,
+    ClientAddr(client): ClientAddr,
     headers: HeaderMap,
     form: Result<Form<LoginForm>, axum::extract::rejection::FormRejection>,
 ) -> Result<Response, ServiceError> {
@@ -252,33 +254,49 @@ async fn login(
             session::CSRF_REFUSED,
         ));
     }
-    let token = form.token.trim();
-    if token.is_empty() || s.caller(Some(token)).await?.organiser().is_err() {
-        tracing::warn!("organiser console: failed login");
-        return Ok(login_again(
-            &headers,
-            StatusCode::UNAUTHORIZED,
-            "That is not the organiser token.",
-        ));
-    }
-    let secure = session::https(&headers);
-    let cookie = session::session_cookie(COOKIE, token, SESSION_S, secure);
-    Ok(session::see_other("/admin", &[cookie]))
+    Ok(match s.log_in(Role::Organiser, &form.token, client).await? {
+        Login::Opened {
+            cookie, max_age_s, ..
+        } => {
+            let c = session::session_cookie(COOKIE, &cookie, max_age_s, session::https(&headers));
+            session::see_other("/admin", &[c])
+        }
+        Login::Refused(message) => login_again(&headers, StatusCode::UNAUTHORIZED, message),
+        Login::Throttled { retry_after_s } => session::with_retry_after(
+            login_again(
+                &headers,
+                StatusCode::TOO_MANY_REQUESTS,
+                &session::throttled_message(retry_after_s),
+            ),
+            retry_after_s,
+        ),
+    })
 }
 
-/// `POST /admin/logout` (form `csrf=...`): drop the session cookie (and the one older servers
-/// set on `Path=/admin`).
+/// `POST /admin/logout` (form `csrf=...`): end the session and drop its cookie (and the one
+/// older servers set on `Path=/admin`).
 async fn logout(
+    State(s): State<AppState>,
     headers: HeaderMap,
     form: Result<Form<CsrfForm>, axum::extract::rejection::FormRejection>,
-) -> Response {
+) -> Result<Response, ServiceError> {
     let sent = form.ok().and_then(|Form(f)| f.csrf);
     if !session::csrf_ok(&headers, COOKIE, sent.as_deref()) {
-        return login_again(&headers, StatusCode::FORBIDDEN, session::CSRF_REFUSED);
+        return Ok(login_again(
+            &headers,
+            StatusCode::FORBIDDEN,
+            session::CSRF_REFUSED,
+        ));
+    }
+    if let Some(id) = session::session_id(&headers, COOKIE) {
+        s.log_out(id).await?;
     }
     let secure = session::https(&headers);
     let old = HeaderValue::from_static("kitchen_r_admin=; Path=/admin; HttpOnly; SameSite=Strict; Max-Age=0");
-    session::see_other("/admin", &[session::set_cookie(COOKIE, "", Some(0), secure), old])
+    Ok(session::see_other(
+        "/admin",
+        &[session::set_cookie(COOKIE, "", Some(0), secure), old],
+    ))
 }
 
 #[cfg(test)]

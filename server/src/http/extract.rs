@@ -78,3 +78,31 @@ impl FromRequest<AppState> for BodyBytes {
         }
     }
 }
+
+/// The client's address for the login throttle: the `[sessions] client_address_header`'s first
+/// address when configured (behind a reverse proxy), else the TCP peer's; `None` when neither
+/// is known (a router driven without a socket, as unit tests do).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct ClientAddr(pub Option<std::net::IpAddr>);
+
+impl FromRequestParts<AppState> for ClientAddr {
+    type Rejection = std::convert::Infallible;
+
+    async fn from_request_parts(parts: &mut Parts, state: &AppState) -> Result<Self, Self::Rejection> {
+        let header = &state.config().sessions.client_address_header;
+        if !header.is_empty() {
+            let forwarded = (parts.headers.get(header.as_str()))
+                .and_then(|v| v.to_str().ok())
+                .and_then(|v| v.split(',').next())
+                .and_then(|a| a.trim().parse().ok());
+            if forwarded.is_some() {
+                return Ok(ClientAddr(forwarded));
+            }
+        }
+        let peer = parts
+            .extensions
+            .get::<axum::extract::ConnectInfo<std::net::SocketAddr>>()
+            .map(|c| c.0.ip());
+        Ok(ClientAddr(peer))
+    }
+}

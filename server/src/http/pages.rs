@@ -1,14 +1,14 @@
 //! The participant pages: server-rendered HTML that needs no script and no build step.
 //!
 //! - `GET /contest`: the contest home ([`home`]): tracks, metrics, how to take part, data, rules;
-//! - `GET|POST /team/login`, `POST /team/logout`: the team token kept in a session cookie;
+//! - `GET|POST /team/login`, `POST /team/logout`: a team token opens a server-side session;
 //! - `GET /team`: the team's submissions and quota left ([`team`]);
 //! - `GET /submissions/{id}`: one submission, for its team or the organiser ([`submission`]);
 //! - `GET /leaderboard/{track}/{split}/{id}`: a leaderboard entry's public summary;
 //! - `GET /favicon.ico`: 204, no icon (the browser asks for it on its own).
 //!
-//! Policy: a page that needs a team takes the token once (the login form) and keeps it in the
-//! `kitchen_r_team` cookie; the organiser's console cookie opens submission pages too. Cookies
+//! Policy: a page that needs a team takes the token once (the login form), which opens a session
+//! whose id the `kitchen_r_team` cookie holds (`crate::service::sessions`); the organiser's console cookie opens submission pages too. Cookies
 //! and CSRF follow [`super::session`]. Another team's submission answers 404, the same as one
 //! that does not exist, so a page never reveals which ids are taken. A leaderboard entry's page
 //! shows only what the leaderboard row shows, for ranked (and baseline) rows only.
@@ -29,17 +29,17 @@ use axum::routing::{get, post};
 use kitchen_r_core::dataset::Split;
 use serde::Deserialize;
 
-use super::extract::{PathArg, QueryArgs};
+use super::extract::{ClientAddr, PathArg, QueryArgs};
 use super::{admin, session};
 use crate::error::ServiceError;
 use crate::leaderboard::Track;
+use crate::service::sessions::{Login, Role};
 use crate::service::{AppState, Caller, Organiser};
 use crate::store::Team;
 use layout::Viewer;
 
-/// The team session cookie; its value is the team token, hex-encoded.
+/// The team session cookie; its value is a session id (`crate::service::sessions`).
 pub(super) const TEAM_COOKIE: &str = "kitchen_r_team";
-const TEAM_SESSION_S: u32 = 7 * 24 * 3600;
 
 pub(super) fn routes() -> Router<AppState> {
     Router::new()
@@ -85,8 +85,8 @@ async fn who(s: &AppState, caller: Caller, headers: &HeaderMap) -> Result<Who, S
         Caller::Organiser(o) => return Ok(Who::Organiser(o)),
         _ => {}
     }
-    if let Some(token) = session::session_token(headers, TEAM_COOKIE)
-        && let Caller::Team(t) = s.caller(Some(&token)).await?
+    if let Some(id) = session::session_id(headers, TEAM_COOKIE)
+        && let Caller::Team(t) = s.session(id).await?
     {
         return Ok(Who::Team(t));
     }
@@ -197,9 +197,10 @@ struct LoginForm {
     next: Option<String>,
 }
 
-/// `POST /team/login` (form `token`, `csrf`, `next`): a team token sets the session cookie.
+/// `POST /team/login` (form `token`, `csrf`, `next`): a team token opens a session.
 async fn login(
     State(s): State<AppState>,
+    ClientAddr(client): ClientAddr,
     headers: HeaderMap,
     form: Result<Form<LoginForm>, axum::extract::rejection::FormRejection>,
 ) -> Result<Response, ServiceError> {
@@ -217,27 +218,31 @@ async fn login(
             next,
         ));
     }
-    let token = form.token.as_deref().map(str::trim).unwrap_or("");
-    let caller = match token {
-        "" => Caller::Anonymous,
-        t => s.caller(Some(t)).await?,
-    };
-    let message = match caller {
-        Caller::Team(t) => {
-            tracing::info!(team = %t.name, "team logged in to the pages");
-            let cookie =
-                session::session_cookie(TEAM_COOKIE, token, TEAM_SESSION_S, session::https(&headers));
-            return Ok(session::see_other(next, &[cookie]));
+    let token = form.token.as_deref().unwrap_or("");
+    match s.log_in(Role::Team, token, client).await? {
+        Login::Opened {
+            cookie,
+            max_age_s,
+            caller,
+        } => {
+            if let Caller::Team(t) = caller {
+                tracing::info!(team = %t.name, "team logged in to the pages");
+            }
+            let c = session::session_cookie(TEAM_COOKIE, &cookie, max_age_s, session::https(&headers));
+            Ok(session::see_other(next, &[c]))
         }
-        Caller::Organiser(_) => "That is the organiser token: log in on the console (/admin).",
-        _ => "That is not a team token.",
-    };
-    Ok(login_page(
-        &headers,
-        StatusCode::UNAUTHORIZED,
-        Some(message),
-        next,
-    ))
+        Login::Refused(message) => Ok(login_page(
+            &headers,
+            StatusCode::UNAUTHORIZED,
+            Some(message),
+            next,
+        )),
+        Login::Throttled { retry_after_s } => {
+            let message = session::throttled_message(retry_after_s);
+            let page = login_page(&headers, StatusCode::TOO_MANY_REQUESTS, Some(&message), next);
+            Ok(session::with_retry_after(page, retry_after_s))
+        }
+    }
 }
 
 #[derive(Debug, Deserialize)]
@@ -245,22 +250,26 @@ struct CsrfForm {
     csrf: Option<String>,
 }
 
-/// `POST /team/logout` (form `csrf`): drop the team cookie.
+/// `POST /team/logout` (form `csrf`): end the session and drop the team cookie.
 async fn logout(
+    State(s): State<AppState>,
     headers: HeaderMap,
     form: Result<Form<CsrfForm>, axum::extract::rejection::FormRejection>,
-) -> Response {
+) -> Result<Response, ServiceError> {
     let sent = form.ok().and_then(|Form(f)| f.csrf);
     if !session::csrf_ok(&headers, TEAM_COOKIE, sent.as_deref()) {
-        return login_page(
+        return Ok(login_page(
             &headers,
             StatusCode::FORBIDDEN,
             Some(session::CSRF_REFUSED),
             "/team",
-        );
+        ));
+    }
+    if let Some(id) = session::session_id(&headers, TEAM_COOKIE) {
+        s.log_out(id).await?;
     }
     let gone = session::set_cookie(TEAM_COOKIE, "", Some(0), session::https(&headers));
-    session::see_other("/contest", &[gone])
+    Ok(session::see_other("/contest", &[gone]))
 }
 
 /// The caller a page's media request acts as: the team or organiser of its session cookie (or
@@ -318,14 +327,9 @@ async fn submission_page(
         Err(e) => return Err(e),
     };
     let running = submission::running(&view);
-    let eta = match (&view.latest_run, running) {
-        (Some(run), true) => {
-            let e = run.evaluation.as_ref();
-            let (done, total) = e.map_or((0, 0), |e| (e.episodes_done, e.episodes_total));
-            s.run_eta(run.id, done, total).await?
-        }
-        _ => None,
-    };
+    let eta = (view.latest_run.as_ref())
+        .and_then(|r| r.evaluation.as_ref())
+        .and_then(|e| e.eta.clone());
     let title = format!("Submission {id}");
     let refresh = running.then_some(submission::REFRESH_S);
     let body = submission::body(&view, eta.as_ref());
@@ -356,5 +360,7 @@ async fn entry_page(
     Ok(respond(&headers, &who, StatusCode::OK, &title, None, &body))
 }
 
+#[cfg(test)]
+mod session_tests;
 #[cfg(test)]
 mod tests;

@@ -3,7 +3,8 @@
 //! headers every page is sent with.
 //!
 //! Policy:
-//! - A session cookie holds its token hex-encoded, `HttpOnly` (no script reads it),
+//! - A session cookie holds a session id (`crate::service::sessions`: random, stored hashed
+//!   server-side, never a credential), `HttpOnly` (no script reads it),
 //!   `SameSite=Strict` (no other site's page or link sends it), `Path=/`, and `Secure` when the
 //!   request came over https (as a reverse proxy says in `X-Forwarded-Proto` or `Forwarded`;
 //!   a spoofed header only makes the spoofer's own browser drop the cookie on http).
@@ -43,10 +44,9 @@ pub(super) fn cookie<'a>(headers: &'a HeaderMap, name: &str) -> Option<&'a str> 
         .find(|v| !v.is_empty())
 }
 
-/// The token a session cookie holds (hex-encoded UTF-8), if any.
-pub(super) fn session_token(headers: &HeaderMap, name: &str) -> Option<String> {
-    let hexed = cookie(headers, name)?;
-    String::from_utf8(hex::decode(hexed).ok()?).ok()
+/// The session id a session cookie holds, if any.
+pub(super) fn session_id<'a>(headers: &'a HeaderMap, name: &str) -> Option<&'a str> {
+    cookie(headers, name)
 }
 
 /// Whether the request reached us over https (directly or through a proxy that says so).
@@ -76,9 +76,9 @@ pub(super) fn set_cookie(name: &str, value: &str, max_age: Option<u32>, secure: 
     HeaderValue::from_str(&c).unwrap_or_else(|_| HeaderValue::from_static("invalid=; Max-Age=0"))
 }
 
-/// The session cookie for `token`.
-pub(super) fn session_cookie(name: &str, token: &str, max_age: u32, secure: bool) -> HeaderValue {
-    set_cookie(name, &hex::encode(token), Some(max_age), secure)
+/// The session cookie for session id `id` (hex, so always a valid cookie value).
+pub(super) fn session_cookie(name: &str, id: &str, max_age: u32, secure: bool) -> HeaderValue {
+    set_cookie(name, id, Some(max_age), secure)
 }
 
 fn key() -> &'static [u8; 32] {
@@ -144,6 +144,18 @@ pub(super) fn csrf_ok(headers: &HeaderMap, session: &str, sent: Option<&str>) ->
             .fold(0u8, |acc, (a, b)| acc | (a ^ b))
             == 0;
     !cross_site && same
+}
+
+/// What a login form says while failed logins are throttled.
+pub(super) fn throttled_message(retry_after_s: u64) -> String {
+    format!("Too many failed logins from your address: try again in {retry_after_s} s.")
+}
+
+/// `r` with `Retry-After: retry_after_s`.
+pub(super) fn with_retry_after(mut r: Response, retry_after_s: u64) -> Response {
+    r.headers_mut()
+        .insert(header::RETRY_AFTER, HeaderValue::from(retry_after_s));
+    r
 }
 
 /// An HTML answer with the pages' security headers.

@@ -23,9 +23,18 @@ pub(crate) enum Caller {
     Worker(WorkerCred),
 }
 
-/// Proof that the caller presented the organiser token (only [`AppState::caller`] makes one).
+/// Proof that the caller presented the organiser token (only [`AppState::caller`] makes one,
+/// and [`Organiser::by_session`] for a page session opened with that token).
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Organiser(());
+
+impl Organiser {
+    /// For `super::sessions` alone: a live session whose login presented the current organiser
+    /// token.
+    pub(super) fn by_session() -> Organiser {
+        Organiser(())
+    }
+}
 
 /// Proof that the caller presented the simulation workers' token.
 #[derive(Debug, Clone, Copy)]

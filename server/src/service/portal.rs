@@ -45,9 +45,11 @@ pub(crate) struct QuotaView {
 }
 
 /// When a running evaluation should finish.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, utoipa::ToSchema)]
 pub(crate) struct Eta {
+    /// RFC 3339, UTC.
     pub at: String,
+    /// Seconds from now.
     pub in_s: f64,
 }
 

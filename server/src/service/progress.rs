@@ -4,7 +4,12 @@
 //! Policy: test-split feedback is aggregate only: progress counts, the run's scores and how often
 //! each kind of failure happened, never a row per episode, task or instruction (episode keys are
 //! instruction ids, and per-episode success rates would let a team probe the hidden plans one
-//! instruction at a time). Dev runs show everything: per-episode, per-task results and logs.
+//! instruction at a time). And the aggregate appears only once the run has ended: while a test
+//! run is in progress a participant sees how far it got (episodes done, running, total, ETA)
+//! and nothing else, because two views a moment apart that differ by one episode would give
+//! that episode's failure kinds by subtraction (issue #23: an outside review polled every
+//! 0.25 s and differenced 134 of 151 increments to single episodes). Dev runs show everything,
+//! live: per-episode, per-task results and logs.
 
 use serde::Serialize;
 
@@ -37,8 +42,13 @@ pub(crate) struct PolicyRunView {
     /// Dev split: one entry per recorded episode. Empty on the test split.
     pub episodes: Vec<EpisodeView>,
     /// How often each kind of failure happened over the run's tasks and episodes, most frequent
-    /// first (numbers in a reason replaced by `N`, so counts group).
+    /// first (numbers in a reason replaced by `N`, so counts group). Test split: empty until
+    /// the run has ended (see the module documentation).
     pub failure_counts: Vec<ReasonCount>,
+    /// When a queued or running evaluation should finish, from its pace so far (absent before
+    /// its first episode has finished).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub eta: Option<super::portal::Eta>,
     /// Dev split: episodes not finished yet whose earlier attempt failed on the platform side,
     /// and why (they are retried without counting against the participant).
     #[serde(skip_serializing_if = "Vec::is_empty")]
@@ -127,7 +137,12 @@ impl AppState {
                 e
             })
             .collect();
-        let failure_counts = failure_counts(&episodes, hidden);
+        let ended = !matches!(state, "queued" | "running");
+        // Test split: nothing but progress until the run has ended.
+        let failure_counts = match hidden && !ended {
+            true => Vec::new(),
+            false => failure_counts(&episodes, hidden),
+        };
         let retrying: Vec<RetryView> = run_store::retrying(self.read_pool(), source)
             .await?
             .into_iter()
@@ -139,6 +154,10 @@ impl AppState {
             .collect();
         let episodes_done = episodes.len() as i64;
         let episodes_retrying = retrying.len();
+        let eta = match ended {
+            true => None,
+            false => self.run_eta(run.id, episodes_done, run.episodes_total).await?,
+        };
         Ok(PolicyRunView {
             retrying: if hidden { Vec::new() } else { retrying },
             episodes_retrying,
@@ -151,6 +170,7 @@ impl AppState {
             rescored_from_run: run.source_run_id,
             episodes: if hidden { Vec::new() } else { episodes },
             failure_counts,
+            eta,
         })
     }
 }

@@ -131,7 +131,11 @@ impl AppState {
                     id: run.id,
                     scorer_version: run.scorer_version,
                     created_at: rfc3339(run.created_at),
-                    scores: run.scores,
+                    // Test split: no partial score while a run is in progress (`super::progress`).
+                    scores: match hidden && run.state == crate::states::RunState::Active {
+                        true => Scores::default(),
+                        false => run.scores,
+                    },
                     instructions_total: (!is_policy).then_some(results.len()),
                     instructions_present: (!is_policy).then_some(present),
                     instructions: match hidden {

@@ -154,6 +154,11 @@ async fn the_page_logs_in_with_a_strict_http_only_cookie() {
     for attr in ["HttpOnly", "SameSite=Strict", "Path=/;"] {
         assert!(cookie.contains(attr), "{cookie}");
     }
+    // The cookie holds a session id, not the organiser token in any form.
+    assert!(
+        !cookie.contains(ADMIN) && !cookie.contains(&hex::encode(ADMIN)),
+        "{cookie}"
+    );
     let pair = cookie.split(';').next().unwrap().to_string();
     let (status, _, body) = call(
         &app,
@@ -205,6 +210,21 @@ async fn the_page_logs_in_with_a_strict_http_only_cookie() {
             .iter()
             .any(|c| c.starts_with("kitchen_r_admin=;") && c.contains("Path=/;") && c.contains("Max-Age=0")),
         "{cleared:?}"
+    );
+    // The session ended on the server: a copy of the cookie taken before the logout opens
+    // nothing.
+    let (status, _, _) = call(
+        &app,
+        Request::get("/admin")
+            .header(header::COOKIE, format!("{nonce}; {pair}"))
+            .body(Body::empty())
+            .unwrap(),
+    )
+    .await;
+    assert_eq!(
+        status,
+        StatusCode::UNAUTHORIZED,
+        "a logged-out session still works"
     );
 
     // A forged or team cookie is not a session.

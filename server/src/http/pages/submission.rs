@@ -95,6 +95,12 @@ pub(super) fn body(v: &SubmissionView, eta: Option<&Eta>) -> String {
     }
     if let Some(e) = &run.evaluation {
         out.push_str(&failures(e));
+        if test && matches!(e.state, "queued" | "running") {
+            // The rule is `crate::service::progress`'s; say it where the counts would be.
+            out.push_str(
+                "<p class=muted>On the test split a run shows its progress only: its scores and failure counts appear once, when it ends.</p>",
+            );
+        }
         if !test {
             out.push_str(&episodes(e));
         }

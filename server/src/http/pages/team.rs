@@ -103,8 +103,9 @@ pub(super) fn body(quota: &QuotaView, subs: &[TeamSubmission]) -> String {
 pub(super) fn login(message: Option<&str>, csrf: &str, next: &str) -> String {
     let message = message.map_or_else(String::new, |m| format!("<p class=bad>{}</p>", escape(m)));
     format!(
-        "{message}<p>Pages about your team's submissions need your team token once; it is then kept \
-in a cookie of this browser (HttpOnly, SameSite=Strict) for 7 days or until you log out.</p>\
+        "{message}<p>Pages about your team's submissions need your team token once; it opens a \
+session that this browser keeps in a cookie (HttpOnly, SameSite=Strict; it holds no token) until it expires, \
+you log out, or your team's token is rotated.</p>\
 <form method=post action=\"/team/login\">{csrf}<input type=hidden name=next value=\"{}\">\
 <label>Team token<br><input type=password name=token autocomplete=current-password required></label><br>\
 <button>Log in</button></form><p class=muted>Organisers log in on the <a href=\"/admin\">console</a>.</p>",

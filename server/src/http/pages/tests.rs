@@ -6,14 +6,14 @@ use super::*;
 use crate::http::router;
 use crate::testutil::{ADMIN, FakeProbe, Fixture, fixture};
 
-struct Answer {
-    status: StatusCode,
-    headers: HeaderMap,
-    body: String,
+pub(super) struct Answer {
+    pub status: StatusCode,
+    pub headers: HeaderMap,
+    pub body: String,
 }
 
 impl Answer {
-    fn cookies(&self) -> Vec<String> {
+    pub(super) fn cookies(&self) -> Vec<String> {
         self.headers
             .get_all(header::SET_COOKIE)
             .iter()
@@ -21,14 +21,14 @@ impl Answer {
             .collect()
     }
 
-    fn cookie(&self, name: &str) -> Option<String> {
+    pub(super) fn cookie(&self, name: &str) -> Option<String> {
         self.cookies()
             .into_iter()
             .find(|c| c.starts_with(&format!("{name}=")))
     }
 
     /// The CSRF field's value of the page's (first) form.
-    fn csrf(&self) -> String {
+    pub(super) fn csrf(&self) -> String {
         let after = self
             .body
             .split("name=csrf value=\"")
@@ -38,7 +38,7 @@ impl Answer {
     }
 }
 
-async fn call(app: &Router, req: Request<Body>) -> Answer {
+pub(super) async fn call(app: &Router, req: Request<Body>) -> Answer {
     let resp = app.clone().oneshot(req).await.unwrap();
     let (parts, body) = resp.into_parts();
     let bytes = to_bytes(body, 16 << 20).await.unwrap();
@@ -49,7 +49,7 @@ async fn call(app: &Router, req: Request<Body>) -> Answer {
     }
 }
 
-fn get(path: &str, cookies: &str) -> Request<Body> {
+pub(super) fn get(path: &str, cookies: &str) -> Request<Body> {
     let mut r = Request::get(path);
     if !cookies.is_empty() {
         r = r.header(header::COOKIE, cookies);
@@ -57,7 +57,7 @@ fn get(path: &str, cookies: &str) -> Request<Body> {
     r.body(Body::empty()).unwrap()
 }
 
-fn post_form(path: &str, cookies: &str, form: &str) -> Request<Body> {
+pub(super) fn post_form(path: &str, cookies: &str, form: &str) -> Request<Body> {
     Request::post(path)
         .header(header::CONTENT_TYPE, "application/x-www-form-urlencoded")
         .header(header::COOKIE, cookies)
@@ -66,12 +66,12 @@ fn post_form(path: &str, cookies: &str, form: &str) -> Request<Body> {
 }
 
 /// The `name=value` part of a `Set-Cookie`.
-fn pair(set_cookie: &str) -> String {
+pub(super) fn pair(set_cookie: &str) -> String {
     set_cookie.split(';').next().unwrap().to_string()
 }
 
 /// Log in through the form; the browser's cookies afterwards (CSRF nonce and team session).
-async fn login(app: &Router, token: &str) -> String {
+pub(super) async fn login(app: &Router, token: &str) -> String {
     let form = call(app, get("/team/login", "")).await;
     let nonce = pair(&form.cookie(session::CSRF_COOKIE).unwrap());
     let done = call(
@@ -357,6 +357,18 @@ async fn dev_runs_show_each_episode_and_test_runs_only_aggregates() {
     run_jobs(&f, 3).await;
     let page = call(&app, get(&format!("/submissions/{test}"), &cookies)).await;
     assert_eq!(page.status, StatusCode::OK);
+    // In progress: progress only (issue #23), and the page says when the aggregate comes.
+    assert!(!page.body.contains("Failures by kind"), "{}", page.body);
+    assert!(page.body.contains("appear once, when it ends"), "{}", page.body);
+    let run = f
+        .state
+        .get_submission(&caller, test)
+        .await
+        .unwrap()
+        .latest_run
+        .unwrap();
+    f.state.cancel_run(f.admin().await, run.id).await.unwrap();
+    let page = call(&app, get(&format!("/submissions/{test}"), &cookies)).await;
     assert!(
         page.body.contains("Failures by kind") && page.body.contains("timeout"),
         "{}",

@@ -549,3 +549,41 @@ async fn a_released_job_is_queued_at_once_without_using_an_attempt() {
     let failure = eval.episodes[0].failure.clone().unwrap();
     assert!(failure.contains("gave up after 2 attempts"), "{failure}");
 }
+
+/// Issue #23: polling a test run's view while it runs must not give each episode's failure
+/// kinds by subtraction, so it shows progress only; the aggregate appears once it has ended.
+#[tokio::test]
+async fn a_test_run_in_progress_shows_progress_only_and_its_failure_counts_once_ended() {
+    let f = fixture(FakeProbe::ok(4), |_| {}).await;
+    let token = f.team("alpha").await;
+    let id = f
+        .state
+        .register_policy(&f.caller(&token).await, f.request(Split::Test))
+        .await
+        .unwrap()
+        .id;
+    let job = f.lease("w1", 1).await.remove(0);
+    let failed = f.report("w1", &job, |_| false, 0.0);
+    f.state.report_result(f.worker().await, failed).await.unwrap();
+    let view = f.state.get_submission(&f.caller(&token).await, id).await.unwrap();
+    let run = view.latest_run.unwrap();
+    let eval = run.evaluation.unwrap();
+    assert_eq!((eval.state, eval.episodes_done), ("running", 1));
+    assert!(eval.episodes_total > 1);
+    assert!(
+        eval.failure_counts.is_empty(),
+        "a running test run shows failure counts: {:?}",
+        eval.failure_counts
+    );
+    assert!(eval.episodes.is_empty());
+    assert_eq!(run.scores, crate::service::Scores::default());
+    assert!(eval.eta.is_some(), "progress says when the run should end");
+
+    // Once the run has ended (here: cancelled by the organiser), the aggregate is shown.
+    f.state.cancel_run(f.admin().await, run.id).await.unwrap();
+    let eval = run_state(&f, &token, id).await;
+    assert_eq!(eval.state, "cancelled");
+    assert!(eval.eta.is_none());
+    assert_eq!(eval.failure_counts.len(), 1, "{:?}", eval.failure_counts);
+    assert_eq!(eval.failure_counts[0].reason, "timeout");
+}
