@@ -11,7 +11,9 @@ use figment::Figment;
 use figment::providers::{Env, Format, Serialized, Toml};
 use serde::{Deserialize, Serialize};
 
+mod secrets;
 mod video;
+pub(crate) use secrets::SecretsConfig;
 pub(crate) use video::VideoConfig;
 
 /// Environment variables read into the configuration (`KITCHEN_R_<KEY>`). Listed explicitly so
@@ -75,6 +77,7 @@ pub struct Config {
     pub control: ControlConfig,
     pub policy: PolicyConfig,
     pub video: VideoConfig,
+    pub secrets: SecretsConfig,
 }
 
 /// How requests share the database (`[db_pool]`). Writes have one connection of their own
@@ -214,6 +217,7 @@ impl Default for Config {
             control: ControlConfig::default(),
             policy: PolicyConfig::default(),
             video: VideoConfig::default(),
+            secrets: SecretsConfig::default(),
         }
     }
 }
