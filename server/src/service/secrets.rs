@@ -43,6 +43,8 @@ impl AppState {
             self.open_token(&sealed)
                 .context("checking the secret key against the stored endpoint tokens")?;
         }
+        // Names the key (not its bytes), so an organiser can tell which key file a server uses.
+        tracing::info!(fingerprint = key.fingerprint(), "endpoint tokens sealed with this secret key");
         Ok(())
     }
 }

@@ -94,8 +94,7 @@ async fn a_wrong_key_stops_the_server_and_a_damaged_token_is_never_sent_empty() 
     std::fs::write(&key_file, original).unwrap();
 
     // A damaged sealed value: the job is not handed out, its attempt fails with the reason.
-    let damaged = "json_set(spec, '$.endpoint.bearer_token_sealed', 'kr1.' || ? || '.00ff')";
-    sqlx::query(&format!("UPDATE jobs SET spec = {damaged}"))
+    sqlx::query("UPDATE jobs SET spec = json_set(spec, '$.endpoint.bearer_token_sealed', 'kr1.' || ? || '.00ff')")
         .bind(crate::secret_key(&config).unwrap().fingerprint().to_string())
         .execute(f.state.pool())
         .await
