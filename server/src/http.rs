@@ -568,8 +568,8 @@ async fn admin_stats(State(s): State<AppState>, caller: Caller) -> Result<Respon
 }
 
 #[cfg(test)]
-mod stack_tests;
-#[cfg(test)]
 mod hardening_tests;
+#[cfg(test)]
+mod stack_tests;
 #[cfg(test)]
 mod tests;

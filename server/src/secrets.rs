@@ -111,7 +111,9 @@ impl SecretKey {
     }
 
     fn parse(text: &str) -> Result<SecretKey, String> {
-        let bytes = hex::decode(text).ok().and_then(|b| <[u8; KEY_BYTES]>::try_from(b).ok());
+        let bytes = hex::decode(text)
+            .ok()
+            .and_then(|b| <[u8; KEY_BYTES]>::try_from(b).ok());
         bytes
             .map(|b| SecretKey::from_bytes(&b))
             .ok_or_else(|| format!("must hold {} hex digits (a 32-byte key)", 2 * KEY_BYTES))
@@ -138,8 +140,7 @@ impl SecretKey {
     /// The plain text of a value [`SecretKey::seal`] made.
     pub(crate) fn open(&self, sealed: &str) -> Result<String, SecretError> {
         let mut parts = sealed.splitn(3, '.');
-        let (Some(PREFIX), Some(fingerprint), Some(data)) = (parts.next(), parts.next(), parts.next())
-        else {
+        let (Some(PREFIX), Some(fingerprint), Some(data)) = (parts.next(), parts.next(), parts.next()) else {
             return Err(SecretError::Damaged("not a sealed value"));
         };
         if fingerprint != self.fingerprint {
@@ -153,7 +154,8 @@ impl SecretKey {
             return Err(SecretError::Damaged("too short"));
         }
         let mut body = data.split_off(NONCE_LEN);
-        let nonce = <[u8; NONCE_LEN]>::try_from(data.as_slice()).map_err(|_| SecretError::Damaged("no nonce"))?;
+        let nonce =
+            <[u8; NONCE_LEN]>::try_from(data.as_slice()).map_err(|_| SecretError::Damaged("no nonce"))?;
         let plain = self
             .key
             .open_in_place(Nonce::assume_unique_for_key(nonce), Aad::from(AAD), &mut body)
@@ -171,7 +173,11 @@ mod tests {
         let key = SecretKey::generate();
         let sealed = key.seal("participant-secret");
         assert!(!sealed.contains("participant-secret") && sealed.starts_with("kr1."));
-        assert_ne!(sealed, key.seal("participant-secret"), "a fresh nonce per sealing");
+        assert_ne!(
+            sealed,
+            key.seal("participant-secret"),
+            "a fresh nonce per sealing"
+        );
         assert_eq!(key.open(&sealed).unwrap(), "participant-secret");
         let other = SecretKey::generate();
         assert!(matches!(other.open(&sealed), Err(SecretError::WrongKey { .. })));

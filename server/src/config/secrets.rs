@@ -26,7 +26,8 @@ impl SecretsConfig {
             .strip_prefix("sqlite://")
             .or_else(|| db.strip_prefix("sqlite:"))?;
         let path = path.split('?').next().unwrap_or_default();
-        let in_memory = path.contains(":memory:") || path.starts_with("file:") && path.contains("mode=memory");
+        let in_memory =
+            path.contains(":memory:") || path.starts_with("file:") && path.contains("mode=memory");
         if path.is_empty() || in_memory {
             return None;
         }
@@ -54,6 +55,9 @@ mod tests {
         let s = SecretsConfig {
             key_file: "/etc/kitchen-r/key".into(),
         };
-        assert_eq!(s.key_path("sqlite::memory:"), Some(PathBuf::from("/etc/kitchen-r/key")));
+        assert_eq!(
+            s.key_path("sqlite::memory:"),
+            Some(PathBuf::from("/etc/kitchen-r/key"))
+        );
     }
 }

@@ -93,7 +93,11 @@ async fn a_report_that_does_not_fit_the_leased_plan_is_refused_and_the_lease_kep
     };
     let refused = [
         (&online, vec![task(&online, 99)], "task index 99 is out of range"),
-        (&online, vec![task(&online, 0), task(&online, 0)], "task index 0 is reported twice"),
+        (
+            &online,
+            vec![task(&online, 0), task(&online, 0)],
+            "task index 0 is reported twice",
+        ),
         (&online, too_many, "task results for an episode of"),
         (&online, vec![wrong_step], "names step \"dance\""),
         (&offline, vec![many_samples], "MSE samples"),
@@ -123,11 +127,17 @@ async fn endpoint_controlled_text_is_stored_capped() {
     let mut client = f.worker_client().await;
     let (online, offline) = leased(&f, &mut client).await;
     // A policy's 6 KB error message, as a failure reason and in the log tail.
-    let blurb = format!("Act: the policy answered with an error (status Unknown: {})", "é".repeat(6 << 10));
-    let mut req = report(&online, vec![pb::TaskResult {
-        failure_reason: blurb.clone(),
-        ..task(&online, 0)
-    }]);
+    let blurb = format!(
+        "Act: the policy answered with an error (status Unknown: {})",
+        "é".repeat(6 << 10)
+    );
+    let mut req = report(
+        &online,
+        vec![pb::TaskResult {
+            failure_reason: blurb.clone(),
+            ..task(&online, 0)
+        }],
+    );
     req.result.as_mut().unwrap().log_tail = format!("start\ntask 0 failed: {blurb}\nend");
     client.report_result(with_token(req)).await.unwrap();
     let (tasks, log): (String, String) =

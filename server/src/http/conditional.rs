@@ -18,7 +18,11 @@ use axum::http::{HeaderMap, header};
 /// Whether the request's preconditions say the client's copy is current (answer 304).
 /// `etag` is the file's entity tag as sent (`"…"`); `modified` its modification time.
 pub(crate) fn not_modified(headers: &HeaderMap, etag: &str, modified: Option<SystemTime>) -> bool {
-    let text = |name| headers.get(name).and_then(|v: &axum::http::HeaderValue| v.to_str().ok());
+    let text = |name| {
+        headers
+            .get(name)
+            .and_then(|v: &axum::http::HeaderValue| v.to_str().ok())
+    };
     if headers.contains_key(header::IF_NONE_MATCH) {
         return text(header::IF_NONE_MATCH).is_some_and(|list| none_match_matches(list, etag));
     }

@@ -17,7 +17,12 @@ async fn fetch(app: &Router, path: &str, token: Option<&str>) -> Answer {
 }
 
 /// [`fetch`] with more request headers.
-async fn fetch_with(app: &Router, path: &str, token: Option<&str>, headers: &[(header::HeaderName, &str)]) -> Answer {
+async fn fetch_with(
+    app: &Router,
+    path: &str,
+    token: Option<&str>,
+    headers: &[(header::HeaderName, &str)],
+) -> Answer {
     let mut req = Request::get(path);
     if let Some(t) = token {
         req = req.header(header::AUTHORIZATION, format!("Bearer {t}"));
@@ -25,10 +30,18 @@ async fn fetch_with(app: &Router, path: &str, token: Option<&str>, headers: &[(h
     for (name, value) in headers {
         req = req.header(name, *value);
     }
-    let resp = app.clone().oneshot(req.body(Body::empty()).unwrap()).await.unwrap();
+    let resp = app
+        .clone()
+        .oneshot(req.body(Body::empty()).unwrap())
+        .await
+        .unwrap();
     let (parts, body) = resp.into_parts();
     let body = to_bytes(body, 16 << 20).await.unwrap();
-    (parts.status, parts.headers, String::from_utf8_lossy(&body).into_owned())
+    (
+        parts.status,
+        parts.headers,
+        String::from_utf8_lossy(&body).into_owned(),
+    )
 }
 
 /// POST `body` to `path` as `token`; `(status, body)`.
@@ -68,14 +81,22 @@ async fn every_html_answer_carries_the_page_security_headers_leaderboards_includ
     for path in &paths {
         let (status, h, body) = fetch(&app, path, None).await;
         // The console without a session answers its login form as a 401 page.
-        let want = if path == "/admin" { StatusCode::UNAUTHORIZED } else { StatusCode::OK };
+        let want = if path == "/admin" {
+            StatusCode::UNAUTHORIZED
+        } else {
+            StatusCode::OK
+        };
         assert_eq!(status, want, "{path}");
         assert!(
             h[header::CONTENT_TYPE].to_str().unwrap().starts_with("text/html"),
             "{path}"
         );
         for (name, value) in super::stack::PAGE_HEADERS {
-            assert_eq!(h.get(&name).map(|v| v.to_str().unwrap()), Some(value), "{path}: {name}");
+            assert_eq!(
+                h.get(&name).map(|v| v.to_str().unwrap()),
+                Some(value),
+                "{path}: {name}"
+            );
         }
         // The leaderboard is styled inline and has no script: the policy allows the one and
         // forbids the other.
@@ -123,16 +144,25 @@ async fn a_plan_lines_unknown_fields_are_dropped_before_storage() {
     let id = serde_json::from_str::<serde_json::Value>(&body).unwrap()["id"]
         .as_i64()
         .unwrap();
-    let stored = crate::store::submission_body(f.state.pool(), id).await.unwrap().body;
+    let stored = crate::store::submission_body(f.state.pool(), id)
+        .await
+        .unwrap()
+        .body;
     assert_eq!(
         stored,
         "{\"id\":\"dev-0002\",\"plan\":[\"pick the bowl\"]}\n{\"id\":\"dev-0001\",\"plan\":[]}\n"
     );
     // What was stored still scores the same on a rescore.
     let (split, file) = f.state.stored_plans("dev", &stored).unwrap();
-    assert_eq!((split, file.order.clone()), (kitchen_r_core::dataset::Split::Dev, vec![1, 0]));
+    assert_eq!(
+        (split, file.order.clone()),
+        (kitchen_r_core::dataset::Split::Dev, vec![1, 0])
+    );
     // The body limit applies before anything is parsed or dropped.
-    let huge = format!("{{\"id\": \"dev-0001\", \"plan\": [], \"junk\": \"{}\"}}\n", "y".repeat(5 << 20));
+    let huge = format!(
+        "{{\"id\": \"dev-0001\", \"plan\": [], \"junk\": \"{}\"}}\n",
+        "y".repeat(5 << 20)
+    );
     let (status, body) = send(&app, path, &token, huge.into_bytes()).await;
     assert_eq!(status, StatusCode::PAYLOAD_TOO_LARGE, "{body}");
 }
@@ -176,7 +206,10 @@ async fn a_video_answers_304_to_a_matching_if_none_match_or_if_modified_since() 
         vec![(header::IF_NONE_MATCH, format!("\"x\", W/{etag}"))],
         vec![(header::IF_NONE_MATCH, "*".to_string())],
         vec![(header::IF_MODIFIED_SINCE, modified.clone())],
-        vec![(header::IF_NONE_MATCH, etag.clone()), (header::RANGE, "bytes=0-1".into())],
+        vec![
+            (header::IF_NONE_MATCH, etag.clone()),
+            (header::RANGE, "bytes=0-1".into()),
+        ],
     ];
     for headers in not_modified {
         let (status, h, body) = get(headers.clone()).await;
@@ -190,7 +223,10 @@ async fn a_video_answers_304_to_a_matching_if_none_match_or_if_modified_since() 
         vec![(header::IF_NONE_MATCH, "\"other\"".to_string())],
         vec![(header::IF_MODIFIED_SINCE, long_ago)],
         // If-None-Match decides alone when present.
-        vec![(header::IF_NONE_MATCH, "\"other\"".to_string()), (header::IF_MODIFIED_SINCE, modified.clone())],
+        vec![
+            (header::IF_NONE_MATCH, "\"other\"".to_string()),
+            (header::IF_MODIFIED_SINCE, modified.clone()),
+        ],
     ];
     for headers in full {
         let (status, _, body) = get(headers.clone()).await;
@@ -216,8 +252,14 @@ async fn an_endpoint_token_is_stored_sealed_shown_nowhere_and_handed_to_the_work
         .unwrap();
 
     let pool = f.state.pool();
-    let bodies: Vec<String> = sqlx::query_scalar("SELECT body FROM submissions").fetch_all(pool).await.unwrap();
-    let specs: Vec<String> = sqlx::query_scalar("SELECT spec FROM jobs").fetch_all(pool).await.unwrap();
+    let bodies: Vec<String> = sqlx::query_scalar("SELECT body FROM submissions")
+        .fetch_all(pool)
+        .await
+        .unwrap();
+    let specs: Vec<String> = sqlx::query_scalar("SELECT spec FROM jobs")
+        .fetch_all(pool)
+        .await
+        .unwrap();
     assert_eq!(specs.len(), 2);
     for row in bodies.iter().chain(&specs) {
         assert!(!row.contains(SECRET), "a raw row holds the token: {row}");

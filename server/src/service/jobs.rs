@@ -240,10 +240,7 @@ impl AppState {
         if r.platform_error.trim().is_empty() {
             checks::check_tasks(&r.tasks, &job.spec).map_err(|why| {
                 tracing::warn!(job = job.id, worker = %r.worker_id, %why, "report refused");
-                ServiceError::BadRequest(format!(
-                    "job {} (episode {:?}): {why}",
-                    job.id, job.episode_key
-                ))
+                ServiceError::BadRequest(format!("job {} (episode {:?}): {why}", job.id, job.episode_key))
             })?;
         }
         if queue::result_exists(&mut tx, job.run_id, &job.episode_key).await? {

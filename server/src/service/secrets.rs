@@ -44,7 +44,10 @@ impl AppState {
                 .context("checking the secret key against the stored endpoint tokens")?;
         }
         // Names the key (not its bytes), so an organiser can tell which key file a server uses.
-        tracing::info!(fingerprint = key.fingerprint(), "endpoint tokens sealed with this secret key");
+        tracing::info!(
+            fingerprint = key.fingerprint(),
+            "endpoint tokens sealed with this secret key"
+        );
         Ok(())
     }
 }

@@ -96,10 +96,7 @@ pub(super) fn cap_reasons(tasks: &mut [TaskOutcome]) {
 
 /// Every line of a log capped at [`MAX_LOG_LINE_CHARS`].
 pub(super) fn cap_log_lines(log: &str) -> String {
-    let capped: Vec<String> = log
-        .split('\n')
-        .map(|l| cap_text(l, MAX_LOG_LINE_CHARS))
-        .collect();
+    let capped: Vec<String> = log.split('\n').map(|l| cap_text(l, MAX_LOG_LINE_CHARS)).collect();
     capped.join("\n")
 }
 

@@ -19,7 +19,10 @@ async fn registered(f: &Fixture, token: &str) -> i64 {
 /// Every raw `submissions.body` and `jobs.spec`.
 async fn raw_rows(f: &Fixture) -> Vec<String> {
     let pool = f.state.pool();
-    let mut rows: Vec<String> = sqlx::query_scalar("SELECT body FROM submissions").fetch_all(pool).await.unwrap();
+    let mut rows: Vec<String> = sqlx::query_scalar("SELECT body FROM submissions")
+        .fetch_all(pool)
+        .await
+        .unwrap();
     rows.extend(
         sqlx::query_scalar::<_, String>("SELECT spec FROM jobs")
             .fetch_all(pool)
@@ -62,13 +65,13 @@ async fn plain_tokens_stored_before_are_sealed_at_start_and_still_reach_the_work
     let again = f.reopen(FakeProbe::ok(2)).await;
     assert_eq!(raw_rows(&f).await, rows, "the step is idempotent");
     drop(again);
-    let body = crate::store::submission_body(state.pool(), id).await.unwrap().body;
+    let body = crate::store::submission_body(state.pool(), id)
+        .await
+        .unwrap()
+        .body;
     let info = crate::service::policies::policy_info(&body).unwrap();
     assert!(info.has_token && info.endpoint == "http://127.0.0.1:50099");
-    let jobs = state
-        .lease(f.worker().await, "w1", 8, 0)
-        .await
-        .unwrap();
+    let jobs = state.lease(f.worker().await, "w1", 8, 0).await.unwrap();
     assert_eq!(jobs.len(), 2);
     assert!(jobs.iter().all(|j| j.spec.endpoint.bearer_token == OLD));
 }
@@ -94,11 +97,13 @@ async fn a_wrong_key_stops_the_server_and_a_damaged_token_is_never_sent_empty() 
     std::fs::write(&key_file, original).unwrap();
 
     // A damaged sealed value: the job is not handed out, its attempt fails with the reason.
-    sqlx::query("UPDATE jobs SET spec = json_set(spec, '$.endpoint.bearer_token_sealed', 'kr1.' || ? || '.00ff')")
-        .bind(crate::secret_key(&config).unwrap().fingerprint().to_string())
-        .execute(f.state.pool())
-        .await
-        .unwrap();
+    sqlx::query(
+        "UPDATE jobs SET spec = json_set(spec, '$.endpoint.bearer_token_sealed', 'kr1.' || ? || '.00ff')",
+    )
+    .bind(crate::secret_key(&config).unwrap().fingerprint().to_string())
+    .execute(f.state.pool())
+    .await
+    .unwrap();
     assert!(f.lease("w1", 8).await.is_empty());
     let errors: Vec<(String, Option<String>)> =
         sqlx::query_as("SELECT state, last_error FROM jobs ORDER BY id")
