@@ -11,8 +11,10 @@ use figment::Figment;
 use figment::providers::{Env, Format, Serialized, Toml};
 use serde::{Deserialize, Serialize};
 
+mod secrets;
 mod sessions;
 mod video;
+pub(crate) use secrets::SecretsConfig;
 pub(crate) use sessions::SessionConfig;
 pub(crate) use video::VideoConfig;
 
@@ -78,6 +80,7 @@ pub struct Config {
     pub policy: PolicyConfig,
     pub video: VideoConfig,
     pub sessions: SessionConfig,
+    pub secrets: SecretsConfig,
 }
 
 /// How requests share the database (`[db_pool]`). Writes have one connection of their own
@@ -218,6 +221,7 @@ impl Default for Config {
             policy: PolicyConfig::default(),
             video: VideoConfig::default(),
             sessions: SessionConfig::default(),
+            secrets: SecretsConfig::default(),
         }
     }
 }

@@ -18,8 +18,13 @@ pub(crate) use kitchen_r_core::scoring::{Mode, RunScores, TaskOutcome};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub(crate) struct EndpointSpec {
     pub url: String,
-    /// Empty for none.
+    /// The plain token, empty for none. Always empty as stored: set from `bearer_token_sealed`
+    /// when the job is leased (specs stored before tokens were sealed are sealed at start-up).
+    #[serde(default)]
     pub bearer_token: String,
+    /// The token sealed with the server's key (`crate::secrets`); absent for none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bearer_token_sealed: Option<String>,
     pub call_deadline_ms: u32,
     pub startup_deadline_ms: u32,
     pub episode_budget_ms: u32,

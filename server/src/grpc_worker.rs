@@ -139,4 +139,6 @@ impl Worker for WorkerService {
 mod upload;
 
 #[cfg(test)]
+mod report_tests;
+#[cfg(test)]
 mod tests;

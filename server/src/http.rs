@@ -35,6 +35,7 @@ use serde_json::json;
 type Params = QueryArgs<HashMap<String, String>>;
 
 mod admin;
+mod conditional;
 mod extract;
 pub(crate) mod openapi;
 mod pages;
@@ -377,7 +378,7 @@ async fn read_limited(body: Body, limit: usize) -> Result<Vec<u8>, ServiceError>
     path = "/api/v1/submissions/plans",
     tag = "submissions",
     summary = "Submit a plan file (planning track)",
-    description = "The body is JSON Lines: one object a line, `{\"id\": instruction id, \"plan\": [sub-task sentences]}`. It is scored at once; on the dev split per-instruction results follow on the submission.",
+    description = "The body is JSON Lines: one object a line, `{\"id\": instruction id, \"plan\": [sub-task sentences]}`. Other fields of a line are ignored and dropped before storage: the stored file holds only `id` and `plan`. It is scored at once; on the dev split per-instruction results follow on the submission.",
     params(("split" = openapi::SplitName, Query, description = "`dev` or `test`", example = "dev"),
         ("reference" = Option<openapi::FlagParam>, Query, description = "Organiser only: file it as the planning board's baseline row (reserved `(baseline)` team, no quota)")),
     request_body(content = String, content_type = "application/x-ndjson", description = "The plan file: one JSON object a line",
@@ -592,6 +593,8 @@ async fn admin_stats(State(s): State<AppState>, caller: Caller) -> Result<Respon
     Ok(axum::Json(s.admin_stats(caller.organiser()?)).into_response())
 }
 
+#[cfg(test)]
+mod hardening_tests;
 #[cfg(test)]
 mod stack_tests;
 #[cfg(test)]

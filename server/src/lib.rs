@@ -31,6 +31,7 @@ pub mod plans;
 mod plots;
 mod probe;
 mod scores;
+mod secrets;
 mod service;
 mod states;
 mod store;
@@ -86,19 +87,31 @@ pub async fn build_with(config: Config, probe: Arc<dyn PolicyProbe>) -> anyhow::
         content.check_contest_ready()?;
     }
     let pool = store::connect(&config.db, config.db_pool.into()).await?;
+    let secret_key = secret_key(&config)?;
     let (admin, generated_admin_token) = token_or_generated(&config.admin_token);
     let (worker_token, generated_worker_token) = token_or_generated(&config.worker_token);
     let tokens = service::Tokens {
         admin: &admin,
         worker: &worker_token,
+        secret_key: &secret_key,
     };
     let state = AppState::new(pool, config, content, tokens, probe);
+    state.seal_stored_tokens().await?;
     Ok(Server {
         state,
         generated_admin_token,
         generated_worker_token,
         worker_token,
     })
+}
+
+/// The key that seals endpoint tokens: `[secrets] key_file` (by default beside the database),
+/// created at first start; an in-memory database's is new per process.
+pub(crate) fn secret_key(config: &Config) -> Result<secrets::SecretKey, secrets::SecretError> {
+    match config.secrets.key_path(&config.db) {
+        Some(path) => secrets::SecretKey::load_or_create(&path),
+        None => Ok(secrets::SecretKey::generate()),
+    }
 }
 
 fn token_or_generated(configured: &str) -> (String, Option<String>) {

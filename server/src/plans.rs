@@ -4,7 +4,9 @@
 //! line so a participant can fix the file without guessing; nothing of a refused file is stored
 //! and it never uses quota. Blank lines are skipped. Keys other than `id` and `plan` are
 //! ignored, so the downloaded dev file (which also carries the instruction text) is itself a
-//! valid submission. Instructions absent from the file score 0 and produce a warning. A UTF-8
+//! valid submission, and dropped before storage: what is stored is [`PlanFile::to_jsonl`], one
+//! `{"id", "plan"}` object per line in the file's order, so a line's extra fields (a 4 MB
+//! random one, say) cost no disk. Instructions absent from the file score 0 and produce a warning. A UTF-8
 //! byte-order mark at the start (Windows editors write one) is skipped, not refused.
 //!
 //! This module is pure (no I/O) so the parser can be fuzzed and benchmarked on its own.
@@ -129,6 +131,22 @@ impl IdIndex {
 #[derive(Debug, Clone, PartialEq)]
 pub struct PlanFile {
     pub plans: Vec<Option<Vec<String>>>,
+    /// The instructions' indices in the order the file lists them.
+    pub order: Vec<usize>,
+}
+
+impl PlanFile {
+    /// The file as stored: one `{"id": ..., "plan": [...]}` line per plan, in the file's order,
+    /// without any other field. `split` is the split the file was parsed for.
+    pub fn to_jsonl(&self, split: &[Instruction]) -> String {
+        let mut out = String::new();
+        for &pos in &self.order {
+            let line = serde_json::json!({"id": split[pos].id, "plan": self.plans[pos]});
+            out.push_str(&line.to_string());
+            out.push('\n');
+        }
+        out
+    }
 }
 
 /// The line where a body of `limit` bytes stops: for the "too large" message.
@@ -155,14 +173,13 @@ pub fn parse(
     let body = body.strip_prefix(UTF8_BOM).unwrap_or(body);
     let mut plans: Vec<Option<Vec<String>>> = vec![None; split_len];
     let mut first_line: Vec<usize> = vec![0; split_len];
-    let mut any = false;
+    let mut order = Vec::new();
     for (n, raw) in body.split(|b| *b == b'\n').enumerate() {
         let line = n + 1;
         let text = std::str::from_utf8(raw).map_err(|_| PlanFileError::NotUtf8 { line })?;
         if text.trim().is_empty() {
             continue;
         }
-        any = true;
         let (id, plan) = parse_line(text, line, limits)?;
         let pos = match index.get(&id) {
             Some((s, pos)) if s == split && pos < split_len => pos,
@@ -185,11 +202,12 @@ pub fn parse(
         }
         plans[pos] = Some(plan);
         first_line[pos] = line;
+        order.push(pos);
     }
-    if !any {
+    if order.is_empty() {
         return Err(PlanFileError::Empty);
     }
-    Ok(PlanFile { plans })
+    Ok(PlanFile { plans, order })
 }
 
 fn parse_line(text: &str, line: usize, limits: &PlanLimits) -> Result<(String, Vec<String>), PlanFileError> {

@@ -15,6 +15,7 @@
 //! - [`board`]: the leaderboards, cached and rendered;
 //! - [`portal`]: what the participant pages read (a team's submissions, quota left, ETA);
 //! - [`rescore`]: the organiser's rescoring of every stored submission;
+//! - [`secrets`]: endpoint tokens sealed at rest, opened for workers, sealed at start-up;
 //! - [`admin`]: the organiser's console (queue, workers, runs; cancel, requeue, backup).
 //!
 //! This file holds only the shared state and its accessors.
@@ -31,6 +32,7 @@ pub(crate) mod policies;
 pub(crate) mod portal;
 mod progress;
 mod rescore;
+mod secrets;
 pub(crate) mod sessions;
 mod submissions;
 mod teams;
@@ -84,6 +86,8 @@ struct Inner {
     logins: login_throttle::LoginThrottle,
     /// What `/metrics` reads when scraped (workers seen, cached queue gauges).
     telemetry: metrics::Telemetry,
+    /// Seals policy endpoints' bearer tokens at rest ([`secrets`]).
+    secret_key: crate::secrets::SecretKey,
 }
 
 impl std::fmt::Debug for AppState {
@@ -99,6 +103,8 @@ pub(crate) struct Tokens<'a> {
     pub admin: &'a str,
     /// The token simulation workers present on the `Worker` gRPC service.
     pub worker: &'a str,
+    /// The key that seals endpoint tokens at rest (`[secrets] key_file`).
+    pub secret_key: &'a crate::secrets::SecretKey,
 }
 
 impl AppState {
@@ -127,6 +133,7 @@ impl AppState {
                 probe,
                 jobs_ready: tokio::sync::Notify::new(),
                 stopping: std::sync::atomic::AtomicBool::new(false),
+                secret_key: tokens.secret_key.clone(),
             }),
         }
     }

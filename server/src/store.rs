@@ -22,6 +22,7 @@ mod packed;
 pub(crate) mod portal;
 pub(crate) mod queue;
 pub(crate) mod runs;
+pub(crate) mod secrets;
 pub(crate) mod sessions;
 pub(crate) mod videos;
 

@@ -77,14 +77,15 @@ pub(crate) async fn fixture(probe: Arc<dyn PolicyProbe>, tweak: impl FnOnce(&mut
     let pool = crate::store::connect(&config.db, config.db_pool.into())
         .await
         .unwrap();
+    let key = crate::secret_key(&config).unwrap();
     let tokens = Tokens {
         admin: ADMIN,
         worker: WORKER,
+        secret_key: &key,
     };
-    Fixture {
-        state: AppState::new(pool, config, content, tokens, probe),
-        _dir: dir,
-    }
+    let state = AppState::new(pool, config, content, tokens, probe);
+    state.seal_stored_tokens().await.unwrap();
+    Fixture { state, _dir: dir }
 }
 
 impl Fixture {
@@ -110,11 +111,15 @@ impl Fixture {
         let pool = crate::store::connect(&config.db, config.db_pool.into())
             .await
             .unwrap();
+        let key = crate::secret_key(&config).unwrap();
         let tokens = Tokens {
             admin: ADMIN,
             worker: WORKER,
+            secret_key: &key,
         };
-        AppState::new(pool, config, content, tokens, probe)
+        let state = AppState::new(pool, config, content, tokens, probe);
+        state.seal_stored_tokens().await.unwrap();
+        state
     }
 
     pub(crate) async fn team(&self, name: &str) -> String {

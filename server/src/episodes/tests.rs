@@ -16,6 +16,7 @@ fn spec(mode: Mode, id: &str, plan: &[&str]) -> JobSpec {
         endpoint: EndpointSpec {
             url: "http://127.0.0.1:1".into(),
             bearer_token: String::new(),
+            bearer_token_sealed: None,
             call_deadline_ms: 1,
             startup_deadline_ms: 1,
             episode_budget_ms: 1,

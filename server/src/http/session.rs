@@ -17,7 +17,7 @@
 //!   `Sec-Fetch-Site: cross-site` is refused outright.
 //! - Pages are `Cache-Control: no-store` with a Content-Security-Policy that allows no script
 //!   at all, images and media (the episode videos) from the server itself only, and cannot be
-//!   framed.
+//!   framed: one rule for every HTML answer, in the stack ([`super::stack::PAGE_HEADERS`]).
 
 use std::sync::OnceLock;
 
@@ -158,23 +158,14 @@ pub(super) fn with_retry_after(mut r: Response, retry_after_s: u64) -> Response 
     r
 }
 
-/// An HTML answer with the pages' security headers.
+/// An HTML answer; the pages' security headers are added by the stack
+/// ([`super::stack::PAGE_HEADERS`]) to every HTML answer.
 pub(super) fn html(status: StatusCode, body: String) -> Response {
     let mut r = (status, body).into_response();
-    let h = r.headers_mut();
-    h.insert(
+    r.headers_mut().insert(
         header::CONTENT_TYPE,
         HeaderValue::from_static("text/html; charset=utf-8"),
     );
-    h.insert(header::CACHE_CONTROL, HeaderValue::from_static("no-store"));
-    h.insert(
-        header::CONTENT_SECURITY_POLICY,
-        HeaderValue::from_static(
-            "default-src 'none'; img-src 'self'; media-src 'self'; style-src 'unsafe-inline'; form-action 'self'; frame-ancestors 'none'",
-        ),
-    );
-    h.insert(header::X_FRAME_OPTIONS, HeaderValue::from_static("DENY"));
-    h.insert(header::REFERRER_POLICY, HeaderValue::from_static("no-referrer"));
     r
 }
 

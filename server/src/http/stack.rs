@@ -19,7 +19,10 @@
 //! 4. catch-panic: a handler that panics answers 500 `{"code": "internal", "request_id"}`; the
 //!    panic message is logged, never sent;
 //! 5. timeout (per route group, see [`crate::http::router`]): a request past its budget answers
-//!    503 `{"code": "timeout", "request_id"}` instead of hanging.
+//!    503 `{"code": "timeout", "request_id"}` instead of hanging;
+//! 6. page headers: every `text/html` answer (every page, error pages and the leaderboard
+//!    included) gets the pages' security headers ([`PAGE_HEADERS`]) unless its handler set
+//!    its own, so no page can forget them.
 //!
 //! The stack is applied with `Router::layer`, i.e. after routing, because the matched route is
 //! only known there; the timeout is applied to each route group before they are merged.
@@ -51,9 +54,41 @@ pub(crate) fn layered<S: Clone + Send + Sync + 'static>(routes: Router<S>) -> Ro
             .layer(middleware::from_fn(record_metrics))
             .layer(middleware::from_fn(request_id))
             .layer(middleware::from_fn(json_errors))
+            .layer(middleware::from_fn(page_headers))
             .layer(TraceLayer::new_for_http().make_span_with(span))
             .layer(CatchPanicLayer::custom(panic_response)),
     )
+}
+
+/// What every HTML answer is sent with: not stored by caches (pages show a session's data), a
+/// Content-Security-Policy that allows no script at all, images and media (the episode videos)
+/// from the server itself only, inline styles (the pages' one `<style>`), forms posting to the
+/// server only, and no framing (also said the old way, `X-Frame-Options`), and no referrer (a
+/// submission page's URL names its id).
+pub(crate) const PAGE_HEADERS: [(header::HeaderName, &str); 4] = [
+    (header::CACHE_CONTROL, "no-store"),
+    (
+        header::CONTENT_SECURITY_POLICY,
+        "default-src 'none'; img-src 'self'; media-src 'self'; style-src 'unsafe-inline'; form-action 'self'; frame-ancestors 'none'",
+    ),
+    (header::X_FRAME_OPTIONS, "DENY"),
+    (header::REFERRER_POLICY, "no-referrer"),
+];
+
+async fn page_headers(req: Request, next: Next) -> Response {
+    let mut resp = next.run(req).await;
+    let is_page = (resp.headers().get(header::CONTENT_TYPE))
+        .and_then(|v| v.to_str().ok())
+        .is_some_and(|t| t.starts_with("text/html"));
+    if is_page {
+        let h = resp.headers_mut();
+        for (name, value) in PAGE_HEADERS {
+            if !h.contains_key(&name) {
+                h.insert(name, HeaderValue::from_static(value));
+            }
+        }
+    }
+    resp
 }
 
 /// `routes` with a request budget: past it, 503 with code `timeout`.

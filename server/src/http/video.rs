@@ -9,7 +9,10 @@
 //! one `bytes=` range (`a-b`, `a-`, `-n`) is answered 206 with `Content-Range`; a range past the
 //! end is 416 with `Content-Range: bytes */<size>`; several ranges, a malformed header, or an
 //! `If-Range` that does not match the ETag get the whole file (200), as RFC 9110 allows. Every
-//! answer says `Accept-Ranges: bytes` and carries the file's sha256 as its ETag.
+//! answer says `Accept-Ranges: bytes` and carries the file's sha256 as its ETag and its
+//! modification time as `Last-Modified`; a matching `If-None-Match` (or, without one, an
+//! `If-Modified-Since` not older than the file) answers 304 with no body
+//! ([`super::conditional`]).
 
 use axum::body::Body;
 use axum::extract::State;
@@ -18,6 +21,7 @@ use axum::response::Response;
 use bytes::Bytes;
 use tokio::io::{AsyncReadExt, AsyncSeekExt};
 
+use super::conditional;
 use super::extract::PathArg;
 use super::pages::session_caller;
 use crate::error::ServiceError;
@@ -101,7 +105,8 @@ async fn respond(video: &StoredVideo, headers: &HeaderMap) -> Result<Response, S
     let mut file = tokio::fs::File::open(&video.path)
         .await
         .map_err(|e| anyhow::anyhow!("opening {}: {e}", video.path.display()))?;
-    let len = file.metadata().await.map_err(anyhow::Error::from)?.len();
+    let meta = file.metadata().await.map_err(anyhow::Error::from)?;
+    let (len, modified) = (meta.len(), meta.modified().ok());
     let etag = format!("\"{}\"", video.sha256);
     let text = |name| headers.get(name).and_then(|v: &HeaderValue| v.to_str().ok());
     let range = match text(header::IF_RANGE) {
@@ -113,6 +118,13 @@ async fn respond(video: &StoredVideo, headers: &HeaderMap) -> Result<Response, S
         .header(header::ACCEPT_RANGES, "bytes")
         .header(header::ETAG, &etag)
         .header(header::CACHE_CONTROL, "private, max-age=3600");
+    if let Some(m) = modified {
+        b = b.header(header::LAST_MODIFIED, conditional::last_modified(m));
+    }
+    if conditional::not_modified(headers, &etag, modified) {
+        let r = b.status(StatusCode::NOT_MODIFIED).body(Body::empty());
+        return r.map_err(|e| anyhow::Error::from(e).into());
+    }
     let (first, last) = match wanted(range, len) {
         Wanted::Whole => (0, len.saturating_sub(1)),
         Wanted::Part(first, last) => {

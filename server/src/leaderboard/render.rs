@@ -1,5 +1,11 @@
 //! Leaderboard renderings: CSV (RFC 4180 quoting, one header per track) and the self-contained
 //! HTML page. Scores print with six decimals; +inf prints as `inf`.
+//!
+//! CSV injection (OWASP): a spreadsheet evaluates a cell that starts with `=`, `+`, `-`, `@`,
+//! a tab or a carriage return as a formula, and team names are chosen by participants
+//! (`-1-1`, `=HYPERLINK(...)`). Every text cell goes through [`text_cell`], which prefixes such
+//! a cell with `'` and quotes it; numbers the server prints itself (ranks, ids, scores, which
+//! may legitimately be negative) are written as they are.
 
 use std::fmt::Write as _;
 
@@ -33,6 +39,16 @@ fn quote(s: &str) -> String {
     }
 }
 
+/// A CSV cell holding text (a team name, a state): quoted as RFC 4180 says, and neutralised
+/// when a spreadsheet would evaluate it (see the module documentation).
+pub(crate) fn text_cell(s: &str) -> String {
+    if s.starts_with(['=', '+', '-', '@', '\t', '\r']) {
+        format!("\"'{}\"", s.replace('"', "\"\""))
+    } else {
+        quote(s)
+    }
+}
+
 fn rank(r: &Row) -> String {
     r.rank.map_or_else(String::new, |n| n.to_string())
 }
@@ -52,14 +68,15 @@ pub(crate) fn csv(board: &Leaderboard) -> String {
         ",submitted_at\n"
     });
     for r in &board.rows {
-        let _ = write!(out, "{},{},{}", rank(r), quote(&r.team), r.submission_id);
+        let _ = write!(out, "{},{},{}", rank(r), text_cell(&r.team), r.submission_id);
         for (_, get) in cols {
             let _ = write!(out, ",{}", fmt_score(get(r)));
         }
         if policy {
-            let _ = write!(out, ",{},{}", r.state.as_deref().unwrap_or(""), r.baseline);
+            let state = text_cell(r.state.as_deref().unwrap_or(""));
+            let _ = write!(out, ",{state},{}", r.baseline);
         }
-        let _ = writeln!(out, ",{}", r.submitted_at);
+        let _ = writeln!(out, ",{}", text_cell(&r.submitted_at));
     }
     out
 }

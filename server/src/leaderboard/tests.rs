@@ -26,6 +26,32 @@ fn csv_quotes_and_formats() {
     );
 }
 
+/// Issue 23: a team named `-1-1` was a formula in a spreadsheet opening the CSV export.
+#[test]
+fn csv_neutralises_cells_a_spreadsheet_would_evaluate() {
+    for (team, cell) in [
+        ("-1-1", "\"'-1-1\""),
+        ("+1", "\"'+1\""),
+        ("@SUM(A1)", "\"'@SUM(A1)\""),
+        ("\tx", "\"'\tx\""),
+        ("\rx", "\"'\rx\""),
+        (
+            "=HYPERLINK(\"http://evil.example\",\"x\")",
+            "\"'=HYPERLINK(\"\"http://evil.example\"\",\"\"x\"\")\"",
+        ),
+        ("team-1", "team-1"),
+    ] {
+        let csv = csv(&board(team));
+        let row = csv.split_once('\n').unwrap().1;
+        assert_eq!(
+            row,
+            format!("1,{cell},7,0.500000,2026-01-01T00:00:00Z\n"),
+            "{team:?}"
+        );
+    }
+    assert_eq!(super::render::text_cell(""), "");
+}
+
 #[test]
 fn html_escapes_team_names() {
     let page = page(Split::Test, &[board("<script>")], true);

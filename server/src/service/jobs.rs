@@ -18,9 +18,7 @@ use std::time::Duration;
 use serde::Serialize;
 use tokio::time::Instant;
 
-use kitchen_r_core::dataset::Split;
-use kitchen_r_core::plan::place_steps;
-
+use self::checks::MAX_REASON_CHARS;
 use super::metrics::record;
 use super::{AppState, WorkerCred, now_ms};
 use crate::episodes::{JobSpec, TaskOutcome};
@@ -34,7 +32,6 @@ pub(crate) const MAX_LEASE_WAIT_MS: u32 = 30_000;
 /// Cap of the stored log tail (worker.proto: 64 KiB).
 pub(crate) const MAX_LOG_TAIL_BYTES: usize = 64 << 10;
 const MAX_TASKS: usize = 256;
-const MAX_REASON_CHARS: usize = 2000;
 /// A long-polling Lease re-checks the queue this often even without a wake-up, so a slot freed
 /// by another process's write is not missed.
 const POLL_INTERVAL: Duration = Duration::from_millis(500);
@@ -146,7 +143,7 @@ impl AppState {
             if !claimed.is_empty() || Instant::now() >= deadline {
                 self.worker_seen(worker);
                 self.record_queue_waits(&claimed, now).await;
-                let jobs: Vec<LeasedJob> = claimed.into_iter().map(|c| self.leased_job(c)).collect();
+                let jobs = self.hand_out(claimed, worker).await?;
                 for j in &jobs {
                     tracing::info!(job = j.id, run = j.run_id, episode = %j.episode_key, attempt = j.attempt, worker, "job leased");
                 }
@@ -203,7 +200,7 @@ impl AppState {
         let worker = validate_worker_id(worker_id)?;
         let reason = match reason.trim() {
             "" => "released by the worker".to_string(),
-            r => format!("released: {}", clip(r, MAX_REASON_CHARS)),
+            r => format!("released: {}", checks::cap_text(r, MAX_REASON_CHARS)),
         };
         let released =
             queue::release(self.pool(), job_id, i64::from(attempt), worker, &reason, now_ms()).await?;
@@ -226,7 +223,8 @@ impl AppState {
                 "at most {MAX_TASKS} task results per episode"
             )));
         }
-        r.log_tail = tail(&r.log_tail, MAX_LOG_TAIL_BYTES).to_string();
+        r.log_tail = checks::cap_log_lines(tail(&r.log_tail, MAX_LOG_TAIL_BYTES));
+        checks::cap_reasons(&mut r.tasks);
         let now = now_ms();
         let mut tx = self.pool().begin_with("BEGIN IMMEDIATE").await?;
         let job = queue::job(&mut tx, r.job_id)
@@ -237,6 +235,13 @@ impl AppState {
                 "job {} is episode {:?} of run {}, not {:?} of run {}",
                 job.id, job.episode_key, job.run_id, r.episode_key, r.run_id
             )));
+        }
+        // Only a result's tasks are recorded; a platform error's are not looked at.
+        if r.platform_error.trim().is_empty() {
+            checks::check_tasks(&r.tasks, &job.spec).map_err(|why| {
+                tracing::warn!(job = job.id, worker = %r.worker_id, %why, "report refused");
+                ServiceError::BadRequest(format!("job {} (episode {:?}): {why}", job.id, job.episode_key))
+            })?;
         }
         if queue::result_exists(&mut tx, job.run_id, &job.episode_key).await? {
             return Ok(ReportOutcome {
@@ -276,7 +281,7 @@ impl AppState {
         } else {
             let reason = format!(
                 "platform error: {}",
-                clip(r.platform_error.trim(), MAX_REASON_CHARS)
+                checks::cap_text(r.platform_error.trim(), MAX_REASON_CHARS)
             );
             gave_up = Some(
                 self.retry_or_fail(&mut tx, &job, &reason, &r.worker_id, now)
@@ -340,38 +345,6 @@ impl AppState {
     }
 }
 
-impl AppState {
-    fn leased_job(&self, c: queue::Claimed) -> LeasedJob {
-        let mut spec = c.spec;
-        if spec.place_targets.len() != place_steps(&spec.plan) {
-            // A job queued before specs carried their targets.
-            let content = self.content();
-            let found = [Split::Dev, Split::Test]
-                .into_iter()
-                .flat_map(|s| content.ground_truth(s))
-                .find(|i| i.id == spec.instruction_id && i.plan == spec.plan);
-            if let Some(i) = found {
-                spec.place_targets = i.place_targets.clone();
-            }
-        }
-        LeasedJob {
-            id: c.id,
-            attempt: u32::try_from(c.attempt).unwrap_or(u32::MAX),
-            lease_expires_at_ms: c.lease_expires_at,
-            run_id: c.run_id,
-            episode_key: c.episode_key,
-            spec,
-            policy_episode_id: opaque_episode_id(),
-        }
-    }
-}
-
-/// `ep-` and 24 random hex digits.
-fn opaque_episode_id() -> String {
-    let bytes: [u8; 12] = rand::random();
-    format!("ep-{}", hex::encode(bytes))
-}
-
 fn validate_worker_id(id: &str) -> Result<&str, ServiceError> {
     let id = id.trim();
     if id.is_empty() || id.len() > 200 || id.chars().any(char::is_control) {
@@ -394,10 +367,8 @@ fn tail(s: &str, max: usize) -> &str {
     &s[start..]
 }
 
-fn clip(s: &str, max_chars: usize) -> String {
-    s.chars().take(max_chars).collect()
-}
-
+mod checks;
 mod finish;
+mod handout;
 #[cfg(test)]
 mod tests;

@@ -64,8 +64,8 @@ impl AppState {
         let gt = self.content().ground_truth(split);
         let file = plans::parse(body, split, gt.len(), &self.content().index, &self.config().plans)?;
         let score = plans::score(&file, gt);
-        // `parse` accepted it, so it is UTF-8.
-        let text = String::from_utf8_lossy(body);
+        // Only `id` and `plan` are kept: other fields of a line are dropped before storage.
+        let text = file.to_jsonl(gt);
         let scorer = self.scorer_version();
         let run = NewRun {
             scorer_version: &scorer,

@@ -34,7 +34,7 @@ pub(crate) struct RegisterPolicy {
     pub endpoint: String,
     #[schema(value_type = crate::http::openapi::SplitName)]
     pub split: Split,
-    /// Bearer token the evaluator sends to the endpoint.
+    /// Bearer token the evaluator sends to the endpoint; stored sealed, never shown back.
     #[serde(default)]
     pub token: Option<String>,
     /// Plan submission (same team, same split) for the integrated track.
@@ -68,8 +68,10 @@ pub(crate) struct Registered {
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub(crate) struct PolicyBody {
     pub endpoint: String,
-    /// Stored because workers must present it to the endpoint; never shown back.
-    pub token: Option<String>,
+    /// The bearer token workers present to the endpoint, sealed ([`super::secrets`]): the plain
+    /// text is never stored nor shown back.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub token_sealed: Option<String>,
     pub plans: Option<i64>,
     pub reference: bool,
     pub protocol_version: u32,
@@ -99,7 +101,7 @@ pub(crate) fn policy_info(body: &str) -> Result<PolicyInfo, ServiceError> {
     let b = parse_body(body)?;
     Ok(PolicyInfo {
         endpoint: b.endpoint,
-        has_token: b.token.is_some(),
+        has_token: b.token_sealed.is_some(),
         plans: b.plans,
         reference: b.reference,
         max_concurrency: b.max_concurrency,
@@ -145,11 +147,12 @@ impl AppState {
         check_contract_v1_1(&probed, &cfg.control)?;
         // policy.proto: 0 is read as 1.
         let max_concurrency = probed.max_concurrency.max(1);
-        let endpoint_spec = self.endpoint_spec(&endpoint, bearer.as_deref());
+        let sealed = bearer.as_deref().map(|t| self.seal_token(t));
+        let endpoint_spec = self.endpoint_spec(&endpoint, sealed.clone());
         let jobs = self.job_specs(instructions, &endpoint_spec, req.reference)?;
         let body = PolicyBody {
             endpoint,
-            token: bearer,
+            token_sealed: sealed,
             plans: req.plans,
             reference: req.reference,
             protocol_version: probed.protocol_version,
@@ -214,7 +217,7 @@ impl AppState {
         let episodes = (split == Split::Dev).then_some(body.instructions as u32);
         let instructions = self.run_instructions(split, episodes)?;
         let cfg = self.config();
-        let endpoint = self.endpoint_spec(&body.endpoint, body.token.as_deref());
+        let endpoint = self.endpoint_spec(&body.endpoint, body.token_sealed.clone());
         let jobs = self.job_specs(instructions, &endpoint, body.reference)?;
         let scorer = format!("{CONTROL_SCORER}+{}", self.content().dataset_tag());
         let new = NewPolicyRun {
@@ -247,12 +250,14 @@ impl AppState {
         })
     }
 
-    /// Where a run's jobs call the policy, with the deadlines configured now.
-    fn endpoint_spec(&self, url: &str, bearer: Option<&str>) -> EndpointSpec {
+    /// Where a run's jobs call the policy, with the deadlines configured now; the token stays
+    /// sealed until a job is leased.
+    fn endpoint_spec(&self, url: &str, sealed_bearer: Option<String>) -> EndpointSpec {
         let (p, c) = (&self.config().policy, &self.config().control);
         EndpointSpec {
             url: url.to_string(),
-            bearer_token: bearer.unwrap_or_default().to_string(),
+            bearer_token: String::new(),
+            bearer_token_sealed: sealed_bearer,
             call_deadline_ms: p.call_deadline_ms,
             startup_deadline_ms: p.startup_deadline_ms,
             episode_budget_ms: p.episode_budget_ms,

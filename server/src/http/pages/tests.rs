@@ -453,13 +453,11 @@ async fn pages_render_without_script_and_the_leaderboard_links_public_summaries(
                 .starts_with("text/html")
         );
         assert!(!a.body.to_ascii_lowercase().contains("<script"), "{path}");
-        if path != "/" {
-            let csp = a.headers[header::CONTENT_SECURITY_POLICY].to_str().unwrap();
-            assert!(
-                csp.contains("default-src 'none'") && !csp.contains("script-src"),
-                "{csp}"
-            );
-        }
+        let csp = a.headers[header::CONTENT_SECURITY_POLICY].to_str().unwrap();
+        assert!(
+            csp.contains("default-src 'none'") && !csp.contains("script-src"),
+            "{csp}"
+        );
     }
 }
 
