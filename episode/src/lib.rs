@@ -1,14 +1,17 @@
 //! Episodes on the kitchen twin: the policy interface ([`policy`]), the single episode runner
 //! every evaluation uses ([`runner`]), the oracle expert ([`oracle`]), offline MSE ([`offline`])
-//! and local evaluation of a split ([`eval`]).
+//! local evaluation of a split ([`eval`]), teleport-on-failure's expert states ([`teleport`])
+//! and an episode driven one action at a time from outside ([`driven`], the Python environment).
 //!
 //! It owns how a policy drives the simulator and what an episode's outcome is. It must not touch
 //! the network, a database or an async runtime (no tokio, tonic, prost or kitchen-r-proto):
 //! transports wrap a policy from outside (kitchen-r-contract), the job loop leases and reports
 //! (kitchen-r-worker), and scoring and storage belong to the server.
 
+pub mod driven;
 pub mod eval;
 pub mod offline;
 pub mod oracle;
 pub mod policy;
 pub mod runner;
+pub mod teleport;

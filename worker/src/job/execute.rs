@@ -12,7 +12,7 @@ use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::time::Instant;
 
 use kitchen_r_proto::worker::v1 as pb;
-use kitchen_r_sim::{Action, EpisodeConfig, Sim, Snapshot, StepInfo};
+use kitchen_r_sim::{Action, EpisodeConfig, Sim, StepInfo};
 
 use super::cores::{Cores, YieldsCore};
 use super::path::PathHook;
@@ -20,9 +20,10 @@ use super::spec;
 use super::{JobContext, JobError};
 use kitchen_r_contract::{Credentials, RemotePolicy, SimCamera};
 use kitchen_r_episode::offline::{OfflineOutcome, run_offline};
-use kitchen_r_episode::oracle::{OraclePolicy, expert_options};
+use kitchen_r_episode::oracle::OraclePolicy;
 use kitchen_r_episode::policy::{Corrections, Policy, Unreachable};
 use kitchen_r_episode::runner::{EpisodeOutcome, StepHook, run_episode};
+use kitchen_r_episode::teleport::expert_starts;
 use kitchen_r_record::video::episode::{EpisodeVideo, RecordedVideo, VideoHook};
 
 /// The log tail kept with a result (the contract's cap).
@@ -84,21 +85,6 @@ impl StepHook for Watch<'_> {
             return Err(format!("cancelled: {}", self.0.reason()));
         }
         Ok(())
-    }
-}
-
-/// The expert's state at the start of each task, for teleport-on-failure.
-#[derive(Default)]
-struct Starts(Vec<Snapshot>);
-
-impl StepHook for Starts {
-    fn on_step(&mut self, _: &Sim, _: &Action, _: &StepInfo) -> Result<(), String> {
-        Ok(())
-    }
-    fn on_task_start(&mut self, sim: &Sim, index: usize) {
-        if self.0.len() == index {
-            self.0.push(sim.snapshot());
-        }
     }
 }
 
@@ -280,7 +266,7 @@ fn run(job: &pb::Job, ctx: &JobContext, control: &JobControl, log: &mut Log) -> 
         return Ok(Ran::tasks(offline_results(&out, log)));
     }
     let starts = if spec.teleport_on_failure {
-        Some(expert_starts(&mut sim, &cfg, ctx)?)
+        Some(expert_starts(&mut sim, &cfg, &ctx.assets)?)
     } else {
         None
     };
@@ -325,15 +311,6 @@ fn finish_video(video: EpisodeVideo, log: &mut Log) -> Option<RecordedVideo> {
             None
         }
     }
-}
-
-/// Run the expert over the episode once, keeping its state at each task start, then reset.
-fn expert_starts(sim: &mut Sim, cfg: &EpisodeConfig, ctx: &JobContext) -> Result<Vec<Snapshot>, JobError> {
-    let mut expert = OraclePolicy::new(&ctx.assets).without_images();
-    let mut starts = Starts::default();
-    run_episode(sim, &mut expert, &expert_options(), None, &mut starts)?;
-    sim.reset(cfg)?;
-    Ok(starts.0)
 }
 
 fn all_failed(cfg: &EpisodeConfig, n: usize, reason: &str) -> Vec<pb::TaskResult> {

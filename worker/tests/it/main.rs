@@ -11,6 +11,7 @@
 mod remote_support;
 
 mod collect;
+mod driven;
 mod job_execute;
 mod job_worker;
 mod lerobot_export;

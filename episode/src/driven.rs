@@ -1,0 +1,404 @@
+//! An episode driven one action at a time from outside: the Python environment's `step`.
+//!
+//! It is not a second runner. The episode runs in [`run_episode`] on a thread of its own, with
+//! a relay as its policy: at every decision point the relay hands the decision out and waits
+//! for the next action, which it returns as a chunk that the runner executes one action of
+//! (`actions_executed_per_chunk = 1`). Task starts and ends, success checks, time limits,
+//! teleport on failure and the chunk rules (quaternion and gripper corrections, counted as
+//! warnings) are therefore the leaderboard's own, and the same seed gives the same episode as
+//! `kitchen-r eval` and the workers.
+//!
+//! The expert can be asked for its chunk at any decision ([`DrivenEpisode::expert_chunk`]): an
+//! oracle follows the episode beside the relay and answers from privileged state. Asked at
+//! every `k`-th decision with its chunk's first `k` actions executed, it drives exactly as
+//! `kitchen-r eval --policy builtin:oracle` with `execute = k` does. Asked after actions it
+//! did not choose (DAgger), it labels from the state it finds; its path follower and phase
+//! machine carry on from what it last predicted, re-anchored on the measured pose.
+
+use std::sync::mpsc::{Receiver, Sender, channel};
+use std::thread::JoinHandle;
+
+use kitchen_r_sim::{Action, Assets, EpisodeConfig, Observation, Sim, StepInfo};
+
+use crate::oracle::OraclePolicy;
+use crate::policy::{
+    ACTION_DIM, Frame, HORIZON, MAX_OBSERVATION_HISTORY, Policy, PolicyError, PolicyInput, PolicySpec,
+    Privileged, check_chunk,
+};
+use crate::runner::{EpisodeOutcome, RunOptions, StepHook, TaskRecord, run_episode};
+use crate::teleport::expert_starts;
+
+/// How a driven episode runs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DriveOptions {
+    /// Task time limit, plan steps, chunk tolerance (`execute`, `privileged`, budgets and
+    /// timeouts do not apply: the driver executes one action per decision and is not timed).
+    pub run: RunOptions,
+    /// After a failed task, continue from the expert's state at the start of the next one.
+    pub teleport_on_failure: bool,
+    /// Render the cameras (and LiDAR) at every decision; false gives the robot state only.
+    pub images: bool,
+    /// Consecutive control steps each decision shows, the newest included (1..=8).
+    pub observation_history: usize,
+    /// Keep the expert ready for [`DrivenEpisode::expert_chunk`].
+    pub expert: bool,
+}
+
+impl Default for DriveOptions {
+    fn default() -> Self {
+        DriveOptions {
+            run: RunOptions::default(),
+            teleport_on_failure: true,
+            images: true,
+            observation_history: 1,
+            expert: true,
+        }
+    }
+}
+
+/// One decision point: what a policy would be sent, plus the privileged state.
+#[derive(Debug, Clone)]
+pub struct Decision {
+    /// Control steps since the episode started.
+    pub step: u64,
+    pub task_index: usize,
+    pub sub_task: String,
+    pub observation: Observation,
+    /// Hand pose in the base frame `[x, y, z, qw, qx, qy, qz]`.
+    pub ee_pose: [f64; 7],
+    pub previous_action: Option<[f64; ACTION_DIM]>,
+    /// Earlier frames of the task, oldest first (`observation_history - 1` at most).
+    pub history: Vec<Frame>,
+    /// The robot, the task's goal and the key objects in the scene frame.
+    pub privileged: Privileged,
+}
+
+/// How the episode ended.
+#[derive(Debug, Clone)]
+pub struct Ended {
+    pub outcome: EpisodeOutcome,
+    /// The world after the last action, as a policy would have seen it.
+    pub observation: Observation,
+}
+
+/// What an action led to: the tasks that ended with it, then the next decision or the end.
+#[derive(Debug, Clone)]
+pub struct Progress {
+    pub tasks_ended: Vec<TaskRecord>,
+    pub next: Next,
+}
+
+#[derive(Debug, Clone)]
+pub enum Next {
+    Decision(Box<Decision>),
+    Ended(Box<Ended>),
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum DriveError {
+    /// The action breaks the chunk rules (shape, finite values, gripper range, unit quaternion
+    /// beyond the tolerance). Nothing was executed; the decision still waits for an action.
+    #[error("invalid action: {0}")]
+    BadAction(String),
+    #[error("the episode has ended: reset it before stepping")]
+    Ended,
+    #[error("the expert is off for this episode (DriveOptions::expert)")]
+    NoExpert,
+    #[error("the expert failed: {0}")]
+    Expert(String),
+    /// The simulator failed (a platform error, not the driver's).
+    #[error("simulator: {0}")]
+    Sim(String),
+}
+
+enum Cmd {
+    Act([f64; ACTION_DIM]),
+    Expert,
+}
+
+enum Event {
+    TaskEnded(TaskRecord),
+    Decision(Box<Decision>),
+    Expert(Result<Vec<[f64; ACTION_DIM]>, String>),
+    Ended(Box<Ended>),
+    Failed(String),
+}
+
+/// An episode running on its own thread, waiting at a decision for [`DrivenEpisode::act`].
+pub struct DrivenEpisode {
+    cmds: Option<Sender<Cmd>>,
+    events: Receiver<Event>,
+    thread: Option<JoinHandle<Sim>>,
+    tolerance: crate::policy::ChunkTolerance,
+    has_expert: bool,
+    waiting: bool,
+}
+
+impl DrivenEpisode {
+    /// Load `cfg` into `sim` and run it until its first decision (or its end, for an episode
+    /// with no task). Teleport on failure first runs the expert over the episode once.
+    pub fn start(
+        mut sim: Sim,
+        cfg: EpisodeConfig,
+        assets: &Assets,
+        opts: &DriveOptions,
+    ) -> Result<(DrivenEpisode, Progress), DriveError> {
+        let (cmd_tx, cmd_rx) = channel();
+        let (ev_tx, ev_rx) = channel();
+        let expert = opts.expert.then(|| OraclePolicy::new(assets).without_images());
+        let starts_from = opts.teleport_on_failure.then(|| assets.clone());
+        let mut run = RunOptions {
+            // Every decision carries the privileged state: the expert reads it, and the
+            // environment shows it when asked. It changes nothing in the simulation.
+            privileged: true,
+            wall_budget: None,
+            max_consecutive_timeouts: u32::MAX,
+            ..opts.run.clone()
+        };
+        run.execute = 1;
+        let relay = Relay {
+            spec: PolicySpec {
+                name: "driven".into(),
+                horizon: HORIZON,
+                observation_history: opts.observation_history.clamp(1, MAX_OBSERVATION_HISTORY),
+                actions_executed_per_chunk: Some(1),
+                ..PolicySpec::default()
+            },
+            images: opts.images,
+            cmds: cmd_rx,
+            events: ev_tx.clone(),
+            expert,
+            abandoned: false,
+        };
+        let thread = std::thread::Builder::new()
+            .name("kitchen-r-driven".into())
+            .spawn(move || {
+                // A failure was sent as an event; the simulator comes back either way.
+                let _ = drive(&mut sim, &cfg, starts_from, relay, &run, ev_tx);
+                sim
+            })
+            .map_err(|e| DriveError::Sim(format!("cannot start the episode's thread: {e}")))?;
+        let mut ep = DrivenEpisode {
+            cmds: Some(cmd_tx),
+            events: ev_rx,
+            thread: Some(thread),
+            tolerance: opts.run.chunk_tolerance,
+            has_expert: opts.expert,
+            waiting: false,
+        };
+        let first = ep.progress()?;
+        Ok((ep, first))
+    }
+
+    /// Execute `action` for one control step (after the chunk rules' checks).
+    pub fn act(&mut self, action: [f64; ACTION_DIM]) -> Result<Progress, DriveError> {
+        if !self.waiting {
+            return Err(DriveError::Ended);
+        }
+        let mut chunk = [action; HORIZON];
+        check_chunk(&mut chunk, HORIZON, &self.tolerance).map_err(|e| match e {
+            PolicyError::BadChunk(m) => DriveError::BadAction(m),
+            other => DriveError::BadAction(other.to_string()),
+        })?;
+        self.send(Cmd::Act(action))?;
+        self.waiting = false;
+        self.progress()
+    }
+
+    /// The expert's chunk of 16 actions for the current decision.
+    pub fn expert_chunk(&mut self) -> Result<Vec<[f64; ACTION_DIM]>, DriveError> {
+        if !self.waiting {
+            return Err(DriveError::Ended);
+        }
+        if !self.has_expert {
+            return Err(DriveError::NoExpert);
+        }
+        self.send(Cmd::Expert)?;
+        match self.events.recv() {
+            Ok(Event::Expert(r)) => r.map_err(DriveError::Expert),
+            Ok(Event::Failed(e)) => Err(DriveError::Sim(e)),
+            Ok(_) => Err(DriveError::Sim("the episode thread answered out of turn".into())),
+            Err(_) => Err(DriveError::Sim("the episode thread stopped".into())),
+        }
+    }
+
+    /// Stop the episode (if it still runs) and hand the simulator back for the next one.
+    pub fn finish(mut self) -> Option<Sim> {
+        // Dropping the sender makes every later decision fail at once: the runner races
+        // through the remaining tasks without stepping and returns.
+        self.cmds = None;
+        while self.events.recv().is_ok() {}
+        self.thread.take().and_then(|t| t.join().ok())
+    }
+
+    fn send(&mut self, cmd: Cmd) -> Result<(), DriveError> {
+        let sent = self.cmds.as_ref().map(|c| c.send(cmd));
+        match sent {
+            Some(Ok(())) => Ok(()),
+            _ => Err(DriveError::Sim("the episode thread stopped".into())),
+        }
+    }
+
+    /// Events up to the next decision or the end.
+    fn progress(&mut self) -> Result<Progress, DriveError> {
+        let mut tasks_ended = Vec::new();
+        loop {
+            match self.events.recv() {
+                Ok(Event::TaskEnded(t)) => tasks_ended.push(t),
+                Ok(Event::Decision(d)) => {
+                    self.waiting = true;
+                    return Ok(Progress {
+                        tasks_ended,
+                        next: Next::Decision(d),
+                    });
+                }
+                Ok(Event::Ended(e)) => {
+                    return Ok(Progress {
+                        tasks_ended,
+                        next: Next::Ended(e),
+                    });
+                }
+                Ok(Event::Failed(e)) => return Err(DriveError::Sim(e)),
+                Ok(Event::Expert(_)) => {}
+                Err(_) => return Err(DriveError::Sim("the episode thread stopped".into())),
+            }
+        }
+    }
+}
+
+impl Drop for DrivenEpisode {
+    fn drop(&mut self) {
+        self.cmds = None;
+        while self.events.recv().is_ok() {}
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+/// The episode thread's body: the leaderboard's runner, with the relay as its policy.
+fn drive(
+    sim: &mut Sim,
+    cfg: &EpisodeConfig,
+    starts_from: Option<Assets>,
+    mut relay: Relay,
+    run: &RunOptions,
+    events: Sender<Event>,
+) -> Result<(), ()> {
+    let fail = |e: String| {
+        let _ = events.send(Event::Failed(e));
+    };
+    if let Err(e) = sim.reset(cfg) {
+        fail(e.to_string());
+        return Err(());
+    }
+    let starts = match starts_from {
+        Some(assets) => match expert_starts(sim, cfg, &assets) {
+            Ok(s) => Some(s),
+            Err(e) => {
+                fail(e.to_string());
+                return Err(());
+            }
+        },
+        None => None,
+    };
+    let mut hook = TaskEnds(events.clone());
+    let outcome = match run_episode(sim, &mut relay, run, starts.as_deref(), &mut hook) {
+        Ok(o) => o,
+        Err(e) => {
+            fail(e.to_string());
+            return Err(());
+        }
+    };
+    let observation = if relay.images {
+        sim.observe()
+    } else {
+        sim.observe_state()
+    };
+    let _ = events.send(Event::Ended(Box::new(Ended { outcome, observation })));
+    Ok(())
+}
+
+/// Tells the driver each task's end as it happens.
+struct TaskEnds(Sender<Event>);
+
+impl StepHook for TaskEnds {
+    fn on_step(&mut self, _: &Sim, _: &Action, _: &StepInfo) -> Result<(), String> {
+        Ok(())
+    }
+    fn on_task_end(&mut self, _: &Sim, task: &TaskRecord) {
+        let _ = self.0.send(Event::TaskEnded(task.clone()));
+    }
+}
+
+/// The runner's policy: hands each decision to the driver and returns its action.
+struct Relay {
+    spec: PolicySpec,
+    images: bool,
+    cmds: Receiver<Cmd>,
+    events: Sender<Event>,
+    expert: Option<OraclePolicy>,
+    /// The driver is gone: every decision fails at once so the runner ends quickly.
+    abandoned: bool,
+}
+
+const ABANDONED: &str = "the episode was abandoned by its driver";
+
+impl Policy for Relay {
+    fn spec(&self) -> &PolicySpec {
+        &self.spec
+    }
+
+    fn reset(&mut self, episode_id: &str, task_index: usize, sub_task: &str) -> Result<(), PolicyError> {
+        if let Some(e) = &mut self.expert {
+            e.reset(episode_id, task_index, sub_task)?;
+        }
+        Ok(())
+    }
+
+    fn act(&mut self, input: &PolicyInput<'_>) -> Result<Vec<[f64; ACTION_DIM]>, PolicyError> {
+        if self.abandoned {
+            return Err(PolicyError::Call(ABANDONED.into()));
+        }
+        let Some(privileged) = input.privileged.cloned() else {
+            return Err(PolicyError::NeedsPrivileged);
+        };
+        let decision = Decision {
+            step: input.step,
+            task_index: input.task_index,
+            sub_task: input.sub_task.to_string(),
+            observation: input.observation.clone(),
+            ee_pose: input.ee_pose,
+            previous_action: input.previous_action,
+            history: input.history.to_vec(),
+            privileged,
+        };
+        if self.events.send(Event::Decision(Box::new(decision))).is_err() {
+            self.abandoned = true;
+            return Err(PolicyError::Call(ABANDONED.into()));
+        }
+        loop {
+            match self.cmds.recv() {
+                Ok(Cmd::Act(a)) => return Ok(vec![a; HORIZON]),
+                Ok(Cmd::Expert) => {
+                    let chunk = match &mut self.expert {
+                        Some(e) => e.act(input).map_err(|e| e.to_string()),
+                        None => Err(DriveError::NoExpert.to_string()),
+                    };
+                    if self.events.send(Event::Expert(chunk)).is_err() {
+                        self.abandoned = true;
+                        return Err(PolicyError::Call(ABANDONED.into()));
+                    }
+                }
+                Err(_) => {
+                    self.abandoned = true;
+                    return Err(PolicyError::Call(ABANDONED.into()));
+                }
+            }
+        }
+    }
+
+    fn wants_images(&self) -> bool {
+        self.images
+    }
+}
