@@ -7,7 +7,7 @@ cd "$(dirname "$0")/.."
 if ! python3 - <<'PY' 2>/dev/null
 import importlib.util, sys
 mods = ["mcap", "mcap_ros2", "h5py", "numpy", "grpc", "grpc_health", "grpc_tools", "google.protobuf",
-        "playwright", "schemathesis"]
+        "playwright", "schemathesis", "maturin", "gymnasium", "pytest"]
 sys.exit(0 if all(importlib.util.find_spec(m) for m in mods) else 1)
 PY
 then
@@ -34,3 +34,8 @@ if ! "$TORCH_PY" -c "import torch, torchvision" 2>/dev/null; then
   "$TORCH_PY" -m pip install --quiet --disable-pip-version-check -r scripts/test-requirements-torch.txt
 fi
 cargo test --workspace --locked "$@"
+# The Python package (python/, issue #24): built from source with cargo through maturin, then its
+# tests, which compare the expert stepped from Python with the binary the Rust tests just built.
+echo "== the Python package: pip install ./python, then python/tests"
+python3 -m pip install --quiet --disable-pip-version-check --no-build-isolation ./python
+KITCHEN_R_BIN=target/debug/kitchen-r python3 -m pytest -q python/tests

@@ -1,0 +1,305 @@
+"""The Kitchen-R twin as a gymnasium environment.
+
+An episode is one instruction of the dataset: its whole ground-truth plan, task by task, exactly
+as the leaderboard runs it (the native module relays each action into the same episode runner the
+workers use; it adds no rule). The same instruction and seed give the episode that
+``kitchen-r eval --seed SEED`` runs for that instruction.
+
+Observation (a ``Dict``):
+
+- ``images``: one ``uint8`` array ``(H, W, 3)`` per configured camera (``base``, ``gripper`` by
+  default; ``(history, H, W, 3)`` with ``history > 1``); ``depth`` likewise in metres when asked;
+- ``state``: ``float64`` ``(29,)`` (``(history, 29)``), fields named in ``STATE_FIELDS``:
+  odometry relative to the episode's start, base velocities, the arm's joints, the gripper
+  opening, the hand pose in the base frame and the previous action (zeros before the first one
+  and after a teleport);
+- ``sub_task``: the current plan step, e.g. ``"pick the bowl"``; ``task_index``.
+
+Action: 10 values named in ``ACTION_FIELDS`` (base velocities, the hand's target pose in the base
+frame, the gripper command). The action space holds only legal actions (a unit quaternion,
+``g`` in [0, 1]); an illegal one raises ``ValueError`` and is not executed.
+
+Reward: 1 for each task that succeeds (sparse). ``terminated`` when the plan's last task has
+ended; ``truncated`` is never set (each task's 120 s limit is part of the episode).
+``info``: ``task_index``, ``sub_task``, ``tasks_ended`` (records of the tasks that ended with this
+step), ``is_success`` (every task so far succeeded; at the end, the whole plan), and on request
+``expert_chunk`` (the expert's 16x10 chunk for the current state) and ``privileged`` (robot pose
+in the scene frame, the task's goal, the key objects' poses).
+"""
+
+from __future__ import annotations
+
+import string
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from . import _native
+
+ACTION_FIELDS = ("base_v", "base_w", "ee_x", "ee_y", "ee_z", "ee_qw", "ee_qx", "ee_qy", "ee_qz", "gripper")
+STATE_FIELDS = (
+    ("odom_x", "odom_y", "odom_yaw", "base_v", "base_w")
+    + tuple(f"joint_{i}" for i in range(6))
+    + ("gripper",)
+    + ("ee_x", "ee_y", "ee_z", "ee_qw", "ee_qx", "ee_qy", "ee_qz")
+    + tuple(f"prev_{f}" for f in ACTION_FIELDS)
+)
+HORIZON = 16
+# Actions of a chunk executed before the policy is asked again (the organiser's default).
+EXECUTE = 8
+MAX_TASKS = 16
+_SUB_TASK_CHARSET = string.ascii_letters + string.digits + " -'"
+
+
+class ActionSpace(spaces.Box):
+    """The legal actions: a box on each value, a unit quaternion, ``g`` in [0, 1].
+
+    Not every point of the box is an action (the hand's orientation is a unit quaternion), so
+    ``sample`` normalises the quaternion and ``contains`` checks its norm.
+    """
+
+    def __init__(self, seed: int | None = None):
+        low = np.array([-0.5, -1.5, -1.5, -1.5, -1.5, -1.0, -1.0, -1.0, -1.0, 0.0])
+        high = np.array([0.5, 1.5, 1.5, 1.5, 1.5, 1.0, 1.0, 1.0, 1.0, 1.0])
+        super().__init__(low=low, high=high, dtype=np.float64, seed=seed)
+
+    def sample(self, mask: Any = None, probability: Any = None) -> np.ndarray:
+        a = super().sample()
+        q = a[5:9]
+        while np.linalg.norm(q) < 1e-3:
+            q = self.np_random.uniform(-1.0, 1.0, size=4)
+        a[5:9] = q / np.linalg.norm(q)
+        return a
+
+    def contains(self, x: Any) -> bool:
+        if not super().contains(x):
+            return False
+        return abs(float(np.linalg.norm(np.asarray(x, dtype=np.float64)[5:9])) - 1.0) <= 1e-6
+
+
+def _state(frame: dict, ee_pose: list, previous: list | None) -> np.ndarray:
+    prev = previous if previous is not None else [0.0] * 10
+    values = frame["odometry"] + frame["velocity"] + frame["joints"] + [frame["gripper"]] + ee_pose + prev
+    return np.asarray(values, dtype=np.float64)
+
+
+class KitchenREnv(gym.Env):
+    """``gymnasium.make("KitchenR/Plan-v0", **kwargs)``; see the module documentation.
+
+    Parameters: ``split`` (``"dev"``; ``"test"`` needs ``ground_truth``, the organiser's JSON
+    Lines file), ``images`` / ``depth`` (render the cameras / their depth at every step),
+    ``history`` (consecutive control steps each observation shows, 1 to 8),
+    ``teleport_on_failure`` (after a failed task, continue from the expert's state at the next
+    task's start, as the server does; costs one expert pre-run per reset), ``expert`` (put the
+    expert's chunk in ``info`` at every step), ``privileged`` (put privileged state in ``info``),
+    ``task_time_limit`` (sim seconds per task, 120), ``max_tasks`` (run only the first N plan
+    steps; 0 = all), ``instruction`` (always this instruction id; otherwise ``reset`` picks
+    one, or takes ``options={"instruction": id}``).
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+
+    def __init__(
+        self,
+        split: str = "dev",
+        ground_truth: str | None = None,
+        images: bool = True,
+        depth: bool = False,
+        history: int = 1,
+        teleport_on_failure: bool = True,
+        expert: bool = False,
+        privileged: bool = False,
+        task_time_limit: float = 120.0,
+        max_tasks: int = 0,
+        instruction: str | None = None,
+        render_mode: str | None = None,
+    ):
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode {render_mode!r}: only 'rgb_array' is supported")
+        self._native = _native.NativeEnv(
+            split=split,
+            ground_truth=ground_truth,
+            images=images,
+            depth=depth,
+            teleport_on_failure=teleport_on_failure,
+            history=history,
+            task_time_limit=task_time_limit,
+            max_tasks=max_tasks,
+            expert=True,
+        )
+        self.render_mode = render_mode
+        self._images, self._depth, self._history = images, depth, history
+        self._expert, self._privileged = expert, privileged
+        self._ids = self._native.instruction_ids()
+        if instruction is not None and instruction not in self._ids:
+            raise KeyError(f"no instruction {instruction!r} in the {split} split")
+        self._fixed = instruction
+        self._cameras = self._native.cameras()
+        self._decision: dict | None = None
+        self._last_obs: dict | None = None
+        self._success = True
+        self.instruction: dict | None = None
+        self.action_space = ActionSpace()
+        self.observation_space = self._observation_space()
+
+    # Spaces -------------------------------------------------------------------------------
+
+    def _observation_space(self) -> spaces.Dict:
+        lead = (self._history,) if self._history > 1 else ()
+        obs: dict[str, spaces.Space] = {}
+        if self._images:
+            obs["images"] = spaces.Dict(
+                {n: spaces.Box(0, 255, lead + (h, w, 3), np.uint8) for n, h, w in self._cameras}
+            )
+        if self._depth:
+            obs["depth"] = spaces.Dict(
+                {n: spaces.Box(0.0, np.inf, lead + (h, w), np.float32) for n, h, w in self._cameras}
+            )
+        obs["state"] = spaces.Box(-np.inf, np.inf, lead + (len(STATE_FIELDS),), np.float64)
+        obs["sub_task"] = spaces.Text(max_length=128, min_length=1, charset=_SUB_TASK_CHARSET)
+        obs["task_index"] = spaces.Discrete(MAX_TASKS)
+        return spaces.Dict(obs)
+
+    # Conversions --------------------------------------------------------------------------
+
+    def _frames(self, decision: dict) -> list[tuple[dict, list, list | None]]:
+        """The decision's frames, oldest first, padded to ``history`` with the oldest."""
+        frames = [(h, h["ee_pose"], h["previous_action"]) for h in decision["history"]]
+        frames.append((decision["observation"], decision["ee_pose"], decision["previous_action"]))
+        while len(frames) < self._history:
+            frames.insert(0, frames[0])
+        return frames
+
+    def _obs(self, decision: dict) -> dict:
+        frames = self._frames(decision)
+
+        def stack(arrays: list[np.ndarray]) -> np.ndarray:
+            return np.stack(arrays) if self._history > 1 else arrays[-1]
+
+        obs: dict[str, Any] = {}
+        if self._images:
+            obs["images"] = {
+                n: stack([_image(f["images"][n], np.uint8, 3) for f, _, _ in frames]) for n, _, _ in self._cameras
+            }
+        if self._depth:
+            obs["depth"] = {
+                n: stack([_image(f["depth"][n], np.float32, 0) for f, _, _ in frames]) for n, _, _ in self._cameras
+            }
+        obs["state"] = stack([_state(f, ee, prev) for f, ee, prev in frames])
+        obs["sub_task"] = decision["sub_task"]
+        obs["task_index"] = int(decision["task_index"])
+        return obs
+
+    def _final_obs(self, ended: dict) -> dict:
+        """The observation after the last action: the world as it was left, with the last
+        decision's task and hand pose (no decision follows)."""
+        last = self._decision or {}
+        frame = dict(last)
+        frame["observation"] = ended["observation"]
+        frame["history"] = []
+        return self._obs(frame)
+
+    def _info(self, progress: dict) -> dict:
+        info: dict[str, Any] = {"tasks_ended": progress["tasks_ended"]}
+        for t in progress["tasks_ended"]:
+            self._success = self._success and t["success"]
+        info["is_success"] = self._success
+        d = progress["decision"]
+        if d is not None:
+            info["task_index"] = d["task_index"]
+            info["sub_task"] = d["sub_task"]
+            if self._privileged:
+                info["privileged"] = d["privileged"]
+            if self._expert:
+                info["expert_chunk"] = self.expert_chunk()
+        else:
+            ended = progress["ended"]
+            info["episode"] = {k: ended[k] for k in ("tasks", "sim_time", "success_rate")}
+            info["is_success"] = all(t["success"] for t in ended["tasks"])
+        return info
+
+    # The gymnasium API --------------------------------------------------------------------
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        options = options or {}
+        instruction = options.get("instruction", self._fixed)
+        if instruction is None:
+            instruction = self._ids[int(self.np_random.integers(len(self._ids)))]
+        elif isinstance(instruction, int):
+            instruction = self._ids[instruction]
+        run_seed = seed if seed is not None else int(self.np_random.integers(2**63))
+        self.instruction = self._native.instruction(instruction)
+        self._success = True
+        progress = self._native.reset(instruction, int(run_seed))
+        if progress["decision"] is None:
+            raise RuntimeError(f"instruction {instruction!r} has no task to run")
+        self._decision = progress["decision"]
+        obs = self._obs(self._decision)
+        self._last_obs = obs
+        info = self._info(progress)
+        info["instruction"] = self.instruction
+        info["run_seed"] = run_seed
+        return obs, info
+
+    def step(self, action):
+        a = np.asarray(action, dtype=np.float64)
+        if a.shape != (10,):
+            raise ValueError(f"an action has shape {a.shape}; it must be (10,): {', '.join(ACTION_FIELDS)}")
+        if self._decision is None:
+            raise RuntimeError("call reset() before step(), and again after the episode has terminated")
+        progress = self._native.step(a.tolist())
+        reward = float(sum(1 for t in progress["tasks_ended"] if t["success"]))
+        info = self._info(progress)
+        if progress["decision"] is not None:
+            self._decision = progress["decision"]
+            obs = self._obs(self._decision)
+            terminated = False
+        else:
+            obs = self._final_obs(progress["ended"])
+            self._decision = None
+            terminated = True
+        self._last_obs = obs
+        return obs, reward, terminated, False, info
+
+    def step_chunk(self, chunk, execute: int = EXECUTE):
+        """Execute the first ``execute`` actions of a 16x10 chunk, as the leaderboard's runner
+        does with a policy's chunk; stops early when the episode ends or a task ends (the
+        runner asks the policy again at each task's start). Returns the last step's
+        observation, the summed reward, and the last step's flags and info."""
+        c = np.asarray(chunk, dtype=np.float64)
+        if c.ndim != 2 or c.shape[1] != 10 or len(c) < 1:
+            raise ValueError(f"a chunk has shape {c.shape}; it must be (N, 10), N >= 1")
+        total = 0.0
+        result = None
+        for a in c[: max(1, min(execute, len(c)))]:
+            obs, reward, terminated, truncated, info = self.step(a)
+            total += reward
+            result = (obs, total, terminated, truncated, info)
+            if terminated or info["tasks_ended"]:
+                break
+        return result
+
+    def expert_chunk(self) -> np.ndarray:
+        """The expert's chunk (16 x 10) for the current state, from privileged state."""
+        if self._decision is None:
+            raise RuntimeError("call reset() first: there is no current decision")
+        return np.asarray(self._native.expert_chunk(), dtype=np.float64)
+
+    def render(self):
+        if self.render_mode != "rgb_array" or self._last_obs is None or "images" not in self._last_obs:
+            return None
+        views = [v[-1] if self._history > 1 else v for v in self._last_obs["images"].values()]
+        return np.concatenate(views, axis=1)
+
+    def close(self):
+        self._native.close()
+        self._decision = None
+
+
+def _image(entry, dtype, channels: int) -> np.ndarray:
+    h, w, raw = entry
+    shape = (h, w, channels) if channels else (h, w)
+    return np.frombuffer(raw, dtype=dtype).reshape(shape)

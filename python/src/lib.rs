@@ -1,0 +1,250 @@
+//! `kitchen_r._native`: the twin's episodes for Python, behind the `kitchen_r` package's
+//! gymnasium environment (`python/kitchen_r/env.py`).
+//!
+//! It owns the translation between Python values and the episode crate's types, nothing else:
+//! episodes are `kitchen_r_episode::driven` episodes, i.e. `run_episode` with the action
+//! relayed from Python, so the same instruction and seed give the episode `kitchen-r eval` and
+//! the leaderboard's workers run. It must not add rules: no success check, time limit or action
+//! rule of its own. The simulator steps with the GIL released.
+
+mod convert;
+
+use std::sync::{Mutex, MutexGuard, PoisonError};
+
+use kitchen_r_core::dataset::{Instruction, Split};
+use kitchen_r_episode::driven::{DriveError, DriveOptions, DrivenEpisode, Progress};
+use kitchen_r_episode::eval::{instruction_seed, instructions};
+use kitchen_r_episode::runner::RunOptions;
+use kitchen_r_sim::{Assets, EpisodeConfig, EpisodeParams, SensorsConfig, Sim, SimConfig};
+use pyo3::exceptions::{PyKeyError, PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+/// What the environment holds between calls.
+struct Inner {
+    assets: Assets,
+    params: EpisodeParams,
+    sim_cfg: SimConfig,
+    sensors: SensorsConfig,
+    instructions: Vec<Instruction>,
+    opts: DriveOptions,
+    depth: bool,
+    /// A simulator between episodes (built once, reset for each episode as `eval` does).
+    idle: Option<Sim>,
+    episode: Option<DrivenEpisode>,
+}
+
+/// Errors of this layer, mapped once to Python exceptions.
+#[derive(Debug, thiserror::Error)]
+enum EnvError {
+    #[error("{0}")]
+    Drive(#[from] DriveError),
+    #[error("no instruction {0:?} in this split (see instruction_ids())")]
+    UnknownInstruction(String),
+    #[error("call reset() before step()")]
+    NotReset,
+    #[error("an action has {0} values; it must have 10 (v, w, x, y, z, qw, qx, qy, qz, g)")]
+    ActionShape(usize),
+    #[error("{0}")]
+    Setup(String),
+}
+
+impl From<EnvError> for PyErr {
+    fn from(e: EnvError) -> PyErr {
+        match e {
+            EnvError::Drive(DriveError::BadAction(_)) | EnvError::ActionShape(_) => {
+                PyValueError::new_err(e.to_string())
+            }
+            EnvError::UnknownInstruction(_) => PyKeyError::new_err(e.to_string()),
+            _ => PyRuntimeError::new_err(e.to_string()),
+        }
+    }
+}
+
+fn setup<E: std::fmt::Display>(what: &str) -> impl Fn(E) -> EnvError + '_ {
+    move |e| EnvError::Setup(format!("{what}: {e}"))
+}
+
+/// One environment: one simulator, one episode at a time.
+#[pyclass(module = "kitchen_r._native")]
+struct NativeEnv {
+    inner: Mutex<Inner>,
+}
+
+impl NativeEnv {
+    fn lock(&self) -> MutexGuard<'_, Inner> {
+        // A panic while stepping leaves the episode to be reset; the data is still whole.
+        self.inner.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+}
+
+impl Inner {
+    fn reset(&mut self, instruction: &str, seed: u64) -> Result<Progress, EnvError> {
+        if let Some(old) = self.episode.take() {
+            self.idle = old.finish().or(self.idle.take());
+        }
+        let ins = (self.instructions.iter().find(|i| i.id == instruction))
+            .ok_or_else(|| EnvError::UnknownInstruction(instruction.to_string()))?;
+        let scene = self.assets.scene(&ins.scene).map_err(setup("scene"))?;
+        let cfg = EpisodeConfig::from_instruction(
+            ins,
+            scene,
+            &self.assets.catalogue,
+            &self.params,
+            instruction_seed(seed, &ins.id),
+        )
+        .map_err(setup("episode"))?;
+        let sim = match self.idle.take() {
+            Some(s) => s,
+            None => {
+                (Sim::new(
+                    self.assets.clone(),
+                    self.sim_cfg.clone(),
+                    self.sensors.clone(),
+                    &cfg,
+                ))
+                .map_err(setup("simulator"))?
+                .0
+            }
+        };
+        let (episode, first) = DrivenEpisode::start(sim, cfg, &self.assets, &self.opts)?;
+        self.episode = Some(episode);
+        Ok(first)
+    }
+
+    fn step(&mut self, action: &[f64]) -> Result<Progress, EnvError> {
+        let a: [f64; 10] = action
+            .try_into()
+            .map_err(|_| EnvError::ActionShape(action.len()))?;
+        let episode = self.episode.as_mut().ok_or(EnvError::NotReset)?;
+        Ok(episode.act(a)?)
+    }
+
+    fn expert_chunk(&mut self) -> Result<Vec<[f64; 10]>, EnvError> {
+        let episode = self.episode.as_mut().ok_or(EnvError::NotReset)?;
+        Ok(episode.expert_chunk()?)
+    }
+}
+
+#[pymethods]
+impl NativeEnv {
+    /// `split`: `dev` (the public split with plans) or `test` with `ground_truth` (a JSON Lines
+    /// file of instructions with plans, the organiser's). See `kitchen_r.KitchenREnv`.
+    #[new]
+    #[pyo3(signature = (split="dev", ground_truth=None, images=true, depth=false, teleport_on_failure=true, history=1, task_time_limit=120.0, max_tasks=0, expert=true))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        split: &str,
+        ground_truth: Option<std::path::PathBuf>,
+        images: bool,
+        depth: bool,
+        teleport_on_failure: bool,
+        history: usize,
+        task_time_limit: f64,
+        max_tasks: usize,
+        expert: bool,
+    ) -> PyResult<NativeEnv> {
+        let split: Split = split.parse().map_err(PyValueError::new_err)?;
+        if !(1..=8).contains(&history) {
+            return Err(PyValueError::new_err("history must be 1 to 8 control steps"));
+        }
+        if !(task_time_limit.is_finite() && task_time_limit > 0.0) {
+            return Err(PyValueError::new_err(
+                "task_time_limit must be a positive number of seconds",
+            ));
+        }
+        let instructions =
+            instructions(split, ground_truth.as_ref()).map_err(|e| PyValueError::new_err(e.to_string()))?;
+        let assets = Assets::load_default().map_err(setup("assets"))?;
+        let params = EpisodeParams::load_default().map_err(setup("episode parameters"))?;
+        let sim_cfg = SimConfig::load_default().map_err(setup("configs/sim.toml"))?;
+        let sensors = SensorsConfig::load_default().map_err(setup("configs/sensors.toml"))?;
+        let opts = DriveOptions {
+            run: RunOptions {
+                task_time_limit,
+                max_tasks: (max_tasks > 0).then_some(max_tasks),
+                ..RunOptions::default()
+            },
+            teleport_on_failure,
+            images: images || depth,
+            observation_history: history,
+            expert,
+        };
+        Ok(NativeEnv {
+            inner: Mutex::new(Inner {
+                assets,
+                params,
+                sim_cfg,
+                sensors,
+                instructions,
+                opts,
+                depth,
+                idle: None,
+                episode: None,
+            }),
+        })
+    }
+
+    /// The split's instruction ids, in dataset order.
+    fn instruction_ids(&self) -> Vec<String> {
+        self.lock().instructions.iter().map(|i| i.id.clone()).collect()
+    }
+
+    /// The instruction text and ground-truth plan of `instruction`.
+    fn instruction<'py>(&self, py: Python<'py>, instruction: &str) -> PyResult<Bound<'py, PyDict>> {
+        let inner = self.lock();
+        let ins = (inner.instructions.iter().find(|i| i.id == instruction))
+            .ok_or_else(|| EnvError::UnknownInstruction(instruction.to_string()))?;
+        let d = PyDict::new(py);
+        d.set_item("id", &ins.id)?;
+        d.set_item("scene", &ins.scene)?;
+        d.set_item("instruction", &ins.instruction)?;
+        d.set_item("plan", &ins.plan)?;
+        Ok(d)
+    }
+
+    /// The configured cameras: `(name, height, width)` each, in observation order.
+    fn cameras(&self) -> Vec<(String, u32, u32)> {
+        let inner = self.lock();
+        (inner.sensors.cameras.iter())
+            .map(|c| (c.name.clone(), c.height, c.width))
+            .collect()
+    }
+
+    /// Start the episode of `instruction` with run seed `seed` (the episode `kitchen-r eval
+    /// --seed SEED` runs for it); the first decision.
+    fn reset<'py>(&self, py: Python<'py>, instruction: &str, seed: u64) -> PyResult<Bound<'py, PyDict>> {
+        let progress = py.detach(|| self.lock().reset(instruction, seed))?;
+        let depth = self.lock().depth;
+        convert::progress(py, &progress, depth)
+    }
+
+    /// Execute one action (10 values) for one control step.
+    fn step<'py>(&self, py: Python<'py>, action: Vec<f64>) -> PyResult<Bound<'py, PyDict>> {
+        let progress = py.detach(|| self.lock().step(&action))?;
+        let depth = self.lock().depth;
+        convert::progress(py, &progress, depth)
+    }
+
+    /// The expert's chunk (16 actions of 10 values) for the current decision.
+    fn expert_chunk(&self, py: Python<'_>) -> PyResult<Vec<Vec<f64>>> {
+        let chunk = py.detach(|| self.lock().expert_chunk())?;
+        Ok(chunk.iter().map(|a| a.to_vec()).collect())
+    }
+
+    /// Stop the current episode, if any.
+    fn close(&self, py: Python<'_>) {
+        py.detach(|| {
+            let mut inner = self.lock();
+            if let Some(old) = inner.episode.take() {
+                inner.idle = old.finish().or(inner.idle.take());
+            }
+        });
+    }
+}
+
+#[pymodule]
+mod _native {
+    #[pymodule_export]
+    use super::NativeEnv;
+}

@@ -1,0 +1,134 @@
+"""The gymnasium environment (issue #24): it passes gymnasium's checker, is deterministic, refuses
+bad input with Python exceptions, and the expert stepped through it is the episode
+``kitchen-r eval --policy builtin:oracle`` runs, task by task and bit for bit in sim time.
+
+``KITCHEN_R_BIN`` names the ``kitchen-r`` binary to compare with (``scripts/test.sh`` passes the
+one the Rust tests built).
+"""
+
+import json
+import math
+import os
+import subprocess
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import kitchen_r
+from kitchen_r import KitchenREnv
+
+EPISODES = 20
+
+
+def first_ids(n):
+    env = KitchenREnv(images=False)
+    ids = env._native.instruction_ids()[:n]
+    env.close()
+    return ids
+
+
+def drive_expert(env, instruction, seed=0):
+    """The expert's chunk every `EXECUTE` steps, as `eval` runs the oracle; the episode info."""
+    env.reset(seed=seed, options={"instruction": instruction})
+    terminated = False
+    while not terminated:
+        _, _, terminated, truncated, info = env.step_chunk(env.expert_chunk())
+        assert not truncated
+    return info
+
+
+def test_gymnasium_checker_passes():
+    env = gym.make("KitchenR/Plan-v0", max_tasks=1)
+    check_env(env.unwrapped, skip_render_check=True)
+    env.close()
+
+
+def test_the_same_seed_gives_the_same_observations():
+    env = KitchenREnv(depth=True)
+    runs = []
+    for _ in range(2):
+        obs, _ = env.reset(seed=7)
+        trace = [obs]
+        for a in env.expert_chunk()[:5]:
+            trace.append(env.step(a)[0])
+        runs.append(trace)
+    for a, b in zip(*runs):
+        assert a["sub_task"] == b["sub_task"]
+        np.testing.assert_array_equal(a["state"], b["state"])
+        for cam in a["images"]:
+            np.testing.assert_array_equal(a["images"][cam], b["images"][cam])
+            np.testing.assert_array_equal(a["depth"][cam], b["depth"][cam])
+    # Another seed is another episode (robot start, background objects).
+    other, _ = env.reset(seed=8)
+    assert not np.array_equal(other["state"], runs[0][0]["state"]) or other["sub_task"] != runs[0][0]["sub_task"]
+    env.close()
+
+
+def test_spaces_name_their_fields_and_hold_the_observations():
+    env = KitchenREnv(history=3)
+    obs, info = env.reset(seed=1)
+    assert env.observation_space.contains(obs), "the observation is in the observation space"
+    assert obs["state"].shape == (3, len(kitchen_r.STATE_FIELDS))
+    assert obs["images"]["base"].shape == (3, 128, 128, 3)
+    assert len(kitchen_r.ACTION_FIELDS) == 10 and kitchen_r.ACTION_FIELDS[-1] == "gripper"
+    assert info["sub_task"] == info["instruction"]["plan"][0]
+    a = env.action_space.sample()
+    assert env.action_space.contains(a) and math.isclose(np.linalg.norm(a[5:9]), 1.0)
+    env.close()
+
+
+def test_bad_input_raises_python_exceptions_and_executes_nothing():
+    env = KitchenREnv(images=False)
+    with pytest.raises(RuntimeError, match="reset"):
+        env.step(np.zeros(10))
+    with pytest.raises(KeyError, match="no instruction"):
+        env.reset(seed=0, options={"instruction": "dev-9999"})
+    with pytest.raises(KeyError):
+        KitchenREnv(instruction="nope")
+    with pytest.raises(ValueError, match="split"):
+        KitchenREnv(split="train")
+    obs, _ = env.reset(seed=0)
+    still = np.concatenate([[0.0, 0.0], obs["state"][12:19], [1.0]])
+    for bad in (np.zeros(9), np.zeros((2, 10))):
+        with pytest.raises(ValueError, match="shape"):
+            env.step(bad)
+    nan = still.copy()
+    nan[0] = np.nan
+    not_unit = still.copy()
+    not_unit[5:9] = [2.0, 0.0, 0.0, 0.0]
+    for bad in (nan, not_unit):
+        with pytest.raises(ValueError, match="invalid action"):
+            env.step(bad)
+    obs, reward, terminated, truncated, info = env.step(still)
+    assert obs["state"][-10:].tolist() == still.tolist(), "only the legal action was executed"
+    assert (reward, terminated, truncated) == (0.0, False, False)
+    env.close()
+
+
+def test_the_expert_through_the_env_is_the_eval_episode_task_by_task():
+    binary = os.environ.get("KITCHEN_R_BIN", "target/debug/kitchen-r")
+    assert os.path.exists(binary), f"{binary} is missing: build it (cargo build) or set KITCHEN_R_BIN"
+    out = subprocess.run(
+        [binary, "eval", "--policy", "builtin:oracle", "--episodes", str(EPISODES), "--seed", "0", "--json"],
+        check=True,
+        capture_output=True,
+        text=True,
+    )
+    report = json.loads(out.stdout)
+    env = KitchenREnv(images=False)
+    ids = first_ids(EPISODES)
+    assert [e["episode_id"] for e in report["episodes"]] == ids
+    succeeded = 0
+    for want in report["episodes"]:
+        info = drive_expert(env, want["episode_id"])
+        got = info["episode"]
+        assert got["sim_time"] == want["sim_time"], want["episode_id"]
+        for g, w in zip(got["tasks"], want["tasks"], strict=True):
+            assert (g["index"], g["step"], g["success"], g["failure"]) == (w["index"], w["step"], w["success"], w["failure"])
+            assert g["sim_time"] == w["sim_time"], (want["episode_id"], g["index"])
+        succeeded += sum(t["success"] for t in got["tasks"])
+        assert info["is_success"] == all(t["success"] for t in want["tasks"])
+    assert succeeded == report["overall"]["succeeded"]
+    env.close()
