@@ -93,6 +93,8 @@ pub async fn build_with(config: Config, probe: Arc<dyn PolicyProbe>) -> anyhow::
         worker: &worker_token,
     };
     let state = AppState::new(pool, config, content, tokens, probe);
+    // Before anything listens, so no upload of this process is in `tmp/` yet.
+    videos::clear_partial_uploads(&state).await?;
     Ok(Server {
         state,
         generated_admin_token,

@@ -15,7 +15,8 @@
 //! - [`board`]: the leaderboards, cached and rendered;
 //! - [`portal`]: what the participant pages read (a team's submissions, quota left, ETA);
 //! - [`rescore`]: the organiser's rescoring of every stored submission;
-//! - [`admin`]: the organiser's console (queue, workers, runs; cancel, requeue, backup).
+//! - [`admin`]: the organiser's console (queue, workers, runs; cancel, requeue, backup);
+//! - [`video_budget`]: the video storage budgets and the files nothing links any more.
 //!
 //! This file holds only the shared state and its accessors.
 
@@ -32,6 +33,7 @@ mod progress;
 mod rescore;
 mod submissions;
 mod teams;
+mod video_budget;
 
 use std::sync::Arc;
 
@@ -80,6 +82,8 @@ struct Inner {
     limits: limits::Limits,
     /// What `/metrics` reads when scraped (workers seen, cached queue gauges).
     telemetry: metrics::Telemetry,
+    /// Video uploads in flight and the lock ordering file decisions (see [`video_budget`]).
+    videos: video_budget::VideoLedger,
 }
 
 impl std::fmt::Debug for AppState {
@@ -119,6 +123,7 @@ impl AppState {
                 probe,
                 jobs_ready: tokio::sync::Notify::new(),
                 stopping: std::sync::atomic::AtomicBool::new(false),
+                videos: video_budget::VideoLedger::default(),
             }),
         }
     }
