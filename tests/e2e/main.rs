@@ -28,4 +28,5 @@ mod participant_client;
 mod planning;
 mod submission;
 mod video;
+mod video_files;
 mod workers;
