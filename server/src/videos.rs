@@ -86,7 +86,10 @@ impl AppState {
         if self.video_dir().is_none() {
             return Ok(HashMap::new());
         }
-        Ok(store::videos::keys(self.read_pool(), run).await?.into_iter().collect())
+        Ok(store::videos::keys(self.read_pool(), run)
+            .await?
+            .into_iter()
+            .collect())
     }
 
     /// Delete the videos linked before `now - retention_days` and the files left unlinked.
@@ -140,7 +143,10 @@ async fn subdirs(dir: &Path) -> Result<Vec<PathBuf>, ServiceError> {
     };
     while let Some(e) = entries.next_entry().await.map_err(io)? {
         let name = e.file_name();
-        let two_hex = name.len() == 2 && name.to_str().is_some_and(|n| n.bytes().all(|b| b.is_ascii_hexdigit()));
+        let two_hex = name.len() == 2
+            && name
+                .to_str()
+                .is_some_and(|n| n.bytes().all(|b| b.is_ascii_hexdigit()));
         if two_hex && e.file_type().await.map_err(io)?.is_dir() {
             out.push(e.path());
         }

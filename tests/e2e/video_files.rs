@@ -39,7 +39,13 @@ async fn lease_and_report(client: &mut WorkerClient<Channel>) -> pb::Job {
         max_jobs: 1,
         wait_ms: 5000,
     };
-    let job = client.lease(authed(lease)).await.unwrap().into_inner().jobs.remove(0);
+    let job = client
+        .lease(authed(lease))
+        .await
+        .unwrap()
+        .into_inner()
+        .jobs
+        .remove(0);
     let spec = job.episode.clone().unwrap();
     let steps = match spec.max_plan_steps {
         0 => spec.plan.len(),
@@ -83,7 +89,11 @@ fn first_chunk(job: &pb::Job, data: Vec<u8>, total: u64) -> pb::VideoChunk {
     }
 }
 
-async fn upload_whole(client: &mut WorkerClient<Channel>, job: &pb::Job, data: Vec<u8>) -> pb::UploadVideoResponse {
+async fn upload_whole(
+    client: &mut WorkerClient<Channel>,
+    job: &pb::Job,
+    data: Vec<u8>,
+) -> pb::UploadVideoResponse {
     let total = data.len() as u64;
     let chunks = tokio_stream::iter(vec![first_chunk(job, data, total)]);
     client.upload_video(authed(chunks)).await.unwrap().into_inner()
@@ -138,12 +148,20 @@ async fn crash_and_replace(fx: &ControlFixture, policy: String) {
     // Upload the episode's video again, announce 1 MiB, send 64 KiB, and SIGKILL the server
     // once the partial file holds them.
     let (tx, rx) = tokio::sync::mpsc::channel(1);
-    tx.send(first_chunk(&job, vec![7; 64 << 10], 1 << 20)).await.unwrap();
+    tx.send(first_chunk(&job, vec![7; 64 << 10], 1 << 20))
+        .await
+        .unwrap();
     let mut cut = client.clone();
     let call = tokio::spawn(async move { cut.upload_video(authed(ReceiverStream::new(rx))).await });
     let start = Instant::now();
-    while !files_under(&tmp).iter().any(|f| f.metadata().is_ok_and(|m| m.len() >= 64 << 10)) {
-        assert!(start.elapsed() < Duration::from_secs(60), "the partial upload never reached disk");
+    while !files_under(&tmp)
+        .iter()
+        .any(|f| f.metadata().is_ok_and(|m| m.len() >= 64 << 10))
+    {
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "the partial upload never reached disk"
+        );
         tokio::time::sleep(Duration::from_millis(50)).await;
     }
     server.child().kill().unwrap();
@@ -157,7 +175,11 @@ async fn crash_and_replace(fx: &ControlFixture, policy: String) {
     // The restarted server (same database and directory) has cleared tmp/ by the time it
     // listens.
     let server = fx.serve(0);
-    assert_eq!(files_under(&tmp), Vec::<PathBuf>::new(), "a partial upload survived the restart");
+    assert_eq!(
+        files_under(&tmp),
+        Vec::<PathBuf>::new(),
+        "a partial upload survived the restart"
+    );
 
     // A whole new take replaces the link: the first take's file goes.
     let mut client = worker_client(&server).await;

@@ -69,7 +69,13 @@ impl AppState {
     /// Book `bytes` for the video of `(run, key)`, evicting the oldest videos the budgets
     /// need gone (their files deleted once no row names them). Refused, with a note on the
     /// episode, only when uploads in flight hold the budget's rest.
-    pub(crate) async fn book_video(&self, dir: &Path, run: i64, key: &str, bytes: u64) -> Result<Booking, UploadError> {
+    pub(crate) async fn book_video(
+        &self,
+        dir: &Path,
+        run: i64,
+        key: &str,
+        bytes: u64,
+    ) -> Result<Booking, UploadError> {
         let (team, name) = store::team_of_run(self.read_pool(), run)
             .await
             .map_err(ServiceError::from)?
@@ -89,20 +95,37 @@ impl AppState {
             (p.teams.get(&team).copied().unwrap_or(0), p.total)
         };
         let budgets = [
-            Budget { team: Some(team), max: cfg.team_max_bytes, pending: team_pending, note: &team_note },
-            Budget { team: None, max: cfg.total_max_bytes, pending: total_pending, note: &total_note },
+            Budget {
+                team: Some(team),
+                max: cfg.team_max_bytes,
+                pending: team_pending,
+                note: &team_note,
+            },
+            Budget {
+                team: None,
+                max: cfg.total_max_bytes,
+                pending: total_pending,
+                note: &total_note,
+            },
         ];
         let room = store::make_room(self.pool(), &budgets, bytes)
             .await
             .map_err(ServiceError::from)?;
-        let row = Row { run, key, team, now: now_ms() };
+        let row = Row {
+            run,
+            key,
+            team,
+            now: now_ms(),
+        };
         if !room.fits {
             let why = format!(
                 "video not stored: other uploads in progress fill [video] team_max_bytes ({}) or total_max_bytes ({}); the worker retries",
                 size(cfg.team_max_bytes),
                 size(cfg.total_max_bytes)
             );
-            store::note(self.pool(), row, &why).await.map_err(ServiceError::from)?;
+            store::note(self.pool(), row, &why)
+                .await
+                .map_err(ServiceError::from)?;
             return Err(UploadError::NoRoom(why));
         }
         for (budget, n) in ["team", "total"].into_iter().zip(&room.evicted) {
@@ -112,7 +135,11 @@ impl AppState {
         let mut p = self.inner.videos.pending();
         *p.teams.entry(team).or_default() += bytes;
         p.total += bytes;
-        Ok(Booking { state: self.clone(), team, bytes })
+        Ok(Booking {
+            state: self.clone(),
+            team,
+            bytes,
+        })
     }
 
     /// Move a finished upload into place and link it to `(run, key)`; the file a replaced link
@@ -128,12 +155,18 @@ impl AppState {
         let (sha, bytes) = (file.sha256.clone(), file.bytes);
         let _turn = self.inner.videos.turn.lock().await;
         file.place(dir).await?;
-        let row = Row { run, key, team: booking.team, now: now_ms() };
+        let row = Row {
+            run,
+            key,
+            team: booking.team,
+            now: now_ms(),
+        };
         let replaced = store::link(self.pool(), row, &sha, bytes)
             .await
             .map_err(ServiceError::from)?;
         drop(booking);
-        self.delete_unlinked_locked(dir, replaced.into_iter().collect()).await;
+        self.delete_unlinked_locked(dir, replaced.into_iter().collect())
+            .await;
         drop(_turn);
         self.record_stored_video_bytes().await;
         Ok((sha, bytes))

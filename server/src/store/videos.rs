@@ -41,7 +41,12 @@ pub(crate) async fn team_of_run(pool: &SqlitePool, run: i64) -> sqlx::Result<Opt
 
 /// Link `(run, key)` of `team` to the file `sha256`, replacing an earlier link or note.
 /// Returns the file the replaced link named when no stored row names it any more.
-pub(crate) async fn link(pool: &SqlitePool, row: Row<'_>, sha256: &str, bytes: u64) -> sqlx::Result<Option<String>> {
+pub(crate) async fn link(
+    pool: &SqlitePool,
+    row: Row<'_>,
+    sha256: &str,
+    bytes: u64,
+) -> sqlx::Result<Option<String>> {
     let mut tx = pool.begin_with("BEGIN IMMEDIATE").await?;
     let old: Option<String> = sqlx::query_scalar(
         "SELECT sha256 FROM episode_videos WHERE run_id = ? AND episode_key = ? AND note IS NULL",
@@ -124,7 +129,8 @@ pub(crate) struct Room {
 // Two statements per kind of budget rather than `team_id = ? OR ? IS NULL`, so SQLite uses the
 // partial indexes (migration 20261126000100).
 const SUM_ALL: &str = "SELECT COALESCE(SUM(bytes), 0) FROM episode_videos WHERE note IS NULL";
-const SUM_TEAM: &str = "SELECT COALESCE(SUM(bytes), 0) FROM episode_videos WHERE note IS NULL AND team_id = ?";
+const SUM_TEAM: &str =
+    "SELECT COALESCE(SUM(bytes), 0) FROM episode_videos WHERE note IS NULL AND team_id = ?";
 const OLDEST_ALL: &str = "SELECT rowid, sha256, bytes FROM episode_videos WHERE note IS NULL
      ORDER BY created_at, rowid LIMIT 1";
 const OLDEST_TEAM: &str = "SELECT rowid, sha256, bytes FROM episode_videos WHERE note IS NULL AND team_id = ?
@@ -133,7 +139,11 @@ const OLDEST_TEAM: &str = "SELECT rowid, sha256, bytes FROM episode_videos WHERE
 /// Evict the oldest stored rows of each budget in turn until `incoming` more bytes fit it, in
 /// one write transaction (two uploads never pick the same row nor both count the room one
 /// eviction freed). Nothing is evicted when a budget cannot hold `incoming` even emptied.
-pub(crate) async fn make_room(pool: &SqlitePool, budgets: &[Budget<'_>], incoming: u64) -> sqlx::Result<Room> {
+pub(crate) async fn make_room(
+    pool: &SqlitePool,
+    budgets: &[Budget<'_>],
+    incoming: u64,
+) -> sqlx::Result<Room> {
     if budgets.iter().any(|b| b.pending.saturating_add(incoming) > b.max) {
         return Ok(Room::default());
     }
@@ -246,8 +256,8 @@ pub(crate) async fn expire(pool: &SqlitePool, before: i64) -> sqlx::Result<Vec<S
 pub(crate) async fn linked(pool: &SqlitePool, sha256: &str) -> sqlx::Result<bool> {
     let found: Option<i64> =
         sqlx::query_scalar("SELECT 1 FROM episode_videos WHERE sha256 = ? AND note IS NULL LIMIT 1")
-        .bind(sha256)
-        .fetch_optional(pool)
-        .await?;
+            .bind(sha256)
+            .fetch_optional(pool)
+            .await?;
     Ok(found.is_some())
 }

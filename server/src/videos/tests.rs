@@ -142,7 +142,12 @@ async fn the_retention_sweep_deletes_old_links_and_files_no_link_names() {
     let pool = f.state.pool();
     let link = |run: i64, key: String, sha: String, at: i64| async move {
         let (team, _) = store::videos::team_of_run(pool, run).await.unwrap().unwrap();
-        let row = store::videos::Row { run, key: &key, team, now: at };
+        let row = store::videos::Row {
+            run,
+            key: &key,
+            team,
+            now: at,
+        };
         store::videos::link(pool, row, &sha, 3).await.unwrap();
     };
     link(a.2, a.3.clone(), old.clone(), now - 3 * DAY_MS).await;

@@ -276,7 +276,11 @@ aria-label=\"Episode {key}: both cameras with the task and time captioned\">\
 <a href=\"{src}\">the episode video (MP4)</a></video>"
         );
     } else if let Some(note) = ep.video_note.as_deref() {
-        let _ = write!(out, "<br><span class=\"muted video-note\">{}</span>", escape(note));
+        let _ = write!(
+            out,
+            "<br><span class=\"muted video-note\">{}</span>",
+            escape(note)
+        );
     }
     if let Some(plot) = ep.plot_url.as_deref() {
         let src = page(plot);
@@ -317,7 +321,10 @@ mod tests {
         let html = media(&episode(None, Some(note)));
         assert!(!html.contains("<video"), "{html}");
         assert!(html.contains("team &lt;a&gt;&#39;s videos within"), "{html}");
-        let html = media(&episode(Some("/api/v1/submissions/1/episodes/dev-0001/video.mp4"), None));
+        let html = media(&episode(
+            Some("/api/v1/submissions/1/episodes/dev-0001/video.mp4"),
+            None,
+        ));
         assert!(html.contains("<video"), "{html}");
     }
 }

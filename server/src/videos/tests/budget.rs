@@ -22,14 +22,23 @@ async fn budget_fixture() -> Fixture {
 async fn dev_run(f: &Fixture, team: &str) -> (String, i64, Vec<(i64, i64, i64, String)>) {
     let token = f.team(team).await;
     let caller = f.caller(&token).await;
-    let id = f.state.register_policy(&caller, f.request(Split::Dev)).await.unwrap().id;
+    let id = f
+        .state
+        .register_policy(&caller, f.request(Split::Dev))
+        .await
+        .unwrap()
+        .id;
     let worker = f.worker().await;
     for job in f.lease("w1", 16).await {
         let report = f.report("w1", &job, |_| false, 0.0);
         f.state.report_result(worker, report).await.unwrap();
     }
     let run = store::latest_run(f.state.pool(), id).await.unwrap().unwrap().id;
-    let jobs = done_jobs(f).await.into_iter().filter(|j| j.2 == run).collect::<Vec<_>>();
+    let jobs = done_jobs(f)
+        .await
+        .into_iter()
+        .filter(|j| j.2 == run)
+        .collect::<Vec<_>>();
     assert_eq!(jobs.len(), 3, "{jobs:?}");
     (token, id, jobs)
 }
@@ -59,7 +68,11 @@ async fn uploads_past_a_budget_evict_the_oldest_videos_and_their_episodes_say_wh
     let mut sha = Vec::new();
     for (job, n) in a.iter().zip(1..) {
         let v = video(n);
-        let answer = client.upload_video(upload(job, &v, 1000)).await.unwrap().into_inner();
+        let answer = client
+            .upload_video(upload(job, &v, 1000))
+            .await
+            .unwrap()
+            .into_inner();
         sha.push(answer.sha256);
     }
     // alpha's third video passed its 2 KiB: its first is gone, file and all; the others stay.
@@ -86,7 +99,10 @@ async fn uploads_past_a_budget_evict_the_oldest_videos_and_their_episodes_say_wh
     let eps = shown(&f, &alpha, alpha_id).await;
     let (url, note) = note_of(&eps, &a[1].3);
     assert!(!url);
-    assert!(note.unwrap().contains("[video] total_max_bytes (3 KiB)"), "{note:?}");
+    assert!(
+        note.unwrap().contains("[video] total_max_bytes (3 KiB)"),
+        "{note:?}"
+    );
     assert!(!file_path(&dir, &sha[1]).exists());
     assert_eq!(note_of(&eps, &a[2].3), (true, None), "the newest is kept");
     let eps = shown(&f, &bravo, bravo_id).await;
@@ -118,7 +134,10 @@ async fn an_upload_in_flight_holds_its_room_until_linked() {
     let mut file = Incoming::start(&dir, 3, KIB).await.unwrap();
     file.write(b"abc").await.unwrap();
     let done = file.finish().await.unwrap();
-    f.state.store_video(&dir, up, a[2].2, &a[2].3, done).await.unwrap();
+    f.state
+        .store_video(&dir, up, a[2].2, &a[2].3, done)
+        .await
+        .unwrap();
     let eps = shown(&f, &alpha, alpha_id).await;
     assert_eq!(note_of(&eps, &a[2].3), (true, None), "{eps:?}");
     drop(first);
@@ -131,14 +150,28 @@ async fn a_replaced_video_deletes_the_old_file_unless_another_episode_links_it()
     let mut client = f.worker_client().await;
     let dir = f.state.video_dir().unwrap();
     let up = |job: &(i64, i64, i64, String), v: &[u8]| upload(job, v, v.len() as u64);
-    let old = client.upload_video(up(&a[0], b"first take")).await.unwrap().into_inner();
-    let new = client.upload_video(up(&a[0], b"second take")).await.unwrap().into_inner();
-    assert!(!file_path(&dir, &old.sha256).exists(), "the replaced file is still on disk");
+    let old = client
+        .upload_video(up(&a[0], b"first take"))
+        .await
+        .unwrap()
+        .into_inner();
+    let new = client
+        .upload_video(up(&a[0], b"second take"))
+        .await
+        .unwrap()
+        .into_inner();
+    assert!(
+        !file_path(&dir, &old.sha256).exists(),
+        "the replaced file is still on disk"
+    );
     assert!(file_path(&dir, &new.sha256).exists());
     // The same bytes linked from two episodes: replacing one link keeps the file.
     client.upload_video(up(&a[1], b"second take")).await.unwrap();
     client.upload_video(up(&a[0], b"third take")).await.unwrap();
-    assert!(file_path(&dir, &new.sha256).exists(), "a file another episode links was deleted");
+    assert!(
+        file_path(&dir, &new.sha256).exists(),
+        "a file another episode links was deleted"
+    );
     assert_eq!(files(&dir).len(), 2, "{:?}", files(&dir));
 }
 
@@ -148,7 +181,11 @@ async fn a_start_removes_partial_uploads_and_files_no_episode_links() {
     let (_, _, a) = dev_run(&f, "alpha").await;
     let dir = f.state.video_dir().unwrap();
     let mut client = f.worker_client().await;
-    let kept = client.upload_video(upload(&a[0], b"kept", 4)).await.unwrap().into_inner();
+    let kept = client
+        .upload_video(upload(&a[0], b"kept", 4))
+        .await
+        .unwrap()
+        .into_inner();
     // What a killed process leaves: a partial upload, and a file placed but never linked.
     std::fs::create_dir_all(dir.join("tmp")).unwrap();
     std::fs::write(dir.join("tmp/123-456-0.part"), b"half a vid").unwrap();
