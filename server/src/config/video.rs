@@ -40,8 +40,8 @@ impl Default for VideoConfig {
             test_split: false,
             retention_days: 30,
             max_bytes: 64 << 20,
-            // A failing policy's dev episode makes 6–10 MB of video (README "Episode video"):
-            // 2 GiB keeps a team's last two or three full dev runs of such a policy.
+            // A failing policy's dev episode makes 1–6.5 MB of video (README "Episode video"):
+            // 2 GiB keeps a team's last two full dev runs of the worst such policy.
             team_max_bytes: 2 << 30,
             total_max_bytes: 64 << 30,
             dir: PathBuf::new(),
