@@ -1,13 +1,19 @@
 #!/usr/bin/env bash
-# What the episode video costs (README "Episode video"): the same oracle episodes evaluated
-# through the workers' runner against `kitchen-r policy oracle` on loopback, once without and
-# once with `--record DIR`, one episode at a time (--jobs 1, one core). Prints, per episode, the
-# wall time without and with the video, the time spent composing and encoding frames (from
-# `eval --record`), frames and bytes; the rest of the difference is the extra camera renders
-# (every control step instead of every policy query).
+# What the episode video costs (README "Episode video"): the same episodes evaluated through the
+# workers' runner against a policy served on loopback, once without and once with `--record DIR`,
+# one episode at a time (--jobs 1, one core). Prints, per episode, the wall time without and with
+# the video, the time spent composing and encoding frames (from `eval --record`), frames and
+# bytes; the rest of the difference is the extra camera renders (every control step instead of
+# every policy query).
 #
-#   KITCHEN_R_BIN=target/release/kitchen-r bash scripts/bench-video.sh [EPISODES]
+#   KITCHEN_R_BIN=target/release/kitchen-r [POLICY=oracle|still|sweep] bash scripts/bench-video.sh [EPISODES]
 #
+# POLICY=oracle (default): `kitchen-r policy oracle`, whose tasks end as soon as they succeed.
+# POLICY=still: the starter kit's policy (starter-kit/policy_server.py; needs
+# starter-kit/requirements.txt), which stands still, so every task runs to its time limit: the
+# most frames and encoding time an episode makes.
+# POLICY=sweep: scripts/sweep_policy.py, which also fails every task but keeps both cameras
+# moving: the most bytes an episode makes, what storage budgets must plan for.
 # EPISODES (default 3): the first dev instructions. Everything listens on 127.0.0.1 and is
 # stopped on exit.
 set -euo pipefail
@@ -23,14 +29,26 @@ trap cleanup EXIT
 
 source "$(dirname "$0")/bench-lib.sh"
 
-"$bin" policy oracle --listen 127.0.0.1:0 --max-concurrency 4 > "$work/policy.out" 2>/dev/null &
+case ${POLICY:-oracle} in
+  oracle)
+    "$bin" policy oracle --listen 127.0.0.1:0 --max-concurrency 4 > "$work/policy.out" 2>/dev/null &
+    extra=(--privileged) ;;
+  still)
+    python3 "$(dirname "$0")/../starter-kit/policy_server.py" --listen 127.0.0.1:0 \
+      > "$work/policy.out" 2> "$work/policy.err" &
+    extra=() ;;
+  sweep)
+    python3 "$(dirname "$0")/sweep_policy.py" --listen 127.0.0.1:0 > "$work/policy.out" 2> "$work/policy.err" &
+    extra=() ;;
+  *) echo "POLICY must be oracle, still or sweep" >&2; exit 2 ;;
+esac
 echo $! >> "$work/pids"
 policy=$(wait_line "$work/policy.out" 'listening grpc=')
 
 run() { # run NAME [eval flags...]: the report JSON in $work/NAME.json
   local name=$1
   shift
-  "$bin" eval --policy "http://$policy" --privileged --mode online --episodes "$n" --jobs 1 --json "$@" \
+  "$bin" eval --policy "http://$policy" "${extra[@]}" --mode online --episodes "$n" --jobs 1 --json "$@" \
     > "$work/$name.json" 2> "$work/$name.err"
 }
 run plain
@@ -40,13 +58,15 @@ python3 - "$work/plain.json" "$work/video.json" <<'PY'
 import json, sys
 plain, video = (json.load(open(p)) for p in sys.argv[1:3])
 rows = list(zip(plain["episodes"], video["episodes"]))
-print(f"{'episode':<10} {'wall s':>7} {'+video s':>8} {'encode s':>8} {'frames':>6} {'bytes':>8}")
+print(f"{'episode':<10} {'wall s':>7} {'+video s':>8} {'encode s':>8} {'frames':>6} {'bytes':>8} {'tasks ok':>8}")
 tot = dict(wall=0.0, extra=0.0, enc=0.0, frames=0, bytes=0)
 for p, v in rows:
     vid = v.get("video") or {}
     extra = v["wall_s"] - p["wall_s"]
+    tasks = v.get("tasks") or []
+    ok = f"{sum(1 for t in tasks if t.get('success'))}/{len(tasks)}"
     print(f"{p['episode_key']:<10} {p['wall_s']:7.2f} {extra:8.2f} {vid.get('encode_s', 0):8.2f} "
-          f"{vid.get('frames', 0):6d} {vid.get('bytes', 0):8d}")
+          f"{vid.get('frames', 0):6d} {vid.get('bytes', 0):8d} {ok:>8}")
     tot["wall"] += p["wall_s"]; tot["extra"] += extra; tot["enc"] += vid.get("encode_s", 0)
     tot["frames"] += vid.get("frames", 0); tot["bytes"] += vid.get("bytes", 0)
 k = max(len(rows), 1)

@@ -231,18 +231,29 @@ fn print_tasks(x: &Value) {
 }
 
 /// Links the server attaches to an episode (fields named `*_url`, e.g. a video or a path plot),
-/// made absolute.
+/// made absolute, and in a link's place the note saying why it is gone (`video_note`: a video
+/// removed to keep a storage budget).
 fn print_links(x: &Value, server: &ServerArgs) {
-    for (k, link) in x.as_object().into_iter().flatten() {
-        let (Some(name), Some(link)) = (k.strip_suffix("_url"), link.as_str()) else {
-            continue;
-        };
-        let link = match link.starts_with('/') {
-            true => url(server, link),
-            false => link.to_string(),
-        };
-        println!("      {name}: {link}");
+    for line in link_lines(x, server) {
+        println!("      {line}");
     }
+}
+
+fn link_lines(x: &Value, server: &ServerArgs) -> Vec<String> {
+    let mut out = Vec::new();
+    for (k, v) in x.as_object().into_iter().flatten() {
+        let Some(text) = v.as_str() else { continue };
+        if let Some(name) = k.strip_suffix("_note") {
+            out.push(format!("{name}: {text}"));
+        } else if let Some(name) = k.strip_suffix("_url") {
+            let link = match text.starts_with('/') {
+                true => url(server, text),
+                false => text.to_string(),
+            };
+            out.push(format!("{name}: {link}"));
+        }
+    }
+    out
 }
 
 fn print_instructions(run: &Value, test: bool) {
@@ -361,6 +372,22 @@ mod tests {
             "submission 9 not found (HTTP 404) [code not_found, request id abc]"
         );
         assert_eq!(error_message(502, ""), "the server answered HTTP 502");
+    }
+
+    #[test]
+    fn a_removed_video_prints_its_note_where_the_link_was() {
+        let server = ServerArgs {
+            server: "http://s/".into(),
+        };
+        let ep = json!({"key": "dev-0001", "plot_url": "/p.png",
+                        "video_note": "video removed to keep team t's videos within [video] team_max_bytes (2 GiB)"});
+        assert_eq!(
+            link_lines(&ep, &server),
+            [
+                "plot: http://s/p.png",
+                "video: video removed to keep team t's videos within [video] team_max_bytes (2 GiB)"
+            ]
+        );
     }
 
     #[test]

@@ -97,6 +97,8 @@ pub async fn build_with(config: Config, probe: Arc<dyn PolicyProbe>) -> anyhow::
     };
     let state = AppState::new(pool, config, content, tokens, probe);
     state.seal_stored_tokens().await?;
+    // Before anything listens, so no upload of this process is in `tmp/` yet.
+    videos::clear_partial_uploads(&state).await?;
     Ok(Server {
         state,
         generated_admin_token,

@@ -34,6 +34,8 @@ pub(crate) const EPISODE_DURATION: &str = "kitchen_r_episode_duration_seconds";
 pub(crate) const JOBS_FINISHED: &str = "kitchen_r_jobs_finished_total";
 pub(crate) const JOB_RETRIES: &str = "kitchen_r_job_retries_total";
 pub(crate) const LEASES_RECLAIMED: &str = "kitchen_r_leases_reclaimed_total";
+pub(crate) const VIDEO_EVICTIONS: &str = "kitchen_r_video_evictions_total";
+pub(crate) const VIDEO_STORED_BYTES: &str = "kitchen_r_video_stored_bytes";
 
 /// The Prometheus text format's content type.
 pub(crate) const CONTENT_TYPE: &str = "text/plain; version=0.0.4; charset=utf-8";
@@ -156,8 +158,20 @@ fn describe() {
         LEASES_RECLAIMED,
         "Expired leases taken back by the reaper (requeued or failed)"
     );
+    describe_counter!(
+        VIDEO_EVICTIONS,
+        "Episode videos removed to keep a storage budget, by budget (team: [video] team_max_bytes; total: total_max_bytes)"
+    );
+    metrics::describe_gauge!(
+        VIDEO_STORED_BYTES,
+        metrics::Unit::Bytes,
+        "Bytes of episode video stored, as the budgets count them (per linked episode), after the last upload or sweep"
+    );
     for outcome in ["done", "failed"] {
         metrics::counter!(JOBS_FINISHED, "outcome" => outcome).increment(0);
+    }
+    for budget in ["team", "total"] {
+        metrics::counter!(VIDEO_EVICTIONS, "budget" => budget).increment(0);
     }
     metrics::counter!(LEASES_RECLAIMED).increment(0);
 }

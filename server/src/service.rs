@@ -16,7 +16,8 @@
 //! - [`portal`]: what the participant pages read (a team's submissions, quota left, ETA);
 //! - [`rescore`]: the organiser's rescoring of every stored submission;
 //! - [`secrets`]: endpoint tokens sealed at rest, opened for workers, sealed at start-up;
-//! - [`admin`]: the organiser's console (queue, workers, runs; cancel, requeue, backup).
+//! - [`admin`]: the organiser's console (queue, workers, runs; cancel, requeue, backup);
+//! - [`video_budget`]: the video storage budgets and the files nothing links any more.
 //!
 //! This file holds only the shared state and its accessors.
 
@@ -36,6 +37,7 @@ mod secrets;
 pub(crate) mod sessions;
 mod submissions;
 mod teams;
+mod video_budget;
 
 use std::sync::Arc;
 
@@ -88,6 +90,8 @@ struct Inner {
     telemetry: metrics::Telemetry,
     /// Seals policy endpoints' bearer tokens at rest ([`secrets`]).
     secret_key: crate::secrets::SecretKey,
+    /// Video uploads in flight and the lock ordering file decisions (see [`video_budget`]).
+    videos: video_budget::VideoLedger,
 }
 
 impl std::fmt::Debug for AppState {
@@ -134,6 +138,7 @@ impl AppState {
                 jobs_ready: tokio::sync::Notify::new(),
                 stopping: std::sync::atomic::AtomicBool::new(false),
                 secret_key: tokens.secret_key.clone(),
+                videos: video_budget::VideoLedger::default(),
             }),
         }
     }

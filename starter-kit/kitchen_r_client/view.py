@@ -194,7 +194,10 @@ def _print_evaluation(ev, server, out):
         if isinstance(x.get("failure"), str):
             out("      failure: " + x["failure"])
         for k, link in x.items():
-            if k.endswith("_url") and isinstance(link, str):
+            if k.endswith("_note") and isinstance(link, str):
+                # In the link's place: why it is gone (a video removed to keep a storage budget).
+                out("      %s: %s" % (k[: -len("_note")], link))
+            elif k.endswith("_url") and isinstance(link, str):
                 out("      %s: %s" % (k[: -len("_url")], server.rstrip("/") + link if link.startswith("/") else link))
 
 

@@ -88,6 +88,17 @@ class Printing(unittest.TestCase):
         self.assertIn("task 2  FAILED       place the cup: time limit of 120 s reached", text)
         self.assertIn("video: http://s/media/v.mp4", text)
 
+    def test_a_removed_video_prints_its_note_where_the_link_was(self):
+        note = "video removed to keep team t's videos within [video] team_max_bytes (2 GiB)"
+        v = {"id": 3, "kind": "policy", "split": "dev", "team": "t", "created_at": "x",
+             "latest_run": {"id": 4, "scores": {}, "evaluation": {
+                 "state": "finished", "episodes_done": 1, "episodes_total": 1, "episodes_running": 0,
+                 "failure_counts": [], "episodes": [{"key": "dev-0001", "mode": "online", "wall_ms": 1,
+                                                     "attempt": 1, "video_note": note, "tasks": []}]}}}
+        lines = []
+        view.print_submission(v, "http://s", out=lines.append)
+        self.assertIn("video: " + note, "\n".join(lines))
+
 
 if __name__ == "__main__":
     unittest.main()

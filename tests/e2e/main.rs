@@ -29,4 +29,5 @@ mod planning;
 mod secrets;
 mod submission;
 mod video;
+mod video_files;
 mod workers;

@@ -22,6 +22,12 @@ pub struct VideoConfig {
     pub retention_days: u32,
     /// Largest video file accepted, bytes (workers do not upload a larger one).
     pub max_bytes: u64,
+    /// Most bytes of stored video one team's episodes may link; an upload past it first
+    /// removes that team's oldest videos (their episodes say so where the video was).
+    pub team_max_bytes: u64,
+    /// Most bytes of stored video of all teams together; past it the oldest videos of any
+    /// team are removed, after the uploading team's own budget was applied.
+    pub total_max_bytes: u64,
     /// Where the files are stored (`<aa>/<sha256>.mp4`); empty means `videos/` beside the
     /// database file (no videos with an in-memory database).
     pub dir: PathBuf,
@@ -34,6 +40,10 @@ impl Default for VideoConfig {
             test_split: false,
             retention_days: 30,
             max_bytes: 64 << 20,
+            // A failing policy's dev episode makes 1–6.5 MB of video (README "Episode video"):
+            // 2 GiB keeps a team's last two full dev runs of the worst such policy.
+            team_max_bytes: 2 << 30,
+            total_max_bytes: 64 << 30,
             dir: PathBuf::new(),
         }
     }
@@ -45,6 +55,26 @@ impl VideoConfig {
             return Err(ConfigError::Invalid {
                 key: "video.max_bytes",
                 message: "must be between 1 KiB and 1 GiB".into(),
+            });
+        }
+        // Each budget must hold at least one file of the one below it, or an upload that
+        // `max_bytes` accepts could never be stored.
+        if self.team_max_bytes < self.max_bytes {
+            return Err(ConfigError::Invalid {
+                key: "video.team_max_bytes",
+                message: format!(
+                    "{} is less than `video.max_bytes` ({}): a team's budget must hold at least its largest video",
+                    self.team_max_bytes, self.max_bytes
+                ),
+            });
+        }
+        if self.total_max_bytes < self.team_max_bytes {
+            return Err(ConfigError::Invalid {
+                key: "video.total_max_bytes",
+                message: format!(
+                    "{} is less than `video.team_max_bytes` ({}): the total must hold at least one team's budget",
+                    self.total_max_bytes, self.team_max_bytes
+                ),
             });
         }
         Ok(())
@@ -96,5 +126,27 @@ mod tests {
         };
         assert_eq!(v.directory("sqlite::memory:"), Some(PathBuf::from("/v")));
         assert!(VideoConfig { max_bytes: 5, ..v }.validate().is_err());
+    }
+
+    #[test]
+    fn budgets_must_nest_max_bytes_within_team_within_total() {
+        let v = VideoConfig::default();
+        assert_eq!(v.validate().map_err(|e| e.to_string()), Ok(()));
+        let key = |v: VideoConfig| match v.validate() {
+            Err(ConfigError::Invalid { key, message }) => (key, message),
+            other => panic!("{other:?}"),
+        };
+        let (k, m) = key(VideoConfig {
+            team_max_bytes: v.max_bytes - 1,
+            ..v.clone()
+        });
+        assert_eq!(k, "video.team_max_bytes");
+        assert!(m.contains("video.max_bytes"), "{m}");
+        let (k, m) = key(VideoConfig {
+            total_max_bytes: v.team_max_bytes - 1,
+            ..v.clone()
+        });
+        assert_eq!(k, "video.total_max_bytes");
+        assert!(m.contains("video.team_max_bytes"), "{m}");
     }
 }

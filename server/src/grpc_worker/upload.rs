@@ -1,6 +1,7 @@
 //! `UploadVideo`: an episode video streamed in chunks after the episode's result. The first
 //! chunk names the job; the upload is accepted only for a job whose result that attempt
-//! reported, so a worker token cannot attach a file to any other episode.
+//! reported, so a worker token cannot attach a file to any other episode. The announced size
+//! is booked against the storage budgets before a byte is written (`service::video_budget`).
 
 use kitchen_r_proto::worker::v1 as pb;
 use tonic::{Status, Streaming};
@@ -38,25 +39,33 @@ pub(super) async fn receive(
             first.job_id, first.attempt, first.run_id, first.episode_key
         )));
     }
+    let (run, key) = (first.run_id, first.episode_key.as_str());
     let limit = state.config().video.max_bytes;
     let mut file = Incoming::start(&dir, first.total_bytes, limit)
+        .await
+        .map_err(refused)?;
+    let booking = state
+        .book_video(&dir, run, key, first.total_bytes)
         .await
         .map_err(refused)?;
     file.write(&first.data).await.map_err(refused)?;
     while let Some(chunk) = stream.message().await? {
         file.write(&chunk.data).await.map_err(refused)?;
     }
-    let (sha, bytes) = file.finish(&dir).await.map_err(refused)?;
-    state
-        .link_video(first.run_id, &first.episode_key, &sha, bytes)
-        .await?;
-    tracing::info!(run = first.run_id, episode = %first.episode_key, bytes, sha256 = %sha, "episode video stored");
+    let file = file.finish().await.map_err(refused)?;
+    let (sha, bytes) = state
+        .store_video(&dir, booking, run, key, file)
+        .await
+        .map_err(refused)?;
+    tracing::info!(run, episode = %key, bytes, sha256 = %sha, "episode video stored");
     Ok((sha, bytes))
 }
 
 fn refused(e: UploadError) -> Status {
     match e {
         UploadError::Io(e) => Status::internal(format!("storing the video: {e}")),
+        UploadError::Service(e) => e.into(),
+        UploadError::NoRoom(why) => Status::resource_exhausted(why),
         e => Status::invalid_argument(e.to_string()),
     }
 }

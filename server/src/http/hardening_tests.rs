@@ -180,12 +180,15 @@ async fn a_video_answers_304_to_a_matching_if_none_match_or_if_modified_since() 
     .await
     .unwrap();
     let dir = f.state.video_dir().unwrap();
-    let mut up = crate::videos::Incoming::start(&dir, 5, 1 << 20).await.unwrap();
-    up.write(b"mp4!!").await.unwrap();
-    let (sha, n) = up.finish(&dir).await.unwrap();
-    crate::store::videos::link(pool, run, &key, &sha, n, crate::service::now_ms())
-        .await
-        .unwrap();
+    let sha = crate::videos::tests::store_file(&dir, b"mp4!!").await;
+    let team = f.team_of(&alpha).await.id;
+    let row = crate::store::videos::Row {
+        run,
+        key: &key,
+        team,
+        now: crate::service::now_ms(),
+    };
+    crate::store::videos::link(pool, row, &sha, 5).await.unwrap();
     let app = router(f.state.clone());
     let path = format!("/api/v1/submissions/{dev}/episodes/{key}/video.mp4");
     let get = |h: Vec<(header::HeaderName, String)>| {

@@ -101,6 +101,10 @@ pub(crate) struct EpisodeView {
     /// The episode video (dev split, online episodes with a stored video; `[video]`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub video_url: Option<String>,
+    /// Why the episode has no video any more, where `video_url` would be: removed to keep a
+    /// storage budget (`[video] team_max_bytes` or `total_max_bytes`), or not stored.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub video_note: Option<String>,
 }
 
 impl AppState {
@@ -113,8 +117,8 @@ impl AppState {
         let source = run.episodes_run();
         let counts = run_store::job_counts(self.read_pool(), source).await?;
         let results = run_store::results(self.read_pool(), source).await?;
-        let videos = match hidden {
-            true => Vec::new(),
+        let mut videos = match hidden {
+            true => Default::default(),
             false => self.video_keys(source).await?,
         };
         let state = match run.state {
@@ -131,8 +135,10 @@ impl AppState {
                 if plot {
                     e.plot_url = Some(plot_url(submission, &e.key));
                 }
-                if videos.contains(&e.key) {
-                    e.video_url = Some(video_url(submission, &e.key));
+                match videos.remove(&e.key) {
+                    Some(None) => e.video_url = Some(video_url(submission, &e.key)),
+                    Some(Some(note)) => e.video_note = Some(note),
+                    None => {}
                 }
                 e
             })
@@ -264,6 +270,7 @@ fn episode_view(r: ResultRow) -> EpisodeView {
         log_tail: Some(r.log_tail),
         plot_url: None,
         video_url: None,
+        video_note: None,
     }
 }
 
@@ -286,6 +293,7 @@ mod tests {
             log_tail: None,
             plot_url: None,
             video_url: None,
+            video_note: None,
         };
         let hidden = failure_counts(std::slice::from_ref(&given_up), true);
         assert_eq!(hidden[0].reason, PLATFORM_GAVE_UP);

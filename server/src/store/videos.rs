@@ -1,5 +1,9 @@
 //! Episode videos' rows (`episode_videos`): which stored file (by sha256) shows which
-//! (run, episode), and the retention sweep's deletes. The files are `crate::videos`'.
+//! (run, episode), the budgets' evictions and the retention sweep's deletes. The files are
+//! `crate::videos`'.
+//!
+//! A row with a `note` is a video removed to keep a budget: it has no file any more and says
+//! why. Everything that counts, serves or keeps files reads only rows without one ("stored").
 
 use sqlx::sqlite::SqlitePool;
 
@@ -24,62 +28,223 @@ pub(crate) async fn reported_job(
     Ok(found.is_some())
 }
 
-/// Link `(run, key)` to the file `sha256` (replacing an earlier link).
-pub(crate) async fn link(
-    pool: &SqlitePool,
-    run: i64,
-    key: &str,
-    sha256: &str,
-    bytes: u64,
-    now: i64,
-) -> sqlx::Result<()> {
-    sqlx::query(
-        "INSERT INTO episode_videos (run_id, episode_key, sha256, bytes, created_at) VALUES (?, ?, ?, ?, ?)
-         ON CONFLICT (run_id, episode_key) DO UPDATE SET sha256 = excluded.sha256,
-             bytes = excluded.bytes, created_at = excluded.created_at",
+/// The team whose run `run` is, and its name.
+pub(crate) async fn team_of_run(pool: &SqlitePool, run: i64) -> sqlx::Result<Option<(i64, String)>> {
+    sqlx::query_as(
+        "SELECT t.id, t.name FROM scoring_runs r JOIN submissions s ON s.id = r.submission_id
+         JOIN teams t ON t.id = s.team_id WHERE r.id = ?",
     )
     .bind(run)
-    .bind(key)
+    .fetch_optional(pool)
+    .await
+}
+
+/// Link `(run, key)` of `team` to the file `sha256`, replacing an earlier link or note.
+/// Returns the file the replaced link named when no stored row names it any more.
+pub(crate) async fn link(
+    pool: &SqlitePool,
+    row: Row<'_>,
+    sha256: &str,
+    bytes: u64,
+) -> sqlx::Result<Option<String>> {
+    let mut tx = pool.begin_with("BEGIN IMMEDIATE").await?;
+    let old: Option<String> = sqlx::query_scalar(
+        "SELECT sha256 FROM episode_videos WHERE run_id = ? AND episode_key = ? AND note IS NULL",
+    )
+    .bind(row.run)
+    .bind(row.key)
+    .fetch_optional(&mut *tx)
+    .await?;
+    sqlx::query(
+        "INSERT INTO episode_videos (run_id, episode_key, team_id, sha256, bytes, created_at)
+         VALUES (?, ?, ?, ?, ?, ?)
+         ON CONFLICT (run_id, episode_key) DO UPDATE SET sha256 = excluded.sha256,
+             bytes = excluded.bytes, created_at = excluded.created_at,
+             team_id = excluded.team_id, note = NULL",
+    )
+    .bind(row.run)
+    .bind(row.key)
+    .bind(row.team)
     .bind(sha256)
     .bind(bytes as i64)
-    .bind(now)
+    .bind(row.now)
+    .execute(&mut *tx)
+    .await?;
+    let orphan = match old {
+        Some(old) if old != sha256 && !stored(&mut tx, &old).await? => Some(old),
+        _ => None,
+    };
+    tx.commit().await?;
+    Ok(orphan)
+}
+
+/// Say why `(run, key)` has no video, unless it has a row already (a stored video stays).
+pub(crate) async fn note(pool: &SqlitePool, row: Row<'_>, note: &str) -> sqlx::Result<()> {
+    sqlx::query(
+        "INSERT INTO episode_videos (run_id, episode_key, team_id, sha256, bytes, created_at, note)
+         VALUES (?, ?, ?, '', 0, ?, ?) ON CONFLICT (run_id, episode_key) DO NOTHING",
+    )
+    .bind(row.run)
+    .bind(row.key)
+    .bind(row.team)
+    .bind(row.now)
+    .bind(note)
     .execute(pool)
     .await?;
     Ok(())
 }
 
-/// The file of `(run, key)`: its sha256 and size.
+/// The `episode_videos` row an upload writes.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Row<'a> {
+    pub run: i64,
+    pub key: &'a str,
+    pub team: i64,
+    /// Unix ms.
+    pub now: i64,
+}
+
+/// A byte budget of stored videos: one team's (`team`) or everyone's (`None`).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Budget<'a> {
+    pub team: Option<i64>,
+    pub max: u64,
+    /// Bytes of uploads in flight that this budget must hold too.
+    pub pending: u64,
+    /// What a row evicted for this budget says.
+    pub note: &'a str,
+}
+
+/// What [`make_room`] did.
+#[derive(Debug, Default)]
+pub(crate) struct Room {
+    /// Whether `incoming` bytes fit every budget now; when not, nothing was evicted.
+    pub fits: bool,
+    /// Rows evicted, per budget in the order given.
+    pub evicted: Vec<usize>,
+    /// Files of evicted rows that no stored row names any more.
+    pub orphans: Vec<String>,
+}
+
+// Two statements per kind of budget rather than `team_id = ? OR ? IS NULL`, so SQLite uses the
+// partial indexes (migration 20261126000100).
+const SUM_ALL: &str = "SELECT COALESCE(SUM(bytes), 0) FROM episode_videos WHERE note IS NULL";
+const SUM_TEAM: &str =
+    "SELECT COALESCE(SUM(bytes), 0) FROM episode_videos WHERE note IS NULL AND team_id = ?";
+const OLDEST_ALL: &str = "SELECT rowid, sha256, bytes FROM episode_videos WHERE note IS NULL
+     ORDER BY created_at, rowid LIMIT 1";
+const OLDEST_TEAM: &str = "SELECT rowid, sha256, bytes FROM episode_videos WHERE note IS NULL AND team_id = ?
+     ORDER BY created_at, rowid LIMIT 1";
+
+/// Evict the oldest stored rows of each budget in turn until `incoming` more bytes fit it, in
+/// one write transaction (two uploads never pick the same row nor both count the room one
+/// eviction freed). Nothing is evicted when a budget cannot hold `incoming` even emptied.
+pub(crate) async fn make_room(
+    pool: &SqlitePool,
+    budgets: &[Budget<'_>],
+    incoming: u64,
+) -> sqlx::Result<Room> {
+    if budgets.iter().any(|b| b.pending.saturating_add(incoming) > b.max) {
+        return Ok(Room::default());
+    }
+    let mut tx = pool.begin_with("BEGIN IMMEDIATE").await?;
+    let mut room = Room {
+        fits: true,
+        ..Room::default()
+    };
+    let mut freed = Vec::new();
+    for b in budgets {
+        let (sum, oldest) = match b.team {
+            Some(_) => (SUM_TEAM, OLDEST_TEAM),
+            None => (SUM_ALL, OLDEST_ALL),
+        };
+        let mut q = sqlx::query_scalar::<_, i64>(sum);
+        if let Some(team) = b.team {
+            q = q.bind(team);
+        }
+        let used = q.fetch_one(&mut *tx).await?;
+        let mut used = used.max(0) as u64;
+        let mut n = 0;
+        while used + b.pending + incoming > b.max {
+            let mut q = sqlx::query_as::<_, (i64, String, i64)>(oldest);
+            if let Some(team) = b.team {
+                q = q.bind(team);
+            }
+            let row = q.fetch_optional(&mut *tx).await?;
+            // Unreachable: emptied, the budget holds `pending + incoming` (checked above).
+            let Some((rowid, sha, bytes)) = row else { break };
+            sqlx::query("UPDATE episode_videos SET note = ? WHERE rowid = ?")
+                .bind(b.note)
+                .bind(rowid)
+                .execute(&mut *tx)
+                .await?;
+            used = used.saturating_sub(bytes.max(0) as u64);
+            n += 1;
+            if !freed.contains(&sha) {
+                freed.push(sha);
+            }
+        }
+        room.evicted.push(n);
+    }
+    for sha in freed {
+        if !stored(&mut tx, &sha).await? {
+            room.orphans.push(sha);
+        }
+    }
+    tx.commit().await?;
+    Ok(room)
+}
+
+/// Whether a stored row names the file `sha256`, inside a transaction.
+async fn stored(tx: &mut sqlx::SqliteConnection, sha256: &str) -> sqlx::Result<bool> {
+    let found: Option<i64> =
+        sqlx::query_scalar("SELECT 1 FROM episode_videos WHERE sha256 = ? AND note IS NULL LIMIT 1")
+            .bind(sha256)
+            .fetch_optional(tx)
+            .await?;
+    Ok(found.is_some())
+}
+
+/// The stored file of `(run, key)`: its sha256 and size.
 pub(crate) async fn video(pool: &SqlitePool, run: i64, key: &str) -> sqlx::Result<Option<(String, i64)>> {
-    sqlx::query_as("SELECT sha256, bytes FROM episode_videos WHERE run_id = ? AND episode_key = ?")
+    sqlx::query_as(
+        "SELECT sha256, bytes FROM episode_videos WHERE run_id = ? AND episode_key = ? AND note IS NULL",
+    )
+    .bind(run)
+    .bind(key)
+    .fetch_optional(pool)
+    .await
+}
+
+/// The episode keys of `run` with a row: `None` for a stored video, else the note saying why
+/// there is none.
+pub(crate) async fn keys(pool: &SqlitePool, run: i64) -> sqlx::Result<Vec<(String, Option<String>)>> {
+    sqlx::query_as("SELECT episode_key, note FROM episode_videos WHERE run_id = ?")
         .bind(run)
-        .bind(key)
-        .fetch_optional(pool)
+        .fetch_all(pool)
         .await
 }
 
-/// The episode keys of `run` that have a video.
-pub(crate) async fn keys(pool: &SqlitePool, run: i64) -> sqlx::Result<Vec<String>> {
-    sqlx::query_scalar("SELECT episode_key FROM episode_videos WHERE run_id = ?")
-        .bind(run)
-        .fetch_all(pool)
+/// Bytes of every stored video (per row, as the budgets count them).
+pub(crate) async fn stored_bytes(pool: &SqlitePool) -> sqlx::Result<i64> {
+    sqlx::query_scalar("SELECT COALESCE(SUM(bytes), 0) FROM episode_videos WHERE note IS NULL")
+        .fetch_one(pool)
         .await
 }
 
 /// Delete the links made before `before` (Unix ms); returns the files no link names any more.
 pub(crate) async fn expire(pool: &SqlitePool, before: i64) -> sqlx::Result<Vec<String>> {
     let mut tx = pool.begin_with("BEGIN IMMEDIATE").await?;
-    let gone: Vec<String> =
-        sqlx::query_scalar("DELETE FROM episode_videos WHERE created_at < ? RETURNING sha256")
-            .bind(before)
-            .fetch_all(&mut *tx)
-            .await?;
+    // Evicted rows go too (their note has no file to explain any more).
+    let gone: Vec<Option<String>> = sqlx::query_scalar(
+        "DELETE FROM episode_videos WHERE created_at < ? RETURNING CASE WHEN note IS NULL THEN sha256 END",
+    )
+    .bind(before)
+    .fetch_all(&mut *tx)
+    .await?;
     let mut orphans = Vec::new();
-    for sha in gone {
-        let still: Option<i64> = sqlx::query_scalar("SELECT 1 FROM episode_videos WHERE sha256 = ? LIMIT 1")
-            .bind(&sha)
-            .fetch_optional(&mut *tx)
-            .await?;
-        if still.is_none() && !orphans.contains(&sha) {
+    for sha in gone.into_iter().flatten() {
+        if !orphans.contains(&sha) && !stored(&mut tx, &sha).await? {
             orphans.push(sha);
         }
     }
@@ -87,11 +252,12 @@ pub(crate) async fn expire(pool: &SqlitePool, before: i64) -> sqlx::Result<Vec<S
     Ok(orphans)
 }
 
-/// Whether any link names the file `sha256` (an upload racing the sweep keeps its file).
+/// Whether a stored row names the file `sha256` (an upload racing the sweep keeps its file).
 pub(crate) async fn linked(pool: &SqlitePool, sha256: &str) -> sqlx::Result<bool> {
-    let found: Option<i64> = sqlx::query_scalar("SELECT 1 FROM episode_videos WHERE sha256 = ? LIMIT 1")
-        .bind(sha256)
-        .fetch_optional(pool)
-        .await?;
+    let found: Option<i64> =
+        sqlx::query_scalar("SELECT 1 FROM episode_videos WHERE sha256 = ? AND note IS NULL LIMIT 1")
+            .bind(sha256)
+            .fetch_optional(pool)
+            .await?;
     Ok(found.is_some())
 }

@@ -1,12 +1,15 @@
 use kitchen_r_core::dataset::Split;
 use kitchen_r_proto::worker::v1 as pb;
+use sha2::{Digest, Sha256};
 use tonic::{Code, Request};
 
 use super::*;
 use crate::testutil::{FakeProbe, Fixture, WORKER, fixture};
 
+mod budget;
+
 /// `(job id, attempt, run, key)` of every reported online job, dev run first.
-async fn done_jobs(f: &Fixture) -> Vec<(i64, i64, i64, String)> {
+pub(super) async fn done_jobs(f: &Fixture) -> Vec<(i64, i64, i64, String)> {
     sqlx::query_as(
         "SELECT id, attempt, run_id, episode_key FROM jobs WHERE state = 'done'
          AND episode_key NOT LIKE '%/offline' ORDER BY run_id, id",
@@ -17,7 +20,7 @@ async fn done_jobs(f: &Fixture) -> Vec<(i64, i64, i64, String)> {
 }
 
 /// The upload stream of `data` for `job`, in chunks of 3 bytes, announcing `total` bytes.
-fn upload(
+pub(super) fn upload(
     job: &(i64, i64, i64, String),
     data: &[u8],
     total: u64,
@@ -40,7 +43,7 @@ fn upload(
     req
 }
 
-fn files(dir: &Path) -> Vec<PathBuf> {
+pub(super) fn files(dir: &Path) -> Vec<PathBuf> {
     let mut out = Vec::new();
     for e in std::fs::read_dir(dir).into_iter().flatten().flatten() {
         let p = e.path();
@@ -133,28 +136,24 @@ async fn the_retention_sweep_deletes_old_links_and_files_no_link_names() {
     f.runs_with_paths(|_| Default::default()).await;
     let jobs = done_jobs(&f).await;
     let dir = f.state.video_dir().unwrap();
-    let store_file = |bytes: &'static [u8]| {
-        let dir = dir.clone();
-        async move {
-            let mut up = Incoming::start(&dir, bytes.len() as u64, 1 << 20).await.unwrap();
-            up.write(bytes).await.unwrap();
-            up.finish(&dir).await.unwrap().0
-        }
-    };
-    let (old, shared) = (store_file(b"old").await, store_file(b"shared").await);
+    let (old, shared) = (store_file(&dir, b"old").await, store_file(&dir, b"shared").await);
     let now = 100 * DAY_MS;
     let (a, b) = (&jobs[0], jobs.last().unwrap());
     let pool = f.state.pool();
-    store::videos::link(pool, a.2, &a.3, &old, 3, now - 3 * DAY_MS)
-        .await
-        .unwrap();
+    let link = |run: i64, key: String, sha: String, at: i64| async move {
+        let (team, _) = store::videos::team_of_run(pool, run).await.unwrap().unwrap();
+        let row = store::videos::Row {
+            run,
+            key: &key,
+            team,
+            now: at,
+        };
+        store::videos::link(pool, row, &sha, 3).await.unwrap();
+    };
+    link(a.2, a.3.clone(), old.clone(), now - 3 * DAY_MS).await;
     // `shared` is linked by an old row and a recent one: the file stays.
-    store::videos::link(pool, b.2, &b.3, &shared, 6, now - 3 * DAY_MS)
-        .await
-        .unwrap();
-    store::videos::link(pool, a.2, "other-key", &shared, 6, now - DAY_MS)
-        .await
-        .unwrap();
+    link(b.2, b.3.clone(), shared.clone(), now - 3 * DAY_MS).await;
+    link(a.2, "other-key".into(), shared.clone(), now - DAY_MS).await;
     assert_eq!(f.state.sweep_videos(now).await.unwrap(), 1);
     assert!(!file_path(&dir, &old).exists());
     assert!(file_path(&dir, &shared).exists());
@@ -168,6 +167,16 @@ async fn the_retention_sweep_deletes_old_links_and_files_no_link_names() {
     // retention_days = 0 keeps everything.
     let keep = fixture(FakeProbe::ok(8), |c| c.video.retention_days = 0).await;
     assert_eq!(keep.state.sweep_videos(now).await.unwrap(), 0);
+}
+
+/// Store `bytes` as a finished upload would; returns its sha256.
+pub(crate) async fn store_file(dir: &Path, bytes: &[u8]) -> String {
+    let mut up = Incoming::start(dir, bytes.len() as u64, 1 << 20).await.unwrap();
+    up.write(bytes).await.unwrap();
+    let done = up.finish().await.unwrap();
+    let sha = done.sha256.clone();
+    done.place(dir).await.unwrap();
+    sha
 }
 
 #[tokio::test]

@@ -265,7 +265,8 @@ fn episode_row(ep: &EpisodeView) -> String {
 
 /// The episode's video and path plot (issue #15, items 1 and 2), placed under the episode's
 /// key; only what exists is shown (neither ever on the test split: the view has no URL there).
-/// Both are served to the page's session at the API path less its `/api/v1` prefix.
+/// Both are served to the page's session at the API path less its `/api/v1` prefix. A video
+/// removed to keep a storage budget shows its note instead of a player (never a broken one).
 fn media(ep: &EpisodeView) -> String {
     let page = |url: &str| escape(url.strip_prefix("/api/v1").unwrap_or(url));
     let key = escape(&ep.key);
@@ -280,6 +281,12 @@ fn media(ep: &EpisodeView) -> String {
 aria-label=\"Episode {key}: both cameras with the task and time captioned\">\
 <a href=\"{src}\">the episode video (MP4)</a></video>"
         );
+    } else if let Some(note) = ep.video_note.as_deref() {
+        let _ = write!(
+            out,
+            "<br><span class=\"muted video-note\">{}</span>",
+            escape(note)
+        );
     }
     if let Some(plot) = ep.plot_url.as_deref() {
         let src = page(plot);
@@ -290,4 +297,40 @@ alt=\"Where the robot went in {key}: the base path coloured by task, goal circle
         );
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn episode(video_url: Option<&str>, video_note: Option<&str>) -> EpisodeView {
+        EpisodeView {
+            key: "dev-0001".into(),
+            mode: "online".into(),
+            success_rate: Some(0.0),
+            mse: None,
+            failure: None,
+            failure_reasons: Vec::new(),
+            wall_ms: 1000,
+            attempt: 1,
+            tasks: Some(Vec::new()),
+            log_tail: None,
+            plot_url: None,
+            video_url: video_url.map(str::to_string),
+            video_note: video_note.map(str::to_string),
+        }
+    }
+
+    #[test]
+    fn a_removed_video_shows_its_note_instead_of_a_player() {
+        let note = "video removed to keep team <a>'s videos within [video] team_max_bytes (2 GiB)";
+        let html = media(&episode(None, Some(note)));
+        assert!(!html.contains("<video"), "{html}");
+        assert!(html.contains("team &lt;a&gt;&#39;s videos within"), "{html}");
+        let html = media(&episode(
+            Some("/api/v1/submissions/1/episodes/dev-0001/video.mp4"),
+            None,
+        ));
+        assert!(html.contains("<video"), "{html}");
+    }
 }

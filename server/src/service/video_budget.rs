@@ -1,0 +1,238 @@
+//! Bounded video storage (issue 23): per-team and total byte budgets (`[video] team_max_bytes`,
+//! `total_max_bytes`), and no file left on disk that nothing links.
+//!
+//! Policy: an upload's announced size is booked before a byte is written. If the team's stored
+//! videos plus its uploads in flight plus this one would pass the team's budget, that team's
+//! oldest videos are removed until it fits; then the oldest videos of any team until the total
+//! fits (newest kept, as the retention sweep keeps them). A removed video keeps its row with a
+//! note that the episode shows where the video was. Bytes count per row: a file that two
+//! episodes link counts twice (simple, and never under the disk's use).
+//!
+//! Concurrency: this server is its video directory's only writer (one replica, `deploy/`), so
+//! uploads in flight are booked in memory, and one lock (`turn`) orders every step that decides
+//! a file's fate: booking (with its evictions), placing a file and linking it, and deleting a
+//! file no row names. So two uploads never both take the last room nor evict the same video,
+//! and a file is never deleted between an upload of the same bytes placing and linking it.
+//! The database side is one `BEGIN IMMEDIATE` transaction per step (`store::videos`).
+
+use std::collections::HashMap;
+use std::path::Path;
+use std::sync::{Mutex, PoisonError};
+
+use super::{AppState, now_ms};
+use crate::error::ServiceError;
+use crate::metrics as m;
+use crate::store::videos::{self as store, Budget, Row};
+use crate::videos::{Complete, UploadError, file_path};
+
+/// Uploads in flight and the lock that orders file decisions; one per server.
+#[derive(Default)]
+pub(super) struct VideoLedger {
+    turn: tokio::sync::Mutex<()>,
+    pending: Mutex<Pending>,
+}
+
+#[derive(Default)]
+struct Pending {
+    teams: HashMap<i64, u64>,
+    total: u64,
+}
+
+impl VideoLedger {
+    fn pending(&self) -> std::sync::MutexGuard<'_, Pending> {
+        self.pending.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+}
+
+/// Room booked for one upload in flight; given back when dropped (the linked row counts
+/// from then on).
+pub(crate) struct Booking {
+    state: AppState,
+    team: i64,
+    bytes: u64,
+}
+
+impl Drop for Booking {
+    fn drop(&mut self) {
+        let mut p = self.state.inner.videos.pending();
+        p.total = p.total.saturating_sub(self.bytes);
+        if let Some(t) = p.teams.get_mut(&self.team) {
+            *t = t.saturating_sub(self.bytes);
+            if *t == 0 {
+                p.teams.remove(&self.team);
+            }
+        }
+    }
+}
+
+impl AppState {
+    /// Book `bytes` for the video of `(run, key)`, evicting the oldest videos the budgets
+    /// need gone (their files deleted once no row names them). Refused, with a note on the
+    /// episode, only when uploads in flight hold the budget's rest.
+    pub(crate) async fn book_video(
+        &self,
+        dir: &Path,
+        run: i64,
+        key: &str,
+        bytes: u64,
+    ) -> Result<Booking, UploadError> {
+        let (team, name) = store::team_of_run(self.read_pool(), run)
+            .await
+            .map_err(ServiceError::from)?
+            .ok_or_else(|| ServiceError::not_found(format!("scoring run {run}")))?;
+        let cfg = &self.config().video;
+        let team_note = format!(
+            "video removed to keep team {name}'s videos within [video] team_max_bytes ({}); newer episodes' videos are kept",
+            size(cfg.team_max_bytes)
+        );
+        let total_note = format!(
+            "video removed to keep all teams' videos within [video] total_max_bytes ({}); newer episodes' videos are kept",
+            size(cfg.total_max_bytes)
+        );
+        let _turn = self.inner.videos.turn.lock().await;
+        let (team_pending, total_pending) = {
+            let p = self.inner.videos.pending();
+            (p.teams.get(&team).copied().unwrap_or(0), p.total)
+        };
+        let budgets = [
+            Budget {
+                team: Some(team),
+                max: cfg.team_max_bytes,
+                pending: team_pending,
+                note: &team_note,
+            },
+            Budget {
+                team: None,
+                max: cfg.total_max_bytes,
+                pending: total_pending,
+                note: &total_note,
+            },
+        ];
+        let room = store::make_room(self.pool(), &budgets, bytes)
+            .await
+            .map_err(ServiceError::from)?;
+        let row = Row {
+            run,
+            key,
+            team,
+            now: now_ms(),
+        };
+        if !room.fits {
+            let why = format!(
+                "video not stored: other uploads in progress fill [video] team_max_bytes ({}) or total_max_bytes ({}); the worker retries",
+                size(cfg.team_max_bytes),
+                size(cfg.total_max_bytes)
+            );
+            store::note(self.pool(), row, &why)
+                .await
+                .map_err(ServiceError::from)?;
+            return Err(UploadError::NoRoom(why));
+        }
+        for (budget, n) in ["team", "total"].into_iter().zip(&room.evicted) {
+            metrics::counter!(m::VIDEO_EVICTIONS, "budget" => budget).increment(*n as u64);
+        }
+        self.delete_unlinked_locked(dir, room.orphans).await;
+        let mut p = self.inner.videos.pending();
+        *p.teams.entry(team).or_default() += bytes;
+        p.total += bytes;
+        Ok(Booking {
+            state: self.clone(),
+            team,
+            bytes,
+        })
+    }
+
+    /// Move a finished upload into place and link it to `(run, key)`; the file a replaced link
+    /// named is deleted when no row names it any more. Returns the sha256 and size.
+    pub(crate) async fn store_video(
+        &self,
+        dir: &Path,
+        booking: Booking,
+        run: i64,
+        key: &str,
+        file: Complete,
+    ) -> Result<(String, u64), UploadError> {
+        let (sha, bytes) = (file.sha256.clone(), file.bytes);
+        let _turn = self.inner.videos.turn.lock().await;
+        file.place(dir).await?;
+        let row = Row {
+            run,
+            key,
+            team: booking.team,
+            now: now_ms(),
+        };
+        let replaced = store::link(self.pool(), row, &sha, bytes)
+            .await
+            .map_err(ServiceError::from)?;
+        drop(booking);
+        self.delete_unlinked_locked(dir, replaced.into_iter().collect())
+            .await;
+        drop(_turn);
+        self.record_stored_video_bytes().await;
+        Ok((sha, bytes))
+    }
+
+    /// Set the stored-bytes gauge from the database (nothing without a recorder).
+    pub(crate) async fn record_stored_video_bytes(&self) {
+        if !m::installed() {
+            return;
+        }
+        match store::stored_bytes(self.read_pool()).await {
+            Ok(b) => metrics::gauge!(m::VIDEO_STORED_BYTES).set(b as f64),
+            Err(e) => tracing::debug!(error = %e, "stored video bytes not recorded"),
+        }
+    }
+
+    /// Delete the files `shas` that no stored row names (checked again: an upload of the same
+    /// bytes may have linked one since). Returns how many were deleted.
+    pub(crate) async fn delete_unlinked(&self, dir: &Path, shas: Vec<String>) -> usize {
+        let _turn = self.inner.videos.turn.lock().await;
+        self.delete_unlinked_locked(dir, shas).await
+    }
+
+    /// [`Self::delete_unlinked`], for a caller holding `turn`.
+    async fn delete_unlinked_locked(&self, dir: &Path, shas: Vec<String>) -> usize {
+        let mut deleted = 0;
+        for sha in shas {
+            match store::linked(self.pool(), &sha).await {
+                Ok(false) => {}
+                Ok(true) => continue,
+                Err(e) => {
+                    tracing::warn!(sha256 = %sha, error = %e, "video file kept: cannot check its links");
+                    continue;
+                }
+            }
+            match tokio::fs::remove_file(file_path(dir, &sha)).await {
+                Ok(()) => deleted += 1,
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                Err(e) => tracing::warn!(sha256 = %sha, error = %e, "cannot delete an unlinked video"),
+            }
+        }
+        deleted
+    }
+}
+
+/// Bytes as a config value reads best: `2 GiB`, `512 MiB`, `1.5 GiB`, `3000 bytes`.
+fn size(bytes: u64) -> String {
+    const UNITS: [(u64, &str); 3] = [(1 << 30, "GiB"), (1 << 20, "MiB"), (1 << 10, "KiB")];
+    for (unit, name) in UNITS {
+        if bytes >= unit {
+            return match bytes % unit {
+                0 => format!("{} {name}", bytes / unit),
+                _ => format!("{:.1} {name}", bytes as f64 / unit as f64),
+            };
+        }
+    }
+    format!("{bytes} bytes")
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn sizes_read_as_configured() {
+        assert_eq!(super::size(2 << 30), "2 GiB");
+        assert_eq!(super::size(64 << 20), "64 MiB");
+        assert_eq!(super::size(3 << 29), "1.5 GiB");
+        assert_eq!(super::size(1000), "1000 bytes");
+    }
+}
