@@ -1,4 +1,4 @@
-//! Episode values as plain Python values (dicts, lists, bytes); `kitchen_r/env.py` turns them
+//! Episode values as plain Python values (dicts, lists, bytes); `gym_kitchen_r/env.py` turns them
 //! into numpy arrays without another copy of the images.
 
 use kitchen_r_episode::driven::{Decision, Next, Progress};

@@ -1,5 +1,5 @@
-//! `kitchen_r._native`: the twin's episodes for Python, behind the `kitchen_r` package's
-//! gymnasium environment (`python/kitchen_r/env.py`).
+//! `gym_kitchen_r._native`: the twin's episodes for Python, behind the `gym_kitchen_r` package's
+//! gymnasium environment (`python/gym_kitchen_r/env.py`).
 //!
 //! It owns the translation between Python values and the episode crate's types, nothing else:
 //! episodes are `kitchen_r_episode::driven` episodes, i.e. `run_episode` with the action
@@ -66,7 +66,7 @@ fn setup<E: std::fmt::Display>(what: &str) -> impl Fn(E) -> EnvError + '_ {
 }
 
 /// One environment: one simulator, one episode at a time.
-#[pyclass(module = "kitchen_r._native")]
+#[pyclass(module = "gym_kitchen_r._native")]
 struct NativeEnv {
     inner: Mutex<Inner>,
 }
@@ -129,7 +129,7 @@ impl Inner {
 #[pymethods]
 impl NativeEnv {
     /// `split`: `dev` (the public split with plans) or `test` with `ground_truth` (a JSON Lines
-    /// file of instructions with plans, the organiser's). See `kitchen_r.KitchenREnv`.
+    /// file of instructions with plans, the organiser's). See `gym_kitchen_r.KitchenREnv`.
     #[new]
     #[pyo3(signature = (split="dev", ground_truth=None, images=true, depth=false, teleport_on_failure=true, history=1, task_time_limit=120.0, max_tasks=0, expert=true))]
     #[allow(clippy::too_many_arguments)]

@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-import kitchen_r
-from kitchen_r import KitchenREnv
+import gym_kitchen_r
+from gym_kitchen_r import KitchenREnv
 
 EPISODES = 20
 
@@ -70,9 +70,9 @@ def test_spaces_name_their_fields_and_hold_the_observations():
     env = KitchenREnv(history=3)
     obs, info = env.reset(seed=1)
     assert env.observation_space.contains(obs), "the observation is in the observation space"
-    assert obs["state"].shape == (3, len(kitchen_r.STATE_FIELDS))
+    assert obs["state"].shape == (3, len(gym_kitchen_r.STATE_FIELDS))
     assert obs["images"]["base"].shape == (3, 128, 128, 3)
-    assert len(kitchen_r.ACTION_FIELDS) == 10 and kitchen_r.ACTION_FIELDS[-1] == "gripper"
+    assert len(gym_kitchen_r.ACTION_FIELDS) == 10 and gym_kitchen_r.ACTION_FIELDS[-1] == "gripper"
     assert info["sub_task"] == info["instruction"]["plan"][0]
     a = env.action_space.sample()
     assert env.action_space.contains(a) and math.isclose(np.linalg.norm(a[5:9]), 1.0)
@@ -132,3 +132,33 @@ def test_the_expert_through_the_env_is_the_eval_episode_task_by_task():
         assert info["is_success"] == all(t["success"] for t in want["tasks"])
     assert succeeded == report["overall"]["succeeded"]
     env.close()
+
+
+def test_a_vector_env_steps_its_envs_and_autoresets_on_the_next_step():
+    v = gym.make_vec("KitchenR/Plan-v0", num_envs=2, vectorization_mode="vector_entry_point", images=False, max_tasks=1)
+    env = v.unwrapped
+    obs, _ = v.reset(seed=3)
+    assert env.observation_space.contains(obs)
+    assert obs["state"].shape == (2, len(gym_kitchen_r.STATE_FIELDS))
+    # The same seeds give the same first observations as single environments.
+    for i in range(2):
+        single = KitchenREnv(images=False, max_tasks=1)
+        o, _ = single.reset(seed=3 + i)
+        np.testing.assert_array_equal(o["state"], obs["state"][i])
+        single.close()
+    ended = np.zeros(2, dtype=bool)
+    for _ in range(3000):
+        obs, reward, terminated, truncated, info = v.step(env.expert_chunks()[:, 0])
+        assert not truncated.any()
+        if terminated.any():
+            assert all(reward[terminated] == 1.0), "the expert's one task succeeded"
+            first = np.flatnonzero(terminated)[0]
+            # NEXT_STEP autoreset: the following step resets that env, reward 0, not terminated.
+            obs, reward, terminated, _, _ = v.step(env.expert_chunks()[:, 0])
+            assert reward[first] == 0.0 and not terminated[first]
+            assert obs["task_index"][first] == 0
+            ended[first] = True
+        if ended.all():
+            break
+    assert ended.all(), "both environments finished their task"
+    v.close()
