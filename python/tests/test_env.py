@@ -162,3 +162,13 @@ def test_a_vector_env_steps_its_envs_and_autoresets_on_the_next_step():
             break
     assert ended.all(), "both environments finished their task"
     v.close()
+
+
+def test_the_package_leaves_the_contracts_protobuf_namespace_alone():
+    """`kitchen_r.policy.v1` is the policy contract's protobuf package, which the starter kit
+    generates into a namespace package at run time; a regular `kitchen_r` package installed by
+    us would shadow it and break every Python policy server in the same environment."""
+    import importlib.util
+
+    assert gym_kitchen_r.__name__ == "gym_kitchen_r"
+    assert importlib.util.find_spec("kitchen_r") is None
