@@ -1,0 +1,118 @@
+"""What the Python environment costs over the Rust runner, and what a vector env gains.
+
+    python3 python/bench_env.py [--episodes N] [--bin target/release/kitchen-r]
+
+Three runs over the same first N dev instructions (run seed 0), the expert choosing every
+action and both 128x128 RGB cameras rendered at every control step in all three:
+
+1. Rust: ``kitchen-r eval --policy builtin:oracle --jobs 1`` with ``execute = 1`` (the oracle
+   asked at every step, so a frame is rendered at every step);
+2. Python, one env: ``env.expert_chunk()`` then ``env.step(chunk[0])`` at every step;
+3. Python, a vector env of 2 (or ``--envs``), the episodes shared between its envs.
+
+Prints control steps per second of each and the ratios: the binding's overhead is 2 against 1
+on one core, the vector env's gain 3 against 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import tempfile
+import time
+
+import gymnasium as gym
+
+import gym_kitchen_r
+
+
+def rust(binary: str, n: int) -> tuple[int, float]:
+    with tempfile.NamedTemporaryFile("w", suffix=".toml", delete=False) as f:
+        f.write("execute = 1\nteleport_on_failure = false\n")
+        cfg = f.name
+    try:
+        started = time.perf_counter()
+        out = subprocess.run(
+            [binary, "eval", "--policy", "builtin:oracle", "--episodes", str(n), "--jobs", "1", "--seed", "0",
+             "--config", cfg, "--json"],
+            check=True, capture_output=True, text=True,
+        )
+        wall = time.perf_counter() - started
+    finally:
+        os.unlink(cfg)
+    report = json.loads(out.stdout)
+    steps = sum(round(e["sim_time"] / 0.1) for e in report["episodes"])
+    return steps, wall
+
+
+def one_env(ids: list[str]) -> tuple[int, float]:
+    env = gym_kitchen_r.KitchenREnv(teleport_on_failure=False)
+    steps = 0
+    started = time.perf_counter()
+    for i in ids:
+        env.reset(seed=0, options={"instruction": i})
+        done = False
+        while not done:
+            _, _, done, _, _ = env.step(env.expert_chunk()[0])
+            steps += 1
+    wall = time.perf_counter() - started
+    env.close()
+    return steps, wall
+
+
+def vector_env(ids: list[str], n_envs: int) -> tuple[int, float]:
+    v = gym.make_vec("KitchenR/Plan-v0", num_envs=n_envs, vectorization_mode="vector_entry_point",
+                     teleport_on_failure=False)
+    env = v.unwrapped
+    queue = list(ids)
+    steps = 0
+    started = time.perf_counter()
+    # Each env runs the next instruction of the queue; a finished env with none left idles.
+    current = [queue.pop(0) for _ in range(n_envs)]
+    for k, e in enumerate(env.envs):
+        e.reset(seed=0, options={"instruction": current[k]})
+    active = [True] * n_envs
+    while any(active):
+        chunks = env._pool.map(lambda k: env.envs[k].expert_chunk()[0] if active[k] else None, range(n_envs))
+        chunks = list(chunks)
+
+        def one(k: int):
+            if not active[k]:
+                return 0
+            _, _, done, _, _ = env.envs[k].step(chunks[k])
+            if done:
+                if queue:
+                    env.envs[k].reset(seed=0, options={"instruction": queue.pop(0)})
+                else:
+                    active[k] = False
+            return 1
+
+        steps += sum(env._pool.map(one, range(n_envs)))
+    wall = time.perf_counter() - started
+    v.close()
+    return steps, wall
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--episodes", type=int, default=6)
+    p.add_argument("--envs", type=int, default=2)
+    p.add_argument("--bin", default=os.environ.get("KITCHEN_R_BIN", "target/release/kitchen-r"))
+    a = p.parse_args()
+    ids = gym_kitchen_r.KitchenREnv(images=False)._native.instruction_ids()[: a.episodes]
+    rows = {
+        "rust runner (1 core)": rust(a.bin, a.episodes),
+        "python env (1)": one_env(ids),
+        f"python vector env ({a.envs})": vector_env(ids, a.envs),
+    }
+    for name, (steps, wall) in rows.items():
+        print(f"{name:28s} {steps:6d} steps {wall:7.2f} s {steps / wall:8.1f} steps/s")
+    r, o, v = (s / w for s, w in rows.values())
+    print(f"binding overhead: {100 * (r / o - 1):+.1f} % (python env time over the rust runner's)")
+    print(f"vector env of {a.envs}: {v / o:.2f}x one env")
+
+
+if __name__ == "__main__":
+    main()
