@@ -224,8 +224,12 @@ impl DrivenEpisode {
 
     /// Stop the episode (if it still runs) and hand the simulator back for the next one.
     pub fn finish(mut self) -> Option<Sim> {
-        // Dropping the sender makes every later decision fail at once: the runner races
-        // through the remaining tasks without stepping and returns.
+        self.stop()
+    }
+
+    /// Dropping the sender makes every later decision fail at once: the runner races through
+    /// the remaining tasks without stepping and returns, and the thread hands the sim back.
+    fn stop(&mut self) -> Option<Sim> {
         self.cmds = None;
         while self.events.recv().is_ok() {}
         self.thread.take().and_then(|t| t.join().ok())
@@ -268,11 +272,7 @@ impl DrivenEpisode {
 
 impl Drop for DrivenEpisode {
     fn drop(&mut self) {
-        self.cmds = None;
-        while self.events.recv().is_ok() {}
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
+        self.stop();
     }
 }
 

@@ -28,7 +28,6 @@ struct Inner {
     sensors: SensorsConfig,
     instructions: Vec<Instruction>,
     opts: DriveOptions,
-    depth: bool,
     /// A simulator between episodes (built once, reset for each episode as `eval` does).
     idle: Option<Sim>,
     episode: Option<DrivenEpisode>,
@@ -69,6 +68,8 @@ fn setup<E: std::fmt::Display>(what: &str) -> impl Fn(E) -> EnvError + '_ {
 #[pyclass(module = "gym_kitchen_r._native")]
 struct NativeEnv {
     inner: Mutex<Inner>,
+    /// Observations carry depth images (fixed at construction, read without the lock).
+    depth: bool,
 }
 
 impl NativeEnv {
@@ -178,10 +179,10 @@ impl NativeEnv {
                 sensors,
                 instructions,
                 opts,
-                depth,
                 idle: None,
                 episode: None,
             }),
+            depth,
         })
     }
 
@@ -215,15 +216,13 @@ impl NativeEnv {
     /// --seed SEED` runs for it); the first decision.
     fn reset<'py>(&self, py: Python<'py>, instruction: &str, seed: u64) -> PyResult<Bound<'py, PyDict>> {
         let progress = py.detach(|| self.lock().reset(instruction, seed))?;
-        let depth = self.lock().depth;
-        convert::progress(py, &progress, depth)
+        convert::progress(py, &progress, self.depth)
     }
 
     /// Execute one action (10 values) for one control step.
     fn step<'py>(&self, py: Python<'py>, action: Vec<f64>) -> PyResult<Bound<'py, PyDict>> {
         let progress = py.detach(|| self.lock().step(&action))?;
-        let depth = self.lock().depth;
-        convert::progress(py, &progress, depth)
+        convert::progress(py, &progress, self.depth)
     }
 
     /// The expert's chunk (16 actions of 10 values) for the current decision.

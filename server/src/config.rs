@@ -18,6 +18,20 @@ pub(crate) use secrets::SecretsConfig;
 pub(crate) use sessions::SessionConfig;
 pub(crate) use video::VideoConfig;
 
+/// The directory holding the SQLite database file of URL `db`, where files kept beside it
+/// (videos, the secret key) go; `None` for an in-memory database, which has no directory.
+fn beside_database(db: &str) -> Option<PathBuf> {
+    let path = db
+        .strip_prefix("sqlite://")
+        .or_else(|| db.strip_prefix("sqlite:"))?;
+    let path = path.split('?').next().unwrap_or_default();
+    let in_memory = path.contains(":memory:") || path.starts_with("file:") && path.contains("mode=memory");
+    if path.is_empty() || in_memory {
+        return None;
+    }
+    Some(Path::new(path).parent().map(PathBuf::from).unwrap_or_default())
+}
+
 /// Environment variables read into the configuration (`KITCHEN_R_<KEY>`). Listed explicitly so
 /// the client-side variables (`KITCHEN_R_SERVER`, `KITCHEN_R_TOKEN`) are not mistaken for keys.
 const ENV_KEYS: [&str; 12] = [

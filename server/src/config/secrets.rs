@@ -1,7 +1,7 @@
 //! `[secrets]`: where the server's secret key lives (it seals policy endpoints' bearer tokens at
 //! rest, see `crate::secrets`).
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
 
@@ -22,17 +22,7 @@ impl SecretsConfig {
         if !self.key_file.as_os_str().is_empty() {
             return Some(self.key_file.clone());
         }
-        let path = db
-            .strip_prefix("sqlite://")
-            .or_else(|| db.strip_prefix("sqlite:"))?;
-        let path = path.split('?').next().unwrap_or_default();
-        let in_memory =
-            path.contains(":memory:") || path.starts_with("file:") && path.contains("mode=memory");
-        if path.is_empty() || in_memory {
-            return None;
-        }
-        let dir = Path::new(path).parent().unwrap_or(Path::new(""));
-        Some(dir.join("secret.key"))
+        Some(super::beside_database(db)?.join("secret.key"))
     }
 }
 

@@ -86,21 +86,7 @@ impl VideoConfig {
         if !self.dir.as_os_str().is_empty() {
             return Some(self.dir.clone());
         }
-        let path = db
-            .strip_prefix("sqlite://")
-            .or_else(|| db.strip_prefix("sqlite:"))?;
-        let path = path.split('?').next().unwrap_or_default();
-        if path.is_empty()
-            || path.contains(":memory:")
-            || path.starts_with("file:") && path.contains("mode=memory")
-        {
-            return None;
-        }
-        let parent = std::path::Path::new(path)
-            .parent()
-            .map(PathBuf::from)
-            .unwrap_or_default();
-        Some(parent.join("videos"))
+        Some(super::beside_database(db)?.join("videos"))
     }
 }
 
