@@ -42,6 +42,10 @@ pub struct DriveOptions {
     pub observation_history: usize,
     /// Keep the expert ready for [`DrivenEpisode::expert_chunk`].
     pub expert: bool,
+    /// Ask the expert at every decision, on the episode's thread, and hand its chunk out with
+    /// the decision ([`Decision::expert`]): labels for every state without a second round
+    /// trip. Needs `expert`.
+    pub expert_inline: bool,
 }
 
 impl Default for DriveOptions {
@@ -52,6 +56,7 @@ impl Default for DriveOptions {
             images: true,
             observation_history: 1,
             expert: true,
+            expert_inline: false,
         }
     }
 }
@@ -71,6 +76,8 @@ pub struct Decision {
     pub history: Vec<Frame>,
     /// The robot, the task's goal and the key objects in the scene frame.
     pub privileged: Privileged,
+    /// The expert's chunk for this state, or why it has none ([`DriveOptions::expert_inline`]).
+    pub expert: Option<Result<Vec<[f64; ACTION_DIM]>, String>>,
 }
 
 /// How the episode ended.
@@ -106,6 +113,12 @@ pub enum DriveError {
     NoExpert,
     #[error("the expert failed: {0}")]
     Expert(String),
+    /// `receive` while a decision waits for its action: nothing was sent to wait for.
+    #[error("a decision is waiting for an action: send one before receiving")]
+    Pending,
+    /// An action is on its way and its result was not received yet.
+    #[error("the last action's result was not received yet: receive it first")]
+    InFlight,
     /// The simulator failed (a platform error, not the driver's).
     #[error("simulator: {0}")]
     Sim(String),
@@ -131,18 +144,34 @@ pub struct DrivenEpisode {
     thread: Option<JoinHandle<Sim>>,
     tolerance: crate::policy::ChunkTolerance,
     has_expert: bool,
+    /// A decision waits for its action.
     waiting: bool,
+    /// The end was received: nothing more will come.
+    ended: bool,
 }
 
 impl DrivenEpisode {
     /// Load `cfg` into `sim` and run it until its first decision (or its end, for an episode
     /// with no task). Teleport on failure first runs the expert over the episode once.
     pub fn start(
-        mut sim: Sim,
+        sim: Sim,
         cfg: EpisodeConfig,
         assets: &Assets,
         opts: &DriveOptions,
     ) -> Result<(DrivenEpisode, Progress), DriveError> {
+        let mut ep = DrivenEpisode::launch(sim, cfg, assets, opts)?;
+        let first = ep.receive()?;
+        Ok((ep, first))
+    }
+
+    /// [`DrivenEpisode::start`] without waiting: the episode runs towards its first decision
+    /// on its thread while the caller launches others; [`DrivenEpisode::receive`] waits.
+    pub fn launch(
+        mut sim: Sim,
+        cfg: EpisodeConfig,
+        assets: &Assets,
+        opts: &DriveOptions,
+    ) -> Result<DrivenEpisode, DriveError> {
         let (cmd_tx, cmd_rx) = channel();
         let (ev_tx, ev_rx) = channel();
         let expert = opts.expert.then(|| OraclePolicy::new(assets).without_images());
@@ -167,6 +196,7 @@ impl DrivenEpisode {
             images: opts.images,
             cmds: cmd_rx,
             events: ev_tx.clone(),
+            inline: opts.expert_inline && expert.is_some(),
             expert,
             abandoned: false,
         };
@@ -178,38 +208,36 @@ impl DrivenEpisode {
                 sim
             })
             .map_err(|e| DriveError::Sim(format!("cannot start the episode's thread: {e}")))?;
-        let mut ep = DrivenEpisode {
+        Ok(DrivenEpisode {
             cmds: Some(cmd_tx),
             events: ev_rx,
             thread: Some(thread),
             tolerance: opts.run.chunk_tolerance,
             has_expert: opts.expert,
             waiting: false,
-        };
-        let first = ep.progress()?;
-        Ok((ep, first))
+            ended: false,
+        })
     }
 
     /// Execute `action` for one control step (after the chunk rules' checks).
     pub fn act(&mut self, action: [f64; ACTION_DIM]) -> Result<Progress, DriveError> {
-        if !self.waiting {
-            return Err(DriveError::Ended);
-        }
-        let mut chunk = [action; HORIZON];
-        check_chunk(&mut chunk, HORIZON, &self.tolerance).map_err(|e| match e {
-            PolicyError::BadChunk(m) => DriveError::BadAction(m),
-            other => DriveError::BadAction(other.to_string()),
-        })?;
+        self.send_action(action)?;
+        self.receive()
+    }
+
+    /// [`DrivenEpisode::act`] without waiting: the action is checked and handed to the
+    /// episode's thread, which steps while the caller hands actions to other episodes;
+    /// [`DrivenEpisode::receive`] waits for what it led to.
+    pub fn send_action(&mut self, action: [f64; ACTION_DIM]) -> Result<(), DriveError> {
+        self.check_action(action)?;
         self.send(Cmd::Act(action))?;
         self.waiting = false;
-        self.progress()
+        Ok(())
     }
 
     /// The expert's chunk of 16 actions for the current decision.
     pub fn expert_chunk(&mut self) -> Result<Vec<[f64; ACTION_DIM]>, DriveError> {
-        if !self.waiting {
-            return Err(DriveError::Ended);
-        }
+        self.check_waiting()?;
         if !self.has_expert {
             return Err(DriveError::NoExpert);
         }
@@ -219,6 +247,27 @@ impl DrivenEpisode {
             Ok(Event::Failed(e)) => Err(DriveError::Sim(e)),
             Ok(_) => Err(DriveError::Sim("the episode thread answered out of turn".into())),
             Err(_) => Err(DriveError::Sim("the episode thread stopped".into())),
+        }
+    }
+
+    /// Whether [`DrivenEpisode::send_action`] would take `action` now (a decision waits and the
+    /// action keeps the chunk rules), without sending it: a driver of several episodes checks
+    /// every action before it sends any.
+    pub fn check_action(&self, action: [f64; ACTION_DIM]) -> Result<(), DriveError> {
+        self.check_waiting()?;
+        let mut chunk = [action; HORIZON];
+        check_chunk(&mut chunk, HORIZON, &self.tolerance).map_err(|e| match e {
+            PolicyError::BadChunk(m) => DriveError::BadAction(m),
+            other => DriveError::BadAction(other.to_string()),
+        })?;
+        Ok(())
+    }
+
+    fn check_waiting(&self) -> Result<(), DriveError> {
+        match (self.waiting, self.ended) {
+            (true, _) => Ok(()),
+            (false, true) => Err(DriveError::Ended),
+            (false, false) => Err(DriveError::InFlight),
         }
     }
 
@@ -243,8 +292,16 @@ impl DrivenEpisode {
         }
     }
 
-    /// Events up to the next decision or the end.
-    fn progress(&mut self) -> Result<Progress, DriveError> {
+    /// Events up to the next decision or the end: what the launch or the last action sent led
+    /// to. Called again while a decision waits, it reports nothing new ([`DriveError::Ended`]
+    /// after the end).
+    pub fn receive(&mut self) -> Result<Progress, DriveError> {
+        if self.waiting {
+            return Err(DriveError::Pending);
+        }
+        if self.ended {
+            return Err(DriveError::Ended);
+        }
         let mut tasks_ended = Vec::new();
         loop {
             match self.events.recv() {
@@ -257,14 +314,21 @@ impl DrivenEpisode {
                     });
                 }
                 Ok(Event::Ended(e)) => {
+                    self.ended = true;
                     return Ok(Progress {
                         tasks_ended,
                         next: Next::Ended(e),
                     });
                 }
-                Ok(Event::Failed(e)) => return Err(DriveError::Sim(e)),
+                Ok(Event::Failed(e)) => {
+                    self.ended = true;
+                    return Err(DriveError::Sim(e));
+                }
                 Ok(Event::Expert(_)) => {}
-                Err(_) => return Err(DriveError::Sim("the episode thread stopped".into())),
+                Err(_) => {
+                    self.ended = true;
+                    return Err(DriveError::Sim("the episode thread stopped".into()));
+                }
             }
         }
     }
@@ -338,6 +402,8 @@ struct Relay {
     cmds: Receiver<Cmd>,
     events: Sender<Event>,
     expert: Option<OraclePolicy>,
+    /// Ask `expert` at every decision and send its chunk with it.
+    inline: bool,
     /// The driver is gone: every decision fails at once so the runner ends quickly.
     abandoned: bool,
 }
@@ -363,7 +429,13 @@ impl Policy for Relay {
         let Some(privileged) = input.privileged.cloned() else {
             return Err(PolicyError::NeedsPrivileged);
         };
+        let expert = match (&mut self.expert, self.inline) {
+            // The expert's failure is reported, never the episode's: it changes nothing.
+            (Some(e), true) => Some(e.act(input).map_err(|e| e.to_string())),
+            _ => None,
+        };
         let decision = Decision {
+            expert,
             step: input.step,
             task_index: input.task_index,
             sub_task: input.sub_task.to_string(),

@@ -128,6 +128,9 @@ class KitchenREnv(gym.Env):
             task_time_limit=task_time_limit,
             max_tasks=max_tasks,
             expert=True,
+            # The expert's chunk rides with each decision: no second round trip per step.
+            expert_inline=expert,
+            privileged=privileged,
         )
         self.render_mode = render_mode
         self._images, self._depth, self._history = images, depth, history
@@ -213,7 +216,10 @@ class KitchenREnv(gym.Env):
             if self._privileged:
                 info["privileged"] = d["privileged"]
             if self._expert:
-                info["expert_chunk"] = self.expert_chunk()
+                if "expert_error" in d:
+                    raise RuntimeError(f"the expert has no chunk for this state: {d['expert_error']}")
+                n, raw = d["expert"]
+                info["expert_chunk"] = np.frombuffer(raw, dtype=np.float64).reshape(n, 10).copy()
         else:
             ended = progress["ended"]
             info["episode"] = {k: ended[k] for k in ("tasks", "sim_time", "success_rate")}
@@ -223,6 +229,11 @@ class KitchenREnv(gym.Env):
     # The gymnasium API --------------------------------------------------------------------
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
+        instruction, run_seed = self._reset_args(seed, options)
+        return self._after_reset(self._native.reset(instruction, run_seed), instruction, run_seed)
+
+    def _reset_args(self, seed: int | None, options: dict | None) -> tuple[str, int]:
+        """The instruction and run seed a reset starts (the vector env starts several at once)."""
         super().reset(seed=seed)
         options = options or {}
         instruction = options.get("instruction", self._fixed)
@@ -232,8 +243,10 @@ class KitchenREnv(gym.Env):
             instruction = self._ids[instruction]
         run_seed = seed if seed is not None else int(self.np_random.integers(2**63))
         self.instruction = self._native.instruction(instruction)
+        return instruction, int(run_seed)
+
+    def _after_reset(self, progress: dict, instruction: str, run_seed: int):
         self._success = True
-        progress = self._native.reset(instruction, int(run_seed))
         if progress["decision"] is None:
             raise RuntimeError(f"instruction {instruction!r} has no task to run")
         self._decision = progress["decision"]
@@ -245,12 +258,18 @@ class KitchenREnv(gym.Env):
         return obs, info
 
     def step(self, action):
+        return self._after_step(self._native.step(self._action(action)))
+
+    def _action(self, action) -> list[float]:
+        """The action as the native step takes it; a wrong shape or a step with no episode raises."""
         a = np.asarray(action, dtype=np.float64)
         if a.shape != (10,):
             raise ValueError(f"an action has shape {a.shape}; it must be (10,): {', '.join(ACTION_FIELDS)}")
         if self._decision is None:
             raise RuntimeError("call reset() before step(), and again after the episode has terminated")
-        progress = self._native.step(a.tolist())
+        return a.tolist()
+
+    def _after_step(self, progress: dict):
         reward = float(sum(1 for t in progress["tasks_ended"] if t["success"]))
         info = self._info(progress)
         if progress["decision"] is not None:

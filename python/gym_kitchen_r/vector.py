@@ -1,9 +1,10 @@
 """N Kitchen-R environments stepped in parallel, as a gymnasium ``VectorEnv``.
 
-Each environment's episode runs on a Rust thread of its own and a step holds the GIL only to
-hand the action over and to turn the result into numpy arrays, so the N simulators step at the
-same time; a thread per environment waits for its own. Observations are written into arrays
-preallocated once (``gymnasium.vector.utils.create_empty_array``).
+Each environment's episode runs on a Rust thread of its own. A step is one native call
+(``_native.step_many``): every action is checked, all are handed to their episodes' threads,
+the N simulators step at the same time with the GIL released, and the results come back
+together; resets that autoreset asks for run in the same call. Observations are written into
+arrays preallocated once (``gymnasium.vector.utils.create_empty_array``).
 
 Autoreset follows gymnasium's default, ``AutoresetMode.NEXT_STEP``: the step after an episode
 ended resets that environment (its action is ignored) and returns the reset observation with
@@ -13,13 +14,13 @@ builds one.
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space, concatenate, create_empty_array, iterate
 
+from . import _native
 from .env import KitchenREnv
 
 
@@ -42,52 +43,59 @@ class KitchenRVectorEnv(VectorEnv):
         self._terminations = np.zeros(num_envs, dtype=np.bool_)
         self._truncations = np.zeros(num_envs, dtype=np.bool_)
         self._autoreset = np.zeros(num_envs, dtype=np.bool_)
-        self._pool = ThreadPoolExecutor(max_workers=num_envs, thread_name_prefix="kitchen-r-env")
+        self._natives = [e._native for e in self.envs]
 
     def reset(self, *, seed: int | list[int | None] | None = None, options: dict | None = None):
         seeds = seed if isinstance(seed, list) else [None if seed is None else seed + i for i in range(self.num_envs)]
         if len(seeds) != self.num_envs:
             raise ValueError(f"{len(seeds)} seeds for {self.num_envs} environments")
-        results = list(self._pool.map(lambda i: self.envs[i].reset(seed=seeds[i], options=options), range(self.num_envs)))
+        args = [e._reset_args(s, options) for e, s in zip(self.envs, seeds)]
+        progress = _native.step_many(self._natives, args)
         infos: dict[str, Any] = {}
-        for i, (_, info) in enumerate(results):
+        observations = []
+        for i, (env, p, (ins, run_seed)) in enumerate(zip(self.envs, progress, args)):
+            obs, info = env._after_reset(p, ins, run_seed)
+            observations.append(obs)
             infos = self._add_info(infos, info, i)
-        self._obs = concatenate(self.single_observation_space, [o for o, _ in results], self._obs)
+        self._obs = concatenate(self.single_observation_space, observations, self._obs)
         self._autoreset[:] = False
         return self._obs, infos
-
-    def _step_one(self, i: int, action: np.ndarray):
-        env = self.envs[i]
-        if self._autoreset[i]:
-            obs, info = env.reset()
-            return obs, 0.0, False, False, info
-        return env.step(action)
 
     def step(self, actions):
         actions = list(iterate(self.action_space, actions))
         if len(actions) != self.num_envs:
             raise ValueError(f"{len(actions)} actions for {self.num_envs} environments")
-        results = list(self._pool.map(lambda i: self._step_one(i, actions[i]), range(self.num_envs)))
+        # NEXT_STEP autoreset: an environment whose episode ended resets now, its action ignored.
+        requests = [
+            env._reset_args(None, None) if self._autoreset[i] else env._action(actions[i])
+            for i, env in enumerate(self.envs)
+        ]
+        progress = _native.step_many(self._natives, requests)
         infos: dict[str, Any] = {}
-        for i, (_, reward, terminated, truncated, info) in enumerate(results):
+        observations = []
+        for i, (env, p, r) in enumerate(zip(self.envs, progress, requests)):
+            if self._autoreset[i]:
+                obs, info = env._after_reset(p, *r)
+                reward, terminated, truncated = 0.0, False, False
+            else:
+                obs, reward, terminated, truncated, info = env._after_step(p)
+            observations.append(obs)
             self._rewards[i] = reward
             self._terminations[i] = terminated
             self._truncations[i] = truncated
             infos = self._add_info(infos, info, i)
-        self._obs = concatenate(self.single_observation_space, [r[0] for r in results], self._obs)
+        self._obs = concatenate(self.single_observation_space, observations, self._obs)
         self._autoreset = np.logical_or(self._terminations, self._truncations)
         return self._obs, self._rewards.copy(), self._terminations.copy(), self._truncations.copy(), infos
 
     def expert_chunks(self) -> np.ndarray:
         """The expert's chunk for each environment's current state: ``(num_envs, 16, 10)``.
-        An environment waiting to autoreset gives zeros."""
-        chunks = self._pool.map(
-            lambda i: np.zeros((16, 10)) if self._autoreset[i] else self.envs[i].expert_chunk(),
-            range(self.num_envs),
+        An environment waiting to autoreset gives zeros. (With ``expert=True`` every step's
+        ``infos["expert_chunk"]`` has them already, at no extra cost.)"""
+        return np.stack(
+            [np.zeros((16, 10)) if self._autoreset[i] else e.expert_chunk() for i, e in enumerate(self.envs)]
         )
-        return np.stack(list(chunks))
 
     def close_extras(self, **kwargs: Any):
         for env in self.envs:
             env.close()
-        self._pool.shutdown(wait=True)

@@ -9,7 +9,12 @@ use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyList};
 
 /// `{"tasks_ended": [...], "decision": {...} | None, "ended": {...} | None}`.
-pub(crate) fn progress<'py>(py: Python<'py>, p: &Progress, depth: bool) -> PyResult<Bound<'py, PyDict>> {
+pub(crate) fn progress<'py>(
+    py: Python<'py>,
+    p: &Progress,
+    depth: bool,
+    privileged: bool,
+) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     let tasks = PyList::empty(py);
     for t in &p.tasks_ended {
@@ -18,7 +23,7 @@ pub(crate) fn progress<'py>(py: Python<'py>, p: &Progress, depth: bool) -> PyRes
     d.set_item("tasks_ended", tasks)?;
     match &p.next {
         Next::Decision(dec) => {
-            d.set_item("decision", decision(py, dec, depth)?)?;
+            d.set_item("decision", decision(py, dec, depth, privileged)?)?;
             d.set_item("ended", py.None())?;
         }
         Next::Ended(end) => {
@@ -49,7 +54,12 @@ fn task<'py>(py: Python<'py>, t: &TaskRecord) -> PyResult<Bound<'py, PyDict>> {
     Ok(d)
 }
 
-fn decision<'py>(py: Python<'py>, dec: &Decision, depth: bool) -> PyResult<Bound<'py, PyDict>> {
+fn decision<'py>(
+    py: Python<'py>,
+    dec: &Decision,
+    depth: bool,
+    with_privileged: bool,
+) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     d.set_item("step", dec.step)?;
     d.set_item("task_index", dec.task_index)?;
@@ -66,7 +76,17 @@ fn decision<'py>(py: Python<'py>, dec: &Decision, depth: bool) -> PyResult<Bound
         history.append(h)?;
     }
     d.set_item("history", history)?;
-    d.set_item("privileged", privileged(py, &dec.privileged)?)?;
+    if with_privileged {
+        d.set_item("privileged", privileged(py, &dec.privileged)?)?;
+    }
+    match &dec.expert {
+        Some(Ok(chunk)) => {
+            let flat: Vec<f64> = chunk.iter().flatten().copied().collect();
+            d.set_item("expert", (chunk.len(), PyBytes::new(py, &f64_bytes(&flat))))?;
+        }
+        Some(Err(e)) => d.set_item("expert_error", e)?,
+        None => {}
+    }
     Ok(d)
 }
 
@@ -78,7 +98,7 @@ fn observation<'py>(py: Python<'py>, o: &Observation, depth: bool) -> PyResult<B
     for im in &o.images {
         images.set_item(&im.name, (im.height, im.width, PyBytes::new(py, &im.rgb)))?;
         if depth {
-            let raw: Vec<u8> = im.depth.iter().flat_map(|v| v.to_le_bytes()).collect();
+            let raw: Vec<u8> = im.depth.iter().flat_map(|v| v.to_ne_bytes()).collect();
             depths.set_item(&im.name, (im.height, im.width, PyBytes::new(py, &raw)))?;
         }
     }
@@ -123,4 +143,9 @@ fn privileged<'py>(py: Python<'py>, p: &Privileged) -> PyResult<Bound<'py, PyDic
     }
     d.set_item("objects", objects)?;
     Ok(d)
+}
+
+/// Values as the bytes numpy reads with `frombuffer(..., float64)` (native order).
+fn f64_bytes(values: &[f64]) -> Vec<u8> {
+    values.iter().flat_map(|v| v.to_ne_bytes()).collect()
 }

@@ -48,15 +48,23 @@ enum EnvError {
     Setup(String),
 }
 
+impl EnvError {
+    /// The Python exception, its message led by `context` (which environment of several).
+    fn into_py(self, context: &str) -> PyErr {
+        let msg = format!("{context}{self}");
+        match self {
+            EnvError::Drive(DriveError::BadAction(_)) | EnvError::ActionShape(_) => {
+                PyValueError::new_err(msg)
+            }
+            EnvError::UnknownInstruction(_) => PyKeyError::new_err(msg),
+            _ => PyRuntimeError::new_err(msg),
+        }
+    }
+}
+
 impl From<EnvError> for PyErr {
     fn from(e: EnvError) -> PyErr {
-        match e {
-            EnvError::Drive(DriveError::BadAction(_)) | EnvError::ActionShape(_) => {
-                PyValueError::new_err(e.to_string())
-            }
-            EnvError::UnknownInstruction(_) => PyKeyError::new_err(e.to_string()),
-            _ => PyRuntimeError::new_err(e.to_string()),
-        }
+        e.into_py("")
     }
 }
 
@@ -70,6 +78,8 @@ struct NativeEnv {
     inner: Mutex<Inner>,
     /// Observations carry depth images (fixed at construction, read without the lock).
     depth: bool,
+    /// Decisions carry the privileged state.
+    privileged: bool,
 }
 
 impl NativeEnv {
@@ -80,12 +90,13 @@ impl NativeEnv {
 }
 
 impl Inner {
-    fn reset(&mut self, instruction: &str, seed: u64) -> Result<Progress, EnvError> {
+    /// Launch the episode of `instruction` with run seed `seed`; `receive` waits for its first
+    /// decision.
+    fn begin_reset(&mut self, instruction: &str, seed: u64) -> Result<(), EnvError> {
         if let Some(old) = self.episode.take() {
             self.idle = old.finish().or(self.idle.take());
         }
-        let ins = (self.instructions.iter().find(|i| i.id == instruction))
-            .ok_or_else(|| EnvError::UnknownInstruction(instruction.to_string()))?;
+        let ins = self.find(instruction)?;
         let scene = self.assets.scene(&ins.scene).map_err(setup("scene"))?;
         let cfg = EpisodeConfig::from_instruction(
             ins,
@@ -108,23 +119,99 @@ impl Inner {
                 .0
             }
         };
-        let (episode, first) = DrivenEpisode::start(sim, cfg, &self.assets, &self.opts)?;
-        self.episode = Some(episode);
-        Ok(first)
+        self.episode = Some(DrivenEpisode::launch(sim, cfg, &self.assets, &self.opts)?);
+        Ok(())
     }
 
-    fn step(&mut self, action: &[f64]) -> Result<Progress, EnvError> {
+    fn find(&self, instruction: &str) -> Result<&Instruction, EnvError> {
+        (self.instructions.iter().find(|i| i.id == instruction))
+            .ok_or_else(|| EnvError::UnknownInstruction(instruction.to_string()))
+    }
+
+    fn episode(&mut self) -> Result<&mut DrivenEpisode, EnvError> {
+        self.episode.as_mut().ok_or(EnvError::NotReset)
+    }
+
+    fn check_action(&mut self, action: &[f64]) -> Result<[f64; 10], EnvError> {
         let a: [f64; 10] = action
             .try_into()
             .map_err(|_| EnvError::ActionShape(action.len()))?;
-        let episode = self.episode.as_mut().ok_or(EnvError::NotReset)?;
-        Ok(episode.act(a)?)
+        self.episode()?.check_action(a)?;
+        Ok(a)
+    }
+
+    fn begin_step(&mut self, action: &[f64]) -> Result<(), EnvError> {
+        let a = self.check_action(action)?;
+        Ok(self.episode()?.send_action(a)?)
+    }
+
+    fn receive(&mut self) -> Result<Progress, EnvError> {
+        Ok(self.episode()?.receive()?)
     }
 
     fn expert_chunk(&mut self) -> Result<Vec<[f64; 10]>, EnvError> {
-        let episode = self.episode.as_mut().ok_or(EnvError::NotReset)?;
-        Ok(episode.expert_chunk()?)
+        Ok(self.episode()?.expert_chunk()?)
     }
+}
+
+/// What `step_many` asks of one environment.
+#[derive(FromPyObject)]
+enum Request {
+    /// Execute this action.
+    Step(Vec<f64>),
+    /// Start the episode of `(instruction, run seed)`.
+    Reset(String, u64),
+}
+
+/// Step or reset several environments at once: every action is checked first (a bad one
+/// raises before any environment moves), then all are handed to their episodes' threads and
+/// simulate in parallel with the GIL released, then each result is converted. The vector
+/// environment's step.
+#[pyfunction]
+fn step_many<'py>(
+    py: Python<'py>,
+    envs: Vec<PyRef<'py, NativeEnv>>,
+    requests: Vec<Request>,
+) -> PyResult<Vec<Bound<'py, PyDict>>> {
+    if envs.len() != requests.len() {
+        return Err(PyValueError::new_err(format!(
+            "{} requests for {} environments",
+            requests.len(),
+            envs.len()
+        )));
+    }
+    let refs: Vec<&NativeEnv> = envs.iter().map(|e| &**e).collect();
+    for (i, a) in refs.iter().enumerate() {
+        if refs[..i].iter().any(|b| std::ptr::eq(*a, *b)) {
+            return Err(PyValueError::new_err(format!(
+                "environment {i} appears twice: each request needs an environment of its own"
+            )));
+        }
+    }
+    let done = py.detach(|| -> Result<Vec<Progress>, (usize, EnvError)> {
+        let mut inners: Vec<MutexGuard<'_, Inner>> = refs.iter().map(|e| e.lock()).collect();
+        for (i, (inner, r)) in inners.iter_mut().zip(&requests).enumerate() {
+            match r {
+                Request::Step(a) => inner.check_action(a).map(drop),
+                Request::Reset(id, _) => inner.find(id).map(drop),
+            }
+            .map_err(|e| (i, e))?;
+        }
+        for (i, (inner, r)) in inners.iter_mut().zip(&requests).enumerate() {
+            match r {
+                Request::Step(a) => inner.begin_step(a),
+                Request::Reset(id, seed) => inner.begin_reset(id, *seed),
+            }
+            .map_err(|e| (i, e))?;
+        }
+        (inners.iter_mut().enumerate())
+            .map(|(i, inner)| inner.receive().map_err(|e| (i, e)))
+            .collect()
+    });
+    let done = done.map_err(|(i, e)| e.into_py(&format!("environment {i}: ")))?;
+    (done.iter().zip(&refs))
+        .map(|(p, e)| convert::progress(py, p, e.depth, e.privileged))
+        .collect()
 }
 
 #[pymethods]
@@ -132,7 +219,7 @@ impl NativeEnv {
     /// `split`: `dev` (the public split with plans) or `test` with `ground_truth` (a JSON Lines
     /// file of instructions with plans, the organiser's). See `gym_kitchen_r.KitchenREnv`.
     #[new]
-    #[pyo3(signature = (split="dev", ground_truth=None, images=true, depth=false, teleport_on_failure=true, history=1, task_time_limit=120.0, max_tasks=0, expert=true))]
+    #[pyo3(signature = (split="dev", ground_truth=None, images=true, depth=false, teleport_on_failure=true, history=1, task_time_limit=120.0, max_tasks=0, expert=true, expert_inline=false, privileged=false))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         split: &str,
@@ -144,6 +231,8 @@ impl NativeEnv {
         task_time_limit: f64,
         max_tasks: usize,
         expert: bool,
+        expert_inline: bool,
+        privileged: bool,
     ) -> PyResult<NativeEnv> {
         let split: Split = split.parse().map_err(PyValueError::new_err)?;
         if !(1..=8).contains(&history) {
@@ -169,7 +258,8 @@ impl NativeEnv {
             teleport_on_failure,
             images: images || depth,
             observation_history: history,
-            expert,
+            expert: expert || expert_inline,
+            expert_inline,
         };
         Ok(NativeEnv {
             inner: Mutex::new(Inner {
@@ -183,6 +273,7 @@ impl NativeEnv {
                 episode: None,
             }),
             depth,
+            privileged,
         })
     }
 
@@ -215,14 +306,22 @@ impl NativeEnv {
     /// Start the episode of `instruction` with run seed `seed` (the episode `kitchen-r eval
     /// --seed SEED` runs for it); the first decision.
     fn reset<'py>(&self, py: Python<'py>, instruction: &str, seed: u64) -> PyResult<Bound<'py, PyDict>> {
-        let progress = py.detach(|| self.lock().reset(instruction, seed))?;
-        convert::progress(py, &progress, self.depth)
+        let progress = py.detach(|| {
+            let mut inner = self.lock();
+            inner.begin_reset(instruction, seed)?;
+            inner.receive()
+        })?;
+        convert::progress(py, &progress, self.depth, self.privileged)
     }
 
     /// Execute one action (10 values) for one control step.
     fn step<'py>(&self, py: Python<'py>, action: Vec<f64>) -> PyResult<Bound<'py, PyDict>> {
-        let progress = py.detach(|| self.lock().step(&action))?;
-        convert::progress(py, &progress, self.depth)
+        let progress = py.detach(|| {
+            let mut inner = self.lock();
+            inner.begin_step(&action)?;
+            inner.receive()
+        })?;
+        convert::progress(py, &progress, self.depth, self.privileged)
     }
 
     /// The expert's chunk (16 actions of 10 values) for the current decision.
@@ -245,5 +344,5 @@ impl NativeEnv {
 #[pymodule]
 mod _native {
     #[pymodule_export]
-    use super::NativeEnv;
+    use super::{NativeEnv, step_many};
 }
