@@ -25,7 +25,7 @@ use crate::policy::{
     ACTION_DIM, Frame, HORIZON, MAX_OBSERVATION_HISTORY, Policy, PolicyError, PolicyInput, PolicySpec,
     Privileged, check_chunk,
 };
-use crate::runner::{EpisodeOutcome, RunOptions, StepHook, TaskRecord, run_episode};
+use crate::runner::{EpisodeOutcome, RunOptions, StepHook, TaskRecord, ee_pose, run_episode};
 use crate::teleport::expert_starts;
 
 /// How a driven episode runs.
@@ -86,6 +86,10 @@ pub struct Ended {
     pub outcome: EpisodeOutcome,
     /// The world after the last action, as a policy would have seen it.
     pub observation: Observation,
+    /// Hand pose in the base frame then `[x, y, z, qw, qx, qy, qz]`.
+    pub ee_pose: [f64; 7],
+    /// The last action executed (`None` if none was, or the last task began with a teleport).
+    pub previous_action: Option<[f64; ACTION_DIM]>,
 }
 
 /// What an action led to: the tasks that ended with it, then the next decision or the end.
@@ -197,6 +201,8 @@ impl DrivenEpisode {
             cmds: cmd_rx,
             events: ev_tx.clone(),
             inline: opts.expert_inline && expert.is_some(),
+            last_action: None,
+            tolerance: opts.run.chunk_tolerance,
             expert,
             abandoned: false,
         };
@@ -379,7 +385,12 @@ fn drive(
     } else {
         sim.observe_state()
     };
-    let _ = events.send(Event::Ended(Box::new(Ended { outcome, observation })));
+    let _ = events.send(Event::Ended(Box::new(Ended {
+        outcome,
+        observation,
+        ee_pose: ee_pose(sim),
+        previous_action: relay.last_action,
+    })));
     Ok(())
 }
 
@@ -404,6 +415,9 @@ struct Relay {
     expert: Option<OraclePolicy>,
     /// Ask `expert` at every decision and send its chunk with it.
     inline: bool,
+    /// The previous action of the decision last handed out, then the action that answered it.
+    last_action: Option<[f64; ACTION_DIM]>,
+    tolerance: crate::policy::ChunkTolerance,
     /// The driver is gone: every decision fails at once so the runner ends quickly.
     abandoned: bool,
 }
@@ -434,6 +448,7 @@ impl Policy for Relay {
             (Some(e), true) => Some(e.act(input).map_err(|e| e.to_string())),
             _ => None,
         };
+        self.last_action = input.previous_action;
         let decision = Decision {
             expert,
             step: input.step,
@@ -451,7 +466,13 @@ impl Policy for Relay {
         }
         loop {
             match self.cmds.recv() {
-                Ok(Cmd::Act(a)) => return Ok(vec![a; HORIZON]),
+                Ok(Cmd::Act(a)) => {
+                    // As the runner executes it, corrections applied (the end's previous action).
+                    let mut executed = [a];
+                    let _ = check_chunk(&mut executed, 1, &self.tolerance);
+                    self.last_action = Some(executed[0]);
+                    return Ok(vec![a; HORIZON]);
+                }
                 Ok(Cmd::Expert) => {
                     let chunk = match &mut self.expert {
                         Some(e) => e.act(input).map_err(|e| e.to_string()),

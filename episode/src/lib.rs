@@ -1,7 +1,8 @@
 //! Episodes on the kitchen twin: the policy interface ([`policy`]), the single episode runner
 //! every evaluation uses ([`runner`]), the oracle expert ([`oracle`]), offline MSE ([`offline`])
 //! local evaluation of a split ([`eval`]), teleport-on-failure's expert states ([`teleport`])
-//! and an episode driven one action at a time from outside ([`driven`], the Python environment).
+//! an episode driven one action at a time from outside ([`driven`], the Python environment) and
+//! expert training samples from parallel simulators ([`samples`]).
 //!
 //! It owns how a policy drives the simulator and what an episode's outcome is. It must not touch
 //! the network, a database or an async runtime (no tokio, tonic, prost or kitchen-r-proto):
@@ -14,4 +15,5 @@ pub mod offline;
 pub mod oracle;
 pub mod policy;
 pub mod runner;
+pub mod samples;
 pub mod teleport;

@@ -162,7 +162,7 @@ fn privileged(sim: &Sim, target: TaskTarget) -> Privileged {
 }
 
 /// The hand (tool centre point) pose in the base frame `[x, y, z, qw, qx, qy, qz]`.
-fn ee_pose(sim: &Sim) -> [f64; 7] {
+pub fn ee_pose(sim: &Sim) -> [f64; 7] {
     let ee = sim.ee_pose();
     let (t, q) = (ee.translation.vector, ee.rotation);
     [t.x, t.y, t.z, q.w, q.i, q.j, q.k]

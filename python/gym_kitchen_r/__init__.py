@@ -9,14 +9,26 @@
 ``gym.make_vec("KitchenR/Plan-v0", num_envs=N, vectorization_mode="vector_entry_point")``: N of them
 stepped in parallel (``gym_kitchen_r.vector``). ``KitchenR/Plan-v0``: an episode is one instruction's whole ground-truth plan, stepped one action
 at a time through the same episode code the leaderboard runs (see ``gym_kitchen_r.env``).
+``ExpertSamples``: expert training samples from parallel simulators (``gym_kitchen_r.samples``;
+as a PyTorch dataset, ``gym_kitchen_r.torch_data``).
 """
 
 from gymnasium.envs.registration import register
 
 from .env import ACTION_FIELDS, EXECUTE, HORIZON, STATE_FIELDS, ActionSpace, KitchenREnv
+from .samples import ExpertSamples
 from .vector import KitchenRVectorEnv
 
-__all__ = ["ACTION_FIELDS", "EXECUTE", "HORIZON", "STATE_FIELDS", "ActionSpace", "KitchenREnv", "KitchenRVectorEnv"]
+__all__ = [
+    "ACTION_FIELDS",
+    "EXECUTE",
+    "HORIZON",
+    "STATE_FIELDS",
+    "ActionSpace",
+    "ExpertSamples",
+    "KitchenREnv",
+    "KitchenRVectorEnv",
+]
 
 register(
     id="KitchenR/Plan-v0",

@@ -39,13 +39,9 @@ from gymnasium import spaces
 from . import _native
 
 ACTION_FIELDS = ("base_v", "base_w", "ee_x", "ee_y", "ee_z", "ee_qw", "ee_qx", "ee_qy", "ee_qz", "gripper")
-STATE_FIELDS = (
-    ("odom_x", "odom_y", "odom_yaw", "base_v", "base_w")
-    + tuple(f"joint_{i}" for i in range(6))
-    + ("gripper",)
-    + ("ee_x", "ee_y", "ee_z", "ee_qw", "ee_qx", "ee_qy", "ee_qz")
-    + tuple(f"prev_{f}" for f in ACTION_FIELDS)
-)
+# The robot state's fields, in order; the native module builds the state (one layout for the
+# environment and the expert samples).
+STATE_FIELDS = tuple(_native.STATE_FIELDS)
 HORIZON = 16
 # Actions of a chunk executed before the policy is asked again (the organiser's default).
 EXECUTE = 8
@@ -77,12 +73,6 @@ class ActionSpace(spaces.Box):
         if not super().contains(x):
             return False
         return abs(float(np.linalg.norm(np.asarray(x, dtype=np.float64)[5:9])) - 1.0) <= 1e-6
-
-
-def _state(frame: dict, ee_pose: list, previous: list | None) -> np.ndarray:
-    prev = previous if previous is not None else [0.0] * 10
-    values = frame["odometry"] + frame["velocity"] + frame["joints"] + [frame["gripper"]] + ee_pose + prev
-    return np.asarray(values, dtype=np.float64)
 
 
 class KitchenREnv(gym.Env):
@@ -167,42 +157,21 @@ class KitchenREnv(gym.Env):
 
     # Conversions --------------------------------------------------------------------------
 
-    def _frames(self, decision: dict) -> list[tuple[dict, list, list | None]]:
-        """The decision's frames, oldest first, padded to ``history`` with the oldest."""
-        frames = [(h, h["ee_pose"], h["previous_action"]) for h in decision["history"]]
-        frames.append((decision["observation"], decision["ee_pose"], decision["previous_action"]))
-        while len(frames) < self._history:
-            frames.insert(0, frames[0])
-        return frames
-
-    def _obs(self, decision: dict) -> dict:
-        frames = self._frames(decision)
-
-        def stack(arrays: list[np.ndarray]) -> np.ndarray:
-            return np.stack(arrays) if self._history > 1 else arrays[-1]
-
-        obs: dict[str, Any] = {}
-        if self._images:
-            obs["images"] = {
-                n: stack([_image(f["images"][n], np.uint8, 3) for f, _, _ in frames]) for n, _, _ in self._cameras
-            }
-        if self._depth:
-            obs["depth"] = {
-                n: stack([_image(f["depth"][n], np.float32, 0) for f, _, _ in frames]) for n, _, _ in self._cameras
-            }
-        obs["state"] = stack([_state(f, ee, prev) for f, ee, prev in frames])
-        obs["sub_task"] = decision["sub_task"]
-        obs["task_index"] = int(decision["task_index"])
+    def _obs(self, frames: dict, sub_task: str, task_index: int) -> dict:
+        """The observation from the native module's stacked frames (see ``unpack_frames``)."""
+        obs = unpack_frames(frames, self._history, self._images, self._depth)
+        obs["sub_task"] = sub_task
+        obs["task_index"] = int(task_index)
         return obs
+
+    def _decision_obs(self, decision: dict) -> dict:
+        return self._obs(decision["frames"], decision["sub_task"], decision["task_index"])
 
     def _final_obs(self, ended: dict) -> dict:
         """The observation after the last action: the world as it was left, with the last
-        decision's task and hand pose (no decision follows)."""
-        last = self._decision or {}
-        frame = dict(last)
-        frame["observation"] = ended["observation"]
-        frame["history"] = []
-        return self._obs(frame)
+        decision's task (no decision follows)."""
+        last = self._decision or {"sub_task": "", "task_index": 0}
+        return self._obs(ended["frames"], last["sub_task"], last["task_index"])
 
     def _info(self, progress: dict) -> dict:
         info: dict[str, Any] = {"tasks_ended": progress["tasks_ended"]}
@@ -250,7 +219,7 @@ class KitchenREnv(gym.Env):
         if progress["decision"] is None:
             raise RuntimeError(f"instruction {instruction!r} has no task to run")
         self._decision = progress["decision"]
-        obs = self._obs(self._decision)
+        obs = self._decision_obs(self._decision)
         self._last_obs = obs
         info = self._info(progress)
         info["instruction"] = self.instruction
@@ -274,7 +243,7 @@ class KitchenREnv(gym.Env):
         info = self._info(progress)
         if progress["decision"] is not None:
             self._decision = progress["decision"]
-            obs = self._obs(self._decision)
+            obs = self._decision_obs(self._decision)
             terminated = False
         else:
             obs = self._final_obs(progress["ended"])
@@ -318,7 +287,20 @@ class KitchenREnv(gym.Env):
         self._decision = None
 
 
-def _image(entry, dtype, channels: int) -> np.ndarray:
-    h, w, raw = entry
-    shape = (h, w, channels) if channels else (h, w)
-    return np.frombuffer(raw, dtype=dtype).reshape(shape)
+def unpack_frames(frames: dict, history: int, images: bool = True, depth: bool = False) -> dict:
+    """The native module's stacked frames as arrays: ``images`` / ``depth`` per camera and
+    ``state``, with a leading ``history`` axis when ``history > 1`` (the arrays are read-only
+    views of the native bytes, no copy)."""
+
+    def unpack(entry, dtype, tail: tuple) -> np.ndarray:
+        n, raw = entry[0], entry[-1]
+        a = np.frombuffer(raw, dtype=dtype).reshape((n,) + tail)
+        return a if history > 1 else a[0]
+
+    out: dict[str, Any] = {}
+    if images:
+        out["images"] = {n: unpack(e, np.uint8, (e[1], e[2], 3)) for n, e in frames["images"].items()}
+    if depth:
+        out["depth"] = {n: unpack(e, np.float32, (e[1], e[2])) for n, e in frames["depth"].items()}
+    out["state"] = unpack(frames["state"], np.float64, (len(STATE_FIELDS),))
+    return out

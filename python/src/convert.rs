@@ -1,17 +1,136 @@
-//! Episode values as plain Python values (dicts, lists, bytes); `gym_kitchen_r/env.py` turns them
-//! into numpy arrays without another copy of the images.
+//! Episode values as plain Python values (dicts, lists, bytes) that `gym_kitchen_r` turns into
+//! numpy arrays without another copy: an observation history is stacked here, frame by frame,
+//! into one bytes object per camera and one for the robot state.
 
 use kitchen_r_episode::driven::{Decision, Next, Progress};
-use kitchen_r_episode::policy::Privileged;
+use kitchen_r_episode::policy::{ACTION_DIM, Frame, Privileged};
 use kitchen_r_episode::runner::TaskRecord;
+use kitchen_r_sim::sensors::CameraImage;
 use kitchen_r_sim::{Observation, TaskTarget};
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyList};
+
+/// The robot state of a frame, in this order (`gym_kitchen_r.STATE_FIELDS`): odometry relative
+/// to the episode's start, base velocities, arm joints, gripper opening, hand pose in the base
+/// frame, previous action (zeros before the first one and after a teleport).
+pub(crate) const STATE_FIELDS: [&str; 29] = [
+    "odom_x",
+    "odom_y",
+    "odom_yaw",
+    "base_v",
+    "base_w",
+    "joint_0",
+    "joint_1",
+    "joint_2",
+    "joint_3",
+    "joint_4",
+    "joint_5",
+    "gripper",
+    "ee_x",
+    "ee_y",
+    "ee_z",
+    "ee_qw",
+    "ee_qx",
+    "ee_qy",
+    "ee_qz",
+    "prev_base_v",
+    "prev_base_w",
+    "prev_ee_x",
+    "prev_ee_y",
+    "prev_ee_z",
+    "prev_ee_qw",
+    "prev_ee_qx",
+    "prev_ee_qy",
+    "prev_ee_qz",
+    "prev_gripper",
+];
+
+/// One frame as the conversion reads it.
+#[derive(Clone, Copy)]
+pub(crate) struct View<'a> {
+    pub(crate) observation: &'a Observation,
+    pub(crate) ee_pose: &'a [f64; 7],
+    pub(crate) previous_action: Option<&'a [f64; ACTION_DIM]>,
+}
+
+impl<'a> From<&'a Frame> for View<'a> {
+    fn from(f: &'a Frame) -> View<'a> {
+        View {
+            observation: &f.observation,
+            ee_pose: &f.ee_pose,
+            previous_action: f.previous_action.as_ref(),
+        }
+    }
+}
+
+fn state(v: &View<'_>, out: &mut Vec<f64>) {
+    let o = v.observation;
+    out.extend(o.odometry.pose);
+    out.extend(o.odometry.velocity);
+    out.extend(o.joints);
+    out.push(o.gripper);
+    out.extend(v.ee_pose);
+    out.extend(v.previous_action.copied().unwrap_or([0.0; ACTION_DIM]));
+}
+
+/// `{"images": {camera: (n, H, W, rgb bytes)}, "depth": {camera: (n, H, W, f32 bytes)},
+/// "state": (n, f64 bytes)}` for the last `history` of `frames` (oldest first), the oldest
+/// repeated in front when there are fewer, as the policy contract pads a history. A camera is
+/// present only when every frame has its image (the runner renders only what is shown).
+pub(crate) fn frames<'py>(
+    py: Python<'py>,
+    frames: &[View<'_>],
+    history: usize,
+    depth: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    let Some(first) = frames.first() else {
+        return Ok(d);
+    };
+    let shown = &frames[frames.len().saturating_sub(history)..];
+    let padded: Vec<&View<'_>> = std::iter::repeat_n(first, history.saturating_sub(shown.len()))
+        .chain(shown)
+        .collect();
+    let n = padded.len();
+    let images = PyDict::new(py);
+    let depths = PyDict::new(py);
+    let newest = padded[n - 1].observation;
+    for (c, cam) in newest.images.iter().enumerate() {
+        fn of<'a>(v: &View<'a>, c: usize, name: &str) -> Option<&'a CameraImage> {
+            v.observation.images.get(c).filter(|i| i.name == name)
+        }
+        if !(padded.iter()).all(|v| of(v, c, &cam.name).is_some_and(|i| !i.rgb.is_empty())) {
+            continue;
+        }
+        let mut rgb = Vec::with_capacity(n * cam.rgb.len());
+        let mut z = Vec::with_capacity(if depth { n * cam.depth.len() * 4 } else { 0 });
+        for im in padded.iter().filter_map(|v| of(v, c, &cam.name)) {
+            rgb.extend_from_slice(&im.rgb);
+            if depth {
+                z.extend(im.depth.iter().flat_map(|v| v.to_ne_bytes()));
+            }
+        }
+        images.set_item(&cam.name, (n, cam.height, cam.width, PyBytes::new(py, &rgb)))?;
+        if depth {
+            depths.set_item(&cam.name, (n, cam.height, cam.width, PyBytes::new(py, &z)))?;
+        }
+    }
+    let mut s = Vec::with_capacity(n * STATE_FIELDS.len());
+    for v in &padded {
+        state(v, &mut s);
+    }
+    d.set_item("images", images)?;
+    d.set_item("depth", depths)?;
+    d.set_item("state", (n, PyBytes::new(py, &f64_bytes(&s))))?;
+    d.set_item("time", newest.time)?;
+    Ok(d)
+}
 
 /// `{"tasks_ended": [...], "decision": {...} | None, "ended": {...} | None}`.
 pub(crate) fn progress<'py>(
     py: Python<'py>,
     p: &Progress,
+    history: usize,
     depth: bool,
     privileged: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
@@ -23,7 +142,7 @@ pub(crate) fn progress<'py>(
     d.set_item("tasks_ended", tasks)?;
     match &p.next {
         Next::Decision(dec) => {
-            d.set_item("decision", decision(py, dec, depth, privileged)?)?;
+            d.set_item("decision", decision(py, dec, history, depth, privileged)?)?;
             d.set_item("ended", py.None())?;
         }
         Next::Ended(end) => {
@@ -36,14 +155,19 @@ pub(crate) fn progress<'py>(
             e.set_item("tasks", all)?;
             e.set_item("sim_time", end.outcome.sim_time)?;
             e.set_item("success_rate", end.outcome.success_rate())?;
-            e.set_item("observation", observation(py, &end.observation, depth)?)?;
+            let last = View {
+                observation: &end.observation,
+                ee_pose: &end.ee_pose,
+                previous_action: end.previous_action.as_ref(),
+            };
+            e.set_item("frames", frames(py, &[last], history, depth)?)?;
             d.set_item("ended", e)?;
         }
     }
     Ok(d)
 }
 
-fn task<'py>(py: Python<'py>, t: &TaskRecord) -> PyResult<Bound<'py, PyDict>> {
+pub(crate) fn task<'py>(py: Python<'py>, t: &TaskRecord) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     d.set_item("index", t.index)?;
     d.set_item("step", &t.step)?;
@@ -54,9 +178,16 @@ fn task<'py>(py: Python<'py>, t: &TaskRecord) -> PyResult<Bound<'py, PyDict>> {
     Ok(d)
 }
 
+/// A chunk as `(actions, f64 bytes)`.
+pub(crate) fn chunk<'py>(py: Python<'py>, chunk: &[[f64; ACTION_DIM]]) -> (usize, Bound<'py, PyBytes>) {
+    let flat: Vec<f64> = chunk.iter().flatten().copied().collect();
+    (chunk.len(), PyBytes::new(py, &f64_bytes(&flat)))
+}
+
 fn decision<'py>(
     py: Python<'py>,
     dec: &Decision,
+    history: usize,
     depth: bool,
     with_privileged: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
@@ -64,50 +195,21 @@ fn decision<'py>(
     d.set_item("step", dec.step)?;
     d.set_item("task_index", dec.task_index)?;
     d.set_item("sub_task", &dec.sub_task)?;
-    d.set_item("observation", observation(py, &dec.observation, depth)?)?;
-    d.set_item("ee_pose", dec.ee_pose.to_vec())?;
-    d.set_item("previous_action", dec.previous_action.map(|a| a.to_vec()))?;
-    let history = PyList::empty(py);
-    for f in &dec.history {
-        let h = observation(py, &f.observation, depth)?;
-        h.set_item("ee_pose", f.ee_pose.to_vec())?;
-        h.set_item("previous_action", f.previous_action.map(|a| a.to_vec()))?;
-        h.set_item("step", f.step)?;
-        history.append(h)?;
-    }
-    d.set_item("history", history)?;
+    let mut views: Vec<View<'_>> = dec.history.iter().map(View::from).collect();
+    views.push(View {
+        observation: &dec.observation,
+        ee_pose: &dec.ee_pose,
+        previous_action: dec.previous_action.as_ref(),
+    });
+    d.set_item("frames", frames(py, &views, history, depth)?)?;
     if with_privileged {
         d.set_item("privileged", privileged(py, &dec.privileged)?)?;
     }
     match &dec.expert {
-        Some(Ok(chunk)) => {
-            let flat: Vec<f64> = chunk.iter().flatten().copied().collect();
-            d.set_item("expert", (chunk.len(), PyBytes::new(py, &f64_bytes(&flat))))?;
-        }
+        Some(Ok(c)) => d.set_item("expert", chunk(py, c))?,
         Some(Err(e)) => d.set_item("expert_error", e)?,
         None => {}
     }
-    Ok(d)
-}
-
-fn observation<'py>(py: Python<'py>, o: &Observation, depth: bool) -> PyResult<Bound<'py, PyDict>> {
-    let d = PyDict::new(py);
-    d.set_item("time", o.time)?;
-    let images = PyDict::new(py);
-    let depths = PyDict::new(py);
-    for im in &o.images {
-        images.set_item(&im.name, (im.height, im.width, PyBytes::new(py, &im.rgb)))?;
-        if depth {
-            let raw: Vec<u8> = im.depth.iter().flat_map(|v| v.to_ne_bytes()).collect();
-            depths.set_item(&im.name, (im.height, im.width, PyBytes::new(py, &raw)))?;
-        }
-    }
-    d.set_item("images", images)?;
-    d.set_item("depth", depths)?;
-    d.set_item("odometry", o.odometry.pose.to_vec())?;
-    d.set_item("velocity", o.odometry.velocity.to_vec())?;
-    d.set_item("joints", o.joints.to_vec())?;
-    d.set_item("gripper", o.gripper)?;
     Ok(d)
 }
 

@@ -8,6 +8,7 @@
 //! rule of its own. The simulator steps with the GIL released.
 
 mod convert;
+mod samples;
 
 use std::sync::{Mutex, MutexGuard, PoisonError};
 
@@ -80,6 +81,8 @@ struct NativeEnv {
     depth: bool,
     /// Decisions carry the privileged state.
     privileged: bool,
+    /// Frames each observation stacks.
+    history: usize,
 }
 
 impl NativeEnv {
@@ -210,7 +213,7 @@ fn step_many<'py>(
     });
     let done = done.map_err(|(i, e)| e.into_py(&format!("environment {i}: ")))?;
     (done.iter().zip(&refs))
-        .map(|(p, e)| convert::progress(py, p, e.depth, e.privileged))
+        .map(|(p, e)| convert::progress(py, p, e.history, e.depth, e.privileged))
         .collect()
 }
 
@@ -274,6 +277,7 @@ impl NativeEnv {
             }),
             depth,
             privileged,
+            history,
         })
     }
 
@@ -311,7 +315,7 @@ impl NativeEnv {
             inner.begin_reset(instruction, seed)?;
             inner.receive()
         })?;
-        convert::progress(py, &progress, self.depth, self.privileged)
+        convert::progress(py, &progress, self.history, self.depth, self.privileged)
     }
 
     /// Execute one action (10 values) for one control step.
@@ -321,7 +325,7 @@ impl NativeEnv {
             inner.begin_step(&action)?;
             inner.receive()
         })?;
-        convert::progress(py, &progress, self.depth, self.privileged)
+        convert::progress(py, &progress, self.history, self.depth, self.privileged)
     }
 
     /// The expert's chunk (16 actions of 10 values) for the current decision.
@@ -344,5 +348,9 @@ impl NativeEnv {
 #[pymodule]
 mod _native {
     #[pymodule_export]
+    use super::samples::NativeSamples;
+    #[pymodule_export]
     use super::{NativeEnv, step_many};
+    #[pymodule_export]
+    const STATE_FIELDS: [&str; 29] = super::convert::STATE_FIELDS;
 }

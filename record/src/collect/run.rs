@@ -9,7 +9,6 @@ use std::time::Instant;
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use kitchen_r_core::dataset::{Instruction, Split};
-use kitchen_r_sim::generator::splitmix;
 use kitchen_r_sim::{Assets, EpisodeConfig, EpisodeParams, Sim, SimConfig, SimError};
 
 use super::hook::{Recorder, Trip};
@@ -22,6 +21,7 @@ use crate::mcap_ros2::McapRecorder;
 use crate::video::VideoSettings;
 use kitchen_r_episode::oracle::{OraclePolicy, expert_options};
 use kitchen_r_episode::runner::run_episode;
+use kitchen_r_episode::samples::collection_episode;
 
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> CollectError + '_ {
     move |source| CollectError::Io {
@@ -45,16 +45,11 @@ fn episode(
         let text = cfg.plan.join("; ");
         return Ok((cfg, text, String::new()));
     }
+    // The paper's randomisation when configured, each aspect as switched in
+    // configs/episodes.toml `[randomise]`; the same seed gives the same episode (and the same
+    // as the Python package's streamed expert samples).
+    let cfg = collection_episode(assets, params, ins, opts.seed, index, opts.config.randomise)?;
     let instruction = &ins[index % ins.len()];
-    let seed = splitmix(opts.seed ^ splitmix(index as u64));
-    let scene = assets.scene(&instruction.scene)?;
-    let mut cfg = EpisodeConfig::from_instruction(instruction, scene, &assets.catalogue, params, seed)?;
-    cfg.id = format!("ep{index:05}");
-    if opts.config.randomise {
-        // The paper's randomisation, each aspect as switched in configs/episodes.toml
-        // `[randomise]`; the same seed gives the same episode.
-        kitchen_r_sim::randomise(&mut cfg, scene, &assets.catalogue, params, seed)?;
-    }
     Ok((cfg, instruction.instruction.clone(), instruction.id.clone()))
 }
 
