@@ -39,3 +39,8 @@ cargo test --workspace --locked "$@"
 echo "== the Python package: pip install ./python, then python/tests"
 python3 -m pip install --quiet --disable-pip-version-check --no-build-isolation ./python
 KITCHEN_R_BIN=target/debug/kitchen-r python3 -m pytest -q python/tests
+# The LeRobot env plugin (python/lerobot_env_kitchen_r, issue #24 item 5): pure Python, installed
+# offline over the package just built; its tests need no LeRobot (those that do are skipped).
+echo "== the LeRobot env plugin: pip install ./python/lerobot_env_kitchen_r, then its tests"
+python3 -m pip install --quiet --disable-pip-version-check --no-build-isolation --no-deps ./python/lerobot_env_kitchen_r
+python3 -m pytest -q python/lerobot_env_kitchen_r/tests
