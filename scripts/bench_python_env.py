@@ -95,7 +95,7 @@ def main() -> None:
     p.add_argument("--envs", type=int, default=2)
     p.add_argument("--bin", default=os.environ.get("KITCHEN_R_BIN", "target/release/kitchen-r"))
     a = p.parse_args()
-    ids = gym_kitchen_r.KitchenREnv(images=False)._native.instruction_ids()[: a.episodes]
+    ids = gym_kitchen_r.KitchenREnv(images=False).instruction_ids()[: a.episodes]
     rows = {
         "rust runner (1 core)": rust(a.bin, a.episodes),
     }

@@ -276,6 +276,15 @@ class KitchenREnv(gym.Env):
             raise RuntimeError("call reset() first: there is no current decision")
         return np.asarray(self._native.expert_chunk(), dtype=np.float64)
 
+    def instruction_ids(self) -> list[str]:
+        """The split's instruction ids, in dataset order (what ``options={"instruction": ...}``
+        takes)."""
+        return list(self._ids)
+
+    def instruction_of(self, instruction_id: str) -> dict:
+        """``{"id", "scene", "instruction", "plan"}`` of an instruction of the split."""
+        return self._native.instruction(instruction_id)
+
     def render(self):
         if self.render_mode != "rgb_array" or self._last_obs is None or "images" not in self._last_obs:
             return None

@@ -24,7 +24,7 @@ EPISODES = 20
 
 def first_ids(n):
     env = KitchenREnv(images=False)
-    ids = env._native.instruction_ids()[:n]
+    ids = env.instruction_ids()[:n]
     env.close()
     return ids
 

@@ -129,7 +129,7 @@ class KitchenRLeRobotEnv(gym.Env):
             max_tasks=max_tasks,
         )
         # gym_kitchen_r has no public list of instruction ids; its own tests read the native one.
-        self.instruction_ids: list[str] = list(self.inner._native.instruction_ids())
+        self.instruction_ids: list[str] = self.inner.instruction_ids()
         if instruction is not None and instruction not in self.instruction_ids:
             raise KeyError(f"no instruction {instruction!r} in the {split} split")
         sizes = {name: (h, w) for name, (h, w) in self._camera_sizes().items()}
@@ -151,7 +151,7 @@ class KitchenRLeRobotEnv(gym.Env):
         # lerobot-eval runs at most `_max_episode_steps` steps (`env.call("_max_episode_steps")`).
         # By default the longest plan's every task at its time limit: every episode ends by itself.
         per_task = math.ceil(task_time_limit * FPS) + 1
-        longest = max(len(self.inner._native.instruction(i)["plan"]) for i in self.instruction_ids)
+        longest = max(len(self.inner.instruction_of(i)["plan"]) for i in self.instruction_ids)
         tasks = min(longest, max_tasks) if max_tasks > 0 else longest
         self._limit = episode_length
         self._max_episode_steps = episode_length if episode_length is not None else tasks * per_task
