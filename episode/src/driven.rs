@@ -25,7 +25,7 @@ use crate::policy::{
     ACTION_DIM, Frame, HORIZON, MAX_OBSERVATION_HISTORY, Policy, PolicyError, PolicyInput, PolicySpec,
     Privileged, check_chunk,
 };
-use crate::runner::{EpisodeOutcome, RunOptions, StepHook, TaskRecord, ee_pose, run_episode};
+use crate::runner::{EpisodeOutcome, RunOptions, StepHook, TaskRecord, ee_pose, run_from_task};
 use crate::teleport::expert_starts;
 
 /// How a driven episode runs.
@@ -46,6 +46,9 @@ pub struct DriveOptions {
     /// the decision ([`Decision::expert`]): labels for every state without a second round
     /// trip. Needs `expert`.
     pub expert_inline: bool,
+    /// Run only this plan step, from the expert's state at its start (one sub-task as an
+    /// episode); `None` runs the plan from its first step (up to `run.max_tasks`).
+    pub only_task: Option<usize>,
 }
 
 impl Default for DriveOptions {
@@ -57,6 +60,7 @@ impl Default for DriveOptions {
             observation_history: 1,
             expert: true,
             expert_inline: false,
+            only_task: None,
         }
     }
 }
@@ -179,7 +183,10 @@ impl DrivenEpisode {
         let (cmd_tx, cmd_rx) = channel();
         let (ev_tx, ev_rx) = channel();
         let expert = opts.expert.then(|| OraclePolicy::new(assets).without_images());
-        let starts_from = opts.teleport_on_failure.then(|| assets.clone());
+        // One sub-task from a later step needs the expert's states even without teleports.
+        let starts_from =
+            (opts.teleport_on_failure || opts.only_task.is_some_and(|j| j > 0)).then(|| assets.clone());
+        let first = opts.only_task.unwrap_or(0);
         let mut run = RunOptions {
             // Every decision carries the privileged state: the expert reads it, and the
             // environment shows it when asked. It changes nothing in the simulation.
@@ -189,6 +196,9 @@ impl DrivenEpisode {
             ..opts.run.clone()
         };
         run.execute = 1;
+        if let Some(j) = opts.only_task {
+            run.max_tasks = Some(j + 1);
+        }
         let relay = Relay {
             spec: PolicySpec {
                 name: "driven".into(),
@@ -210,7 +220,7 @@ impl DrivenEpisode {
             .name("kitchen-r-driven".into())
             .spawn(move || {
                 // A failure was sent as an event; the simulator comes back either way.
-                let _ = drive(&mut sim, &cfg, starts_from, relay, &run, ev_tx);
+                let _ = drive(&mut sim, &cfg, starts_from, relay, &run, first, ev_tx);
                 sim
             })
             .map_err(|e| DriveError::Sim(format!("cannot start the episode's thread: {e}")))?;
@@ -353,6 +363,7 @@ fn drive(
     starts_from: Option<Assets>,
     mut relay: Relay,
     run: &RunOptions,
+    first: usize,
     events: Sender<Event>,
 ) -> Result<(), ()> {
     let fail = |e: String| {
@@ -373,7 +384,7 @@ fn drive(
         None => None,
     };
     let mut hook = TaskEnds(events.clone());
-    let outcome = match run_episode(sim, &mut relay, run, starts.as_deref(), &mut hook) {
+    let outcome = match run_from_task(sim, &mut relay, run, starts.as_deref(), &mut hook, first) {
         Ok(o) => o,
         Err(e) => {
             fail(e.to_string());

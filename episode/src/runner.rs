@@ -133,6 +133,10 @@ impl StepHook for () {
 pub enum RunError {
     #[error("simulator: {0}")]
     Sim(#[from] SimError),
+    /// A run from plan step N needs the expert's state at its start, and none was given (or
+    /// the plan has no step N).
+    #[error("no expert state at the start of plan step {0} to start from")]
+    NoStart(usize),
 }
 
 /// Privileged state for reference policies.
@@ -179,6 +183,21 @@ pub fn run_episode(
     expert_starts: Option<&[Snapshot]>,
     hook: &mut dyn StepHook,
 ) -> Result<EpisodeOutcome, RunError> {
+    run_from_task(sim, policy, opts, expert_starts, hook, 0)
+}
+
+/// [`run_episode`] from plan step `first` on: the robot and objects are first put where the
+/// expert stood at that task's start (`expert_starts[first]`), and only tasks `first..` are
+/// run and reported (one sub-task as an episode: `KitchenR/Task-v0`, with `max_tasks` =
+/// `first + 1`). `first = 0` is `run_episode`.
+pub fn run_from_task(
+    sim: &mut Sim,
+    policy: &mut dyn Policy,
+    opts: &RunOptions,
+    expert_starts: Option<&[Snapshot]>,
+    hook: &mut dyn StepHook,
+    first: usize,
+) -> Result<EpisodeOutcome, RunError> {
     let started = Instant::now();
     let episode = sim.episode().clone();
     let n_tasks = opts
@@ -195,7 +214,11 @@ pub fn run_episode(
     let mut timeouts = 0u32;
     let mut aborted: Option<String> = None;
     let mut last_action: Option<[f64; ACTION_DIM]> = None;
-    for j in 0..n_tasks {
+    if first > 0 {
+        let snap = (expert_starts.and_then(|s| s.get(first))).ok_or(RunError::NoStart(first))?;
+        sim.restore(snap)?;
+    }
+    for j in first..n_tasks {
         let step_text = episode.plan[j].clone();
         if let Some(reason) = &aborted {
             out.tasks.push(TaskRecord {

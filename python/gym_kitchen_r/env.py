@@ -198,11 +198,12 @@ class KitchenREnv(gym.Env):
     # The gymnasium API --------------------------------------------------------------------
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        instruction, run_seed = self._reset_args(seed, options)
-        return self._after_reset(self._native.reset(instruction, run_seed), instruction, run_seed)
+        args = self._reset_args(seed, options)
+        return self._after_reset(self._native.reset(*args), *args)
 
-    def _reset_args(self, seed: int | None, options: dict | None) -> tuple[str, int]:
-        """The instruction and run seed a reset starts (the vector env starts several at once)."""
+    def _reset_args(self, seed: int | None, options: dict | None) -> tuple[str, int, int | None]:
+        """The instruction, run seed and plan step (None: the whole plan) a reset starts (the
+        vector env starts several at once)."""
         super().reset(seed=seed)
         options = options or {}
         instruction = options.get("instruction", self._fixed)
@@ -212,9 +213,13 @@ class KitchenREnv(gym.Env):
             instruction = self._ids[instruction]
         run_seed = seed if seed is not None else int(self.np_random.integers(2**63))
         self.instruction = self._native.instruction(instruction)
-        return instruction, int(run_seed)
+        return instruction, int(run_seed), self._task(options)
 
-    def _after_reset(self, progress: dict, instruction: str, run_seed: int):
+    def _task(self, options: dict) -> int | None:
+        """The plan step a reset runs alone; the whole plan here (``KitchenR/Task-v0`` picks one)."""
+        return None
+
+    def _after_reset(self, progress: dict, instruction: str, run_seed: int, task: int | None = None):
         self._success = True
         if progress["decision"] is None:
             raise RuntimeError(f"instruction {instruction!r} has no task to run")
@@ -224,6 +229,8 @@ class KitchenREnv(gym.Env):
         info = self._info(progress)
         info["instruction"] = self.instruction
         info["run_seed"] = run_seed
+        if task is not None:
+            info["task"] = task
         return obs, info
 
     def step(self, action):
@@ -313,3 +320,24 @@ def unpack_frames(frames: dict, history: int, images: bool = True, depth: bool =
         out["depth"] = {n: unpack(e, np.float32, (e[1], e[2])) for n, e in frames["depth"].items()}
     out["state"] = unpack(frames["state"], np.float64, (len(STATE_FIELDS),))
     return out
+
+
+class KitchenRTaskEnv(KitchenREnv):
+    """``gymnasium.make("KitchenR/Task-v0", **kwargs)``: one sub-task as an episode.
+
+    ``reset(options={"instruction": id, "task": j})`` runs plan step ``j`` of the instruction
+    alone, starting where the expert stood at that step's start (one expert pre-run per reset
+    for ``j > 0``); without ``task`` a step is drawn from the seeded generator. The episode
+    terminates when that task ends; ``info["is_success"]`` is its success. Parameters as
+    ``KitchenR/Plan-v0`` (``max_tasks`` does not apply).
+    """
+
+    def _task(self, options: dict) -> int:
+        plan = self.instruction["plan"]
+        task = options.get("task")
+        if task is None:
+            return int(self.np_random.integers(len(plan)))
+        task = int(task)
+        if not 0 <= task < len(plan):
+            raise ValueError(f"task {task}: instruction {self.instruction['id']!r} has plan steps 0..{len(plan) - 1}")
+        return task

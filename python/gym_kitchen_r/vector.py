@@ -21,19 +21,20 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space, concatenate, create_empty_array, iterate
 
 from . import _native
-from .env import KitchenREnv
+from .env import KitchenREnv, KitchenRTaskEnv
 
 
 class KitchenRVectorEnv(VectorEnv):
     """``num_envs`` copies of :class:`gym_kitchen_r.KitchenREnv` built with the same ``kwargs``."""
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
+    env_class: type[KitchenREnv] = KitchenREnv
 
     def __init__(self, num_envs: int = 2, **kwargs: Any):
         if num_envs < 1:
             raise ValueError("num_envs must be at least 1")
         self.num_envs = num_envs
-        self.envs = [KitchenREnv(**kwargs) for _ in range(num_envs)]
+        self.envs = [self.env_class(**kwargs) for _ in range(num_envs)]
         self.single_observation_space = self.envs[0].observation_space
         self.single_action_space = self.envs[0].action_space
         self.observation_space = batch_space(self.single_observation_space, num_envs)
@@ -53,8 +54,8 @@ class KitchenRVectorEnv(VectorEnv):
         progress = _native.step_many(self._natives, args)
         infos: dict[str, Any] = {}
         observations = []
-        for i, (env, p, (ins, run_seed)) in enumerate(zip(self.envs, progress, args)):
-            obs, info = env._after_reset(p, ins, run_seed)
+        for i, (env, p, a) in enumerate(zip(self.envs, progress, args)):
+            obs, info = env._after_reset(p, *a)
             observations.append(obs)
             infos = self._add_info(infos, info, i)
         self._obs = concatenate(self.single_observation_space, observations, self._obs)
@@ -99,3 +100,9 @@ class KitchenRVectorEnv(VectorEnv):
     def close_extras(self, **kwargs: Any):
         for env in self.envs:
             env.close()
+
+
+class KitchenRTaskVectorEnv(KitchenRVectorEnv):
+    """``num_envs`` copies of :class:`gym_kitchen_r.KitchenRTaskEnv` (``KitchenR/Task-v0``)."""
+
+    env_class = KitchenRTaskEnv

@@ -41,6 +41,8 @@ enum EnvError {
     Drive(#[from] DriveError),
     #[error("no instruction {0:?} in this split (see instruction_ids())")]
     UnknownInstruction(String),
+    #[error("plan step {0} does not exist: instruction {1:?} has {2} steps")]
+    NoTask(usize, String, usize),
     #[error("call reset() before step()")]
     NotReset,
     #[error("an action has {0} values; it must have 10 (v, w, x, y, z, qw, qx, qy, qz, g)")]
@@ -58,6 +60,7 @@ impl EnvError {
                 PyValueError::new_err(msg)
             }
             EnvError::UnknownInstruction(_) => PyKeyError::new_err(msg),
+            EnvError::NoTask(..) => PyValueError::new_err(msg),
             _ => PyRuntimeError::new_err(msg),
         }
     }
@@ -95,11 +98,12 @@ impl NativeEnv {
 impl Inner {
     /// Launch the episode of `instruction` with run seed `seed`; `receive` waits for its first
     /// decision.
-    fn begin_reset(&mut self, instruction: &str, seed: u64) -> Result<(), EnvError> {
+    fn begin_reset(&mut self, instruction: &str, seed: u64, task: Option<usize>) -> Result<(), EnvError> {
         if let Some(old) = self.episode.take() {
             self.idle = old.finish().or(self.idle.take());
         }
         let ins = self.find(instruction)?;
+        check_task(ins, task)?;
         let scene = self.assets.scene(&ins.scene).map_err(setup("scene"))?;
         let cfg = EpisodeConfig::from_instruction(
             ins,
@@ -122,13 +126,21 @@ impl Inner {
                 .0
             }
         };
-        self.episode = Some(DrivenEpisode::launch(sim, cfg, &self.assets, &self.opts)?);
+        let opts = DriveOptions {
+            only_task: task,
+            ..self.opts.clone()
+        };
+        self.episode = Some(DrivenEpisode::launch(sim, cfg, &self.assets, &opts)?);
         Ok(())
     }
 
     fn find(&self, instruction: &str) -> Result<&Instruction, EnvError> {
         (self.instructions.iter().find(|i| i.id == instruction))
             .ok_or_else(|| EnvError::UnknownInstruction(instruction.to_string()))
+    }
+
+    fn check_reset(&self, instruction: &str, task: Option<usize>) -> Result<(), EnvError> {
+        check_task(self.find(instruction)?, task)
     }
 
     fn episode(&mut self) -> Result<&mut DrivenEpisode, EnvError> {
@@ -157,13 +169,20 @@ impl Inner {
     }
 }
 
+fn check_task(ins: &Instruction, task: Option<usize>) -> Result<(), EnvError> {
+    match task {
+        Some(j) if j >= ins.plan.len() => Err(EnvError::NoTask(j, ins.id.clone(), ins.plan.len())),
+        _ => Ok(()),
+    }
+}
+
 /// What `step_many` asks of one environment.
 #[derive(FromPyObject)]
 enum Request {
     /// Execute this action.
     Step(Vec<f64>),
-    /// Start the episode of `(instruction, run seed)`.
-    Reset(String, u64),
+    /// Start the episode of `(instruction, run seed, plan step or None)`.
+    Reset(String, u64, Option<usize>),
 }
 
 /// Step or reset several environments at once: every action is checked first (a bad one
@@ -196,14 +215,14 @@ fn step_many<'py>(
         for (i, (inner, r)) in inners.iter_mut().zip(&requests).enumerate() {
             match r {
                 Request::Step(a) => inner.check_action(a).map(drop),
-                Request::Reset(id, _) => inner.find(id).map(drop),
+                Request::Reset(id, _, task) => inner.check_reset(id, *task),
             }
             .map_err(|e| (i, e))?;
         }
         for (i, (inner, r)) in inners.iter_mut().zip(&requests).enumerate() {
             match r {
                 Request::Step(a) => inner.begin_step(a),
-                Request::Reset(id, seed) => inner.begin_reset(id, *seed),
+                Request::Reset(id, seed, task) => inner.begin_reset(id, *seed, *task),
             }
             .map_err(|e| (i, e))?;
         }
@@ -263,6 +282,7 @@ impl NativeEnv {
             observation_history: history,
             expert: expert || expert_inline,
             expert_inline,
+            only_task: None,
         };
         Ok(NativeEnv {
             inner: Mutex::new(Inner {
@@ -308,11 +328,19 @@ impl NativeEnv {
     }
 
     /// Start the episode of `instruction` with run seed `seed` (the episode `kitchen-r eval
-    /// --seed SEED` runs for it); the first decision.
-    fn reset<'py>(&self, py: Python<'py>, instruction: &str, seed: u64) -> PyResult<Bound<'py, PyDict>> {
+    /// --seed SEED` runs for it); the first decision. With `task`, only that plan step, from
+    /// the expert's state at its start.
+    #[pyo3(signature = (instruction, seed, task=None))]
+    fn reset<'py>(
+        &self,
+        py: Python<'py>,
+        instruction: &str,
+        seed: u64,
+        task: Option<usize>,
+    ) -> PyResult<Bound<'py, PyDict>> {
         let progress = py.detach(|| {
             let mut inner = self.lock();
-            inner.begin_reset(instruction, seed)?;
+            inner.begin_reset(instruction, seed, task)?;
             inner.receive()
         })?;
         convert::progress(py, &progress, self.history, self.depth, self.privileged)

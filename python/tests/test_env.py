@@ -175,3 +175,37 @@ def test_the_package_leaves_the_contracts_protobuf_namespace_alone():
     # None, or a namespace package (no loader) that generated modules can join.
     assert spec is None or spec.loader is None, f"a regular kitchen_r package is installed: {spec}"
 
+
+
+def test_the_readme_snippet_steps_the_expert_to_success():
+    # The README's lines, as a newcomer types them.
+    import gymnasium as gym, gym_kitchen_r  # noqa: E401,F401
+    env = gym.make("KitchenR/Plan-v0", expert=True)
+    obs, info = env.reset(seed=0, options={"instruction": "dev-0001"})
+    done = False
+    while not done: obs, reward, done, _, info = env.step(info["expert_chunk"][0])  # noqa: E701
+    assert info["is_success"] and len(info["episode"]["tasks"]) == len(info["episode"]["tasks"]) > 0
+    env.close()
+
+
+def test_task_env_runs_one_sub_task_from_the_experts_state_at_its_start():
+    env = gym.make("KitchenR/Task-v0")
+    plan = env.unwrapped.instruction_of("dev-0001")["plan"]
+    j = next(i for i, step in enumerate(plan) if step.startswith("place"))
+    obs, info = env.reset(seed=0, options={"instruction": "dev-0001", "task": j})
+    assert obs["sub_task"] == plan[j] and obs["task_index"] == j and info["task"] == j
+    # The robot starts holding what the expert picked before this step: the gripper is closed on it.
+    assert obs["state"][gym_kitchen_r.STATE_FIELDS.index("gripper")] < 0.9
+    terminated, steps = False, 0
+    while not terminated:
+        _, reward, terminated, _, info = env.unwrapped.step_chunk(env.unwrapped.expert_chunk())
+        steps += 1
+    assert info["is_success"] and reward == 1.0
+    assert [t["index"] for t in info["episode"]["tasks"]] == [j], "only that step runs"
+    with pytest.raises(ValueError, match="plan steps"):
+        env.reset(seed=0, options={"instruction": "dev-0001", "task": len(plan)})
+    # Without a task, the seeded generator draws one.
+    _, a = env.reset(seed=4, options={"instruction": "dev-0001"})
+    _, b = env.reset(seed=4, options={"instruction": "dev-0001"})
+    assert a["task"] == b["task"]
+    env.close()
