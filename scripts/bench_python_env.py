@@ -14,7 +14,9 @@ action and both 128x128 RGB cameras rendered at every control step in all three:
    drawn by the seeded env (not the same N), run until it has made as many steps as run 2.
 
 Prints control steps per second of each and the ratios: the binding's overhead is 2 against 1
-on one core, the vector env's gain 3 against 2.
+on one core, the vector env's gain 3 against 2. With ``--repeat R`` the three runs are repeated
+R times, interleaved (a shared or virtual machine drifts by more than the overhead between
+runs), and the median of each ratio is printed too.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import statistics
 import subprocess
 import tempfile
 import time
@@ -93,19 +96,25 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--episodes", type=int, default=6)
     p.add_argument("--envs", type=int, default=2)
+    p.add_argument("--repeat", type=int, default=1, help="repeat the three runs, interleaved; print the medians")
     p.add_argument("--bin", default=os.environ.get("KITCHEN_R_BIN", "target/release/kitchen-r"))
     a = p.parse_args()
     ids = gym_kitchen_r.KitchenREnv(images=False).instruction_ids()[: a.episodes]
-    rows = {
-        "rust runner (1 core)": rust(a.bin, a.episodes),
-    }
-    rows["python env (1)"] = one_env(ids)
-    rows[f"python vector env ({a.envs})"] = vector_env(a.envs, rows["python env (1)"][0])
-    for name, (steps, wall) in rows.items():
-        print(f"{name:28s} {steps:6d} steps {wall:7.2f} s {steps / wall:8.1f} steps/s")
-    r, o, v = (s / w for s, w in rows.values())
-    print(f"binding overhead: {100 * (r / o - 1):+.1f} % (python env time over the rust runner's)")
-    print(f"vector env of {a.envs}: {v / o:.2f}x one env")
+    overheads, gains = [], []
+    for _ in range(a.repeat):
+        rows = {"rust runner (1 core)": rust(a.bin, a.episodes)}
+        rows["python env (1)"] = one_env(ids)
+        rows[f"python vector env ({a.envs})"] = vector_env(a.envs, rows["python env (1)"][0])
+        for name, (steps, wall) in rows.items():
+            print(f"{name:28s} {steps:6d} steps {wall:7.2f} s {steps / wall:8.1f} steps/s")
+        r, o, v = (s / w for s, w in rows.values())
+        overheads.append(100 * (r / o - 1))
+        gains.append(v / o)
+        print(f"binding overhead: {overheads[-1]:+.1f} % (python env time over the rust runner's)")
+        print(f"vector env of {a.envs}: {gains[-1]:.2f}x one env", flush=True)
+    if a.repeat > 1:
+        print(f"median of {a.repeat}: binding overhead {statistics.median(overheads):+.1f} %, "
+              f"vector env of {a.envs} {statistics.median(gains):.2f}x one env")
 
 
 if __name__ == "__main__":

@@ -18,8 +18,7 @@ chmod +x /tmp/kitchen-r
 export KITCHEN_R_ASSETS="$PWD/assets" KITCHEN_R_CONFIGS="$PWD/configs" RUST_LOG=warn
 CORES="$(nproc)"
 echo "== $CORES cores; $(python3 --version)"
-python3 scripts/bench_samples.py --episodes "${SAMPLE_EPISODES:-480}" --workers "$CORES" \
+[ "${SAMPLES:-1}" = 0 ] || python3 scripts/bench_samples.py --episodes "${SAMPLE_EPISODES:-480}" --workers "$CORES" \
   --collect "${COLLECT_EPISODES:-64}" --bin /tmp/kitchen-r --json "$OUT/samples.json" | tee "$OUT/samples.txt"
-for n in 2 "$CORES"; do
-  python3 scripts/bench_python_env.py --episodes 6 --envs "$n" --bin /tmp/kitchen-r | tee "$OUT/env_$n.txt"
-done
+python3 scripts/bench_python_env.py --episodes 6 --envs 2 --repeat "${REPEAT:-5}" --bin /tmp/kitchen-r | tee "$OUT/env_2.txt"
+python3 scripts/bench_python_env.py --episodes 6 --envs "$CORES" --bin /tmp/kitchen-r | tee "$OUT/env_$CORES.txt"
