@@ -32,6 +32,7 @@ use serde::Deserialize;
 use super::extract::{ClientAddr, PathArg, QueryArgs};
 use super::{admin, session};
 use crate::error::ServiceError;
+use kitchen_r_core::observations::ObservationTrack;
 use crate::leaderboard::Track;
 use crate::service::sessions::{Login, Role};
 use crate::service::{AppState, Caller, Organiser};
@@ -351,8 +352,19 @@ async fn entry_page(
     let (Some(track), Some(split), Some(id)) = parsed else {
         return Ok(not_found(&headers, &who, "such leaderboard entry"));
     };
-    let board = s.leaderboard(track, split).await?;
-    let Some(row) = board.rows.iter().find(|r| r.submission_id == id) else {
+    // A submission is on one observation track's board only; planning has just the standard.
+    let mut found = None;
+    for observations in ObservationTrack::ALL {
+        if track == Track::Planning && observations == ObservationTrack::Privileged {
+            break;
+        }
+        let board = s.board(track, observations, split).await?;
+        found = board.rows.into_iter().find(|r| r.submission_id == id);
+        if found.is_some() {
+            break;
+        }
+    }
+    let Some(row) = found.as_ref() else {
         return Ok(not_found(&headers, &who, "such leaderboard entry"));
     };
     let title = format!("{} on the {} leaderboard", row.team, track.as_str());
