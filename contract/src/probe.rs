@@ -215,7 +215,11 @@ async fn handshake(
         cams.join(", "),
         checked.max_concurrency,
         checked.observation_history,
-        if spec.privileged_observations { "privileged" } else { "standard" },
+        if spec.privileged_observations {
+            "privileged"
+        } else {
+            "standard"
+        },
     );
     Ok(ProbedSpec {
         endpoint: conn.endpoint.uri.clone(),

@@ -85,7 +85,12 @@ mod tests {
             assert_eq!(serde_json::to_string(&t).unwrap(), format!("\"{t}\""));
         }
         assert_eq!("".parse(), Ok(ObservationTrack::Standard));
-        assert!("Privileged".parse::<ObservationTrack>().unwrap_err().contains("`privileged`"));
+        assert!(
+            "Privileged"
+                .parse::<ObservationTrack>()
+                .unwrap_err()
+                .contains("`privileged`")
+        );
         assert_eq!(ObservationTrack::of(true), ObservationTrack::Privileged);
     }
 

@@ -31,8 +31,8 @@ use kitchen_r_sim::Sim;
 use serde::{Deserialize, Serialize};
 
 use crate::policy::{
-    ACTION_DIM, ChunkTolerance, Corrections, HORIZON, Policy, PolicyError, PolicyInput, PrivilegedScope, PolicySpec,
-    check_chunk,
+    ACTION_DIM, ChunkTolerance, Corrections, HORIZON, Policy, PolicyError, PolicyInput, PolicySpec,
+    PrivilegedScope, check_chunk,
 };
 use crate::runner::{RunError, RunOptions, StepHook, privileged_observation, run_episode};
 

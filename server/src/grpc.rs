@@ -182,8 +182,8 @@ impl Submissions for SubmissionsService {
         let msg = req.into_inner();
         let track: Track = msg.track.parse()?;
         let split = split(&msg.split, Some(Split::Test))?;
-        let observations: ObservationTrack = (msg.observations.parse())
-            .map_err(|e: String| Status::invalid_argument(e))?;
+        let observations: ObservationTrack =
+            (msg.observations.parse()).map_err(|e: String| Status::invalid_argument(e))?;
         let board = self.state.board(track, observations, split).await?;
         let label = |o: Option<ObservationTrack>| o.map_or_else(String::new, |o| o.to_string());
         Ok(Response::new(pb::Leaderboard {

@@ -97,8 +97,8 @@ fn assert_goal_is_the_zones_approach(o: &PrivilegedObservation, sub_task: &str, 
     };
     let assets = kitchen_r_core::assets::assets_dir();
     let catalogue = kitchen_r_core::catalogue::Catalogue::load(&assets.join("objects.toml")).unwrap();
-    let scene = kitchen_r_core::scene::Scene::load(&assets.join(format!("scenes/{scene}.toml")), &catalogue)
-        .unwrap();
+    let scene =
+        kitchen_r_core::scene::Scene::load(&assets.join(format!("scenes/{scene}.toml")), &catalogue).unwrap();
     let colour = sub_task
         .trim_start_matches("move to the ")
         .trim_end_matches(" zone");
@@ -108,7 +108,9 @@ fn assert_goal_is_the_zones_approach(o: &PrivilegedObservation, sub_task: &str, 
     let world = [bx + c * x - s * y, by + s * x + c * y];
     let heading = (byaw + yaw - zone.approach[2]).sin().abs();
     assert!(
-        (world[0] - zone.approach[0]).abs() < 1e-6 && (world[1] - zone.approach[1]).abs() < 1e-6 && heading < 1e-6,
+        (world[0] - zone.approach[0]).abs() < 1e-6
+            && (world[1] - zone.approach[1]).abs() < 1e-6
+            && heading < 1e-6,
         "{sub_task}: goal {:?} from {:?} is not the approach {:?}",
         o.goal,
         o.base_pose,
@@ -166,7 +168,10 @@ fn privileged_runs_get_what_their_split_allows_and_are_ranked_apart() {
         assert!(!dev.is_empty(), "the endpoint was called");
         for s in &dev {
             assert!(!s.reference_state, "a participant never gets the reference state");
-            let o = s.shown.as_ref().unwrap_or_else(|| panic!("no privileged observation: {s:?}"));
+            let o = s
+                .shown
+                .as_ref()
+                .unwrap_or_else(|| panic!("no privileged observation: {s:?}"));
             let shown = names(o);
             for object in ["apple", "blue cup"] {
                 assert!(shown.iter().any(|n| n == object), "dev shows {object}: {s:?}");
@@ -185,7 +190,10 @@ fn privileged_runs_get_what_their_split_allows_and_are_ranked_apart() {
             assert!(kinds.contains(&step.as_str()), "{step} was run: {kinds:?}");
         }
         for s in &test {
-            let o = s.shown.as_ref().unwrap_or_else(|| panic!("no privileged observation: {s:?}"));
+            let o = s
+                .shown
+                .as_ref()
+                .unwrap_or_else(|| panic!("no privileged observation: {s:?}"));
             for name in names(o) {
                 assert!(s.sub_task.contains(&name), "test split shows {name} during {s:?}");
             }
@@ -199,9 +207,12 @@ fn privileged_runs_get_what_their_split_allows_and_are_ranked_apart() {
             }
         }
         assert!(
-            test.iter().any(|s| s.sub_task.starts_with("pick")) && test.iter().all(|s| {
-                s.shown.as_ref().is_some_and(|o| !names(o).contains(&"apple".to_string()))
-            }),
+            test.iter().any(|s| s.sub_task.starts_with("pick"))
+                && test.iter().all(|s| {
+                    s.shown
+                        .as_ref()
+                        .is_some_and(|o| !names(o).contains(&"apple".to_string()))
+                }),
             "the apple, handled only by later steps, never shows on test"
         );
 
@@ -224,32 +235,56 @@ fn privileged_runs_get_what_their_split_allows_and_are_ranked_apart() {
         assert_eq!(priv_board["observations"], "privileged");
         let rows = priv_board["rows"].as_array().unwrap();
         assert_eq!(rows.len(), 1, "{priv_board}");
-        assert_eq!((rows[0]["team"].as_str(), rows[0]["rank"].as_u64()), (Some("Privileged"), Some(1)));
+        assert_eq!(
+            (rows[0]["team"].as_str(), rows[0]["rank"].as_u64()),
+            (Some("Privileged"), Some(1))
+        );
         assert_eq!(rows[0]["observations"], "privileged");
         let (_, test_board) = board(&server, "track=control&split=test&observations=privileged").await;
         assert_eq!(test_board["rows"][0]["team"], "Privileged", "{test_board}");
         let (_, std_test) = board(&server, "track=control&split=test").await;
         assert_eq!(std_test["rows"], json!([]), "{std_test}");
 
-        let csv = text(&server, "/api/v1/leaderboard?track=control&split=dev&observations=privileged&format=csv").await;
+        let csv = text(
+            &server,
+            "/api/v1/leaderboard?track=control&split=dev&observations=privileged&format=csv",
+        )
+        .await;
         let mut lines = csv.lines();
         assert_eq!(
             lines.next(),
             Some("rank,team,submission_id,sr,mse,state,baseline,submitted_at,observations")
         );
         let row = lines.next().unwrap();
-        assert!(row.starts_with("1,Privileged,") && row.ends_with(",privileged"), "{csv}");
+        assert!(
+            row.starts_with("1,Privileged,") && row.ends_with(",privileged"),
+            "{csv}"
+        );
         assert_eq!(lines.next(), None, "{csv}");
         let csv = text(&server, "/api/v1/leaderboard?track=control&split=dev&format=csv").await;
-        assert!(csv.lines().skip(1).all(|l| l.ends_with(",standard") && l.contains(",Standard,")), "{csv}");
+        assert!(
+            csv.lines()
+                .skip(1)
+                .all(|l| l.ends_with(",standard") && l.contains(",Standard,")),
+            "{csv}"
+        );
 
         let page = text(&server, "/?split=dev").await;
         assert!(page.contains("Control track — standard observations"), "{page}");
-        assert!(page.contains("id=control-privileged>Control track — privileged observations"), "{page}");
-        assert!(page.contains("Integrated track — privileged observations"), "{page}");
+        assert!(
+            page.contains("id=control-privileged>Control track — privileged observations"),
+            "{page}"
+        );
+        assert!(
+            page.contains("Integrated track — privileged observations"),
+            "{page}"
+        );
         let id = rows[0]["submission_id"].as_i64().unwrap();
         let entry = text(&server, &format!("/leaderboard/control/dev/{id}")).await;
-        assert!(entry.contains("<th>Observations</th><td>privileged</td>"), "{entry}");
+        assert!(
+            entry.contains("<th>Observations</th><td>privileged</td>"),
+            "{entry}"
+        );
 
         // Planning has no privileged board.
         let (status, e) = board(&server, "track=planning&observations=privileged").await;
@@ -270,11 +305,17 @@ fn a_privileged_policy_is_refused_naming_the_key_when_the_track_is_off() {
         assert_eq!(status, 403, "{e}");
         assert_eq!(e["code"], "privileged_track_disabled", "{e}");
         let why = e["error"].as_str().unwrap();
-        assert!(why.contains("control.privileged_track") && why.contains("privileged_track = true"), "{why}");
+        assert!(
+            why.contains("control.privileged_track") && why.contains("privileged_track = true"),
+            "{why}"
+        );
         let (_, mine) = get_json(&server, "/api/v1/leaderboard?track=control&split=dev", None).await;
         assert_eq!(mine["rows"], json!([]));
     });
-    assert!(seen.lock().unwrap().is_empty(), "a refused policy is never driven");
+    assert!(
+        seen.lock().unwrap().is_empty(),
+        "a refused policy is never driven"
+    );
 }
 
 /// The starter kit's policy server with `--privileged` asks for the track: `check-policy`
@@ -304,26 +345,51 @@ fn the_starter_kit_check_policy_and_local_eval_speak_the_privileged_track() {
     let checked = ok(kr(&["check-policy", &url]));
     let report = out(&checked);
     assert!(
-        report.lines().any(|l| l.starts_with("PASS  privileged") && l.contains("privileged track")),
+        report
+            .lines()
+            .any(|l| l.starts_with("PASS  privileged") && l.contains("privileged track")),
         "{report}"
     );
-    assert!(report.contains("PASS  act "), "Acts with a privileged observation pass: {report}");
+    assert!(
+        report.contains("PASS  act "),
+        "Acts with a privileged observation pass: {report}"
+    );
     let refused = kr(&["check-policy", &url, "--standard-only"]);
     assert!(!refused.status.success());
     let report = out(&refused);
     assert!(
-        report.lines().any(|l| l.starts_with("FAIL  privileged") && l.contains("control.privileged_track")),
+        report
+            .lines()
+            .any(|l| l.starts_with("FAIL  privileged") && l.contains("control.privileged_track")),
         "{report}"
     );
 
     let dir = tempfile::tempdir().unwrap();
     let eval_cfg = dir.path().join("eval.toml");
-    std::fs::write(&eval_cfg, "task_time_limit = 1.0\nmax_plan_steps = 2\nteleport_on_failure = false\n").unwrap();
+    std::fs::write(
+        &eval_cfg,
+        "task_time_limit = 1.0\nmax_plan_steps = 2\nteleport_on_failure = false\n",
+    )
+    .unwrap();
     let eval = ok(kr(&[
-        "eval", "--policy", &url, "--split", "dev", "--episodes", "1", "--jobs", "1", "--json",
-        "--config", eval_cfg.to_str().unwrap(),
+        "eval",
+        "--policy",
+        &url,
+        "--split",
+        "dev",
+        "--episodes",
+        "1",
+        "--jobs",
+        "1",
+        "--json",
+        "--config",
+        eval_cfg.to_str().unwrap(),
     ]));
     let report: Value = serde_json::from_str(out(&eval).trim()).unwrap();
     assert_eq!(report["observations"], "privileged", "{report}");
-    assert_eq!(report["episodes"][0]["tasks"].as_array().map(Vec::len), Some(2), "{report}");
+    assert_eq!(
+        report["episodes"][0]["tasks"].as_array().map(Vec::len),
+        Some(2),
+        "{report}"
+    );
 }

@@ -120,7 +120,11 @@ mod tests {
         if let Some(pb::goal::Goal::Place(p)) = w.goal.as_mut().and_then(|g| g.goal.as_mut()) {
             p.target.pop();
         }
-        assert!(from_wire(&w).unwrap_err().contains("goal.place.target has 2 values"));
+        assert!(
+            from_wire(&w)
+                .unwrap_err()
+                .contains("goal.place.target has 2 values")
+        );
         w.goal = None;
         assert!(from_wire(&w).unwrap_err().contains("goal is missing"));
     }

@@ -63,12 +63,24 @@ impl PrivilegedObservation {
             TaskTarget::Pick { object } => {
                 let o = p.objects.get(*object)?;
                 let pose = frame.pose(&o.pose);
-                (Goal::Pick { object: o.name.clone(), pose }, Some(o))
+                (
+                    Goal::Pick {
+                        object: o.name.clone(),
+                        pose,
+                    },
+                    Some(o),
+                )
             }
             TaskTarget::Place { object, target } => {
                 let o = p.objects.get(*object)?;
                 let target = frame.point(*target);
-                (Goal::Place { object: o.name.clone(), target }, Some(o))
+                (
+                    Goal::Place {
+                        object: o.name.clone(),
+                        target,
+                    },
+                    Some(o),
+                )
             }
         };
         let objects = match scope {
@@ -119,7 +131,11 @@ impl BaseFrame {
 /// An angle in (-π, π].
 fn wrap(a: f64) -> f64 {
     let w = a.rem_euclid(std::f64::consts::TAU);
-    if w > std::f64::consts::PI { w - std::f64::consts::TAU } else { w }
+    if w > std::f64::consts::PI {
+        w - std::f64::consts::TAU
+    } else {
+        w
+    }
 }
 
 #[cfg(test)]

@@ -32,11 +32,11 @@ use serde::Deserialize;
 use super::extract::{ClientAddr, PathArg, QueryArgs};
 use super::{admin, session};
 use crate::error::ServiceError;
-use kitchen_r_core::observations::ObservationTrack;
 use crate::leaderboard::Track;
 use crate::service::sessions::{Login, Role};
 use crate::service::{AppState, Caller, Organiser};
 use crate::store::Team;
+use kitchen_r_core::observations::ObservationTrack;
 use layout::Viewer;
 
 /// The team session cookie; its value is a session id (`crate::service::sessions`).

@@ -27,10 +27,10 @@ use super::execute::{JobControl, execute_job_recording};
 use super::{JobContext, JobError};
 use kitchen_r_contract::probe::{ProbeFailure, probe_endpoint};
 use kitchen_r_contract::{AllowedNetworks, RemoteConfig};
+pub use kitchen_r_core::observations::ObservationTrack as Track;
 use kitchen_r_episode::eval::{Sr, task_kinds};
 use kitchen_r_episode::policy::PrivilegedScope;
 use kitchen_r_episode::runner::RunOptions;
-pub use kitchen_r_core::observations::ObservationTrack as Track;
 use kitchen_r_record::video::episode::RecordedVideo;
 use kitchen_r_sim::EpisodeConfig;
 use kitchen_r_sim::episode::as_instruction;
@@ -221,8 +221,9 @@ fn evaluate_endpoint_with(
     ))?;
     drop(rt);
     let s = &LocalSettings {
-        privileged_observations: (s.privileged_observations)
-            .or(probed.privileged_observations.then(|| PrivilegedScope::for_split(split))),
+        privileged_observations: (s.privileged_observations).or(probed
+            .privileged_observations
+            .then(|| PrivilegedScope::for_split(split))),
         ..s.clone()
     };
     let mut ctx = JobContext::load(remote.clone(), AllowedNetworks::ALL, 1)?;

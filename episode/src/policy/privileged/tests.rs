@@ -41,12 +41,22 @@ fn names(o: &PrivilegedObservation) -> Vec<&str> {
 #[test]
 fn a_move_goal_is_the_approach_pose_in_the_robot_frame_and_shows_no_object_on_test() {
     // One metre ahead of a robot facing +y, approached facing -x: a quarter turn left.
-    let w = world(TaskTarget::Base { x: 1.0, y: 3.0, yaw: PI });
+    let w = world(TaskTarget::Base {
+        x: 1.0,
+        y: 3.0,
+        yaw: PI,
+    });
     let test = PrivilegedObservation::from_world(&w, PrivilegedScope::SubTask).unwrap();
-    let Goal::Approach { x, y, yaw } = test.goal else { panic!("{:?}", test.goal) };
+    let Goal::Approach { x, y, yaw } = test.goal else {
+        panic!("{:?}", test.goal)
+    };
     close(&[x, y, yaw], &[1.0, 0.0, FRAC_PI_2]);
     assert_eq!(test.base_pose, [1.0, 2.0, FRAC_PI_2]);
-    assert!(test.objects.is_empty(), "a move names no object: {:?}", names(&test));
+    assert!(
+        test.objects.is_empty(),
+        "a move names no object: {:?}",
+        names(&test)
+    );
     let dev = PrivilegedObservation::from_world(&w, PrivilegedScope::Episode).unwrap();
     assert_eq!(names(&dev), ["red cup", "bowl", "apple"]);
     assert_eq!(dev.goal, test.goal);
@@ -56,7 +66,9 @@ fn a_move_goal_is_the_approach_pose_in_the_robot_frame_and_shows_no_object_on_te
 fn a_pick_goal_is_the_named_objects_pose_in_the_robot_frame() {
     let w = world(TaskTarget::Pick { object: 1 });
     let o = PrivilegedObservation::from_world(&w, PrivilegedScope::SubTask).unwrap();
-    let Goal::Pick { object, pose } = &o.goal else { panic!("{:?}", o.goal) };
+    let Goal::Pick { object, pose } = &o.goal else {
+        panic!("{:?}", o.goal)
+    };
     assert_eq!(object, "bowl");
     // The bowl is 3 m along +x of the scene, which is to the robot's right (-y); its heading
     // (scene yaw 0) is a quarter turn right of the robot's.
@@ -74,7 +86,9 @@ fn a_place_goal_is_the_target_in_the_robot_frame_and_test_shows_only_the_placed_
         target: [0.0, 2.5, 0.95],
     });
     let o = PrivilegedObservation::from_world(&w, PrivilegedScope::SubTask).unwrap();
-    let Goal::Place { object, target } = &o.goal else { panic!("{:?}", o.goal) };
+    let Goal::Place { object, target } = &o.goal else {
+        panic!("{:?}", o.goal)
+    };
     assert_eq!(object, "red cup");
     close(target, &[0.5, 1.0, 0.95]);
     assert_eq!(names(&o), ["red cup"]);
@@ -85,7 +99,11 @@ fn a_place_goal_is_the_target_in_the_robot_frame_and_test_shows_only_the_placed_
 #[test]
 fn the_test_scope_never_shows_another_key_object_whatever_the_task() {
     for target in [
-        TaskTarget::Base { x: 0.0, y: 0.0, yaw: 0.0 },
+        TaskTarget::Base {
+            x: 0.0,
+            y: 0.0,
+            yaw: 0.0,
+        },
         TaskTarget::Pick { object: 2 },
         TaskTarget::Place {
             object: 2,
@@ -93,22 +111,36 @@ fn the_test_scope_never_shows_another_key_object_whatever_the_task() {
         },
     ] {
         let o = PrivilegedObservation::from_world(&world(target.clone()), PrivilegedScope::SubTask).unwrap();
-        assert!(names(&o).iter().all(|n| *n == "apple"), "{target:?} shows {:?}", names(&o));
+        assert!(
+            names(&o).iter().all(|n| *n == "apple"),
+            "{target:?} shows {:?}",
+            names(&o)
+        );
         let goal_object = match &o.goal {
             Goal::Approach { .. } => None,
             Goal::Pick { object, .. } | Goal::Place { object, .. } => Some(object.as_str()),
         };
-        assert!(goal_object.is_none_or(|n| n == "apple"), "{target:?}: {:?}", o.goal);
+        assert!(
+            goal_object.is_none_or(|n| n == "apple"),
+            "{target:?}: {:?}",
+            o.goal
+        );
     }
 }
 
 #[test]
 fn a_target_naming_a_missing_object_shows_nothing() {
     let w = world(TaskTarget::Pick { object: 7 });
-    assert_eq!(PrivilegedObservation::from_world(&w, PrivilegedScope::Episode), None);
+    assert_eq!(
+        PrivilegedObservation::from_world(&w, PrivilegedScope::Episode),
+        None
+    );
 }
 
 #[test]
 fn angles_wrap_into_the_half_open_interval() {
-    close(&[wrap(3.0 * PI), wrap(-PI), wrap(0.5), wrap(-3.5 * PI)], &[PI, PI, 0.5, FRAC_PI_2]);
+    close(
+        &[wrap(3.0 * PI), wrap(-PI), wrap(0.5), wrap(-3.5 * PI)],
+        &[PI, PI, 0.5, FRAC_PI_2],
+    );
 }

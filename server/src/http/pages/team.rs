@@ -155,7 +155,8 @@ pub(super) fn entry(track: Track, split: &str, row: &Row) -> String {
         escape(&row.submitted_at),
         escape(split),
         match row.observations {
-            Some(kitchen_r_core::observations::ObservationTrack::Privileged) => format!("{}-privileged", track.as_str()),
+            Some(kitchen_r_core::observations::ObservationTrack::Privileged) =>
+                format!("{}-privileged", track.as_str()),
             _ => track.as_str().to_string(),
         },
     );

@@ -50,7 +50,10 @@ async fn with_the_track_on_the_run_is_privileged_and_its_jobs_grant_the_splits_s
         .unwrap();
     assert_eq!(dev.observations, ObservationTrack::Privileged);
     let all = scopes(f.state.pool(), dev.run_id).await;
-    assert!(!all.is_empty() && all.iter().all(|s| s.as_deref() == Some("episode")), "{all:?}");
+    assert!(
+        !all.is_empty() && all.iter().all(|s| s.as_deref() == Some("episode")),
+        "{all:?}"
+    );
     let view = f.state.get_submission(&caller, dev.id).await.unwrap();
     assert_eq!(view.policy.unwrap().observations, ObservationTrack::Privileged);
 
