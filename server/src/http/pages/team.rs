@@ -81,10 +81,10 @@ pub(super) fn body(quota: &QuotaView, subs: &[TeamSubmission]) -> String {
 <td data-label=MSE class=n>{}</td><td data-label=M class=n>{}</td><td data-label=P class=n>{}</td></tr>",
             escape(&crate::clock::rfc3339(s.created_at)),
             escape(&s.split),
-            if s.kind == SubmissionKind::Policy {
-                "policy"
-            } else {
-                "plans"
+            match (s.kind, s.privileged) {
+                (SubmissionKind::Policy, true) => "policy (privileged)",
+                (SubmissionKind::Policy, false) => "policy",
+                _ => "plans",
             },
             state_words(s),
             score(s.scores.em),
