@@ -163,6 +163,7 @@ impl Submissions for SubmissionsService {
             instructions: done.instructions as u32,
             max_concurrency: done.max_concurrency,
             policy: done.policy,
+            observations: done.observations.to_string(),
         }))
     }
 
