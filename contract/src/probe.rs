@@ -206,7 +206,7 @@ async fn handshake(
         .map_or_else(|| "default".to_string(), |n| n.to_string());
     let summary = format!(
         "{:?} at {}: protocol v{}, horizon {}, action dim {}, cameras [{}], max concurrency {}, \
-         history {}, executes {execute}, observations {}",
+         history {}, executes {execute}{}",
         spec.name,
         conn.endpoint.uri,
         spec.protocol_version,
@@ -215,10 +215,11 @@ async fn handshake(
         cams.join(", "),
         checked.max_concurrency,
         checked.observation_history,
+        // Standard summaries read as before the privileged track existed.
         if spec.privileged_observations {
-            "privileged"
+            ", privileged observations"
         } else {
-            "standard"
+            ""
         },
     );
     Ok(ProbedSpec {

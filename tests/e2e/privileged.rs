@@ -2,7 +2,8 @@
 //! `control.privileged_track = true`, a participant's policy whose GetSpec asks for privileged
 //! observations and logs what it receives, a standard policy beside it, and the boards.
 //!
-//! Checked: the endpoint really receives the privileged observation (its robot pose, a goal in
+//! Online and offline (MSE) episodes both run. Checked: the endpoint really receives the
+//! privileged observation at every Act (its robot pose, a goal in
 //! the robot frame that matches the scene's zone); on the dev split every key object of the
 //! episode, on the test split nothing beyond what the current sub-task names; the standard
 //! policy receives none; the control board keeps standard and privileged entries apart, labelled
@@ -133,7 +134,7 @@ fn privileged_runs_get_what_their_split_allows_and_are_ranked_apart() {
     let (privileged, seen) = logging_policy(true);
     let (standard, standard_seen) = logging_policy(false);
     let fx = ControlFixture::new(
-        "[control]\nprivileged_track = true\ntask_time_limit_s = 1.0\nmax_plan_steps = 4\noffline_mse = false\n",
+        "[control]\nprivileged_track = true\ntask_time_limit_s = 1.0\nmax_plan_steps = 4\n",
     );
     let set_dir = fx.dir.path().join("private-set");
     let truth = one_instruction_test_set(&set_dir);
@@ -164,6 +165,9 @@ fn privileged_runs_get_what_their_split_allows_and_are_ranked_apart() {
         let (reg, view) = run(token.clone(), privileged.url(), "dev").await;
         assert_eq!(reg["observations"], "privileged", "{reg}");
         assert_eq!(view["policy"]["observations"], "privileged", "{view}");
+        // Offline (MSE) episodes asked the policy too: their observations are checked below
+        // with the online ones.
+        assert!(view["latest_run"]["scores"]["mse"].as_f64().is_some(), "{view:#}");
         let dev: Vec<Seen> = std::mem::take(&mut *seen.lock().unwrap());
         assert!(!dev.is_empty(), "the endpoint was called");
         for s in &dev {
