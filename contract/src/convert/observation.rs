@@ -372,7 +372,6 @@ mod tests {
                     history: h,
                     privileged: None,
                     privileged_observation: None,
-                    privileged_observation: None,
                 },
                 std::slice::from_ref(&plan),
                 4,
