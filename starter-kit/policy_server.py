@@ -13,6 +13,7 @@ directory) with grpcio-tools; nothing generated is committed. By hand it is one 
         ../proto/kitchen_r/policy/v1/policy.proto
 
 Run:  python policy_server.py --listen 0.0.0.0:50051 [--token SECRET] [--history 2] [--execute 4]
+      [--privileged]
 It prints `listening grpc=HOST:PORT` once it accepts calls.
 
 Contract v1.1 (what a learned policy needs): GetSpec may ask for an observation history (the
@@ -20,6 +21,14 @@ last N control steps, 0.1 s apart, in every Act) and for how many actions of eac
 worker executes before asking again; every observation carries the hand pose in the base frame
 (`robot.ee_pose`), the gripper opening (`robot.gripper`) and the previous action
 (`previous_action`, empty at the start of the episode).
+
+Privileged-information track (`--privileged`): GetSpec answers `privileged_observations = true`
+and every Act then carries `privileged_observation`: the robot's pose in the scene frame, the
+current task's goal in the robot frame (a move's approach pose, the object to pick, the place
+target) and key objects' poses in the scene frame; on the test split only what the current
+sub-task names. A server accepts such a policy only where its organiser enabled the track
+(`control.privileged_track = true`; otherwise registration is refused, naming that key), and
+ranks it on the privileged boards, apart from standard policies. `privileged(obs)` below reads it.
 """
 
 import argparse
@@ -100,6 +109,7 @@ class StarterPolicy:
         robot state of one frame: what a learned model would be conditioned on.
         """
         _states = [state(f) for f in frames(obs)]  # a model would read these and the images
+        _world = privileged(obs)  # None unless this policy asked for privileged observations
         return [list(self.HOLD) for _ in range(HORIZON)]
 
 
@@ -120,8 +130,33 @@ def state(frame):
     return hand + [frame.robot.gripper] + previous
 
 
+def privileged(obs):
+    """The privileged track's observation as plain values, or None on the standard track:
+    {"base": (x, y, yaw) in the scene frame, "goal": (kind, object, values) in the robot frame
+    (kind "approach": x, y, yaw; "pick": the object's pose x, y, z, qw, qx, qy, qz; "place": the
+    target x, y, z), "objects": {name: pose in the scene frame}}."""
+    if not obs.HasField("privileged_observation"):
+        return None
+    p = obs.privileged_observation
+    kind = p.goal.WhichOneof("goal")
+    if kind == "approach":
+        goal = ("approach", "", (p.goal.approach.x, p.goal.approach.y, p.goal.approach.yaw))
+    elif kind == "pick":
+        goal = ("pick", p.goal.pick.object, tuple(p.goal.pick.pose))
+    elif kind == "place":
+        goal = ("place", p.goal.place.object, tuple(p.goal.place.target))
+    else:
+        goal = None
+    return {
+        "base": (p.base_x, p.base_y, p.base_yaw),
+        "goal": goal,
+        "objects": {o.name: tuple(o.pose) for o in p.objects},
+    }
+
+
 def make_servicer(
-    pb2, pb2_grpc, policy, token, history=1, execute=0, name="starter-kit stand-still 0.2", max_concurrency=4
+    pb2, pb2_grpc, policy, token, history=1, execute=0, name="starter-kit stand-still 0.2", max_concurrency=4,
+    privileged=False,
 ):
     import grpc
 
@@ -153,6 +188,9 @@ def make_servicer(
                 # between request.min_actions_executed_per_chunk and 16).
                 observation_history=history,
                 actions_executed_per_chunk=execute,
+                # Privileged track: True asks for `privileged_observation` in every Act (the
+                # server says whether it runs the track in request.privileged_track).
+                privileged_observations=privileged,
             )
 
         def Reset(self, request, context):
@@ -180,16 +218,31 @@ def main():
     ap.add_argument(
         "--execute", type=int, default=0, help="actions executed per chunk; 0 = the organiser's default (v1.1)"
     )
+    ap.add_argument(
+        "--privileged",
+        action="store_true",
+        help="ask for privileged observations (the privileged track; ranked apart, needs the organiser's "
+        "control.privileged_track = true)",
+    )
     args = ap.parse_args()
     if not 1 <= args.history <= MAX_OBSERVATION_HISTORY:
         sys.exit(f"--history must be between 1 and {MAX_OBSERVATION_HISTORY}")
     if not 0 <= args.execute <= HORIZON:
         sys.exit(f"--execute must be between 0 and {HORIZON}")
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(message)s")
-    serve(args.listen, args.token, args.proto_dir, args.threads, StarterPolicy(), args.history, args.execute)
+    serve(
+        args.listen,
+        args.token,
+        args.proto_dir,
+        args.threads,
+        StarterPolicy(),
+        args.history,
+        args.execute,
+        privileged=args.privileged,
+    )
 
 
-def serve(listen, token, proto, threads, policy, history, execute, name=None, max_concurrency=4):
+def serve(listen, token, proto, threads, policy, history, execute, name=None, max_concurrency=4, privileged=False):
     """Serve `policy` (an object with `reset(episode_id, task_index, sub_task)` and
     `decide(obs)`, as StarterPolicy) with the health service until interrupted; prints
     `listening grpc=HOST:PORT` once it accepts calls. Learned policies (baselines/) reuse this."""
@@ -203,7 +256,9 @@ def serve(listen, token, proto, threads, policy, history, execute, name=None, ma
     ]
     server = grpc.server(futures.ThreadPoolExecutor(max_workers=threads), options=opts)
     extra = {"name": name} if name else {}
-    servicer = make_servicer(pb2, pb2_grpc, policy, token, history, execute, max_concurrency=max_concurrency, **extra)
+    servicer = make_servicer(
+        pb2, pb2_grpc, policy, token, history, execute, max_concurrency=max_concurrency, privileged=privileged, **extra
+    )
     pb2_grpc.add_PolicyServicer_to_server(servicer, server)
     h = health.HealthServicer()
     for service in ("", "kitchen_r.policy.v1.Policy"):

@@ -37,6 +37,12 @@ pub(crate) struct CheckPolicyArgs {
     /// `control.min_actions_executed_per_chunk`), to check a GetSpec against a stricter server.
     #[arg(long, value_name = "K", default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=16))]
     pub min_execute: u32,
+    /// Check against a server that does not run the privileged track (`control.privileged_track
+    /// = false`, the default there): a policy asking for privileged observations then fails.
+    /// Without it the check announces the track, and a privileged policy's Acts carry a
+    /// synthetic privileged observation.
+    #[arg(long)]
+    pub standard_only: bool,
 }
 
 pub(crate) fn check_policy(args: CheckPolicyArgs) -> anyhow::Result<()> {
@@ -62,6 +68,7 @@ pub(crate) fn check_policy(args: CheckPolicyArgs) -> anyhow::Result<()> {
         actions_executed_per_chunk: args.execute,
         min_actions_executed_per_chunk: args.min_execute,
         allowed_networks: AllowedNetworks::ALL,
+        privileged_track: !args.standard_only,
         ..RemoteConfig::default()
     };
     let report = check::check_policy(&args.endpoint, &creds, &cfg, &SimCamera::from_sensors(&sensors));

@@ -103,6 +103,10 @@ pub(crate) struct LeaderboardArgs {
     /// Split to rank.
     #[arg(long, default_value = "test", value_parser = ["dev", "test"])]
     split: String,
+    /// Control and integrated: the board of runs with standard observations, or of runs whose
+    /// policy received privileged observations (ranked apart).
+    #[arg(long, default_value = "standard", value_parser = ["standard", "privileged"])]
+    observations: String,
     /// Output format.
     #[arg(long, value_enum, default_value_t = OutputFormat::Table)]
     format: OutputFormat,
@@ -253,8 +257,12 @@ pub(crate) fn leaderboard(args: LeaderboardArgs) -> anyhow::Result<()> {
     } else {
         "json"
     };
+    let observations = match args.observations.as_str() {
+        "standard" => String::new(),
+        o => format!("&observations={o}"),
+    };
     let path = format!(
-        "/api/v1/leaderboard?track={}&split={}&format={format}",
+        "/api/v1/leaderboard?track={}&split={}{observations}&format={format}",
         args.track, args.split
     );
     runtime()?.block_on(async {

@@ -36,6 +36,8 @@ pub(crate) struct EvalArgs {
     token: Option<String>,
     /// Endpoint policies: send privileged world state, as organiser reference runs do (for
     /// reference policies such as `kitchen-r policy oracle`; participants' runs never get it).
+    /// Not the privileged track: a policy that asks for privileged observations in GetSpec gets
+    /// them (as on a server running the track) and the report says `observations privileged`.
     #[arg(long)]
     privileged: bool,
     /// Instruction split: dev (public plans) or test (needs --ground-truth).
@@ -184,6 +186,7 @@ fn eval_endpoint(
         teleport_on_failure: config.teleport_on_failure,
         bearer_token: args.token,
         privileged: args.privileged,
+        privileged_observations: None,
         jobs: args
             .jobs
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
@@ -249,6 +252,7 @@ fn print_local(r: &LocalReport) {
         r.jobs
     );
     println!("spec {}", r.spec);
+    println!("observations {}", r.observations);
     if let Some(o) = &r.overall {
         for (k, s) in r
             .by_kind

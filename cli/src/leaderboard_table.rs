@@ -1,5 +1,6 @@
 //! The leaderboard as a terminal table: the columns of each track (planning: EM; control: SR
-//! then MSE; integrated: M then P), baseline rows marked.
+//! then MSE; integrated: M then P), baseline rows marked; a policy board's heading names its
+//! observation track (standard or privileged).
 
 use serde_json::Value;
 
@@ -23,7 +24,14 @@ fn cell(v: &Value) -> String {
 
 pub(crate) fn print_table(board: &Value) {
     let track = board["track"].as_str().unwrap_or("planning");
-    println!("{track} track, {} split", board["split"].as_str().unwrap_or("?"));
+    let observations = match board["observations"].as_str() {
+        Some(o) => format!(", {o} observations"),
+        None => String::new(),
+    };
+    println!(
+        "{track} track{observations}, {} split",
+        board["split"].as_str().unwrap_or("?")
+    );
     let rows = board["rows"].as_array().cloned().unwrap_or_default();
     if rows.is_empty() {
         println!("no submissions yet");

@@ -74,10 +74,11 @@ pub(crate) fn submit_policy(a: PolicySubmitArgs) -> anyhow::Result<()> {
         }
         let id = v["id"].as_i64().unwrap_or_default();
         eprintln!(
-            "submission {id} accepted: {} episodes of {} instructions queued ({}), policy: {}",
+            "submission {id} accepted: {} episodes of {} instructions queued ({}, {} observations), policy: {}",
             v["episodes"],
             v["instructions"],
             a.split,
+            v["observations"].as_str().unwrap_or("standard"),
             v["policy"].as_str().unwrap_or("?")
         );
         if !a.wait {

@@ -23,6 +23,7 @@ impl PolicyProbe for WorkerProbe {
                     summary: s.summary,
                     observation_history: s.observation_history,
                     actions_executed_per_chunk: s.actions_executed_per_chunk,
+                    privileged_observations: s.privileged_observations,
                 }),
                 Err(
                     e

@@ -86,9 +86,14 @@ pub(crate) fn serve(args: ServeArgs) -> anyhow::Result<()> {
     let max_episodes = cfg.control.max_episodes;
     let rt = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     rt.block_on(async move {
+        // The registration probe's GetSpec announces whether this server runs the privileged
+        // track; the workers' RemoteConfig does not (each job grants it or not).
         let probe = Arc::new(WorkerProbe {
             allow,
-            remote: remote.clone(),
+            remote: RemoteConfig {
+                privileged_track: cfg.control.privileged_track,
+                ..remote.clone()
+            },
         });
         let server = kitchen_r_server::build_with(cfg, probe).await?;
         let (http, grpc) = server.bind().await?;

@@ -116,6 +116,9 @@ pub(crate) fn print(snap: &Snapshot, server: &ServerArgs) {
             extra.push(format!("with plan submission {plans}"));
         }
         extra.push(format!("max concurrency {}", p["max_concurrency"]));
+        if p["observations"] == "privileged" {
+            extra.push("privileged observations: ranked on the privileged boards".to_string());
+        }
         println!("policy: {} ({})", s(&p["endpoint"]), extra.join(", "));
     }
     let run = &v["latest_run"];

@@ -93,6 +93,7 @@ pub fn call_overhead(calls: usize) -> Result<CallOverhead, RemoteError> {
             previous_action: None,
             history: &[],
             privileged: None,
+            privileged_observation: None,
         };
         let t = Instant::now();
         p.act(&input).map_err(|e| RemoteError::Runtime(e.to_string()))?;

@@ -17,7 +17,9 @@ use tonic_health::pb::health_check_response::ServingStatus;
 use crate::conn::{Conn, describe};
 use crate::convert::{self, CameraPlan, MAX_SIDE};
 use crate::{Credentials, RemoteConfig, SimCamera, client, endpoint};
-use kitchen_r_episode::policy::{ChunkTolerance, HORIZON, PolicyInput, PolicySpec, check_chunk};
+use kitchen_r_episode::policy::{
+    ChunkTolerance, Goal, HORIZON, PolicyInput, PolicySpec, PrivilegedObservation, check_chunk,
+};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Verdict {
@@ -87,13 +89,14 @@ impl Report {
 }
 
 /// Check names, in the order they run.
-pub(crate) const NAMES: [&str; 10] = [
+pub(crate) const NAMES: [&str; 11] = [
     "reachable",
     "health",
     "protocol",
     "shape",
     "cameras",
     "v1.1",
+    "privileged",
     "reset",
     "act",
     "act-again",
@@ -197,10 +200,29 @@ async fn probe(
     let v1_1 = client::check_v1_1(&spec, cfg);
     let v1_1_ok = v1_1.is_ok();
     report.push(NAMES[5], v1_1.map(|(h, k)| describe_v1_1(h, k, cfg)));
+    let track_ok = report.push(NAMES[6], describe_track(spec.privileged_observations, cfg));
     match client::check_spec(&spec, sim, cfg) {
+        Ok(_) if !track_ok => report.skip_rest(7, "this server would refuse the registration"),
         Ok((checked, _)) => acts(report, &mut conn, cfg, &plans, &checked).await,
-        Err(_) if !v1_1_ok => report.skip_rest(6, "the v1.1 fields are out of range"),
-        Err(_) => report.skip_rest(6, "the handshake failed"),
+        Err(_) if !v1_1_ok => report.skip_rest(7, "the v1.1 fields are out of range"),
+        Err(_) => report.skip_rest(7, "the handshake failed"),
+    }
+}
+
+/// Which observation track the policy asked for, and whether the server described by `cfg`
+/// (`privileged_track`: `control.privileged_track` there) accepts it.
+fn describe_track(asks: bool, cfg: &RemoteConfig) -> Result<String, String> {
+    match (asks, cfg.privileged_track) {
+        (false, _) => Ok("standard track: the policy does not ask for privileged observations".into()),
+        (true, true) => Ok("privileged track: the policy asks for privileged observations \
+             (PolicySpec.privileged_observations); a server runs it only where the organiser set \
+             `control.privileged_track = true`, and ranks it on the privileged boards; every Act \
+             of this check carries a synthetic privileged observation"
+            .into()),
+        (true, false) => Err("the policy asks for privileged observations \
+             (PolicySpec.privileged_observations), which a server refuses unless its organiser \
+             set `control.privileged_track = true`; leave the field false for the standard track"
+            .into()),
     }
 }
 
@@ -233,21 +255,23 @@ async fn acts(
         scene_id: "kitchen_a".into(),
     };
     if !report.push(
-        NAMES[6],
+        NAMES[7],
         conn.reset(reset)
             .await
             .map(|()| "Reset accepted".into())
             .map_err(|e| e.to_string()),
     ) {
-        return report.skip_rest(7, "Reset failed");
+        return report.skip_rest(8, "Reset failed");
     }
     let deadline = cfg.call_deadline().as_secs_f64();
     let k = spec
         .actions_executed_per_chunk
         .unwrap_or(cfg.actions_executed_per_chunk as usize) as u64;
     let history = spec.observation_history;
-    for (name, step) in [(NAMES[7], 0), (NAMES[8], k)] {
-        let r = one_act(conn, episode, step, plans, history).await;
+    let privileged = spec.privileged_observations.then(synthetic_privileged);
+    let privileged = privileged.as_ref();
+    for (name, step) in [(NAMES[8], 0), (NAMES[9], k)] {
+        let r = one_act(conn, episode, step, plans, history, privileged).await;
         report.push(
             name,
             r.map(|(ms, note)| {
@@ -265,9 +289,9 @@ async fn acts(
             ..p.clone()
         })
         .collect();
-    let r = one_act(conn, episode, 2 * k, &large, history).await;
+    let r = one_act(conn, episode, 2 * k, &large, history, privileged).await;
     report.push(
-        NAMES[9],
+        NAMES[10],
         r.map(|(ms, _)| format!("{} camera(s) at {MAX_SIDE}x{MAX_SIDE} accepted in {ms:.1} ms", large.len()))
             .map_err(|e| format!("{e} (the worker may send images up to {MAX_SIDE}x{MAX_SIDE}: raise the server's receive limit)")),
     );
@@ -282,6 +306,7 @@ async fn one_act(
     step: u64,
     plans: &[CameraPlan],
     history: usize,
+    privileged: Option<&PrivilegedObservation>,
 ) -> Result<(f64, String), String> {
     let obs = synthetic(plans, step);
     let input = PolicyInput {
@@ -294,6 +319,7 @@ async fn one_act(
         previous_action: (step > 0).then_some([0.0, 0.0, 0.35, 0.0, 0.95, 0.0, 1.0, 0.0, 0.0, 1.0]),
         history: &[],
         privileged: None,
+        privileged_observation: privileged,
     };
     let wire = convert::observation(&input, plans, history).map_err(|e| e.to_string())?;
     let t = Instant::now();
@@ -305,6 +331,21 @@ async fn one_act(
         .warning()
         .map_or_else(String::new, |w| format!("; warning: {w} (within tolerance)"));
     Ok((ms, note))
+}
+
+/// What a privileged run would show for the check's sub-task, `move to the blue zone`: the
+/// robot's scene pose and the zone's approach pose in the robot frame; a move names no object,
+/// so (as on the test split) no object.
+fn synthetic_privileged() -> PrivilegedObservation {
+    PrivilegedObservation {
+        base_pose: [1.0, 0.5, 0.0],
+        goal: Goal::Approach {
+            x: 1.2,
+            y: -0.4,
+            yaw: 1.5,
+        },
+        objects: Vec::new(),
+    }
 }
 
 /// A grey-gradient frame per camera at exactly the planned size (no resampling).

@@ -114,6 +114,7 @@ pub(crate) fn check_spec(
             max_concurrency: spec.max_concurrency.max(1),
             observation_history: history,
             actions_executed_per_chunk: execute,
+            privileged_observations: spec.privileged_observations,
         },
         plans,
     ))

@@ -146,6 +146,7 @@ impl Conn {
             minor_version: kitchen_r_proto::POLICY_MINOR_VERSION,
             min_actions_executed_per_chunk: cfg.min_actions_executed_per_chunk,
             max_observation_history: MAX_OBSERVATION_HISTORY as u32,
+            privileged_track: cfg.privileged_track,
         });
         req.set_timeout(self.call_deadline);
         within(self.call_deadline, self.policy.get_spec(req))

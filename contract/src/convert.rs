@@ -3,6 +3,7 @@
 //! ways, and action chunks both ways.
 
 mod observation;
+pub(crate) mod privileged;
 
 use kitchen_r_proto::policy::v1 as pb;
 use kitchen_r_sim::task::TaskTarget;

@@ -52,6 +52,11 @@ pub struct RemoteConfig {
     pub control_rate_hz: f64,
     /// Address ranges a policy endpoint may resolve to (`[policy.allowed_networks]`).
     pub allowed_networks: AllowedNetworks,
+    /// Whether this run may give privileged observations (the server's
+    /// `control.privileged_track`, or the job's grant), announced in GetSpec as
+    /// `privileged_track`. Not a `[policy]` key: the caller sets it.
+    #[serde(skip)]
+    pub privileged_track: bool,
 }
 
 impl Default for RemoteConfig {
@@ -65,6 +70,7 @@ impl Default for RemoteConfig {
             min_actions_executed_per_chunk: 1,
             control_rate_hz: 10.0,
             allowed_networks: AllowedNetworks::default(),
+            privileged_track: false,
         }
     }
 }

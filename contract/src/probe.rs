@@ -30,6 +30,9 @@ pub struct ProbedSpec {
     /// of the probe's [`RemoteConfig`]: frames per Act and actions executed per chunk.
     pub observation_history: u32,
     pub actions_executed_per_chunk: u32,
+    /// The policy asks for privileged observations (the privileged track). The probe does not
+    /// judge it: the server refuses it, naming its config key, when the track is off.
+    pub privileged_observations: bool,
     /// One line for the participant: name, version, shape, cameras, concurrency.
     pub summary: String,
 }
@@ -203,7 +206,7 @@ async fn handshake(
         .map_or_else(|| "default".to_string(), |n| n.to_string());
     let summary = format!(
         "{:?} at {}: protocol v{}, horizon {}, action dim {}, cameras [{}], max concurrency {}, \
-         history {}, executes {execute}",
+         history {}, executes {execute}{}",
         spec.name,
         conn.endpoint.uri,
         spec.protocol_version,
@@ -211,7 +214,13 @@ async fn handshake(
         checked.action_dim,
         cams.join(", "),
         checked.max_concurrency,
-        checked.observation_history
+        checked.observation_history,
+        // Standard summaries read as before the privileged track existed.
+        if spec.privileged_observations {
+            ", privileged observations"
+        } else {
+            ""
+        },
     );
     Ok(ProbedSpec {
         endpoint: conn.endpoint.uri.clone(),
@@ -220,6 +229,7 @@ async fn handshake(
         name: spec.name,
         observation_history: spec.observation_history,
         actions_executed_per_chunk: spec.actions_executed_per_chunk,
+        privileged_observations: spec.privileged_observations,
         summary,
     })
 }

@@ -149,6 +149,10 @@ impl PolicyRpc for Service {
                 Some(pv) => Some(convert::privileged_from_wire(pv).map_err(Status::invalid_argument)?),
                 None => None,
             };
+            let shown = match &o.privileged_observation {
+                Some(pv) => Some(convert::privileged::from_wire(pv).map_err(Status::invalid_argument)?),
+                None => None,
+            };
             let history = (o.history.iter())
                 .map(convert::frame_from_wire)
                 .collect::<Result<Vec<_>, _>>()
@@ -165,6 +169,7 @@ impl PolicyRpc for Service {
                     .map_err(Status::invalid_argument)?,
                 history: &history,
                 privileged: privileged.as_ref(),
+                privileged_observation: shown.as_ref(),
             };
             let mut p = p.lock().map_err(|_| Status::internal("policy state poisoned"))?;
             p.act(&input).map_err(status)
@@ -210,6 +215,7 @@ pub async fn serve_policy(
             0
         },
         actions_executed_per_chunk: s.actions_executed_per_chunk.map_or(0, |n| n as u32),
+        privileged_observations: s.privileged_observations,
     };
     let service = Service {
         factory,

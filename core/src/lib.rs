@@ -16,6 +16,7 @@ pub mod describe;
 pub mod error;
 pub mod layout;
 pub mod metrics;
+pub mod observations;
 pub mod plan;
 pub mod reach;
 pub mod scene;

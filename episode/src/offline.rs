@@ -32,9 +32,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::policy::{
     ACTION_DIM, ChunkTolerance, Corrections, HORIZON, Policy, PolicyError, PolicyInput, PolicySpec,
-    check_chunk,
+    PrivilegedScope, check_chunk,
 };
-use crate::runner::{RunError, RunOptions, StepHook, run_episode};
+use crate::runner::{RunError, RunOptions, StepHook, privileged_observation, run_episode};
 
 /// MSE charged for a failed prediction (defined with the metrics, so server and worker agree).
 pub use kitchen_r_core::metrics::FAILED_PREDICTION_MSE;
@@ -52,6 +52,10 @@ pub struct OfflineOptions {
     pub max_tasks: Option<usize>,
     /// Pass the expert's privileged state on to the policy (organiser reference runs only).
     pub privileged: bool,
+    /// The privileged track: show the policy a privileged observation of this scope of the
+    /// expert's world at every sampled decision (as online runs do).
+    #[serde(default)]
+    pub privileged_observations: Option<PrivilegedScope>,
     /// Stop calling the policy after this many successive timeouts.
     pub max_consecutive_timeouts: u32,
     /// Stop calling the policy once the episode has run this long.
@@ -70,6 +74,7 @@ impl OfflineOptions {
             sample_every: 1,
             max_tasks: run.max_tasks,
             privileged: run.privileged,
+            privileged_observations: run.privileged_observations,
             max_consecutive_timeouts: run.max_consecutive_timeouts,
             wall_budget: run.wall_budget,
             chunk_tolerance: run.chunk_tolerance,
@@ -135,6 +140,7 @@ pub fn run_offline(
         execute: 1,
         max_tasks: opts.max_tasks,
         privileged: true,
+        privileged_observations: None,
         // The expert is local: it never times out, and the budget limits the policy only.
         max_consecutive_timeouts: u32::MAX,
         wall_budget: None,
@@ -295,12 +301,14 @@ impl Shadow<'_> {
         if let Some(why) = self.stopped.clone().or_else(|| self.reset_failure.clone()) {
             return self.fail(input.step, why);
         }
+        let observation = privileged_observation(input.privileged, self.opts.privileged_observations);
         let shown = PolicyInput {
             privileged: if self.opts.privileged {
                 input.privileged
             } else {
                 None
             },
+            privileged_observation: observation.as_ref(),
             ..*input
         };
         self.calls += 1;

@@ -37,6 +37,11 @@ pub struct PolicySpec {
     /// `None` = the organiser's [`RunOptions::execute`](crate::runner::RunOptions::execute).
     #[serde(default)]
     pub actions_executed_per_chunk: Option<usize>,
+    /// The policy asks for privileged observations (the privileged track; [`privileged`]).
+    /// Whether it gets them is the run's decision
+    /// ([`RunOptions::privileged_observations`](crate::runner::RunOptions::privileged_observations)).
+    #[serde(default)]
+    pub privileged_observations: bool,
 }
 
 fn one() -> usize {
@@ -54,6 +59,7 @@ impl Default for PolicySpec {
             max_concurrency: 1,
             observation_history: 1,
             actions_executed_per_chunk: None,
+            privileged_observations: false,
         }
     }
 }
@@ -114,6 +120,8 @@ pub struct PolicyInput<'a> {
     pub history: &'a [Frame],
     /// Present only in organiser reference runs.
     pub privileged: Option<&'a Privileged>,
+    /// Present only in runs on the privileged track, as their scope allows ([`privileged`]).
+    pub privileged_observation: Option<&'a PrivilegedObservation>,
 }
 
 /// Why a policy could not give a usable chunk; the task fails with this reason.
@@ -181,4 +189,6 @@ impl Policy for Unreachable {
 }
 
 mod chunk;
+pub mod privileged;
 pub use chunk::{ChunkTolerance, Corrections, check_chunk};
+pub use privileged::{Goal, PrivilegedObservation, PrivilegedScope};

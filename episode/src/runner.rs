@@ -14,7 +14,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::policy::{
     ACTION_DIM, ChunkTolerance, Corrections, Frame, MAX_OBSERVATION_HISTORY, Policy, PolicyError,
-    PolicyInput, Privileged, PrivilegedObject, check_chunk,
+    PolicyInput, Privileged, PrivilegedObject, PrivilegedObservation, PrivilegedScope, check_chunk,
 };
 
 /// How an episode is run.
@@ -29,6 +29,10 @@ pub struct RunOptions {
     pub max_tasks: Option<usize>,
     /// Hand the policy privileged world state (organiser reference runs only).
     pub privileged: bool,
+    /// The privileged track: hand the policy a privileged observation of this scope at every
+    /// decision ([`crate::policy::privileged`]); `None` on the standard track.
+    #[serde(default)]
+    pub privileged_observations: Option<PrivilegedScope>,
     /// Abort the episode after this many successive policy timeouts.
     pub max_consecutive_timeouts: u32,
     /// Wall-clock budget for the whole episode, less what the hook spends on its own
@@ -46,6 +50,7 @@ impl Default for RunOptions {
             execute: 8,
             max_tasks: None,
             privileged: false,
+            privileged_observations: None,
             max_consecutive_timeouts: 3,
             wall_budget: None,
             chunk_tolerance: ChunkTolerance::default(),
@@ -163,6 +168,14 @@ fn privileged(sim: &Sim, target: TaskTarget) -> Privileged {
         ee_pose: ee_pose(sim),
         target,
     }
+}
+
+/// What a policy on the privileged track is shown of `world` (nothing on the standard track).
+pub(crate) fn privileged_observation(
+    world: Option<&Privileged>,
+    scope: Option<PrivilegedScope>,
+) -> Option<PrivilegedObservation> {
+    PrivilegedObservation::from_world(world?, scope?)
 }
 
 /// The hand (tool centre point) pose in the base frame `[x, y, z, qw, qx, qy, qz]`.
@@ -362,7 +375,10 @@ fn run_task(
             let why = "wall-clock budget exceeded".to_string();
             return end(sim, Some((why, true)), calls, corrections);
         }
-        let privileged = opts.privileged.then(|| privileged(sim, target.clone()));
+        let world = (opts.privileged || opts.privileged_observations.is_some())
+            .then(|| privileged(sim, target.clone()));
+        let shown = privileged_observation(world.as_ref(), opts.privileged_observations);
+        let privileged = world.filter(|_| opts.privileged);
         let (newest, earlier) = match history.frames.make_contiguous().split_last() {
             Some(split) => split,
             None => return end(sim, Some(("no observation".into(), false)), calls, corrections),
@@ -377,6 +393,7 @@ fn run_task(
             previous_action: newest.previous_action,
             history: earlier,
             privileged: privileged.as_ref(),
+            privileged_observation: shown.as_ref(),
         };
         calls += 1;
         let answer = policy.act(&input).and_then(|mut c| {

@@ -21,8 +21,10 @@ pub const POLICY_PROTOCOL_VERSION: u32 = 1;
 
 /// The minor version of protocol 1 this build's workers speak, announced in GetSpec: 1 is
 /// contract v1.1 (observation history, chosen execution count, hand pose and previous action in
-/// every observation). Compatible: a v1.0 policy is driven exactly as before.
-pub const POLICY_MINOR_VERSION: u32 = 1;
+/// every observation); 2 adds the privileged-information track (`PolicySpec.
+/// privileged_observations`, `GetSpecRequest.privileged_track`, `Observation.
+/// privileged_observation`). Compatible: a v1.0 policy is driven exactly as before.
+pub const POLICY_MINOR_VERSION: u32 = 2;
 
 pub mod policy {
     pub mod v1 {

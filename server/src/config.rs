@@ -187,6 +187,11 @@ pub struct ControlConfig {
     /// Episodes the in-process slots hold at once; each holds a slot only while it simulates,
     /// not while it waits for its policy (the worker's `max_episodes`). 0 = 8 per slot.
     pub max_episodes: usize,
+    /// Run the privileged-information track: a policy may ask in GetSpec for privileged
+    /// observations (robot pose in the scene frame, the current goal, key objects; on the test
+    /// split only what the sub-task names) and is then ranked on the privileged boards. Off, a
+    /// registration that asks is refused, naming this key.
+    pub privileged_track: bool,
 }
 
 /// Calling participants' policies (`[policy]`): deadlines and chunk check tolerances sent to
@@ -285,6 +290,7 @@ impl Default for ControlConfig {
             max_in_flight_per_team: 0,
             drain_grace_s: 30,
             max_episodes: 0,
+            privileged_track: false,
         }
     }
 }

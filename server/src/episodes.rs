@@ -6,6 +6,7 @@
 
 use std::collections::HashMap;
 
+use kitchen_r_core::observations::PrivilegedScope;
 use kitchen_r_core::scoring;
 use kitchen_r_proto::worker::v1 as pb;
 use serde::{Deserialize, Serialize};
@@ -54,6 +55,10 @@ pub(crate) struct JobSpec {
     pub max_plan_steps: u32,
     /// Organiser reference run: the policy gets privileged state.
     pub privileged: bool,
+    /// The privileged track: the scope of the privileged observations the policy gets; absent
+    /// for standard runs (and in every spec stored before the track existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub privileged_observations: Option<PrivilegedScope>,
     pub endpoint: EndpointSpec,
     /// World `[x, y, z]` of each `place` step's target, in plan order: the job carries its whole
     /// episode so workers hold no dataset. Empty in specs stored before it was added (filled in
@@ -92,6 +97,11 @@ impl JobSpec {
             // Set at lease from `[video]` (grpc_worker), not stored with the job.
             record_video: false,
             video_max_bytes: 0,
+            privileged_observations: (match self.privileged_observations {
+                None => pb::PrivilegedScope::None,
+                Some(PrivilegedScope::Episode) => pb::PrivilegedScope::Episode,
+                Some(PrivilegedScope::SubTask) => pb::PrivilegedScope::SubTask,
+            }) as i32,
         }
     }
 

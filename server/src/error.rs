@@ -67,6 +67,16 @@ pub enum ServiceError {
     /// This server was built without a policy probe, so it cannot accept policies.
     #[error("{0}")]
     PolicyDisabled(String),
+    /// The policy asks for privileged observations on a server whose organiser has not enabled
+    /// the privileged track.
+    #[error(
+        "the policy asks for privileged observations in GetSpec (PolicySpec.privileged_observations), \
+         but this server does not run the privileged track; the organiser enables it with \
+         `privileged_track = true` in the [control] section of the server config \
+         (control.privileged_track). To run on the standard track, answer GetSpec with \
+         privileged_observations = false"
+    )]
+    PrivilegedTrackOff,
     #[error(
         "quota exceeded: at most {limit} policy runs of a team evaluate at the same time; wait for one to finish"
     )]
@@ -159,6 +169,7 @@ impl ServiceError {
             ServiceError::EndpointRefused(_) => "endpoint_refused",
             ServiceError::ProbeFailed(_) => "policy_probe_failed",
             ServiceError::PolicyDisabled(_) => "policy_evaluation_disabled",
+            ServiceError::PrivilegedTrackOff => "privileged_track_disabled",
             ServiceError::ConcurrentRuns { .. } => "concurrent_runs_exceeded",
             ServiceError::Timeout { .. } => "timeout",
             ServiceError::MethodNotAllowed { .. } => "method_not_allowed",
@@ -182,6 +193,7 @@ impl ServiceError {
             }
             ServiceError::EndpointRefused(_) => StatusCode::BAD_REQUEST,
             ServiceError::ProbeFailed(_) => StatusCode::UNPROCESSABLE_ENTITY,
+            ServiceError::PrivilegedTrackOff => StatusCode::FORBIDDEN,
             ServiceError::ConcurrentRuns { .. } => StatusCode::TOO_MANY_REQUESTS,
             ServiceError::Timeout { .. } => StatusCode::SERVICE_UNAVAILABLE,
             ServiceError::MethodNotAllowed { .. } => StatusCode::METHOD_NOT_ALLOWED,
@@ -274,7 +286,9 @@ impl From<ServiceError> for tonic::Status {
                 tonic::Status::unavailable(msg)
             }
             ServiceError::EndpointRefused(_) => tonic::Status::invalid_argument(msg),
-            ServiceError::ProbeFailed(_) => tonic::Status::failed_precondition(msg),
+            ServiceError::ProbeFailed(_) | ServiceError::PrivilegedTrackOff => {
+                tonic::Status::failed_precondition(msg)
+            }
             ServiceError::Timeout { .. } => tonic::Status::unavailable(msg),
             ServiceError::MethodNotAllowed { .. } => tonic::Status::unimplemented(msg),
             ServiceError::Internal(_) => tonic::Status::internal(msg),

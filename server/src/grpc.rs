@@ -17,6 +17,7 @@ use std::time::Duration;
 use axum::http::{self, HeaderValue};
 use futures_util::FutureExt;
 use kitchen_r_core::dataset::Split;
+use kitchen_r_core::observations::ObservationTrack;
 use kitchen_r_proto::submission::v1 as pb;
 use pb::submissions_server::Submissions;
 use tonic::{Request, Response, Status};
@@ -162,6 +163,7 @@ impl Submissions for SubmissionsService {
             instructions: done.instructions as u32,
             max_concurrency: done.max_concurrency,
             policy: done.policy,
+            observations: done.observations.to_string(),
         }))
     }
 
@@ -181,10 +183,14 @@ impl Submissions for SubmissionsService {
         let msg = req.into_inner();
         let track: Track = msg.track.parse()?;
         let split = split(&msg.split, Some(Split::Test))?;
-        let board = self.state.leaderboard(track, split).await?;
+        let observations: ObservationTrack =
+            (msg.observations.parse()).map_err(|e: String| Status::invalid_argument(e))?;
+        let board = self.state.board(track, observations, split).await?;
+        let label = |o: Option<ObservationTrack>| o.map_or_else(String::new, |o| o.to_string());
         Ok(Response::new(pb::Leaderboard {
             track: track.as_str().into(),
             split: split.to_string(),
+            observations: label(board.observations),
             rows: board
                 .rows
                 .into_iter()
@@ -195,6 +201,7 @@ impl Submissions for SubmissionsService {
                     scores: Some(scores(r.scores)),
                     submitted_at: r.submitted_at,
                     baseline: r.baseline,
+                    observations: label(r.observations),
                 })
                 .collect(),
         }))

@@ -19,6 +19,7 @@ use axum::response::{Html, IntoResponse, Response};
 use axum::routing::{get, post};
 use bytes::Bytes;
 use kitchen_r_core::dataset::Split;
+use kitchen_r_core::observations::ObservationTrack;
 use tokio_stream::StreamExt;
 
 use crate::content::TestSetKind;
@@ -512,6 +513,7 @@ async fn episode_plot(
     params(
         ("track" = Option<openapi::TrackParam>, Query, description = "`planning` (default), `control` or `integrated`"),
         ("split" = Option<openapi::SplitParam>, Query, description = "`test` (default) or `dev`"),
+        ("observations" = Option<String>, Query, description = "Control and integrated: `standard` (default) or `privileged`, the board of runs whose policy received privileged observations (ranked apart)"),
         ("format" = Option<openapi::FormatParam>, Query, description = "`json` (default), `csv` or `html`"),
     ),
     responses(
@@ -520,12 +522,15 @@ async fn episode_plot(
             (String = "text/csv; charset=utf-8"),
             (String = "text/html; charset=utf-8"),
         )),
-        (status = 400, description = "An unknown track, split or format", body = openapi::ErrorBody),
+        (status = 400, description = "An unknown track, split, observations or format", body = openapi::ErrorBody),
     )
 )]
 async fn leaderboard(State(s): State<AppState>, QueryArgs(q): Params) -> Result<Response, ServiceError> {
     let track: Track = q.get("track").map_or("", String::as_str).parse()?;
     let split = split_param(q.get("split"), Some(Split::Test))?;
+    let observations: ObservationTrack = (q.get("observations").map_or("", String::as_str))
+        .parse()
+        .map_err(ServiceError::BadRequest)?;
     let (format, content_type) = match q.get("format").map(String::as_str) {
         None | Some("" | "json") => (Format::Json, "application/json"),
         Some("csv") => (Format::Csv, "text/csv; charset=utf-8"),
@@ -536,7 +541,7 @@ async fn leaderboard(State(s): State<AppState>, QueryArgs(q): Params) -> Result<
             )));
         }
     };
-    let body = s.leaderboard_rendered(track, split, format).await?;
+    let body = s.leaderboard_rendered(track, observations, split, format).await?;
     Ok(typed(content_type, body))
 }
 

@@ -6,10 +6,14 @@
 //! failed entries last. Organiser reference runs are baseline rows (`baseline: true`, no rank):
 //! each one is shown, none is a team's best.
 //!
+//! The control and integrated tracks have a standard and a privileged board (issue #25): runs
+//! whose policy received privileged observations are ranked only among themselves, and every
+//! rendering names the board (`observations` in JSON, a CSV column, the page's headings).
+//!
 //! Below the service: this module holds the ranking types, the renderings and the cache; the
 //! service (`service/board.rs`) reads the store and fills them.
 //!
-//! Policy: rendered bodies are cached per (track, split, format) and dropped on every write that
+//! Policy: rendered bodies are cached per (track, observations, split, format) and dropped on every write that
 //! can change a ranking (a new submission, a rescore, a policy run finishing), so reads under
 //! load are a hash lookup and a reference-count increment. A generation counter makes a render
 //! that raced with a write unfit for caching instead of serving stale data.
@@ -22,6 +26,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use bytes::Bytes;
 use kitchen_r_core::dataset::Split;
+use kitchen_r_core::observations::ObservationTrack;
 use serde::Serialize;
 
 use crate::error::ServiceError;
@@ -72,6 +77,11 @@ pub(crate) enum Format {
 #[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
 pub(crate) struct Leaderboard {
     pub track: Track,
+    /// Control and integrated: the board shown, `standard` or `privileged` (runs whose policy
+    /// received privileged observations, ranked apart); absent for planning.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[schema(value_type = Option<String>, example = "standard")]
+    pub observations: Option<ObservationTrack>,
     #[schema(value_type = crate::http::openapi::SplitName)]
     pub split: Split,
     pub rows: Vec<Row>,
@@ -91,10 +101,14 @@ pub(crate) struct Row {
     /// An organiser reference run.
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     pub baseline: bool,
+    /// Policy tracks: `standard` or `privileged`, the board this row is ranked on.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[schema(value_type = Option<String>)]
+    pub observations: Option<ObservationTrack>,
 }
 
 /// Key of a cached body: `None` track is the all-tracks page at `/`.
-pub(crate) type CacheKey = (Option<Track>, Split, Format);
+pub(crate) type CacheKey = (Option<Track>, ObservationTrack, Split, Format);
 
 #[derive(Debug, Default)]
 pub(crate) struct LeaderboardCache {

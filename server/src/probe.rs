@@ -27,6 +27,9 @@ pub struct ProbedSpec {
     /// chunk. The server checks them against its `[control]` ranges.
     pub observation_history: u32,
     pub actions_executed_per_chunk: u32,
+    /// The policy asks for privileged observations (the privileged track); the server refuses
+    /// it unless `control.privileged_track` is on.
+    pub privileged_observations: bool,
 }
 
 /// Why an endpoint was not accepted. Messages are shown to the participant as they are.

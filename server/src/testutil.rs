@@ -33,7 +33,20 @@ impl FakeProbe {
                 summary: "fake-policy 1.0".into(),
                 observation_history: 0,
                 actions_executed_per_chunk: 0,
+                privileged_observations: false,
             }),
+            calls: AtomicUsize::new(0),
+        })
+    }
+
+    /// A policy whose GetSpec asks for privileged observations (the privileged track).
+    pub(crate) fn privileged(max_concurrency: u32) -> Arc<FakeProbe> {
+        let mut answer = FakeProbe::ok(max_concurrency).answer.clone();
+        if let Ok(spec) = &mut answer {
+            spec.privileged_observations = true;
+        }
+        Arc::new(FakeProbe {
+            answer,
             calls: AtomicUsize::new(0),
         })
     }

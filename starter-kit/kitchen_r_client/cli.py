@@ -6,7 +6,8 @@
                      [--endpoint-token T] [--reference] [--wait [--timeout S]] [--json]
     kitchen-r-client submission show ID [--json]
     kitchen-r-client submission wait ID [--timeout S] [--json]
-    kitchen-r-client leaderboard [--track T] [--split S] [--format table|json|csv | --json]
+    kitchen-r-client leaderboard [--track T] [--split S] [--observations standard|privileged]
+                                 [--format table|json|csv | --json]
 
 Every command takes --server (KITCHEN_R_SERVER, default http://127.0.0.1:8080) and --token
 (KITCHEN_R_TOKEN; `team create` reads --admin-token / KITCHEN_R_ADMIN_TOKEN). Exit codes: 0
@@ -116,6 +117,9 @@ def build_parser():
     lb = sub.add_parser("leaderboard", help="print the ranking")
     lb.add_argument("--track", default="planning", choices=["planning", "control", "integrated"])
     lb.add_argument("--split", default="test", choices=["dev", "test"])
+    lb.add_argument("--observations", default="standard", choices=["standard", "privileged"],
+                    help="control and integrated: the board of runs whose policy received "
+                         "privileged observations (ranked apart), or the standard one")
     lb.add_argument("--format", default="table", choices=["table", "json", "csv"])
     lb.add_argument("--json", action="store_true", help="same as --format json")
     _server(lb)
@@ -168,8 +172,9 @@ def cmd_submit_policy(a):
         print(json.dumps(v))
         return 0
     sid = v.get("id")
-    print("submission %s accepted: %s episodes of %s instructions queued (%s), policy: %s" % (
-        sid, v.get("episodes"), v.get("instructions"), a.split, v.get("policy", "?")), file=sys.stderr)
+    print("submission %s accepted: %s episodes of %s instructions queued (%s, %s observations), policy: %s" % (
+        sid, v.get("episodes"), v.get("instructions"), a.split, v.get("observations", "standard"),
+        v.get("policy", "?")), file=sys.stderr)
     if not a.wait:
         print(sid)
         print("follow it with `kitchen-r-client submission wait %s` (or `submission show %s`, or %s)" % (
@@ -245,7 +250,9 @@ def wait_for(client, sid, timeout=None):
 
 def cmd_leaderboard(a):
     fmt = "json" if a.json else a.format
-    path = "/api/v1/leaderboard?track=%s&split=%s&format=%s" % (a.track, a.split, "csv" if fmt == "csv" else "json")
+    observations = "" if a.observations == "standard" else "&observations=%s" % a.observations
+    path = "/api/v1/leaderboard?track=%s&split=%s%s&format=%s" % (
+        a.track, a.split, observations, "csv" if fmt == "csv" else "json")
     text = Client(a.server).request("GET", path).text()
     if fmt == "table":
         try:

@@ -141,6 +141,8 @@ def print_submission(view, server, server_now_ms=None, out=print):
         if _num(p.get("plans")):
             extra.append("with plan submission %s" % p["plans"])
         extra.append("max concurrency %s" % _j(p.get("max_concurrency")))
+        if p.get("observations") == "privileged":
+            extra.append("privileged observations: ranked on the privileged boards")
         out("policy: %s (%s)" % (_s(p.get("endpoint")), ", ".join(extra)))
     run = view.get("latest_run")
     if not isinstance(run, dict):
@@ -251,7 +253,9 @@ def _cell(v):
 
 def print_leaderboard(board, out=print):
     track = board.get("track") if isinstance(board.get("track"), str) else "planning"
-    out("%s track, %s split" % (track, _s(board.get("split"))))
+    observations = board.get("observations")
+    label = ", %s observations" % observations if isinstance(observations, str) else ""
+    out("%s track%s, %s split" % (track, label, _s(board.get("split"))))
     rows = board.get("rows") or []
     if not rows:
         out("no submissions yet")

@@ -130,7 +130,7 @@ async fn a_server_restarted_mid_run_resumes_the_run() {
     assert!(sr(&view) >= 0.95, "{view:#}");
 }
 
-fn python_ready() -> bool {
+pub(crate) fn python_ready() -> bool {
     Command::new("python3")
         .args(["-c", "import grpc, grpc_tools, grpc_health"])
         .status()

@@ -71,6 +71,7 @@ async fn submit_and_read_back_over_grpc() {
         .get_leaderboard(pb::GetLeaderboardRequest {
             track: String::new(),
             split: "dev".into(),
+            ..Default::default()
         })
         .await
         .unwrap()

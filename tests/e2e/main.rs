@@ -26,6 +26,7 @@ mod openapi;
 mod pages;
 mod participant_client;
 mod planning;
+mod privileged;
 mod secrets;
 mod submission;
 mod video;

@@ -57,6 +57,7 @@ pub(crate) fn observation(
         robot: Some(robot),
         sim_time: o.time,
         privileged: input.privileged.map(privileged_to_wire),
+        privileged_observation: input.privileged_observation.map(super::privileged::to_wire),
         previous_action,
         history: frames,
     })
@@ -312,6 +313,7 @@ mod tests {
             previous_action: None,
             history: &[],
             privileged: None,
+            privileged_observation: None,
         };
         let wire = observation(&input, std::slice::from_ref(&plan), 1).unwrap();
         assert_eq!(&wire.images[0].data[..2], &[0xFF, 0xD8], "a JPEG file");
@@ -369,6 +371,7 @@ mod tests {
                     previous_action: f6.previous_action,
                     history: h,
                     privileged: None,
+                    privileged_observation: None,
                 },
                 std::slice::from_ref(&plan),
                 4,

@@ -36,6 +36,7 @@ use crate::leaderboard::Track;
 use crate::service::sessions::{Login, Role};
 use crate::service::{AppState, Caller, Organiser};
 use crate::store::Team;
+use kitchen_r_core::observations::ObservationTrack;
 use layout::Viewer;
 
 /// The team session cookie; its value is a session id (`crate::service::sessions`).
@@ -351,8 +352,19 @@ async fn entry_page(
     let (Some(track), Some(split), Some(id)) = parsed else {
         return Ok(not_found(&headers, &who, "such leaderboard entry"));
     };
-    let board = s.leaderboard(track, split).await?;
-    let Some(row) = board.rows.iter().find(|r| r.submission_id == id) else {
+    // A submission is on one observation track's board only; planning has just the standard.
+    let mut found = None;
+    for observations in ObservationTrack::ALL {
+        if track == Track::Planning && observations == ObservationTrack::Privileged {
+            break;
+        }
+        let board = s.board(track, observations, split).await?;
+        found = board.rows.into_iter().find(|r| r.submission_id == id);
+        if found.is_some() {
+            break;
+        }
+    }
+    let Some(row) = found.as_ref() else {
         return Ok(not_found(&headers, &who, "such leaderboard entry"));
     };
     let title = format!("{} on the {} leaderboard", row.team, track.as_str());

@@ -10,6 +10,7 @@
 use std::fmt::Write as _;
 
 use kitchen_r_core::dataset::Split;
+use kitchen_r_core::observations::ObservationTrack;
 
 use super::{Leaderboard, Row, Track};
 use crate::scores::fmt_score;
@@ -54,7 +55,8 @@ fn rank(r: &Row) -> String {
 }
 
 /// Planning: `rank,team,submission_id,em,submitted_at`. Policy tracks add their scores, the
-/// run state and the baseline flag: `rank,team,submission_id,sr,mse,state,baseline,submitted_at`.
+/// run state and the baseline flag, and last the board every row is ranked on (`standard` or
+/// `privileged`): `rank,team,submission_id,sr,mse,state,baseline,submitted_at,observations`.
 pub(crate) fn csv(board: &Leaderboard) -> String {
     let cols = columns(board.track);
     let policy = board.track != Track::Planning;
@@ -63,7 +65,7 @@ pub(crate) fn csv(board: &Leaderboard) -> String {
         let _ = write!(out, ",{name}");
     }
     out.push_str(if policy {
-        ",state,baseline,submitted_at\n"
+        ",state,baseline,submitted_at,observations\n"
     } else {
         ",submitted_at\n"
     });
@@ -76,7 +78,12 @@ pub(crate) fn csv(board: &Leaderboard) -> String {
             let state = text_cell(r.state.as_deref().unwrap_or(""));
             let _ = write!(out, ",{state},{}", r.baseline);
         }
-        let _ = writeln!(out, ",{}", text_cell(&r.submitted_at));
+        let _ = write!(out, ",{}", text_cell(&r.submitted_at));
+        if policy {
+            let observations = r.observations.or(board.observations).unwrap_or_default();
+            let _ = write!(out, ",{observations}");
+        }
+        out.push('\n');
     }
     out
 }
@@ -95,6 +102,28 @@ fn describe(track: Track) -> &'static str {
         Track::Planning => "best plan submission per team by Exact Match",
         Track::Control => "best policy per team by success rate SR, then lower MSE",
         Track::Integrated => "best policy + plans pair per team by M, then lower P",
+    }
+}
+
+/// How a policy board's heading and anchor name its observation track; planning has none.
+fn board_label(board: &Leaderboard) -> (&'static str, &'static str, String) {
+    match board.observations {
+        None => ("", "", String::new()),
+        Some(ObservationTrack::Standard) => (
+            " — standard observations",
+            "",
+            " Standard observations: cameras, the sub-task and the robot's state relative to the \
+episode start."
+                .into(),
+        ),
+        Some(ObservationTrack::Privileged) => (
+            " — privileged observations",
+            "-privileged",
+            " <b>Privileged observations</b>: these policies also received the robot's pose in the \
+scene, the current task's goal and key objects' poses (on the test split only what the sub-task \
+names), so they are ranked apart from standard runs."
+                .into(),
+        ),
     }
 }
 
@@ -128,11 +157,16 @@ fn table(board: &Leaderboard) -> String {
         // The entry's public summary: what this row shows, on a page of its own.
         let _ = write!(
             rows,
-            "<td class=n><a href=\"/leaderboard/{}/{}/{id}\">{id}</a>{state}</td><td>{}</td></tr>",
+            "<td class=n><a href=\"/leaderboard/{}/{}/{id}\">{id}</a>{state}{privileged}</td><td>{}</td></tr>",
             board.track.as_str(),
             board.split,
             escape(&r.submitted_at),
             id = r.submission_id,
+            privileged = if r.observations == Some(ObservationTrack::Privileged) {
+                " (privileged)"
+            } else {
+                ""
+            },
         );
     }
     if board.rows.is_empty() {
@@ -143,10 +177,15 @@ fn table(board: &Leaderboard) -> String {
         );
     }
     let track = board.track.as_str();
+    let (heading, anchor, note) = board_label(board);
+    let query = match board.observations {
+        Some(ObservationTrack::Privileged) => "&amp;observations=privileged",
+        _ => "",
+    };
     format!(
-        "<h2 id={track}>{title} track</h2><p>{what} (ties: earlier submission first). \
-<a href=\"/api/v1/leaderboard?track={track}&amp;split={split}&amp;format=csv\">CSV</a> · \
-<a href=\"/api/v1/leaderboard?track={track}&amp;split={split}\">JSON</a></p>\
+        "<h2 id={track}{anchor}>{title} track{heading}</h2><p>{what} (ties: earlier submission first).{note} \
+<a href=\"/api/v1/leaderboard?track={track}&amp;split={split}{query}&amp;format=csv\">CSV</a> · \
+<a href=\"/api/v1/leaderboard?track={track}&amp;split={split}{query}\">JSON</a></p>\
 <table><thead>{head}</thead><tbody>{rows}</tbody></table>",
         title = track[..1].to_uppercase() + &track[1..],
         what = describe(board.track),
@@ -193,7 +232,8 @@ td.n{{text-align:right;font-variant-numeric:tabular-nums}}th{{background:#f4f4f4
 @media(max-width:40rem){{table{{display:block;overflow-x:auto}}}}</style></head><body>\
 <h1>Kitchen-R leaderboard</h1>{banner}<p><a href=\"/contest\">The contest: tracks, metrics, \
 how to take part, data and rules</a> · <a href=\"/team\">Team page</a></p><p><b>{split}</b> split. <a href=\"/?split={other}\">Show the {other} split</a>. \
-Baseline rows are organiser reference runs and take no rank.</p>{tables}\
+Baseline rows are organiser reference runs and take no rank. Policies that received \
+privileged observations are ranked on boards of their own, labelled privileged.</p>{tables}\
 <h2>Rules that keep the test split honest</h2>{INTEGRITY_RULES}</body></html>"
     )
 }

@@ -1,3 +1,5 @@
+use kitchen_r_core::observations::ObservationTrack;
+
 use super::render::{csv, page};
 use super::*;
 use crate::testutil::{FakeProbe, fixture};
@@ -5,6 +7,7 @@ use crate::testutil::{FakeProbe, fixture};
 fn board(team: &str) -> Leaderboard {
     Leaderboard {
         track: Track::Planning,
+        observations: None,
         split: Split::Test,
         rows: vec![Row {
             rank: Some(1),
@@ -14,6 +17,7 @@ fn board(team: &str) -> Leaderboard {
             submitted_at: "2026-01-01T00:00:00Z".into(),
             state: None,
             baseline: false,
+            observations: None,
         }],
     }
 }
@@ -219,7 +223,12 @@ async fn control_and_integrated_order_with_baselines_and_infinite_p() {
 
     let json = String::from_utf8(
         f.state
-            .leaderboard_rendered(Track::Integrated, Split::Dev, Format::Json)
+            .leaderboard_rendered(
+                Track::Integrated,
+                ObservationTrack::Standard,
+                Split::Dev,
+                Format::Json,
+            )
             .await
             .unwrap()
             .to_vec(),
@@ -231,7 +240,12 @@ async fn control_and_integrated_order_with_baselines_and_infinite_p() {
     );
     let text = String::from_utf8(
         f.state
-            .leaderboard_rendered(Track::Integrated, Split::Dev, Format::Csv)
+            .leaderboard_rendered(
+                Track::Integrated,
+                ObservationTrack::Standard,
+                Split::Dev,
+                Format::Csv,
+            )
             .await
             .unwrap()
             .to_vec(),
@@ -240,7 +254,7 @@ async fn control_and_integrated_order_with_baselines_and_infinite_p() {
     let mut lines = text.lines();
     assert_eq!(
         lines.next(),
-        Some("rank,team,submission_id,m,p,sr,mse,state,baseline,submitted_at")
+        Some("rank,team,submission_id,m,p,sr,mse,state,baseline,submitted_at,observations")
     );
     let a_line = lines.nth(2).unwrap();
     assert!(
@@ -276,7 +290,12 @@ async fn the_cache_is_dropped_when_a_run_finishes() {
         .unwrap();
     let before = f
         .state
-        .leaderboard_rendered(Track::Control, Split::Dev, Format::Csv)
+        .leaderboard_rendered(
+            Track::Control,
+            ObservationTrack::Standard,
+            Split::Dev,
+            Format::Csv,
+        )
         .await
         .unwrap();
     assert!(
@@ -290,7 +309,12 @@ async fn the_cache_is_dropped_when_a_run_finishes() {
         .unwrap();
     let after = f
         .state
-        .leaderboard_rendered(Track::Control, Split::Dev, Format::Csv)
+        .leaderboard_rendered(
+            Track::Control,
+            ObservationTrack::Standard,
+            Split::Dev,
+            Format::Csv,
+        )
         .await
         .unwrap();
     assert!(

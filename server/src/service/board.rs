@@ -3,6 +3,7 @@
 
 use bytes::Bytes;
 use kitchen_r_core::dataset::Split;
+use kitchen_r_core::observations::ObservationTrack;
 
 use super::{AppState, rfc3339};
 use crate::error::ServiceError;
@@ -11,10 +12,30 @@ use crate::scores::Scores;
 use crate::store::board;
 
 impl AppState {
-    /// The ranking of one track and split, read from the maintained entries.
+    /// The standard ranking of one track and split.
     pub(crate) async fn leaderboard(&self, track: Track, split: Split) -> Result<Leaderboard, ServiceError> {
-        let stored = board::read(self.read_pool(), track.as_str(), split).await?;
+        self.board(track, ObservationTrack::Standard, split).await
+    }
+
+    /// The ranking of one track, observation track and split, read from the maintained entries.
+    /// Planning has no privileged board: plan files receive no observations.
+    pub(crate) async fn board(
+        &self,
+        track: Track,
+        observations: ObservationTrack,
+        split: Split,
+    ) -> Result<Leaderboard, ServiceError> {
+        let policy = track != Track::Planning;
+        if !policy && observations == ObservationTrack::Privileged {
+            return Err(ServiceError::BadRequest(
+                "the planning track has no privileged board: `observations=privileged` applies to \
+                 the control and integrated tracks"
+                    .into(),
+            ));
+        }
+        let stored = board::read_observed(self.read_pool(), track.as_str(), observations, split).await?;
         let integrated = track == Track::Integrated;
+        let label = policy.then_some(observations);
         let rows = stored.into_iter().map(|r| Row {
             rank: None,
             team: r.team,
@@ -32,9 +53,11 @@ impl AppState {
             submitted_at: rfc3339(r.submitted_at),
             state: r.state.map(|s| s.as_str().to_string()),
             baseline: r.baseline,
+            observations: label,
         });
         Ok(Leaderboard {
             track,
+            observations: label,
             split,
             rows: ranked(rows),
         })
@@ -44,16 +67,17 @@ impl AppState {
     pub(crate) async fn leaderboard_rendered(
         &self,
         track: Track,
+        observations: ObservationTrack,
         split: Split,
         format: Format,
     ) -> Result<Bytes, ServiceError> {
-        let key = (Some(track), split, format);
+        let key = (Some(track), observations, split, format);
         let cache = self.leaderboard_cache();
         let (generation, hit) = cache.get(key);
         if let Some(body) = hit {
             return Ok(body);
         }
-        let board = self.leaderboard(track, split).await?;
+        let board = self.board(track, observations, split).await?;
         let body: Bytes = match format {
             Format::Json => serde_json::to_vec(&board).map_err(anyhow::Error::from)?.into(),
             Format::Csv => render::csv(&board).into(),
@@ -67,17 +91,26 @@ impl AppState {
         self.content().test_set.kind == crate::content::TestSetKind::PublicSample
     }
 
-    /// The public page at `/`: all three tracks of `split`.
+    /// The public page at `/`: all three tracks of `split`, and the privileged boards of the
+    /// policy tracks when this server runs the privileged track or they hold entries (from a
+    /// time it did).
     pub(crate) async fn leaderboard_page(&self, split: Split) -> Result<Bytes, ServiceError> {
-        let key = (None, split, Format::Html);
+        let key = (None, ObservationTrack::Standard, split, Format::Html);
         let cache = self.leaderboard_cache();
         let (generation, hit) = cache.get(key);
         if let Some(body) = hit {
             return Ok(body);
         }
-        let mut boards = Vec::with_capacity(Track::ALL.len());
+        let mut boards = Vec::with_capacity(Track::ALL.len() + 2);
         for track in Track::ALL {
             boards.push(self.leaderboard(track, split).await?);
+        }
+        let running = self.config().control.privileged_track;
+        for track in [Track::Control, Track::Integrated] {
+            let board = self.board(track, ObservationTrack::Privileged, split).await?;
+            if running || !board.rows.is_empty() {
+                boards.push(board);
+            }
         }
         let body: Bytes = render::page(split, &boards, self.public_sample()).into();
         cache.put(key, generation, &body);

@@ -6,9 +6,18 @@
 //! before the probe (a cheap refusal) and again under the submit lock at insert time; the
 //! upload rate (`quota.per_minute`, [`super::limits`]) before anything else. Organiser
 //! reference runs are exempt from quotas, are filed under a reserved `(baseline)` team, and are
-//! the only runs whose episodes carry `privileged = true`.
+//! the only runs whose episodes carry `privileged = true` (the oracle's full world state).
+//!
+//! The privileged-information track is another thing: a policy whose GetSpec asks for privileged
+//! observations is accepted only when the organiser enabled `control.privileged_track` (else
+//! refused with [`ServiceError::PrivilegedTrackOff`], which names the key); its jobs then grant
+//! them with the split's scope ([`PrivilegedScope::for_split`]: dev shows the episode's key
+//! objects, test only what the current sub-task names), and the submission is stored as
+//! privileged, so the boards rank it apart from standard runs. The track is fixed at
+//! registration: a re-simulation keeps it.
 
 use kitchen_r_core::dataset::{Instruction, Split};
+use kitchen_r_core::observations::{ObservationTrack, PrivilegedScope};
 use serde::{Deserialize, Serialize};
 
 use super::{AppState, Caller, Organiser, now_ms};
@@ -61,6 +70,10 @@ pub(crate) struct Registered {
     pub episodes: usize,
     pub max_concurrency: u32,
     pub policy: String,
+    /// `standard`, or `privileged` when the policy asked for privileged observations: the
+    /// boards rank it apart.
+    #[schema(value_type = String)]
+    pub observations: ObservationTrack,
     pub state: &'static str,
 }
 
@@ -80,6 +93,10 @@ pub(crate) struct PolicyBody {
     pub spec: String,
     pub instructions: usize,
     pub offline_mse: bool,
+    /// The privileged track: the policy asked for privileged observations and its jobs grant
+    /// them. Absent (false) in every body stored before the track existed.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub privileged_observations: bool,
 }
 
 /// The endpoint as the submission page shows it: everything but the token.
@@ -91,6 +108,9 @@ pub(crate) struct PolicyInfo {
     pub reference: bool,
     pub max_concurrency: u32,
     pub spec: String,
+    /// `standard` or `privileged`: the boards this run is ranked on.
+    #[schema(value_type = String)]
+    pub observations: ObservationTrack,
 }
 
 pub(crate) fn parse_body(body: &str) -> Result<PolicyBody, ServiceError> {
@@ -106,6 +126,7 @@ pub(crate) fn policy_info(body: &str) -> Result<PolicyInfo, ServiceError> {
         reference: b.reference,
         max_concurrency: b.max_concurrency,
         spec: b.spec,
+        observations: ObservationTrack::of(b.privileged_observations),
     })
 }
 
@@ -145,11 +166,18 @@ impl AppState {
         }
         let cfg = self.config();
         check_contract_v1_1(&probed, &cfg.control)?;
+        if probed.privileged_observations && !cfg.control.privileged_track {
+            return Err(ServiceError::PrivilegedTrackOff);
+        }
+        let track = ObservationTrack::of(probed.privileged_observations);
         // policy.proto: 0 is read as 1.
         let max_concurrency = probed.max_concurrency.max(1);
         let sealed = bearer.as_deref().map(|t| self.seal_token(t));
         let endpoint_spec = self.endpoint_spec(&endpoint, sealed.clone());
-        let jobs = self.job_specs(instructions, &endpoint_spec, req.reference)?;
+        let scope = probed
+            .privileged_observations
+            .then(|| PrivilegedScope::for_split(req.split));
+        let jobs = self.job_specs(instructions, &endpoint_spec, req.reference, scope)?;
         let body = PolicyBody {
             endpoint,
             token_sealed: sealed,
@@ -160,6 +188,7 @@ impl AppState {
             spec: probed.summary.clone(),
             instructions: instructions.len(),
             offline_mse: cfg.control.offline_mse,
+            privileged_observations: probed.privileged_observations,
         };
         let body = serde_json::to_string(&body).map_err(anyhow::Error::from)?;
         let scorer = format!("{CONTROL_SCORER}+{}", self.content().dataset_tag());
@@ -182,7 +211,7 @@ impl AppState {
         self.inner.jobs_ready.notify_waiters();
         self.leaderboard_cache().invalidate();
         tracing::info!(submission = id, run = run_id, team = %team.name, split = %req.split,
-            episodes = jobs.len(), reference = req.reference, "policy registered");
+            episodes = jobs.len(), reference = req.reference, observations = %track, "policy registered");
         Ok(Registered {
             id,
             run_id,
@@ -191,6 +220,7 @@ impl AppState {
             episodes: jobs.len(),
             max_concurrency,
             policy: probed.summary,
+            observations: track,
             state: "queued",
         })
     }
@@ -218,7 +248,8 @@ impl AppState {
         let instructions = self.run_instructions(split, episodes)?;
         let cfg = self.config();
         let endpoint = self.endpoint_spec(&body.endpoint, body.token_sealed.clone());
-        let jobs = self.job_specs(instructions, &endpoint, body.reference)?;
+        let scope = (body.privileged_observations).then(|| PrivilegedScope::for_split(split));
+        let jobs = self.job_specs(instructions, &endpoint, body.reference, scope)?;
         let scorer = format!("{CONTROL_SCORER}+{}", self.content().dataset_tag());
         let new = NewPolicyRun {
             team: sub.team_id,
@@ -246,6 +277,7 @@ impl AppState {
             episodes: jobs.len(),
             max_concurrency: body.max_concurrency,
             policy: body.spec,
+            observations: ObservationTrack::of(body.privileged_observations),
             state: "queued",
         })
     }
@@ -289,12 +321,14 @@ impl AppState {
     }
 
     /// `(episode_key, spec JSON)` for every job of a run: one online job per instruction, and
-    /// one offline job when `control.offline_mse` is on.
+    /// one offline job when `control.offline_mse` is on. `privileged`: an organiser reference
+    /// run (full world state); `scope`: the privileged track's observations, if any.
     fn job_specs(
         &self,
         instructions: &[Instruction],
         endpoint: &EndpointSpec,
         privileged: bool,
+        scope: Option<PrivilegedScope>,
     ) -> Result<Vec<(String, String)>, ServiceError> {
         let c = &self.config().control;
         let modes: &[Mode] = if c.offline_mse {
@@ -316,6 +350,7 @@ impl AppState {
                     teleport_on_failure: c.teleport_on_failure,
                     max_plan_steps: c.max_plan_steps,
                     privileged,
+                    privileged_observations: scope,
                     endpoint: endpoint.clone(),
                     place_targets: inst.place_targets.clone(),
                 };
@@ -443,5 +478,7 @@ fn validate_bearer(token: Option<&str>) -> Result<Option<String>, ServiceError> 
     Ok(Some(t.to_string()))
 }
 
+#[cfg(test)]
+mod privileged_tests;
 #[cfg(test)]
 mod tests;

@@ -8,8 +8,14 @@
 //! lower id; unscored entries last; organiser reference runs are each their own row (reference
 //! plan files: the baseline team's best, marked as a baseline); on the test
 //! split a plan file created after the team's first test policy submission is not ranked.
+//!
+//! The policy tracks have two boards each, one per observation track: runs whose policy received
+//! privileged observations (`privileged_observations` in the submission's body) are ranked only
+//! among themselves (`observations = 'privileged'`, a team's best with `entry` = -1), never
+//! against standard runs; every older body has no such field and is standard.
 
 use kitchen_r_core::dataset::Split;
+use kitchen_r_core::observations::ObservationTrack;
 use sqlx::sqlite::SqlitePool;
 use sqlx::{FromRow, SqliteConnection};
 
@@ -36,17 +42,30 @@ pub(crate) struct BoardRow {
     pub baseline: bool,
 }
 
-/// The board of `track` (one of the constants above) on `split`, in rank order.
+/// The standard board of `track` (one of the constants above) on `split`, in rank order.
+#[cfg(test)]
 pub(crate) async fn read(pool: &SqlitePool, track: &str, split: Split) -> sqlx::Result<Vec<BoardRow>> {
+    read_observed(pool, track, ObservationTrack::Standard, split).await
+}
+
+/// The board of `track` and observation track on `split`, in rank order (planning has only
+/// the standard board).
+pub(crate) async fn read_observed(
+    pool: &SqlitePool,
+    track: &str,
+    observations: ObservationTrack,
+    split: Split,
+) -> sqlx::Result<Vec<BoardRow>> {
     sqlx::query_as(
         "SELECT t.name AS team, b.submission_id, b.created_at AS submitted_at, b.state,
                 b.em, b.sr, b.mse, b.m, b.p, b.baseline
          FROM leaderboard_entries b JOIN teams t ON t.id = b.team_id
-         WHERE b.track = ? AND b.split = ?
+         WHERE b.track = ? AND b.split = ? AND b.observations = ?
          ORDER BY b.k1 IS NULL, b.k1 DESC, b.k2 IS NULL, b.k2, b.created_at, b.submission_id",
     )
     .bind(track)
     .bind(split.as_str())
+    .bind(observations.as_str())
     .fetch_all(pool)
     .await
 }
@@ -113,18 +132,30 @@ async fn refresh_track(conn: &mut SqliteConnection, track: &str, team: i64, spli
         .execute(&mut *conn)
         .await?;
     let sql = match track {
-        PLANNING => PLANNING_BEST.to_string(),
+        PLANNING => {
+            return sqlx::query(PLANNING_BEST)
+                .bind(track)
+                .bind(split)
+                .bind(team)
+                .execute(&mut *conn)
+                .await
+                .map(drop);
+        }
         CONTROL => policy_best("sr", "mse", ""),
         _ => policy_best("m", "p", "AND json_extract(s.body, '$.plans') IS NOT NULL"),
     };
-    // Column names and filters come from the constants above, never from input.
-    sqlx::query(sqlx::AssertSqlSafe(sql))
-        .bind(track)
-        .bind(split)
-        .bind(team)
-        .execute(&mut *conn)
-        .await
-        .map(drop)
+    for observations in ObservationTrack::ALL {
+        // Column names and filters come from the constants above, never from input.
+        sqlx::query(sqlx::AssertSqlSafe(sql.clone()))
+            .bind(track)
+            .bind(split)
+            .bind(team)
+            .bind(observations == ObservationTrack::Privileged)
+            .bind(observations.as_str())
+            .execute(&mut *conn)
+            .await?;
+    }
+    Ok(())
 }
 
 /// Planning: the team's best plan file by its latest run's EM (binds: track, split, team).
@@ -144,7 +175,8 @@ const PLANNING_BEST: &str = "
     LIMIT 1";
 
 /// Policy tracks: the team's best run on `(primary DESC, secondary ASC)` among finished runs,
-/// plus every organiser reference submission as its own entry (binds: track, split, team).
+/// plus every organiser reference submission as its own entry, of one observation track
+/// (binds: track, split, team, privileged as 0/1, the observation track's name).
 fn policy_best(primary: &str, secondary: &str, linked: &str) -> String {
     format!(
         "WITH latest AS (
@@ -156,15 +188,16 @@ fn policy_best(primary: &str, secondary: &str, linked: &str) -> String {
             LEFT JOIN scoring_runs r
                    ON r.id = (SELECT MAX(id) FROM scoring_runs WHERE submission_id = s.id)
             WHERE s.split = ?2 AND s.team_id = ?3 AND s.kind = 'policy' {linked}
+              AND COALESCE(json_extract(s.body, '$.privileged_observations'), 0) = ?4
          ), best AS (
             SELECT * FROM latest WHERE NOT baseline
             ORDER BY k1 IS NULL, k1 DESC, k2 IS NULL, k2, created_at, id LIMIT 1
          )
          INSERT INTO leaderboard_entries
              (track, split, team_id, entry, submission_id, k1, k2, created_at, state,
-              em, sr, mse, m, p, baseline)
-         SELECT ?1, split, team_id, CASE WHEN baseline THEN id ELSE 0 END, id, k1, k2,
-                created_at, state, em, sr, mse, m, p, baseline
+              em, sr, mse, m, p, baseline, observations)
+         SELECT ?1, split, team_id, CASE WHEN baseline THEN id WHEN ?4 THEN -1 ELSE 0 END, id,
+                k1, k2, created_at, state, em, sr, mse, m, p, baseline, ?5
          FROM (SELECT * FROM best UNION ALL SELECT * FROM latest WHERE baseline)"
     )
 }

@@ -19,6 +19,8 @@ pub(crate) struct TeamSubmission {
     /// `None` only for a submission whose first run is not stored yet (never, in practice).
     pub state: Option<RunState>,
     pub episodes_total: Option<i64>,
+    /// A policy run on the privileged track (its policy received privileged observations).
+    pub privileged: bool,
 }
 
 /// A team's latest `limit` submissions, newest first.
@@ -29,7 +31,11 @@ pub(crate) async fn team_submissions(
 ) -> sqlx::Result<Vec<TeamSubmission>> {
     sqlx::query_as(
         "SELECT s.id, s.split, s.kind, s.created_at, r.em, r.sr, r.mse, r.m, r.p, r.state,
-                r.episodes_total
+                r.episodes_total,
+                -- Plan bodies are not JSON: CASE keeps json_extract to policy bodies.
+                CASE WHEN s.kind = 'policy'
+                     THEN COALESCE(json_extract(s.body, '$.privileged_observations'), 0)
+                     ELSE 0 END AS privileged
          FROM submissions s
          LEFT JOIN scoring_runs r
            ON r.id = (SELECT MAX(r2.id) FROM scoring_runs r2 WHERE r2.submission_id = s.id)

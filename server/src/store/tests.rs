@@ -20,6 +20,7 @@ fn spec() -> JobSpec {
         teleport_on_failure: true,
         max_plan_steps: 0,
         privileged: false,
+        privileged_observations: None,
         endpoint: EndpointSpec {
             url: "http://127.0.0.1:1".into(),
             bearer_token: String::new(),

@@ -224,7 +224,8 @@ fn run(job: &pb::Job, ctx: &JobContext, control: &JobControl, log: &mut Log) -> 
     let mut core = control.cores.core();
     core.hold();
     let mut sim = Sim::new(ctx.assets.clone(), ctx.sim.clone(), ctx.sensors.clone(), &cfg)?.0;
-    let remote_cfg = spec::remote_config(&ctx.remote, &ep, run.execute);
+    let granted = run.privileged_observations.is_some();
+    let remote_cfg = spec::remote_config(&ctx.remote, &ep, run.execute, granted);
     let creds = Credentials {
         token: Some(ep.bearer_token.clone()).filter(|t| !t.is_empty()),
         ca_pem: None,
@@ -233,7 +234,12 @@ fn run(job: &pb::Job, ctx: &JobContext, control: &JobControl, log: &mut Log) -> 
     let mut timed;
     let mut dead;
     let camera = SimCamera::from_sensors(&ctx.sensors);
-    let connected = core.without(|| RemotePolicy::connect(&ep.url, &creds, &remote_cfg, &camera));
+    let connected = core
+        .without(|| RemotePolicy::connect(&ep.url, &creds, &remote_cfg, &camera))
+        .and_then(|p| match p.spec().privileged_observations && !granted {
+            true => Err(standard_run_refusal(&ep.url)),
+            false => Ok(p),
+        });
     let policy: &mut dyn Policy = match connected {
         Ok(p) => {
             remote = p;
@@ -310,6 +316,18 @@ fn finish_video(video: EpisodeVideo, log: &mut Log) -> Option<RecordedVideo> {
             log.line(format!("{e} (the result is not affected)"));
             None
         }
+    }
+}
+
+/// A policy registered on the standard track that now asks for privileged observations: it
+/// would be scored as standard on what it did not expect, so its tasks fail with what to do.
+fn standard_run_refusal(url: &str) -> kitchen_r_contract::RemoteError {
+    kitchen_r_contract::RemoteError::Handshake {
+        endpoint: url.to_string(),
+        reason: "the policy asks for privileged observations (PolicySpec.privileged_observations), \
+                 but this run is on the standard track: its GetSpec did not ask when it was \
+                 registered. Register the endpoint again to run it on the privileged track"
+            .into(),
     }
 }
 

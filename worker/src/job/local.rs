@@ -27,7 +27,9 @@ use super::execute::{JobControl, execute_job_recording};
 use super::{JobContext, JobError};
 use kitchen_r_contract::probe::{ProbeFailure, probe_endpoint};
 use kitchen_r_contract::{AllowedNetworks, RemoteConfig};
+pub use kitchen_r_core::observations::ObservationTrack as Track;
 use kitchen_r_episode::eval::{Sr, task_kinds};
+use kitchen_r_episode::policy::PrivilegedScope;
 use kitchen_r_episode::runner::RunOptions;
 use kitchen_r_record::video::episode::RecordedVideo;
 use kitchen_r_sim::EpisodeConfig;
@@ -43,6 +45,10 @@ pub struct LocalSettings {
     pub bearer_token: Option<String>,
     /// Organiser reference runs only: hand the policy privileged state.
     pub privileged: bool,
+    /// The privileged track: the scope of the privileged observations every job grants (set
+    /// from the endpoint's GetSpec and the split by [`evaluate_endpoint`]); `None` = standard.
+    #[serde(default)]
+    pub privileged_observations: Option<PrivilegedScope>,
     /// Parallel episodes, capped by the endpoint's announced max concurrency.
     pub jobs: usize,
     /// `eval --record DIR`: write each online episode's video, as the workers record it, to
@@ -85,6 +91,9 @@ pub struct LocalReport {
     pub policy: String,
     /// The endpoint's one-line GetSpec summary.
     pub spec: String,
+    /// `standard`, or `privileged` when the policy asked for privileged observations in
+    /// GetSpec and got them: the leaderboard ranks such runs apart.
+    pub observations: Track,
     pub split: Split,
     pub mode: Mode,
     pub seed: u64,
@@ -138,6 +147,7 @@ pub(crate) fn local_job(ins: &Instruction, url: &str, s: &LocalSettings, remote:
             policy_episode_id: String::new(),
             record_video: s.record.is_some(),
             video_max_bytes: 0,
+            privileged_observations: super::spec::privileged_scope_to_wire(s.privileged_observations),
         }),
         policy: Some(pb::PolicyEndpoint {
             url: url.to_string(),
@@ -192,9 +202,11 @@ fn evaluate_endpoint_with(
     progress: &mut dyn FnMut(&LocalEpisode),
 ) -> Result<LocalReport, LocalError> {
     let started = Instant::now();
-    // The participant's own machine: every address range is theirs to use.
+    // The participant's own machine: every address range is theirs to use, and the privileged
+    // track is offered (the policy's GetSpec decides, as at registration on a server running it).
     let remote = RemoteConfig {
         allowed_networks: AllowedNetworks::ALL,
+        privileged_track: true,
         ..RemoteConfig::default()
     };
     let rt = tokio::runtime::Builder::new_current_thread()
@@ -208,6 +220,12 @@ fn evaluate_endpoint_with(
         &remote,
     ))?;
     drop(rt);
+    let s = &LocalSettings {
+        privileged_observations: (s.privileged_observations).or(probed
+            .privileged_observations
+            .then(|| PrivilegedScope::for_split(split))),
+        ..s.clone()
+    };
     let mut ctx = JobContext::load(remote.clone(), AllowedNetworks::ALL, 1)?;
     ctx.params.batch = batch;
     let jobs: Vec<pb::Job> = instructions
@@ -327,6 +345,7 @@ fn report(
     LocalReport {
         policy: url.to_string(),
         spec,
+        observations: Track::of(s.privileged_observations.is_some()),
         split,
         mode: s.mode,
         seed: s.seed,
@@ -374,6 +393,7 @@ mod tests {
             teleport_on_failure: false,
             bearer_token: None,
             privileged: false,
+            privileged_observations: None,
             jobs: 1,
             record: None,
         }

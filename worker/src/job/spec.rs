@@ -18,7 +18,7 @@ use kitchen_r_sim::{Assets, EpisodeConfig, EpisodeParams};
 use super::JobError;
 use kitchen_r_episode::eval::instruction_seed;
 use kitchen_r_episode::offline::OfflineOptions;
-use kitchen_r_episode::policy::{ChunkTolerance, HORIZON};
+use kitchen_r_episode::policy::{ChunkTolerance, HORIZON, PrivilegedScope};
 use kitchen_r_episode::runner::RunOptions;
 
 /// The instruction a job's spec describes: its plan and place targets as the server sent them.
@@ -78,8 +78,33 @@ fn limit_ms(ms: u32) -> Option<Duration> {
     (ms > 0).then(|| Duration::from_millis(u64::from(ms)))
 }
 
-/// The worker's transport limits with the job endpoint's deadlines.
-pub(crate) fn remote_config(base: &RemoteConfig, ep: &pb::PolicyEndpoint, execute: usize) -> RemoteConfig {
+/// The privileged observations the job grants its policy (the privileged track); `None` on the
+/// standard track. The server chose the scope from the split; an unknown value grants nothing.
+pub(crate) fn privileged_scope(spec: &pb::EpisodeSpec) -> Option<PrivilegedScope> {
+    match pb::PrivilegedScope::try_from(spec.privileged_observations) {
+        Ok(pb::PrivilegedScope::Episode) => Some(PrivilegedScope::Episode),
+        Ok(pb::PrivilegedScope::SubTask) => Some(PrivilegedScope::SubTask),
+        Ok(pb::PrivilegedScope::None) | Err(_) => None,
+    }
+}
+
+/// The wire form of a privileged scope, for jobs made on this side (local `eval`).
+pub(crate) fn privileged_scope_to_wire(scope: Option<PrivilegedScope>) -> i32 {
+    (match scope {
+        None => pb::PrivilegedScope::None,
+        Some(PrivilegedScope::Episode) => pb::PrivilegedScope::Episode,
+        Some(PrivilegedScope::SubTask) => pb::PrivilegedScope::SubTask,
+    }) as i32
+}
+
+/// The worker's transport limits with the job endpoint's deadlines; GetSpec announces the
+/// privileged track when the run grants privileged observations (`privileged`).
+pub(crate) fn remote_config(
+    base: &RemoteConfig,
+    ep: &pb::PolicyEndpoint,
+    execute: usize,
+    privileged: bool,
+) -> RemoteConfig {
     let secs = |ms: u32, default: f64| limit_ms(ms).map_or(default, |d| d.as_secs_f64());
     RemoteConfig {
         call_deadline_s: secs(ep.call_deadline_ms, base.call_deadline_s),
@@ -89,6 +114,7 @@ pub(crate) fn remote_config(base: &RemoteConfig, ep: &pb::PolicyEndpoint, execut
             0 => base.min_actions_executed_per_chunk,
             n => n,
         },
+        privileged_track: privileged,
         ..base.clone()
     }
 }
@@ -123,6 +149,7 @@ pub(crate) fn run_options(spec: &pb::EpisodeSpec, ep: &pb::PolicyEndpoint) -> Re
         execute: if execute == 0 { d.execute } else { execute },
         max_tasks: (spec.max_plan_steps > 0).then_some(spec.max_plan_steps as usize),
         privileged: spec.privileged,
+        privileged_observations: privileged_scope(spec),
         max_consecutive_timeouts: match ep.max_successive_timeouts {
             0 => d.max_consecutive_timeouts,
             n => n,

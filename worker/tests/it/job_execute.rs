@@ -52,6 +52,7 @@ pub(crate) fn job(url: &str, mode: pb::EvalMode, steps: u32, privileged: bool) -
             policy_episode_id: "ep-0123456789abcdef01234567".into(),
             record_video: false,
             video_max_bytes: 0,
+            privileged_observations: 0,
         }),
         policy: Some(pb::PolicyEndpoint {
             url: url.to_string(),
@@ -214,6 +215,7 @@ fn local_eval_of_an_endpoint_gives_the_workers_numbers() {
         teleport_on_failure: true,
         bearer_token: None,
         privileged: true,
+        privileged_observations: None,
         jobs: 4,
         record: None,
     };

@@ -194,6 +194,7 @@ fn job(id: i64, policy: &str) -> pb::Job {
             policy_episode_id: String::new(),
             record_video: false,
             video_max_bytes: 0,
+            privileged_observations: 0,
         }),
         policy: Some(pb::PolicyEndpoint {
             url: policy.to_string(),

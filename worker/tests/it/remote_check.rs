@@ -39,8 +39,10 @@ fn a_good_endpoint_passes_every_check() {
     let server = TestServer::start(still(), ServeOptions::default());
     let r = probe(&server.url());
     assert!(r.passed());
-    assert_eq!(r.checks.len(), 10);
+    assert_eq!(r.checks.len(), 11);
     assert!(r.checks.iter().all(|c| c.verdict == Verdict::Pass));
+    let track = &r.get("privileged").unwrap().detail;
+    assert!(track.starts_with("standard track"), "{track}");
     assert!(r.get("cameras").unwrap().detail.contains("base 128x128 RAW_RGB8"));
     let v = &r.get("v1.1").unwrap().detail;
     assert!(

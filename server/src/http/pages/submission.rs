@@ -57,8 +57,15 @@ pub(super) fn body(v: &SubmissionView, eta: Option<&Eta>) -> String {
         });
         let _ = write!(
             out,
-            "<tr><th>Endpoint</th><td><code>{}</code>{plans}</td></tr>",
-            escape(&p.endpoint)
+            "<tr><th>Endpoint</th><td><code>{}</code>{plans}</td></tr>\
+<tr><th>Observations</th><td>{}</td></tr>",
+            escape(&p.endpoint),
+            match p.observations {
+                kitchen_r_core::observations::ObservationTrack::Privileged => {
+                    "<b>privileged</b> (ranked on the privileged boards)"
+                }
+                kitchen_r_core::observations::ObservationTrack::Standard => "standard",
+            }
         );
     }
     let ranked = match &v.unranked_reason {

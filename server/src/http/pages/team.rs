@@ -81,10 +81,10 @@ pub(super) fn body(quota: &QuotaView, subs: &[TeamSubmission]) -> String {
 <td data-label=MSE class=n>{}</td><td data-label=M class=n>{}</td><td data-label=P class=n>{}</td></tr>",
             escape(&crate::clock::rfc3339(s.created_at)),
             escape(&s.split),
-            if s.kind == SubmissionKind::Policy {
-                "policy"
-            } else {
-                "plans"
+            match (s.kind, s.privileged) {
+                (SubmissionKind::Policy, true) => "policy (privileged)",
+                (SubmissionKind::Policy, false) => "policy",
+                _ => "plans",
             },
             state_words(s),
             score(s.scores.em),
@@ -139,6 +139,9 @@ pub(super) fn entry(track: Track, split: &str, row: &Row) -> String {
         escape(&row.team),
         row.submission_id,
     );
+    if let Some(o) = row.observations {
+        let _ = write!(out, "<tr><th>Observations</th><td>{o}</td></tr>");
+    }
     for (name, v) in scores {
         let _ = write!(out, "<tr><th>{name}</th><td class=n>{}</td></tr>", score(*v));
     }
@@ -151,7 +154,11 @@ pub(super) fn entry(track: Track, split: &str, row: &Row) -> String {
 <p><a href=\"/?split={}#{}\">Back to the leaderboard</a>. The submission's details are for its team only.</p>",
         escape(&row.submitted_at),
         escape(split),
-        track.as_str(),
+        match row.observations {
+            Some(kitchen_r_core::observations::ObservationTrack::Privileged) =>
+                format!("{}-privileged", track.as_str()),
+            _ => track.as_str().to_string(),
+        },
     );
     out
 }

@@ -105,6 +105,7 @@ async fn a_spec_outside_the_contract_ranges_is_refused_naming_field_and_range() 
                 summary: String::new(),
                 observation_history: history,
                 actions_executed_per_chunk: execute,
+                privileged_observations: false,
             }),
             calls: Default::default(),
         })
@@ -164,6 +165,7 @@ async fn probe_failures_are_clear_4xx_naming_what_failed() {
             summary: String::new(),
             observation_history: 0,
             actions_executed_per_chunk: 0,
+            privileged_observations: false,
         }),
         calls: Default::default(),
     });
