@@ -63,6 +63,55 @@ fn html_escapes_team_names() {
     assert!(page.contains("&lt;script&gt;") && !page.contains("<script>"));
 }
 
+/// A control board of `observations` with one finished row.
+fn control_board(observations: ObservationTrack) -> Leaderboard {
+    let mut b = board("team");
+    b.track = Track::Control;
+    b.observations = Some(observations);
+    b.rows[0].scores = Scores {
+        em: None,
+        sr: Some(0.25),
+        mse: Some(0.5),
+        m: None,
+        p: None,
+    };
+    b.rows[0].state = Some("finished".into());
+    b.rows[0].observations = Some(observations);
+    b
+}
+
+/// Issue 25: every rendering names the board a policy row is ranked on.
+#[test]
+fn policy_boards_name_their_observation_track_in_csv_and_html() {
+    let privileged = control_board(ObservationTrack::Privileged);
+    assert_eq!(
+        csv(&privileged),
+        "rank,team,submission_id,sr,mse,state,baseline,submitted_at,observations\n\
+         1,team,7,0.250000,0.500000,finished,false,2026-01-01T00:00:00Z,privileged\n"
+    );
+    assert!(csv(&control_board(ObservationTrack::Standard)).ends_with(",standard\n"));
+    let html = page(
+        Split::Dev,
+        &[control_board(ObservationTrack::Standard), privileged],
+        false,
+    );
+    assert!(
+        html.contains("<h2 id=control>Control track — standard observations</h2>"),
+        "{html}"
+    );
+    assert!(
+        html.contains("<h2 id=control-privileged>Control track — privileged observations</h2>"),
+        "{html}"
+    );
+    assert!(
+        html.contains("&amp;observations=privileged&amp;format=csv"),
+        "{html}"
+    );
+    assert!(html.contains("(privileged)</td>"), "{html}");
+    // Planning keeps its CSV exactly.
+    assert!(!csv(&board("a")).contains("observations"));
+}
+
 #[test]
 fn tracks_parse() {
     assert_eq!("".parse::<Track>().unwrap(), Track::Planning);
