@@ -26,6 +26,7 @@ use kitchen_r_sim::{Assets, EpisodeConfig, EpisodeParams, SensorsConfig, Sim, Si
 use crate::oracle::OraclePolicy;
 use crate::policy::{
     ACTION_DIM, Frame, HORIZON, MAX_OBSERVATION_HISTORY, Policy, PolicyError, PolicyInput, PolicySpec,
+    Privileged,
 };
 use crate::runner::{EpisodeOutcome, RunError, RunOptions, run_episode};
 
@@ -141,6 +142,9 @@ pub struct Sample {
     pub frames: Vec<Frame>,
     /// The expert's 16 actions.
     pub chunk: Vec<[f64; ACTION_DIM]>,
+    /// The world state the expert read (what the privileged track's observation is derived
+    /// from, [`crate::policy::PrivilegedObservation::from_world`]).
+    pub privileged: Option<Privileged>,
 }
 
 /// One episode's samples, in decision order.
@@ -438,6 +442,7 @@ impl Policy for Recorder {
             sub_task: input.sub_task.to_string(),
             frames,
             chunk: chunk.clone(),
+            privileged: input.privileged.cloned(),
         });
         Ok(chunk)
     }

@@ -83,7 +83,10 @@ class KitchenREnv(gym.Env):
     ``history`` (consecutive control steps each observation shows, 1 to 8),
     ``teleport_on_failure`` (after a failed task, continue from the expert's state at the next
     task's start, as the server does; costs one expert pre-run per reset), ``expert`` (put the
-    expert's chunk in ``info`` at every step), ``privileged`` (put privileged state in ``info``),
+    expert's chunk in ``info`` at every step), ``privileged`` (put the full reference world state in
+    ``info``), ``privileged_observation`` (put in ``info`` what the privileged track sends a policy
+    that asks for it: the robot's pose in the scene frame, the current goal in the robot frame,
+    the key objects the split allows; see the README's privileged-information track),
     ``task_time_limit`` (sim seconds per task, 120), ``max_tasks`` (run only the first N plan
     steps; 0 = all), ``instruction`` (always this instruction id; otherwise ``reset`` picks
     one, or takes ``options={"instruction": id}``).
@@ -101,6 +104,7 @@ class KitchenREnv(gym.Env):
         teleport_on_failure: bool = True,
         expert: bool = False,
         privileged: bool = False,
+        privileged_observation: bool = False,
         task_time_limit: float = 120.0,
         max_tasks: int = 0,
         instruction: str | None = None,
@@ -121,10 +125,12 @@ class KitchenREnv(gym.Env):
             # The expert's chunk rides with each decision: no second round trip per step.
             expert_inline=expert,
             privileged=privileged,
+            privileged_observation=privileged_observation,
         )
         self.render_mode = render_mode
         self._images, self._depth, self._history = images, depth, history
         self._expert, self._privileged = expert, privileged
+        self._privileged_observation = privileged_observation
         self._ids = self._native.instruction_ids()
         if instruction is not None and instruction not in self._ids:
             raise KeyError(f"no instruction {instruction!r} in the {split} split")
@@ -184,6 +190,8 @@ class KitchenREnv(gym.Env):
             info["sub_task"] = d["sub_task"]
             if self._privileged:
                 info["privileged"] = d["privileged"]
+            if self._privileged_observation:
+                info["privileged_observation"] = d["privileged_observation"]
             if self._expert:
                 if "expert_error" in d:
                     raise RuntimeError(f"the expert has no chunk for this state: {d['expert_error']}")

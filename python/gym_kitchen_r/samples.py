@@ -37,7 +37,9 @@ class ExpertSamples:
     paper's randomisation, on), ``successful_only`` (drop the samples of tasks the expert
     failed, on), ``task_time_limit``, ``max_tasks`` (only the first N plan steps; 0 = all),
     ``shard`` (``(index, count)``: episodes ``n`` with ``n % count == index``, for data loader
-    workers sharing one collection).
+    workers sharing one collection), ``privileged_observation`` (each sample carries what the
+    privileged track sends a policy at that decision: robot pose, goal in the robot frame, the key
+    objects the split allows).
 
     Iterating starts the simulators afresh each time (an epoch gives the same samples; change
     ``seed`` for new episodes). ``episodes_iter()`` yields whole episodes with their outcome.
@@ -59,6 +61,7 @@ class ExpertSamples:
         task_time_limit: float = 120.0,
         max_tasks: int = 0,
         shard: tuple[int, int] = (0, 1),
+        privileged_observation: bool = False,
     ):
         if episodes < 0:
             raise ValueError("episodes must be 0 or more")
@@ -78,6 +81,7 @@ class ExpertSamples:
             max_tasks=int(max_tasks),
             shard_index=int(shard[0]),
             shard_count=int(shard[1]),
+            privileged_observation=privileged_observation,
         )
         self._history, self._images, self._depth = history, images, depth
         # Check the arguments now rather than at the first iteration.
@@ -107,4 +111,6 @@ class ExpertSamples:
         out["step"] = s["step"]
         out["episode_index"] = ep["index"]
         out["instruction_id"] = ep["instruction_id"]
+        if "privileged_observation" in s:
+            out["privileged_observation"] = s["privileged_observation"]
         return out

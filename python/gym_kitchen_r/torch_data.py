@@ -41,12 +41,13 @@ class ExpertDataset(IterableDataset):
 
 
 def _tensors(s: dict[str, Any]) -> dict[str, Any]:
-    """Arrays as tensors (copied: the sample's arrays are read-only views); text as is."""
+    """Arrays as tensors (copied: the sample's arrays are read-only views); text and the
+    privileged observation (nested values) as they are."""
     out: dict[str, Any] = {}
     for k, v in s.items():
         if isinstance(v, np.ndarray):
             out[k] = torch.from_numpy(v.copy())
-        elif isinstance(v, dict):
+        elif isinstance(v, dict) and all(isinstance(a, np.ndarray) for a in v.values()):
             out[k] = {n: torch.from_numpy(a.copy()) for n, a in v.items()}
         else:
             out[k] = v

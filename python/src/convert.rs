@@ -2,8 +2,9 @@
 //! numpy arrays without another copy: an observation history is stacked here, frame by frame,
 //! into one bytes object per camera and one for the robot state.
 
+use kitchen_r_core::observations::PrivilegedScope;
 use kitchen_r_episode::driven::{Decision, Next, Progress};
-use kitchen_r_episode::policy::{ACTION_DIM, Frame, Privileged};
+use kitchen_r_episode::policy::{ACTION_DIM, Frame, Goal, Privileged, PrivilegedObservation};
 use kitchen_r_episode::runner::TaskRecord;
 use kitchen_r_sim::sensors::CameraImage;
 use kitchen_r_sim::{Observation, TaskTarget};
@@ -127,12 +128,21 @@ pub(crate) fn frames<'py>(
 }
 
 /// `{"tasks_ended": [...], "decision": {...} | None, "ended": {...} | None}`.
+/// What a decision carries besides the observation.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct Show {
+    /// The full reference world state (`privileged=True`).
+    pub(crate) privileged: bool,
+    /// The privileged track's observation, with the split's scope.
+    pub(crate) privileged_observation: Option<PrivilegedScope>,
+}
+
 pub(crate) fn progress<'py>(
     py: Python<'py>,
     p: &Progress,
     history: usize,
     depth: bool,
-    privileged: bool,
+    show: &Show,
 ) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     let tasks = PyList::empty(py);
@@ -142,7 +152,7 @@ pub(crate) fn progress<'py>(
     d.set_item("tasks_ended", tasks)?;
     match &p.next {
         Next::Decision(dec) => {
-            d.set_item("decision", decision(py, dec, history, depth, privileged)?)?;
+            d.set_item("decision", decision(py, dec, history, depth, show)?)?;
             d.set_item("ended", py.None())?;
         }
         Next::Ended(end) => {
@@ -189,7 +199,7 @@ fn decision<'py>(
     dec: &Decision,
     history: usize,
     depth: bool,
-    with_privileged: bool,
+    show: &Show,
 ) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     d.set_item("step", dec.step)?;
@@ -202,8 +212,14 @@ fn decision<'py>(
         previous_action: dec.previous_action.as_ref(),
     });
     d.set_item("frames", frames(py, &views, history, depth)?)?;
-    if with_privileged {
+    if show.privileged {
         d.set_item("privileged", privileged(py, &dec.privileged)?)?;
+    }
+    if let Some(scope) = show.privileged_observation {
+        d.set_item(
+            "privileged_observation",
+            privileged_observation(py, &dec.privileged, scope)?,
+        )?;
     }
     match &dec.expert {
         Some(Ok(c)) => d.set_item("expert", chunk(py, c))?,
@@ -250,4 +266,46 @@ fn privileged<'py>(py: Python<'py>, p: &Privileged) -> PyResult<Bound<'py, PyDic
 /// Values as the bytes numpy reads with `frombuffer(..., float64)` (native order).
 fn f64_bytes(values: &[f64]) -> Vec<u8> {
     values.iter().flat_map(|v| v.to_ne_bytes()).collect()
+}
+
+/// The privileged track's observation of `p` (what a policy that asked for it is sent on a
+/// split of `scope`): `{"base_pose", "goal": {"kind", ...}, "objects"}`, goal in the robot frame.
+pub(crate) fn privileged_observation<'py>(
+    py: Python<'py>,
+    p: &Privileged,
+    scope: PrivilegedScope,
+) -> PyResult<Bound<'py, PyAny>> {
+    let Some(o) = PrivilegedObservation::from_world(p, scope) else {
+        return Ok(py.None().into_bound(py));
+    };
+    let d = PyDict::new(py);
+    d.set_item("base_pose", o.base_pose.to_vec())?;
+    let goal = PyDict::new(py);
+    match &o.goal {
+        Goal::Approach { x, y, yaw } => {
+            goal.set_item("kind", "move")?;
+            goal.set_item("pose", vec![*x, *y, *yaw])?;
+        }
+        Goal::Pick { object, pose } => {
+            goal.set_item("kind", "pick")?;
+            goal.set_item("object", object)?;
+            goal.set_item("pose", pose.to_vec())?;
+        }
+        Goal::Place { object, target } => {
+            goal.set_item("kind", "place")?;
+            goal.set_item("object", object)?;
+            goal.set_item("position", target.to_vec())?;
+        }
+    }
+    d.set_item("goal", goal)?;
+    let objects = PyList::empty(py);
+    for ob in &o.objects {
+        let od = PyDict::new(py);
+        od.set_item("name", &ob.name)?;
+        od.set_item("model", &ob.model)?;
+        od.set_item("pose", ob.pose.to_vec())?;
+        objects.append(od)?;
+    }
+    d.set_item("objects", objects)?;
+    Ok(d.into_any())
 }

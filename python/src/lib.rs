@@ -13,6 +13,7 @@ mod samples;
 use std::sync::{Mutex, MutexGuard, PoisonError};
 
 use kitchen_r_core::dataset::{Instruction, Split};
+use kitchen_r_core::observations::PrivilegedScope;
 use kitchen_r_episode::driven::{DriveError, DriveOptions, DrivenEpisode, Progress};
 use kitchen_r_episode::eval::{instruction_seed, instructions};
 use kitchen_r_episode::runner::RunOptions;
@@ -82,8 +83,8 @@ struct NativeEnv {
     inner: Mutex<Inner>,
     /// Observations carry depth images (fixed at construction, read without the lock).
     depth: bool,
-    /// Decisions carry the privileged state.
-    privileged: bool,
+    /// What decisions carry besides the observation.
+    show: convert::Show,
     /// Frames each observation stacks.
     history: usize,
 }
@@ -232,7 +233,7 @@ fn step_many<'py>(
     });
     let done = done.map_err(|(i, e)| e.into_py(&format!("environment {i}: ")))?;
     (done.iter().zip(&refs))
-        .map(|(p, e)| convert::progress(py, p, e.history, e.depth, e.privileged))
+        .map(|(p, e)| convert::progress(py, p, e.history, e.depth, &e.show))
         .collect()
 }
 
@@ -241,7 +242,7 @@ impl NativeEnv {
     /// `split`: `dev` (the public split with plans) or `test` with `ground_truth` (a JSON Lines
     /// file of instructions with plans, the organiser's). See `gym_kitchen_r.KitchenREnv`.
     #[new]
-    #[pyo3(signature = (split="dev", ground_truth=None, images=true, depth=false, teleport_on_failure=true, history=1, task_time_limit=120.0, max_tasks=0, expert=true, expert_inline=false, privileged=false))]
+    #[pyo3(signature = (split="dev", ground_truth=None, images=true, depth=false, teleport_on_failure=true, history=1, task_time_limit=120.0, max_tasks=0, expert=true, expert_inline=false, privileged=false, privileged_observation=false))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         split: &str,
@@ -255,6 +256,7 @@ impl NativeEnv {
         expert: bool,
         expert_inline: bool,
         privileged: bool,
+        privileged_observation: bool,
     ) -> PyResult<NativeEnv> {
         let split: Split = split.parse().map_err(PyValueError::new_err)?;
         if !(1..=8).contains(&history) {
@@ -296,7 +298,10 @@ impl NativeEnv {
                 episode: None,
             }),
             depth,
-            privileged,
+            show: convert::Show {
+                privileged,
+                privileged_observation: privileged_observation.then(|| PrivilegedScope::for_split(split)),
+            },
             history,
         })
     }
@@ -343,7 +348,7 @@ impl NativeEnv {
             inner.begin_reset(instruction, seed, task)?;
             inner.receive()
         })?;
-        convert::progress(py, &progress, self.history, self.depth, self.privileged)
+        convert::progress(py, &progress, self.history, self.depth, &self.show)
     }
 
     /// Execute one action (10 values) for one control step.
@@ -353,7 +358,7 @@ impl NativeEnv {
             inner.begin_step(&action)?;
             inner.receive()
         })?;
-        convert::progress(py, &progress, self.history, self.depth, self.privileged)
+        convert::progress(py, &progress, self.history, self.depth, &self.show)
     }
 
     /// The expert's chunk (16 actions of 10 values) for the current decision.

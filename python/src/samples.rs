@@ -4,6 +4,7 @@ use std::path::PathBuf;
 use std::sync::Mutex;
 
 use kitchen_r_core::dataset::Split;
+use kitchen_r_core::observations::PrivilegedScope;
 use kitchen_r_episode::eval::instructions;
 use kitchen_r_episode::runner::RunOptions;
 use kitchen_r_episode::samples::{EpisodeSamples, SampleOptions, SampleStream};
@@ -20,12 +21,14 @@ pub(crate) struct NativeSamples {
     stream: Mutex<Option<SampleStream>>,
     history: usize,
     depth: bool,
+    /// Samples carry the privileged track's observation, with the split's scope.
+    privileged_observation: Option<PrivilegedScope>,
 }
 
 #[pymethods]
 impl NativeSamples {
     #[new]
-    #[pyo3(signature = (split="dev", ground_truth=None, episodes=1, seed=0, workers=1, execute=8, history=1, images=true, depth=false, randomise=true, successful_only=true, task_time_limit=120.0, max_tasks=0, shard_index=0, shard_count=1))]
+    #[pyo3(signature = (split="dev", ground_truth=None, episodes=1, seed=0, workers=1, execute=8, history=1, images=true, depth=false, randomise=true, successful_only=true, task_time_limit=120.0, max_tasks=0, shard_index=0, shard_count=1, privileged_observation=false))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         split: &str,
@@ -43,6 +46,7 @@ impl NativeSamples {
         max_tasks: usize,
         shard_index: usize,
         shard_count: usize,
+        privileged_observation: bool,
     ) -> PyResult<NativeSamples> {
         let split: Split = split.parse().map_err(PyValueError::new_err)?;
         if !(task_time_limit.is_finite() && task_time_limit > 0.0) {
@@ -75,6 +79,7 @@ impl NativeSamples {
             stream: Mutex::new(Some(stream)),
             history,
             depth,
+            privileged_observation: privileged_observation.then(|| PrivilegedScope::for_split(split)),
         })
     }
 
@@ -90,7 +95,7 @@ impl NativeSamples {
         match next {
             None => Ok(None),
             Some(Err(e)) => Err(PyRuntimeError::new_err(e.to_string())),
-            Some(Ok(ep)) => episode(py, &ep, self.history, self.depth).map(Some),
+            Some(Ok(ep)) => episode(py, &ep, self).map(Some),
         }
     }
 
@@ -105,12 +110,8 @@ impl NativeSamples {
     }
 }
 
-fn episode<'py>(
-    py: Python<'py>,
-    ep: &EpisodeSamples,
-    history: usize,
-    depth: bool,
-) -> PyResult<Bound<'py, PyDict>> {
+fn episode<'py>(py: Python<'py>, ep: &EpisodeSamples, how: &NativeSamples) -> PyResult<Bound<'py, PyDict>> {
+    let (history, depth) = (how.history, how.depth);
     let d = PyDict::new(py);
     d.set_item("index", ep.index)?;
     d.set_item("episode_id", &ep.config.id)?;
@@ -133,6 +134,12 @@ fn episode<'py>(
         sd.set_item("action", convert::chunk(py, &s.chunk))?;
         let views: Vec<View<'_>> = s.frames.iter().map(View::from).collect();
         sd.set_item("frames", convert::frames(py, &views, history, depth)?)?;
+        if let (Some(scope), Some(p)) = (how.privileged_observation, &s.privileged) {
+            sd.set_item(
+                "privileged_observation",
+                convert::privileged_observation(py, p, scope)?,
+            )?;
+        }
         samples.append(sd)?;
     }
     d.set_item("samples", samples)?;

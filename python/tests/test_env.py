@@ -209,3 +209,19 @@ def test_task_env_runs_one_sub_task_from_the_experts_state_at_its_start():
     _, b = env.reset(seed=4, options={"instruction": "dev-0001"})
     assert a["task"] == b["task"]
     env.close()
+
+
+def test_privileged_observation_is_what_the_track_sends_goal_in_the_robot_frame():
+    env = KitchenREnv(images=False, privileged=True, privileged_observation=True)
+    _, info = env.reset(seed=0, options={"instruction": "dev-0001"})
+    po, full = info["privileged_observation"], info["privileged"]
+    assert po["base_pose"] == full["base_pose"]
+    assert po["goal"]["kind"] == full["target"]["kind"] == "move"
+    # The goal is the scene-frame approach pose seen from the robot: rotate it back and compare.
+    x, y, yaw = full["base_pose"]
+    gx, gy, gyaw = po["goal"]["pose"]
+    sx, sy = x + math.cos(yaw) * gx - math.sin(yaw) * gy, y + math.sin(yaw) * gx + math.cos(yaw) * gy
+    assert np.allclose([sx, sy], full["target"]["pose"][:2], atol=1e-9)
+    # The dev split shows every key object of the episode.
+    assert [o["name"] for o in po["objects"]] == [o["name"] for o in full["objects"]]
+    env.close()

@@ -75,3 +75,11 @@ def test_without_images_a_sample_has_the_state_only():
 def test_bad_arguments_raise_value_error(kwargs):
     with pytest.raises(ValueError):
         ExpertSamples(episodes=1, **kwargs)
+
+
+def test_samples_carry_the_privileged_observation_when_asked():
+    s = next(iter(ExpertSamples(episodes=1, workers=1, images=False, max_tasks=1, privileged_observation=True)))
+    assert s["privileged_observation"]["goal"]["kind"] == "move"
+    assert len(s["privileged_observation"]["base_pose"]) == 3
+    plain = next(iter(ExpertSamples(episodes=1, workers=1, images=False, max_tasks=1)))
+    assert "privileged_observation" not in plain
