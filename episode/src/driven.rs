@@ -213,7 +213,6 @@ impl DrivenEpisode {
             events: ev_tx.clone(),
             inline: opts.expert_inline && expert.is_some(),
             last_action: None,
-            tolerance: opts.run.chunk_tolerance,
             expert,
             abandoned: false,
         };
@@ -397,11 +396,18 @@ fn drive(
     } else {
         sim.observe_state()
     };
+    // The last action as the runner executed it, corrections applied (once, here, rather
+    // than for every action on the way).
+    let previous_action = relay.last_action.map(|a| {
+        let mut executed = [a];
+        let _ = check_chunk(&mut executed, 1, &run.chunk_tolerance);
+        executed[0]
+    });
     let _ = events.send(Event::Ended(Box::new(Ended {
         outcome,
         observation,
         ee_pose: ee_pose(sim),
-        previous_action: relay.last_action,
+        previous_action,
     })));
     Ok(())
 }
@@ -429,7 +435,6 @@ struct Relay {
     inline: bool,
     /// The previous action of the decision last handed out, then the action that answered it.
     last_action: Option<[f64; ACTION_DIM]>,
-    tolerance: crate::policy::ChunkTolerance,
     /// The driver is gone: every decision fails at once so the runner ends quickly.
     abandoned: bool,
 }
@@ -479,10 +484,7 @@ impl Policy for Relay {
         loop {
             match recv_soon(&self.cmds) {
                 Ok(Cmd::Act(a)) => {
-                    // As the runner executes it, corrections applied (the end's previous action).
-                    let mut executed = [a];
-                    let _ = check_chunk(&mut executed, 1, &self.tolerance);
-                    self.last_action = Some(executed[0]);
+                    self.last_action = Some(a);
                     return Ok(vec![a; HORIZON]);
                 }
                 Ok(Cmd::Expert) => {

@@ -312,6 +312,23 @@ pub(crate) fn run_all(
     out.into_iter().map(|o| o.ok_or(EvalError::Panicked)).collect()
 }
 
+/// `cfg` loaded into the thread's simulator: the one it has, reset, or a new one the first time.
+pub(crate) fn load<'a>(
+    sim: &'a mut Option<Sim>,
+    assets: &Assets,
+    sim_cfg: &SimConfig,
+    sensors: &SensorsConfig,
+    cfg: &EpisodeConfig,
+) -> Result<&'a mut Sim, SimError> {
+    match sim {
+        Some(s) => {
+            s.reset(cfg)?;
+            Ok(s)
+        }
+        None => Ok(sim.insert(Sim::new(assets.clone(), sim_cfg.clone(), sensors.clone(), cfg)?.0)),
+    }
+}
+
 fn one(
     assets: &Assets,
     sim: &mut Option<Sim>,
@@ -322,13 +339,7 @@ fn one(
     run: &RunOptions,
 ) -> Result<EpisodeOutcome, EvalError> {
     let started = Instant::now();
-    match sim {
-        Some(s) => {
-            s.reset(cfg)?;
-        }
-        None => *sim = Some(Sim::new(assets.clone(), sim_cfg.clone(), sensors.clone(), cfg)?.0),
-    }
-    let s = sim.as_mut().ok_or(EvalError::Panicked)?;
+    let s = load(sim, assets, sim_cfg, sensors, cfg)?;
     let mut o = run_episode(s, policy, run, None, &mut ())?;
     // Count the reset (world build) in the episode's wall time too.
     o.wall_time_s = started.elapsed().as_secs_f64();

@@ -380,20 +380,7 @@ fn one(
         opts.randomise,
     )
     .map_err(ep)?;
-    match sim {
-        Some(s) => s.reset(&cfg).map(drop).map_err(ep)?,
-        None => {
-            let (s, _) = Sim::new(
-                shared.assets.clone(),
-                shared.sim_cfg.clone(),
-                shared.sensors.clone(),
-                &cfg,
-            )
-            .map_err(ep)?;
-            *sim = Some(s);
-        }
-    }
-    let s = sim.as_mut().ok_or(SampleError::Panicked)?;
+    let s = crate::eval::load(sim, &shared.assets, &shared.sim_cfg, &shared.sensors, &cfg).map_err(ep)?;
     recorder.samples.clear();
     let outcome =
         run_episode(s, recorder, run, None, &mut ()).map_err(|source| SampleError::Run { index, source })?;

@@ -4,7 +4,9 @@
 
 use kitchen_r_core::observations::PrivilegedScope;
 use kitchen_r_episode::driven::{Decision, Next, Progress};
-use kitchen_r_episode::policy::{ACTION_DIM, Frame, Goal, Privileged, PrivilegedObservation};
+use kitchen_r_episode::policy::{
+    ACTION_DIM, Frame, Goal, Privileged, PrivilegedObject, PrivilegedObservation,
+};
 use kitchen_r_episode::runner::TaskRecord;
 use kitchen_r_sim::sensors::CameraImage;
 use kitchen_r_sim::{Observation, TaskTarget};
@@ -251,15 +253,7 @@ fn privileged<'py>(py: Python<'py>, p: &Privileged) -> PyResult<Bound<'py, PyDic
         }
     }
     d.set_item("target", target)?;
-    let objects = PyList::empty(py);
-    for o in &p.objects {
-        let od = PyDict::new(py);
-        od.set_item("name", &o.name)?;
-        od.set_item("model", &o.model)?;
-        od.set_item("pose", o.pose.to_vec())?;
-        objects.append(od)?;
-    }
-    d.set_item("objects", objects)?;
+    d.set_item("objects", objects(py, &p.objects)?)?;
     Ok(d)
 }
 
@@ -298,14 +292,19 @@ pub(crate) fn privileged_observation<'py>(
         }
     }
     d.set_item("goal", goal)?;
-    let objects = PyList::empty(py);
-    for ob in &o.objects {
-        let od = PyDict::new(py);
-        od.set_item("name", &ob.name)?;
-        od.set_item("model", &ob.model)?;
-        od.set_item("pose", ob.pose.to_vec())?;
-        objects.append(od)?;
-    }
-    d.set_item("objects", objects)?;
+    d.set_item("objects", objects(py, &o.objects)?)?;
     Ok(d.into_any())
+}
+
+/// Key objects as `[{"name", "model", "pose"}]` (scene frame).
+fn objects<'py>(py: Python<'py>, objects: &[PrivilegedObject]) -> PyResult<Bound<'py, PyList>> {
+    let list = PyList::empty(py);
+    for o in objects {
+        let od = PyDict::new(py);
+        od.set_item("name", &o.name)?;
+        od.set_item("model", &o.model)?;
+        od.set_item("pose", o.pose.to_vec())?;
+        list.append(od)?;
+    }
+    Ok(list)
 }

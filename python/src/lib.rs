@@ -177,6 +177,23 @@ fn check_task(ins: &Instruction, task: Option<usize>) -> Result<(), EnvError> {
     }
 }
 
+/// The split, its instructions (the test split's from the organiser's `ground_truth` file),
+/// after checking the task time limit: what an environment and a sample stream start from.
+fn split_instructions(
+    split: &str,
+    ground_truth: Option<&std::path::PathBuf>,
+    task_time_limit: f64,
+) -> PyResult<(Split, Vec<Instruction>)> {
+    let split: Split = split.parse().map_err(PyValueError::new_err)?;
+    if !(task_time_limit.is_finite() && task_time_limit > 0.0) {
+        return Err(PyValueError::new_err(
+            "task_time_limit must be a positive number of seconds",
+        ));
+    }
+    let ins = instructions(split, ground_truth).map_err(|e| PyValueError::new_err(e.to_string()))?;
+    Ok((split, ins))
+}
+
 /// What `step_many` asks of one environment.
 #[derive(FromPyObject)]
 enum Request {
@@ -258,17 +275,10 @@ impl NativeEnv {
         privileged: bool,
         privileged_observation: bool,
     ) -> PyResult<NativeEnv> {
-        let split: Split = split.parse().map_err(PyValueError::new_err)?;
         if !(1..=8).contains(&history) {
             return Err(PyValueError::new_err("history must be 1 to 8 control steps"));
         }
-        if !(task_time_limit.is_finite() && task_time_limit > 0.0) {
-            return Err(PyValueError::new_err(
-                "task_time_limit must be a positive number of seconds",
-            ));
-        }
-        let instructions =
-            instructions(split, ground_truth.as_ref()).map_err(|e| PyValueError::new_err(e.to_string()))?;
+        let (split, instructions) = split_instructions(split, ground_truth.as_ref(), task_time_limit)?;
         let assets = Assets::load_default().map_err(setup("assets"))?;
         let params = EpisodeParams::load_default().map_err(setup("episode parameters"))?;
         let sim_cfg = SimConfig::load_default().map_err(setup("configs/sim.toml"))?;

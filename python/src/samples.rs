@@ -3,9 +3,7 @@
 use std::path::PathBuf;
 use std::sync::Mutex;
 
-use kitchen_r_core::dataset::Split;
 use kitchen_r_core::observations::PrivilegedScope;
-use kitchen_r_episode::eval::instructions;
 use kitchen_r_episode::runner::RunOptions;
 use kitchen_r_episode::samples::{EpisodeSamples, SampleOptions, SampleStream};
 use kitchen_r_sim::Assets;
@@ -48,14 +46,7 @@ impl NativeSamples {
         shard_count: usize,
         privileged_observation: bool,
     ) -> PyResult<NativeSamples> {
-        let split: Split = split.parse().map_err(PyValueError::new_err)?;
-        if !(task_time_limit.is_finite() && task_time_limit > 0.0) {
-            return Err(PyValueError::new_err(
-                "task_time_limit must be a positive number of seconds",
-            ));
-        }
-        let ins =
-            instructions(split, ground_truth.as_ref()).map_err(|e| PyValueError::new_err(e.to_string()))?;
+        let (split, ins) = crate::split_instructions(split, ground_truth.as_ref(), task_time_limit)?;
         let assets = Assets::load_default().map_err(|e| PyRuntimeError::new_err(format!("assets: {e}")))?;
         let opts = SampleOptions {
             seed,
