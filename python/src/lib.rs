@@ -30,6 +30,9 @@ struct Inner {
     sensors: SensorsConfig,
     instructions: Vec<Instruction>,
     opts: DriveOptions,
+    /// Apply the paper's randomisation (`configs/episodes.toml` `[randomise]`) to each episode,
+    /// as collection and `kitchen-r episodes generate` do, from the same episode seed.
+    randomise: bool,
     /// A simulator between episodes (built once, reset for each episode as `eval` does).
     idle: Option<Sim>,
     episode: Option<DrivenEpisode>,
@@ -106,14 +109,20 @@ impl Inner {
         let ins = self.find(instruction)?;
         check_task(ins, task)?;
         let scene = self.assets.scene(&ins.scene).map_err(setup("scene"))?;
-        let cfg = EpisodeConfig::from_instruction(
-            ins,
-            scene,
-            &self.assets.catalogue,
-            &self.params,
-            instruction_seed(seed, &ins.id),
-        )
-        .map_err(setup("episode"))?;
+        let episode_seed = instruction_seed(seed, &ins.id);
+        let mut cfg =
+            EpisodeConfig::from_instruction(ins, scene, &self.assets.catalogue, &self.params, episode_seed)
+                .map_err(setup("episode"))?;
+        if self.randomise {
+            kitchen_r_sim::randomise(
+                &mut cfg,
+                scene,
+                &self.assets.catalogue,
+                &self.params,
+                episode_seed,
+            )
+            .map_err(setup("randomisation"))?;
+        }
         let sim = match self.idle.take() {
             Some(s) => s,
             None => {
@@ -259,7 +268,7 @@ impl NativeEnv {
     /// `split`: `dev` (the public split with plans) or `test` with `ground_truth` (a JSON Lines
     /// file of instructions with plans, the organiser's). See `gym_kitchen_r.KitchenREnv`.
     #[new]
-    #[pyo3(signature = (split="dev", ground_truth=None, images=true, depth=false, teleport_on_failure=true, history=1, task_time_limit=120.0, max_tasks=0, expert=true, expert_inline=false, privileged=false, privileged_observation=false))]
+    #[pyo3(signature = (split="dev", ground_truth=None, images=true, depth=false, teleport_on_failure=true, history=1, task_time_limit=120.0, max_tasks=0, expert=true, expert_inline=false, privileged=false, privileged_observation=false, randomise=false))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         split: &str,
@@ -274,6 +283,7 @@ impl NativeEnv {
         expert_inline: bool,
         privileged: bool,
         privileged_observation: bool,
+        randomise: bool,
     ) -> PyResult<NativeEnv> {
         if !(1..=8).contains(&history) {
             return Err(PyValueError::new_err("history must be 1 to 8 control steps"));
@@ -304,6 +314,7 @@ impl NativeEnv {
                 sensors,
                 instructions,
                 opts,
+                randomise,
                 idle: None,
                 episode: None,
             }),

@@ -1,0 +1,157 @@
+"""What the camera baseline sees (standard track: no privileged information), computed alike from
+the Python environment / `ExpertSamples` dicts (training) and from a gRPC `Observation` (serving).
+
+One decision's inputs, over the last HISTORY = 2 control steps (0.1 s apart; at a task's first
+decision both are the task's first frame, in the environment as in the contract's padding):
+- images: both cameras (`base`, `gripper`), RGB uint8 as rendered (128x128, the sensors config;
+  the server asks for that size too), resized to the model's `image_size` by `resize_images`,
+  the one resize both paths use: (N, cameras, HISTORY, S, S, 3) uint8;
+- state, STATE_DIM values: per frame (oldest first) the robot's 26 proprioceptive values —
+  measured base velocity `v, w`, the 6 arm joints, gripper opening, hand pose in the base frame
+  (7), the previous action (10; zeros at a task's start and after a teleport) — then odometry
+  relative to the episode's start as `x, y, sin yaw, cos yaw` (allowed on the standard track);
+  then the task's time: seconds since the task's first decision / 60, capped at 3;
+- sub-task: the sentence as MAX_WORDS word ids over a vocabulary built from the dev split's plan
+  steps (saved in the checkpoint; unknown words map to UNK, padding is PAD).
+"""
+
+import math
+import re
+
+import numpy as np
+
+CAMERAS = ("base", "gripper")
+HISTORY = 2
+RENDER_SIZE = 128
+ROBOT = 26
+PER_FRAME = ROBOT + 4
+STATE_DIM = HISTORY * PER_FRAME + 1
+HORIZON, ACTION_DIM = 16, 10
+TIME_SCALE = 60.0
+CONTROL_DT = 0.1
+EXECUTE = 8
+MAX_WORDS = 8
+PAD, UNK = 0, 1
+KINDS = ("move", "pick", "place")
+
+
+# Sub-task words ----------------------------------------------------------------------------
+
+def words(sentence):
+    return re.findall(r"[a-z0-9]+", sentence.lower())
+
+
+def build_vocab(sentences):
+    """Index 0 PAD, 1 UNK, then every word of `sentences`, sorted."""
+    return ["<pad>", "<unk>"] + sorted({w for s in sentences for w in words(s)})
+
+
+def dev_vocab():
+    """The vocabulary of the dev split's plan steps (what train.py saves in the checkpoint)."""
+    from gym_kitchen_r import KitchenREnv
+
+    env = KitchenREnv(images=False)
+    try:
+        return build_vocab(s for i in env.instruction_ids() for s in env.instruction_of(i)["plan"])
+    finally:
+        env.close()
+
+
+def encode(sentence, vocab_index):
+    ids = [vocab_index.get(w, UNK) for w in words(sentence)][:MAX_WORDS]
+    return np.array(ids + [PAD] * (MAX_WORDS - len(ids)), dtype=np.int64)
+
+
+# State ------------------------------------------------------------------------------------
+
+def _frame_values(robot26, x, y, yaw):
+    return list(robot26) + [x, y, math.sin(yaw), math.cos(yaw)]
+
+
+def state_vector(frames, task_time):
+    """`frames`: HISTORY lists of PER_FRAME values, oldest first; `task_time` in seconds."""
+    v = np.zeros(STATE_DIM, dtype=np.float32)
+    v[: HISTORY * PER_FRAME] = np.asarray(frames, dtype=np.float64).reshape(-1)
+    v[-1] = min(task_time, 3 * TIME_SCALE) / TIME_SCALE
+    return v
+
+
+def _pad_history(seq):
+    """The last HISTORY entries, padded at the front with the first one."""
+    seq = list(seq)[-HISTORY:]
+    return [seq[0]] * (HISTORY - len(seq)) + seq
+
+
+def from_env(obs, task_time):
+    """(images (cameras, HISTORY, 128, 128, 3) uint8, state (STATE_DIM,)) of an environment
+    observation or an `ExpertSamples` dict (`images`, `state` with STATE_FIELDS)."""
+    s = np.asarray(obs["state"], dtype=np.float64).reshape(-1, 29)
+    # STATE_FIELDS: odom 0-2, base_v 3, base_w 4, joints 5-10, gripper 11, ee 12-18, prev 19-28
+    frames = [_frame_values(r[3:29], r[0], r[1], r[2]) for r in _pad_history(s)]
+    ims = []
+    for c in CAMERAS:
+        a = np.asarray(obs["images"][c])
+        a = a.reshape((-1,) + a.shape[-3:])
+        ims.append(np.stack(_pad_history(a)))
+    return np.stack(ims), state_vector(frames, task_time)
+
+
+def _image(frame, cam):
+    for im in frame.images:
+        if im.camera == cam:
+            if len(im.data) != im.width * im.height * 3:
+                raise ValueError(f"`{cam}` image is not RAW_RGB8 {im.width}x{im.height} (GetSpec asks for RAW_RGB8)")
+            return np.frombuffer(im.data, dtype=np.uint8).reshape(im.height, im.width, 3)
+    raise ValueError(f"observation has no `{cam}` image; the policy asked for cameras {CAMERAS}")
+
+
+def _grpc_frame_values(f):
+    r = f.robot
+    if len(r.ee_pose) != 7:
+        raise ValueError("observation has no hand pose (robot.ee_pose): the worker must speak contract v1.1")
+    joints = list(r.arm_joints)[:6] + [0.0] * max(0, 6 - len(r.arm_joints))
+    previous = list(f.previous_action) or [0.0] * ACTION_DIM
+    robot = [r.base_v, r.base_omega] + joints + [r.gripper] + list(r.ee_pose) + previous
+    return _frame_values(robot, r.base_x, r.base_y, r.base_yaw)
+
+
+def from_grpc(obs, task_time):
+    """As `from_env`, from one gRPC `Observation` (history, then the observation itself)."""
+    frames = _pad_history(list(obs.history) + [obs])
+    ims = np.stack([np.stack([_image(f, c) for f in frames]) for c in CAMERAS])
+    return ims, state_vector([_grpc_frame_values(f) for f in frames], task_time)
+
+
+# Images -----------------------------------------------------------------------------------
+
+def resize_images(images, size):
+    """uint8 images (..., H, W, 3) (numpy or torch, any device) to (..., size, size, 3) uint8
+    torch, bilinear with antialiasing; the same call in training (on the training device) and
+    serving."""
+    import torch
+    from torch.nn import functional as F
+
+    t = torch.as_tensor(images)
+    if t.shape[-3] == size and t.shape[-2] == size:
+        return t
+    lead = t.shape[:-3]
+    x = t.reshape((-1,) + tuple(t.shape[-3:])).permute(0, 3, 1, 2).float()
+    x = F.interpolate(x, size=(size, size), mode="bilinear", antialias=True, align_corners=False)
+    x = x.round_().clamp_(0, 255).to(torch.uint8).permute(0, 2, 3, 1)
+    return x.reshape(tuple(lead) + (size, size, 3))
+
+
+# Actions ----------------------------------------------------------------------------------
+
+def finish(chunk):
+    """A predicted chunk (16x10) made valid: finite, unit quaternions, gripper in [0, 1]."""
+    c = np.nan_to_num(np.asarray(chunk, dtype=np.float64).reshape(HORIZON, ACTION_DIM), nan=0.0, posinf=0.0, neginf=0.0)
+    q = c[:, 5:9]
+    n = np.linalg.norm(q, axis=1, keepdims=True)
+    c[:, 5:9] = np.where(n > 1e-6, q / np.maximum(n, 1e-6), np.array([1.0, 0.0, 0.0, 0.0]))
+    c[:, 9] = c[:, 9].clip(0.0, 1.0)
+    return c
+
+
+def kind_of(sentence):
+    return sentence.split()[0]

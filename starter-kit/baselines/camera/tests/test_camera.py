@@ -1,0 +1,107 @@
+"""The camera baseline end to end on CPU: features from an environment observation and from the
+equivalent gRPC observation agree; a tiny training run (2 expert episodes, 3 steps, first plan
+step only) writes a checkpoint that reloads and answers a valid 16x10 chunk through serve.py's
+runner. Skipped without torch or gym_kitchen_r (KITCHEN_R_ASSETS / KITCHEN_R_CONFIGS must point
+at the repository's assets/ and configs/; they default to them here)."""
+
+import os
+import subprocess
+import sys
+import tempfile
+import unittest
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent.parent
+REPO = HERE.parent.parent.parent
+sys.path.insert(0, str(HERE))
+os.environ.setdefault("KITCHEN_R_ASSETS", str(REPO / "assets"))
+os.environ.setdefault("KITCHEN_R_CONFIGS", str(REPO / "configs"))
+
+try:
+    import torch  # noqa: F401
+
+    import gym_kitchen_r  # noqa: F401
+except ImportError:  # pragma: no cover
+    torch = None
+
+
+def grpc_like(obs, step, episode="ep-0"):
+    """A stand-in for a gRPC Observation with history 2, built from an environment observation
+    (history 2): what the worker sends for the same state."""
+    state = np.asarray(obs["state"]).reshape(-1, 29)
+
+    def frame(k):
+        s = state[k]
+        prev = s[19:29]
+        return SimpleNamespace(
+            step=step,
+            images=[SimpleNamespace(camera=c, width=128, height=128, data=np.ascontiguousarray(obs["images"][c][k]).tobytes())
+                    for c in ("base", "gripper")],
+            robot=SimpleNamespace(base_x=s[0], base_y=s[1], base_yaw=s[2], base_v=s[3], base_omega=s[4],
+                                  arm_joints=list(s[5:11]), gripper=s[11], ee_pose=list(s[12:19])),
+            previous_action=[] if not prev.any() else list(prev),
+        )
+
+    newest = frame(len(state) - 1)
+    return SimpleNamespace(history=[frame(k) for k in range(len(state) - 1)], episode_id=episode, step=step,
+                           task_index=obs["task_index"], sub_task=obs["sub_task"], **{k: getattr(newest, k) for k in
+                                                                                       ("images", "robot", "previous_action")})
+
+
+@unittest.skipIf(torch is None, "torch or gym_kitchen_r missing")
+class CameraBaselineTest(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        from gym_kitchen_r import KitchenREnv
+
+        env = KitchenREnv(images=True, history=2, expert=True, randomise=True, max_tasks=1)
+        obs0, info = env.reset(seed=3, options={"instruction": env.instruction_ids()[0]})
+        obs1 = obs0
+        for a in info["expert_chunk"][:8]:
+            obs1, _, done, _, info = env.step(a)
+            if done or info["tasks_ended"]:
+                break
+        env.close()
+        cls.observations = [(obs0, 0), (obs1, 8)]
+
+    def test_features_env_equals_grpc(self):
+        import features as F
+
+        for obs, step in self.observations:
+            ims_e, st_e = F.from_env(obs, step * F.CONTROL_DT)
+            ims_g, st_g = F.from_grpc(grpc_like(obs, step), step * F.CONTROL_DT)
+            self.assertEqual(ims_e.shape, (2, F.HISTORY, 128, 128, 3))
+            np.testing.assert_array_equal(ims_e, ims_g)
+            np.testing.assert_allclose(st_e, st_g, rtol=0, atol=1e-6)
+            self.assertEqual(st_e.shape, (F.STATE_DIM,))
+        vocab = F.dev_vocab()
+        ids = F.encode("pick the red cup", {w: i for i, w in enumerate(vocab)})
+        self.assertEqual(len(ids), F.MAX_WORDS)
+        self.assertNotIn(F.UNK, ids[:4].tolist())
+
+    def test_tiny_training_run_serves_a_valid_chunk(self):
+        with tempfile.TemporaryDirectory() as d:
+            cmd = [sys.executable, str(HERE / "train.py"), "--out", d, "--episodes", "2", "--bc-steps", "3",
+                   "--rounds", "0", "--max-tasks", "1", "--batch", "4", "--workers", "2", "--device", "cpu"]
+            subprocess.run(cmd, check=True, capture_output=True, timeout=600)
+            self.assertTrue((Path(d) / "train_log.json").is_file())
+            ck = Path(d) / "ckpt.pt"
+            self.assertLessEqual(ck.stat().st_size, 16 * 2**20)
+            sys.path.insert(1, str(HERE.parent.parent))  # policy_server, for serve.py
+            from serve import CameraRunner
+
+            runner = CameraRunner(str(ck), "cpu")
+            obs, step = self.observations[1]
+            runner.reset("ep-0", 0, obs["sub_task"])
+            chunk = np.asarray(runner.decide(grpc_like(obs, step)))
+            self.assertEqual(chunk.shape, (16, 10))
+            self.assertTrue(np.isfinite(chunk).all())
+            np.testing.assert_allclose(np.linalg.norm(chunk[:, 5:9], axis=1), 1.0, atol=1e-6)
+            self.assertTrue(((chunk[:, 9] >= 0) & (chunk[:, 9] <= 1)).all())
+
+
+if __name__ == "__main__":
+    unittest.main()

@@ -1,0 +1,16 @@
+# Sourced at the start of a GPU-machine command (the developers' `device` tool): installs what
+# travelled as wheels (nothing can be fetched there) and the kitchen-r binary, then sets the
+# environment the baselines' scripts read. Made here, once per build:
+#   python3 -m maturin build --release --strip -m python/Cargo.toml -o target/device/wheels
+#   pip download --python-version 3.12 --only-binary=:all: --no-deps -d target/device/wheels \
+#       gymnasium cloudpickle farama-notifications typing-extensions
+#   pip download (same flags) -d target/device/grpc grpcio grpcio-tools grpcio-health-checking protobuf
+#   strip -o /tmp/kitchen-r target/release/kitchen-r && xz -c /tmp/kitchen-r > target/device/kitchen-r.xz
+# and carried: target/device (and .whl for the camera baseline's encoder wheel).
+python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site \
+  target/device/grpc/*.whl target/device/wheels/*.whl $(ls .whl/*.whl 2>/dev/null) >/dev/null
+export PYTHONPATH=/tmp/site${PYTHONPATH:+:$PYTHONPATH}
+python3 -c "import lzma, shutil; shutil.copyfileobj(lzma.open('target/device/kitchen-r.xz'), open('/tmp/kitchen-r', 'wb'))"
+chmod +x /tmp/kitchen-r
+export KITCHEN_R_BIN=/tmp/kitchen-r KITCHEN_R_ASSETS="$PWD/assets" KITCHEN_R_CONFIGS="$PWD/configs" RUST_LOG=warn
+export PYTHONUNBUFFERED=1

@@ -1,0 +1,146 @@
+"""The privileged baseline end to end on the CPU, in seconds: a few training steps on streamed
+expert samples and one DAgger episode, the checkpoint reloads, serves over gRPC and passes
+`kitchen-r check-policy`; and the features the policy is trained on (from the Python
+environment) are the ones it is served (from a gRPC observation)."""
+
+import os
+import subprocess
+import sys
+import tempfile
+import time
+import unittest
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+BASE = HERE.parent
+ROOT = BASE.parents[2]
+sys.path.insert(0, str(BASE))
+sys.path.insert(1, str(BASE.parent.parent))
+
+try:
+    import torch  # noqa: F401
+
+    HAVE_TORCH = True
+except ImportError:
+    HAVE_TORCH = False
+
+os.environ.setdefault("KITCHEN_R_ASSETS", str(ROOT / "assets"))
+os.environ.setdefault("KITCHEN_R_CONFIGS", str(ROOT / "configs"))
+
+
+def kitchen_r_bin():
+    b = os.environ.get("KITCHEN_R_BIN")
+    for c in ([b] if b else []) + [ROOT / "target/debug/kitchen-r", ROOT / "target/release/kitchen-r"]:
+        if c and Path(c).is_file():
+            return str(Path(c).resolve())
+    raise unittest.SkipTest("no kitchen-r binary (set KITCHEN_R_BIN)")
+
+
+class FeaturesTest(unittest.TestCase):
+    def test_training_and_serving_features_agree(self):
+        """One decision of the environment, turned into the gRPC observation the worker would
+        send, gives the same feature vector both ways."""
+        import features as F
+        import policy_server as kit
+        from gym_kitchen_r import KitchenREnv
+
+        pb2, _ = kit.load_stubs(kit.proto_dir(None))
+        env = KitchenREnv(images=False, privileged_observation=True, expert=True)
+        obs, info = env.reset(seed=3, options={"instruction": "dev-0001"})
+        for _ in range(30):  # into the task, so velocities and the previous action are not zero
+            obs, _, _, _, info = env.step(info["expert_chunk"][0])
+        s, p = np.asarray(obs["state"]), info["privileged_observation"]
+        env.close()
+        g = p["goal"]
+        goal = pb2.Goal()
+        if g["kind"] == "move":
+            goal.approach.x, goal.approach.y, goal.approach.yaw = g["pose"]
+        elif g["kind"] == "pick":
+            goal.pick.object = g["object"]
+            goal.pick.pose.extend(g["pose"])
+        else:
+            goal.place.object = g["object"]
+            goal.place.target.extend(g["position"])
+        o = pb2.Observation(
+            step=130,
+            robot=pb2.RobotState(base_x=s[0], base_y=s[1], base_yaw=s[2], base_v=s[3], base_omega=s[4],
+                                 arm_joints=s[5:11], gripper=s[11], ee_pose=s[12:19]),
+            previous_action=s[19:29],
+            privileged_observation=pb2.PrivilegedObservation(
+                base_x=p["base_pose"][0], base_y=p["base_pose"][1], base_yaw=p["base_pose"][2], goal=goal,
+                objects=[pb2.PrivilegedObject(name=x["name"], pose=x["pose"]) for x in p["objects"]],
+            ),
+        )
+        a, b = F.from_env(s, p, 3.0), F.from_grpc(o, 3.0)
+        self.assertEqual(a.shape, (F.FEATURES,))
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-6)
+        self.assertGreater(np.abs(a[:2]).sum(), 0.0, "the base was moving 3 s into the task")
+
+    def test_a_place_goal_carries_the_held_object_in_the_robot_frame(self):
+        import features as F
+
+        base = (1.0, 2.0, np.pi / 2)
+        held = [1.0, 3.0, 0.9, 1.0, 0.0, 0.0, 0.0]  # 1 m ahead of a base facing +y
+        v = F.vector(np.zeros(F.ROBOT), base, "place", (0.5, 0.0, 0.9), held, 0.0)
+        x, y, z, qw, qx, qy, qz = v[-7:]
+        self.assertAlmostEqual(x, 1.0, places=6)
+        self.assertAlmostEqual(y, 0.0, places=6)
+        self.assertAlmostEqual(z, 0.9, places=6)
+        self.assertAlmostEqual(abs(qz), np.sqrt(0.5), places=6)  # the object's yaw seen from the base: -90 deg
+
+
+@unittest.skipUnless(HAVE_TORCH, "torch is not installed")
+class TrainServeTest(unittest.TestCase):
+    def test_a_few_steps_train_a_checkpoint_that_serves_and_passes_check_policy(self):
+        kr = kitchen_r_bin()
+        with tempfile.TemporaryDirectory() as d:
+            run = subprocess.run(
+                [sys.executable, str(BASE / "train.py"), "--out", d, "--episodes", "2", "--workers", "2",
+                 "--bc-steps", "5", "--rounds", "1", "--round-episodes", "1", "--round-steps", "5", "--envs", "1",
+                 "--batch", "32", "--width", "64", "--depth", "2", "--max-tasks", "1", "--device", "cpu"],
+                capture_output=True, text=True, timeout=600,
+            )
+            self.assertEqual(run.returncode, 0, run.stdout + run.stderr)
+            ck = Path(d) / "ckpt.pt"
+            self.assertLess(ck.stat().st_size, 16 * 2**20)
+            log = __import__("json").loads((Path(d) / "train_log.json").read_text())
+            self.assertEqual(log["rounds"][0]["round"], 1)
+            self.assertGreater(log["expert"]["rows"], 0)
+
+            from model import load
+            import features as F
+
+            model, meta = load(ck)
+            self.assertEqual(meta["stage"], "final")
+            chunk = F.finish(model.chunk(torch.zeros(1, F.FEATURES))[0].numpy())
+            self.assertEqual(chunk.shape, (16, 10))
+            np.testing.assert_allclose(np.linalg.norm(chunk[:, 5:9], axis=1), 1.0, atol=1e-9)
+
+            serve = subprocess.Popen(
+                [sys.executable, str(BASE / "serve.py"), "--checkpoint", str(ck), "--listen", "127.0.0.1:0"],
+                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+            )
+            try:
+                addr = None
+                t0 = time.time()
+                while addr is None and time.time() - t0 < 60:
+                    line = serve.stdout.readline()
+                    if not line:
+                        break
+                    if "listening grpc=" in line:
+                        addr = line.split("listening grpc=")[1].split()[0]
+                self.assertIsNotNone(addr, "serve.py did not print its address")
+                check = subprocess.run([kr, "check-policy", f"http://{addr}"], capture_output=True, text=True,
+                                       timeout=300)
+                self.assertEqual(check.returncode, 0, check.stdout + check.stderr)
+                self.assertIn("privileged", check.stdout)
+                self.assertNotIn("FAIL", check.stdout)
+            finally:
+                serve.terminate()
+                serve.wait(timeout=30)
+
+
+if __name__ == "__main__":
+    unittest.main()
