@@ -48,4 +48,7 @@ python3 -m pytest -q python/lerobot_env_kitchen_r/tests
 # streamed expert samples each; the privileged checkpoint reloads, serves over gRPC and passes
 # check-policy; training and serving compute the same features.
 echo "== the control baselines: starter-kit/baselines/{privileged,camera}/tests"
-KITCHEN_R_BIN=target/debug/kitchen-r python3 -m pytest -q starter-kit/baselines/privileged/tests starter-kit/baselines/camera/tests
+# (One process each: both baselines name their modules features.py and model.py.)
+for b in privileged camera; do
+  KITCHEN_R_BIN=target/debug/kitchen-r python3 -m pytest -q "starter-kit/baselines/$b/tests"
+done

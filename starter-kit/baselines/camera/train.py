@@ -40,8 +40,10 @@ import torch
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
+sys.path.insert(1, str(HERE.parent))  # baselines/, for common
 
 import features as F  # noqa: E402
+from common import sr_by_kind  # noqa: E402
 from model import Batcher, CameraPolicy, save  # noqa: E402
 
 
@@ -234,15 +236,6 @@ def run_round(batcher, vocab_index, jobs, args, seed):
     with ThreadPoolExecutor(args.envs) as pool:
         list(pool.map(worker, range(args.envs)))
     return rows, outcomes, finished
-
-
-def sr_by_kind(outcomes):
-    out = {}
-    for k in F.KINDS:
-        n = sum(1 for o in outcomes if o[0] == k)
-        s = sum(1 for o in outcomes if o[0] == k and o[1])
-        out[k] = {"success": s, "tasks": n, "sr": s / n if n else None}
-    return out
 
 
 def main():

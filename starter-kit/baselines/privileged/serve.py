@@ -14,7 +14,6 @@ import argparse
 import logging
 import os
 import sys
-import threading
 from pathlib import Path
 
 import torch
@@ -22,32 +21,26 @@ import torch
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(1, str(HERE.parent.parent))  # starter-kit/, for policy_server
+sys.path.insert(2, str(HERE.parent))  # baselines/, for common
 
 import features as F  # noqa: E402
 import policy_server as kit  # noqa: E402
+from common import TaskClock  # noqa: E402
 from model import load  # noqa: E402
 
 
 class PrivilegedRunner:
-    """The policy object `policy_server.serve` drives. It remembers, per episode, the step at
-    which the current task's first Act came: the task's time is a feature (features.py)."""
+    """The policy object `policy_server.serve` drives: one MLP forward per Act."""
 
     def __init__(self, checkpoint):
         self.model, self.meta = load(checkpoint)
-        self.lock = threading.Lock()
-        self.task_start = {}
+        self.clock = TaskClock(F.CONTROL_DT)
 
     def reset(self, episode_id, task_index, sub_task):
-        with self.lock:
-            self.task_start.pop(episode_id, None)
+        self.clock.reset(episode_id)
 
     def decide(self, obs):
-        with self.lock:
-            task, start = self.task_start.get(obs.episode_id, (None, None))
-            if task != obs.task_index:
-                start = obs.step
-                self.task_start[obs.episode_id] = (obs.task_index, start)
-        x = F.from_grpc(obs, (obs.step - start) * F.CONTROL_DT)
+        x = F.from_grpc(obs, self.clock.seconds(obs))
         chunk = self.model.chunk(torch.as_tensor(x[None]))[0].numpy()
         return F.finish(chunk).tolist()
 

@@ -35,8 +35,10 @@ import torch
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
+sys.path.insert(1, str(HERE.parent))  # baselines/, for common
 
 import features as F  # noqa: E402
+from common import sr_by_kind  # noqa: E402
 from model import PrivilegedMLP, save  # noqa: E402
 
 
@@ -144,15 +146,6 @@ def run_episodes(driver, jobs, envs, record, beta, seed, max_tasks=0):
     with ThreadPoolExecutor(envs) as pool:
         list(pool.map(worker, range(envs)))
     return xs, ys, outcomes
-
-
-def sr_by_kind(outcomes):
-    out = {}
-    for k in F.KINDS:
-        n = sum(1 for o in outcomes if o[0] == k)
-        s = sum(1 for o in outcomes if o[0] == k and o[1])
-        out[k] = {"success": s, "tasks": n, "sr": s / n if n else None}
-    return out
 
 
 def fit(model, opt, sched, X, Y, steps, batch, tag):

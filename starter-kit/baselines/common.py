@@ -1,0 +1,44 @@
+"""What the learned control baselines (`privileged/`, `camera/`) share, so training and serving
+keep one definition each:
+
+- `TaskClock`: a served policy's memory of when the current task's first Act came, per
+  episode; the task's time is one of both baselines' features (the expert's pick-and-place
+  phases are timed from a task's start);
+- `sr_by_kind`: success counts per task kind of the episodes a policy drove in training.
+"""
+
+import threading
+
+KINDS = ("move", "pick", "place")
+
+
+class TaskClock:
+    """Seconds since the current task's first Act, per episode, from the Acts alone."""
+
+    def __init__(self, control_dt=0.1):
+        self.control_dt = control_dt
+        self.lock = threading.Lock()
+        self.start = {}
+
+    def reset(self, episode_id):
+        with self.lock:
+            self.start.pop(episode_id, None)
+
+    def seconds(self, obs):
+        """The task's time at `obs` (a gRPC Observation: `episode_id`, `task_index`, `step`)."""
+        with self.lock:
+            task, start = self.start.get(obs.episode_id, (None, None))
+            if task != obs.task_index:
+                start = obs.step
+                self.start[obs.episode_id] = (obs.task_index, start)
+        return (obs.step - start) * self.control_dt
+
+
+def sr_by_kind(outcomes):
+    """`outcomes`: (kind, success, ...) per ended task -> {kind: {success, tasks, sr}}."""
+    out = {}
+    for k in KINDS:
+        n = sum(1 for o in outcomes if o[0] == k)
+        s = sum(1 for o in outcomes if o[0] == k and o[1])
+        out[k] = {"success": s, "tasks": n, "sr": s / n if n else None}
+    return out
