@@ -44,7 +44,7 @@ sys.path.insert(1, str(HERE.parent))  # baselines/, for common
 
 import features as F  # noqa: E402
 from common import sr_by_kind  # noqa: E402
-from model import Batcher, CameraPolicy, save  # noqa: E402
+from model import Batcher, CameraPolicy, load, save  # noqa: E402
 
 
 COMPILED = {}  # id(model) -> its torch.compile wrapper (kept off the module: not in the state dict)
@@ -248,6 +248,8 @@ def main():
     ap.add_argument("--rounds", type=int, default=2, help="DAgger rounds")
     ap.add_argument("--round-episodes", type=int, default=64)
     ap.add_argument("--round-steps", type=int, default=4000, help="training steps after each round")
+    ap.add_argument("--init", help="start from this checkpoint (a run split over GPU leases; use another --seed "
+                    "for new expert episodes); its architecture and statistics are kept")
     ap.add_argument("--dagger-kinds", default="move",
                     help="task kinds whose policy-driven decisions the expert labels (comma-separated: move, pick, "
                     "place); navigation only by default, as the privileged baseline (its README says why)")
@@ -298,10 +300,20 @@ def main():
     if rows.n == 0:
         sys.exit("no expert rows: raise --episodes or --collect-minutes")
 
-    grid = max(1, math.ceil(args.image_size / 32))
-    model = CameraPolicy(len(vocab), args.image_size, args.d_model, args.layers, grid=grid,
-                         pretrained=not args.no_pretrained).to(device)
-    model.set_statistics(rows.view("state"), rows.view("y"))
+    if args.init:
+        # Go on from an earlier run (another lease, other expert episodes: change --seed): its
+        # weights, architecture and normalisation statistics, so its features keep their scale.
+        model, init_vocab, init_meta = load(args.init, device)
+        if list(init_vocab) != list(vocab):
+            sys.exit(f"--init {args.init}: its vocabulary differs from this checkout's dev vocabulary")
+        if model.config["image_size"] != args.image_size:
+            sys.exit(f"--init {args.init} was trained at --image-size {model.config['image_size']}: pass that")
+        logbook["init"] = {"checkpoint": str(args.init), "meta": init_meta}
+    else:
+        grid = max(1, math.ceil(args.image_size / 32))
+        model = CameraPolicy(len(vocab), args.image_size, args.d_model, args.layers, grid=grid,
+                             pretrained=not args.no_pretrained).to(device)
+        model.set_statistics(rows.view("state"), rows.view("y"))
     if args.compile:
         COMPILED[id(model)] = torch.compile(model)
     logbook["parameters"] = {"total": sum(p.numel() for p in model.parameters()),
