@@ -153,5 +153,29 @@ def finish(chunk):
     return c
 
 
+# Auxiliary target (training only) ------------------------------------------------------------
+# The privileged goal in the robot frame, which a camera policy must find in its images: a
+# move's approach point and heading, a pick's object position, a place's target. `train.py
+# --aux-weight` asks the network to predict it from what it sees (never an input: the standard
+# track does not send it), so the encoder learns to localise.
+AUX_DIM = 10
+
+
+def aux_target(privileged):
+    """(values, mask), AUX_DIM each, from a privileged observation dict (Python env or
+    ExpertSamples); the mask marks the values the goal's kind defines."""
+    v = np.zeros(AUX_DIM, dtype=np.float32)
+    m = np.zeros(AUX_DIM, dtype=np.float32)
+    g = privileged["goal"]
+    if g["kind"] == "move":
+        x, y, yaw = g["pose"]
+        v[0:4], m[0:4] = [x, y, np.sin(yaw), np.cos(yaw)], 1.0
+    elif g["kind"] == "pick":
+        v[4:7], m[4:7] = g["pose"][:3], 1.0
+    elif g["kind"] == "place":
+        v[7:10], m[7:10] = g["position"], 1.0
+    return v, m
+
+
 def kind_of(sentence):
     return sentence.split()[0]

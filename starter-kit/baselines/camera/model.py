@@ -29,10 +29,11 @@ MAX_BYTES = 16 * 2**20
 
 
 class CameraPolicy(nn.Module):
-    def __init__(self, vocab_size, image_size=96, d_model=256, layers=3, heads=4, grid=3, pretrained=False):
+    def __init__(self, vocab_size, image_size=96, d_model=256, layers=3, heads=4, grid=3, pretrained=False,
+                 aux=False):
         super().__init__()
         self.config = {"vocab_size": vocab_size, "image_size": image_size, "d_model": d_model, "layers": layers,
-                       "heads": heads, "grid": grid}
+                       "heads": heads, "grid": grid, "aux": aux}
         d = d_model
         self.trunk = Trunk(pretrained=pretrained)
         self.proj = nn.Conv2d(OUT_CHANNELS, d, 1)
@@ -46,6 +47,8 @@ class CameraPolicy(nn.Module):
                                            norm_first=True)
         self.transformer = nn.TransformerEncoder(layer, layers, enable_nested_tensor=False)
         self.out = nn.Sequential(nn.LayerNorm(d), nn.Linear(d, FT.HORIZON * FT.ACTION_DIM))
+        # The auxiliary goal head (train.py --aux-weight): trained, never read when serving.
+        self.aux = nn.Sequential(nn.LayerNorm(d), nn.Linear(d, FT.AUX_DIM)) if aux else None
         self.register_buffer("s_mean", torch.zeros(FT.STATE_DIM))
         self.register_buffer("s_std", torch.ones(FT.STATE_DIM))
         self.register_buffer("y_mean", torch.zeros(FT.HORIZON * FT.ACTION_DIM))
@@ -68,10 +71,11 @@ class CameraPolicy(nn.Module):
     def normalise_y(self, y):
         return (y - self.y_mean) / self.y_std
 
-    def forward(self, images, state, words, shift=0):
+    def forward(self, images, state, words, shift=0, with_aux=False):
         """Normalised chunk (B, 160) from images (B, cameras, HISTORY, S, S, 3) uint8, raw state
         (B, STATE_DIM) and word ids (B, MAX_WORDS). `shift`: random-shift augmentation in pixels
-        (training only; one shift per sample and camera, the same for its frames)."""
+        (training only; one shift per sample and camera, the same for its frames). `with_aux`:
+        also the auxiliary goal prediction (B, AUX_DIM) of a model built with `aux=True`."""
         b, nc, nh, s = images.shape[:4]
         x = images.reshape(b * nc * nh, s, s, 3).permute(0, 3, 1, 2).float()
         if shift:
@@ -88,6 +92,8 @@ class CameraPolicy(nn.Module):
         pad = torch.zeros(tokens.shape[:2], dtype=torch.bool, device=tokens.device)
         pad[:, 2 : 2 + FT.MAX_WORDS] = words == FT.PAD
         h = self.transformer(tokens, src_key_padding_mask=pad)
+        if with_aux:
+            return self.out(h[:, 0]).float(), self.aux(h[:, 0]).float()
         return self.out(h[:, 0]).float()
 
     @torch.no_grad()

@@ -56,18 +56,21 @@ def log(msg):
 
 class Rows:
     """The training set on the training device: images uint8 (N, cameras, HISTORY, S, S, 3),
-    state float32, word ids int16, labels float32 (N, 160). Grows by 1.5x."""
+    state float32, word ids int16, labels float32 (N, 160), the auxiliary goal target and its
+    mask (N, AUX_DIM; zeros when no privileged observation was streamed). Grows by 1.5x."""
 
     def __init__(self, size, device):
         self.size, self.device, self.n = size, device, 0
         self.t = None
 
-    def add(self, images, state, words, y):
+    def add(self, images, state, words, y, aux, aux_mask):
         """Raw rows (numpy; images at render size, resized here on the device)."""
         ims = F.resize_images(torch.from_numpy(np.stack(images)).to(self.device), self.size)
         new = {"images": ims, "state": torch.from_numpy(np.stack(state)).to(self.device),
                "words": torch.from_numpy(np.stack(words).astype(np.int16)).to(self.device),
-               "y": torch.from_numpy(np.stack(y).astype(np.float32)).to(self.device)}
+               "y": torch.from_numpy(np.stack(y).astype(np.float32)).to(self.device),
+               "aux": torch.from_numpy(np.stack(aux)).to(self.device),
+               "aux_mask": torch.from_numpy(np.stack(aux_mask)).to(self.device)}
         k = len(ims)
         if self.t is None or self.n + k > len(self.t["y"]):
             cap = max(self.n + k, int(1.5 * (len(self.t["y"]) if self.t else 0)), 1024)
@@ -83,11 +86,26 @@ class Rows:
     def batch(self, idx):
         return self.t["images"][idx], self.t["state"][idx], self.t["words"][idx].long(), self.t["y"][idx]
 
+    def aux_batch(self, idx):
+        return self.t["aux"][idx], self.t["aux_mask"][idx]
+
     def view(self, name):
         return self.t[name][: self.n]
 
     def nbytes(self):
         return sum(v.element_size() * v.numel() for v in self.t.values()) if self.t else 0
+
+
+def empty_rows():
+    """Staged rows: images, state, words, label, auxiliary target, its mask."""
+    return ([], [], [], [], [], [])
+
+
+def aux_of(privileged):
+    """The auxiliary target of a decision, zeros (masked out) without a privileged observation."""
+    if privileged is None:
+        return np.zeros(F.AUX_DIM, np.float32), np.zeros(F.AUX_DIM, np.float32)
+    return F.aux_target(privileged)
 
 
 def expert_rows(rows, vocab_index, args):
@@ -96,17 +114,20 @@ def expert_rows(rows, vocab_index, args):
 
     t0 = time.time()
     deadline = t0 + args.collect_minutes * 60 if args.collect_minutes > 0 else math.inf
-    first, staged, n_ep, episodes = {}, ([], [], [], []), -1, 0
+    first, staged, n_ep, episodes = {}, empty_rows(), -1, 0
+    aux = args.aux_weight > 0
     stream = ExpertSamples(episodes=args.episodes, workers=args.workers, seed=args.seed, images=True,
-                           history=F.HISTORY, randomise=True, max_tasks=args.max_tasks)
+                           history=F.HISTORY, randomise=True, max_tasks=args.max_tasks, privileged_observation=aux)
     for s in stream:
         start = first.setdefault((s["episode_index"], s["task_index"]), s["step"])
         ims, st = F.from_env(s, (s["step"] - start) * F.CONTROL_DT)
-        for lst, v in zip(staged, (ims, st, F.encode(s["sub_task"], vocab_index), np.asarray(s["action"]).reshape(-1))):
+        target = aux_of(s.get("privileged_observation"))
+        for lst, v in zip(staged, (ims, st, F.encode(s["sub_task"], vocab_index), np.asarray(s["action"]).reshape(-1),
+                                   *target)):
             lst.append(v)
         if len(staged[0]) >= 512:
             rows.add(*staged)
-            staged = ([], [], [], [])
+            staged = empty_rows()
         if s["episode_index"] != n_ep:
             n_ep = s["episode_index"]
             episodes = n_ep  # episodes completed before this one
@@ -154,8 +175,12 @@ def fit(model, opt, rows, steps, minutes, peak, args, tag, device):
         idx = torch.randint(0, rows.n, (args.batch,), device=device)
         ims, st, wd, y = rows.batch(idx)
         with torch.autocast("cuda", dtype=torch.bfloat16, enabled=amp):
-            pred = net(ims, st, wd, shift=args.shift)
+            out = net(ims, st, wd, shift=args.shift, with_aux=model.aux is not None)
+        pred = out[0] if model.aux is not None else out
         loss = ((pred.float() - model.normalise_y(y)) ** 2).mean()
+        if model.aux is not None:
+            target, mask = rows.aux_batch(idx)
+            loss = loss + args.aux_weight * (((out[1] - target) ** 2) * mask).sum() / mask.sum().clamp_min(1.0)
         opt.zero_grad(set_to_none=True)
         loss.backward()
         torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
@@ -180,7 +205,7 @@ def rollout(batcher, vocab_index, env, ins, seed, beta, rng, deadline, record=("
     """One randomised episode with the policy driving; returns (rows, task outcomes). `record`:
     the task kinds (a sub-task's first word) whose decisions the expert labels and keeps."""
     obs, info = env.reset(seed=seed, options={"instruction": ins})
-    out, outcomes = ([], [], [], []), []
+    out, outcomes = empty_rows(), []
     task, start, steps, done = None, 0, 0, False
     while not done and time.time() < deadline:
         if obs["task_index"] != task:
@@ -189,7 +214,8 @@ def rollout(batcher, vocab_index, env, ins, seed, beta, rng, deadline, record=("
         wd = F.encode(obs["sub_task"], vocab_index)
         expert = info.get("expert_chunk")
         if expert is not None and obs["sub_task"].split()[0] in record:
-            for lst, v in zip(out, (ims, st, wd, np.asarray(expert, dtype=np.float32).reshape(-1))):
+            for lst, v in zip(out, (ims, st, wd, np.asarray(expert, dtype=np.float32).reshape(-1),
+                                    *aux_of(info.get("privileged_observation")))):
                 lst.append(v)
         if expert is not None and beta > 0 and rng.random() < beta:
             chunk = np.asarray(expert, dtype=np.float64)
@@ -210,11 +236,12 @@ def run_round(batcher, vocab_index, jobs, args, seed):
 
     lock = threading.Lock()
     queue = list(jobs)
-    rows, outcomes, finished = ([], [], [], []), [], [0, 0]
+    rows, outcomes, finished = empty_rows(), [], [0, 0]
     deadline = time.time() + args.rollout_minutes * 60 if args.rollout_minutes > 0 else math.inf
 
     def worker(i):
-        env = KitchenREnv(images=True, history=F.HISTORY, expert=True, randomise=True, max_tasks=args.max_tasks)
+        env = KitchenREnv(images=True, history=F.HISTORY, expert=True, randomise=True, max_tasks=args.max_tasks,
+                          privileged_observation=args.aux_weight > 0)
         rng = np.random.default_rng(seed * 1000 + i)
         try:
             while time.time() < deadline:
@@ -248,6 +275,10 @@ def main():
     ap.add_argument("--rounds", type=int, default=2, help="DAgger rounds")
     ap.add_argument("--round-episodes", type=int, default=64)
     ap.add_argument("--round-steps", type=int, default=4000, help="training steps after each round")
+    ap.add_argument("--aux-weight", type=float, default=0.0,
+                    help="weight of the auxiliary loss: the network also predicts the privileged goal (a move's "
+                    "approach point, a pick's object, a place's target, robot frame) from what it sees, during "
+                    "training only, so the encoder learns to localise; 0 (default, the measured run) leaves it out")
     ap.add_argument("--init", help="start from this checkpoint (a run split over GPU leases; use another --seed "
                     "for new expert episodes); its architecture and statistics are kept")
     ap.add_argument("--dagger-kinds", default="move",
@@ -309,10 +340,12 @@ def main():
         if model.config["image_size"] != args.image_size:
             sys.exit(f"--init {args.init} was trained at --image-size {model.config['image_size']}: pass that")
         logbook["init"] = {"checkpoint": str(args.init), "meta": init_meta}
+        if args.aux_weight > 0 and model.aux is None:
+            sys.exit(f"--init {args.init} has no auxiliary head: train it afresh with --aux-weight, or leave that out")
     else:
         grid = max(1, math.ceil(args.image_size / 32))
         model = CameraPolicy(len(vocab), args.image_size, args.d_model, args.layers, grid=grid,
-                             pretrained=not args.no_pretrained).to(device)
+                             pretrained=not args.no_pretrained, aux=args.aux_weight > 0).to(device)
         model.set_statistics(rows.view("state"), rows.view("y"))
     if args.compile:
         COMPILED[id(model)] = torch.compile(model)

@@ -103,5 +103,20 @@ class CameraBaselineTest(unittest.TestCase):
             self.assertTrue(((chunk[:, 9] >= 0) & (chunk[:, 9] <= 1)).all())
 
 
+class AuxTargetTest(unittest.TestCase):
+    def test_the_auxiliary_target_is_the_goal_its_kind_defines(self):
+        import features as F
+
+        v, m = F.aux_target({"goal": {"kind": "pick", "pose": [0.5, -0.6, 0.9, 1, 0, 0, 0]}})
+        np.testing.assert_allclose(v[4:7], [0.5, -0.6, 0.9], rtol=0, atol=1e-6)
+        self.assertEqual(m.tolist(), [0.0] * 4 + [1.0] * 3 + [0.0] * 3)
+        v, m = F.aux_target({"goal": {"kind": "move", "pose": [1.0, 2.0, 0.0]}})
+        np.testing.assert_allclose(v[:4], [1.0, 2.0, 0.0, 1.0], rtol=0, atol=1e-6)
+        self.assertEqual(m.sum(), 4.0)
+        v, m = F.aux_target({"goal": {"kind": "place", "position": [0.3, 0.1, 0.8]}})
+        np.testing.assert_allclose(v[7:], [0.3, 0.1, 0.8], rtol=0, atol=1e-6)
+        self.assertEqual(m.sum(), 3.0)
+
+
 if __name__ == "__main__":
     unittest.main()
