@@ -308,6 +308,7 @@ fn print_runs(v: &Value) {
                 s(&r["submission"]),
                 s(&r["team"]),
                 s(&r["split"]),
+                s(&r["observations"]),
                 state,
                 format!(
                     "{}/{} ({:.0}%)",
@@ -326,7 +327,7 @@ fn print_runs(v: &Value) {
         .collect();
     table(
         &[
-            "run", "sub", "team", "split", "state", "done", "running", "queued", "gave up", "started",
+            "run", "sub", "team", "split", "obs", "state", "done", "running", "queued", "gave up", "started",
             "mean ep", "eta",
         ],
         &rows,

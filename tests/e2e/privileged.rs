@@ -6,9 +6,11 @@
 //! privileged observation at every Act (its robot pose, a goal in
 //! the robot frame that matches the scene's zone); on the dev split every key object of the
 //! episode, on the test split nothing beyond what the current sub-task names; the standard
-//! policy receives none; the control board keeps standard and privileged entries apart, labelled
-//! in JSON, CSV and on the page; and a server with the track off refuses the registration,
-//! naming the config key.
+//! policy receives none; the control and integrated boards keep standard and privileged entries
+//! apart, labelled in JSON, CSV and on the pages (the dev runs link a plan file, so they rank on
+//! both; the test run links none, so it ranks on control only); the organiser's runs API names
+//! each run's track; and a server with the track off refuses the registration, naming the config
+//! key.
 
 use crate::remote_support;
 use crate::support;
@@ -123,6 +125,24 @@ async fn board(server: &Server, query: &str) -> (u16, Value) {
     get_json(server, &format!("/api/v1/leaderboard?{query}"), None).await
 }
 
+/// A one-line dev plan file (the first dev instruction, the one a one-episode dev run
+/// evaluates, with its true plan) uploaded by `token`; its id, for an integrated run to link.
+async fn dev_plans(server: &Server, token: &str) -> i64 {
+    let public = kitchen_r_core::assets::assets_dir().join("dataset/dev.jsonl");
+    let first: Instruction = kitchen_r_core::dataset::read_jsonl(&public).unwrap().remove(0);
+    let plan: Vec<&str> = first.plan.iter().map(String::as_str).collect();
+    let (status, v) = submit(server, Some(token), "dev", line(&first.id, &plan) + "\n").await;
+    assert_eq!(status, 201, "{v}");
+    v["id"].as_i64().unwrap()
+}
+
+/// The teams on a board, in rank order, with each row's track label.
+fn teams_on(board: &Value) -> Vec<(&str, &str)> {
+    (board["rows"].as_array().unwrap().iter())
+        .map(|r| (r["team"].as_str().unwrap(), r["observations"].as_str().unwrap()))
+        .collect()
+}
+
 async fn text(server: &Server, path: &str) -> String {
     let r = client().get(server.url(path)).send().await.unwrap();
     assert_eq!(r.status().as_u16(), 200, "{path}");
@@ -146,12 +166,16 @@ fn privileged_runs_get_what_their_split_allows_and_are_ranked_apart() {
     rt.block_on(async {
         let token = team(&server, "Privileged").await;
         let other = team(&server, "Standard").await;
-        let run = |token: String, endpoint: String, split: &'static str| {
+        // `plans`: a plan file to link, which makes the run integrated too.
+        let run = |token: String, endpoint: String, split: &'static str, plans: Option<i64>| {
             let server = &server;
             async move {
                 let mut body = json!({"endpoint": endpoint, "split": split});
                 if split == "dev" {
                     body["episodes"] = json!(1);
+                }
+                if let Some(id) = plans {
+                    body["plans"] = json!(id);
                 }
                 let (status, reg) = register_policy(server, &token, body).await;
                 assert_eq!(status, 201, "{reg}");
@@ -161,9 +185,13 @@ fn privileged_runs_get_what_their_split_allows_and_are_ranked_apart() {
             }
         };
 
-        // Dev: every key object of the episode, a goal that matches the scene.
-        let (reg, view) = run(token.clone(), privileged.url(), "dev").await;
+        // Dev, integrated (a plan file linked): every key object of the episode, a goal that
+        // matches the scene.
+        let plans = dev_plans(&server, &token).await;
+        let (reg, view) = run(token.clone(), privileged.url(), "dev", Some(plans)).await;
         assert_eq!(reg["observations"], "privileged", "{reg}");
+        assert_eq!(view["policy"]["plans"], plans, "{view}");
+        let privileged_dev = reg["id"].as_i64().unwrap();
         assert_eq!(view["policy"]["observations"], "privileged", "{view}");
         // Offline (MSE) episodes asked the policy too: their observations are checked below
         // with the online ones.
@@ -186,7 +214,7 @@ fn privileged_runs_get_what_their_split_allows_and_are_ranked_apart() {
         }
 
         // Test: only what the current sub-task names (a move names no object).
-        let (_, view) = run(token.clone(), privileged.url(), "test").await;
+        let (_, view) = run(token.clone(), privileged.url(), "test", None).await;
         assert_eq!(view["latest_run"]["evaluation"]["state"], "finished", "{view}");
         let test: Vec<Seen> = std::mem::take(&mut *seen.lock().unwrap());
         let kinds: Vec<&str> = test.iter().map(|s| s.sub_task.as_str()).collect();
@@ -221,8 +249,10 @@ fn privileged_runs_get_what_their_split_allows_and_are_ranked_apart() {
         );
 
         // A standard policy on the same server gets no privileged observation.
-        let (reg, _) = run(other.clone(), standard.url(), "dev").await;
+        let other_plans = dev_plans(&server, &other).await;
+        let (reg, _) = run(other.clone(), standard.url(), "dev", Some(other_plans)).await;
         assert_eq!(reg["observations"], "standard", "{reg}");
+        let standard_dev = reg["id"].as_i64().unwrap();
         let std_seen = standard_seen.lock().unwrap().clone();
         assert!(!std_seen.is_empty() && std_seen.iter().all(|s| s.shown.is_none() && !s.reference_state));
 
@@ -288,6 +318,55 @@ fn privileged_runs_get_what_their_split_allows_and_are_ranked_apart() {
         assert!(
             entry.contains("<th>Observations</th><td>privileged</td>"),
             "{entry}"
+        );
+
+        // The integrated boards: each dev run on its own track's board only, with its M and P;
+        // the test run linked no plan file, so it is on no integrated board.
+        let (status, std_int) = board(&server, "track=integrated&split=dev").await;
+        assert_eq!(status, 200, "{std_int}");
+        assert_eq!(std_int["observations"], "standard");
+        assert_eq!(teams_on(&std_int), [("Standard", "standard")], "{std_int}");
+        assert_eq!(std_int["rows"][0]["submission_id"], standard_dev, "{std_int}");
+        let (_, priv_int) = board(&server, "track=integrated&split=dev&observations=privileged").await;
+        assert_eq!(priv_int["observations"], "privileged");
+        assert_eq!(teams_on(&priv_int), [("Privileged", "privileged")], "{priv_int}");
+        let row = &priv_int["rows"][0];
+        assert_eq!(row["submission_id"], privileged_dev, "{priv_int}");
+        assert_eq!(
+            (row["rank"].as_u64(), row["state"].as_str()),
+            (Some(1), Some("finished"))
+        );
+        assert!(
+            row["scores"]["m"].is_number() && row["scores"]["p"].is_number(),
+            "{priv_int}"
+        );
+        for query in [
+            "track=integrated&split=test",
+            "track=integrated&split=test&observations=privileged",
+        ] {
+            let (_, b) = board(&server, query).await;
+            assert_eq!(b["rows"], json!([]), "{query}: {b}");
+        }
+        let entry = text(&server, &format!("/leaderboard/integrated/dev/{privileged_dev}")).await;
+        assert!(
+            entry.contains("<th>Observations</th><td>privileged</td>"),
+            "{entry}"
+        );
+
+        // The organiser's console names each run's track.
+        let (status, admin) = get_json(&server, "/api/v1/admin/runs", Some(ADMIN)).await;
+        assert_eq!(status, 200, "{admin}");
+        let tracks: Vec<(&str, &str)> = (admin["runs"].as_array().unwrap().iter())
+            .map(|r| (r["team"].as_str().unwrap(), r["observations"].as_str().unwrap()))
+            .collect();
+        assert_eq!(
+            tracks,
+            [
+                ("Standard", "standard"),
+                ("Privileged", "privileged"),
+                ("Privileged", "privileged")
+            ],
+            "newest first: {admin:#}"
         );
 
         // Planning has no privileged board.

@@ -139,6 +139,14 @@ pub(crate) enum SplitName {
     Test,
 }
 
+/// The observation track of a policy run (`kitchen_r_core::observations::ObservationTrack`).
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub(crate) enum ObservationsName {
+    Standard,
+    Privileged,
+}
+
 /// A query parameter's values, and the empty string (as an HTML form sends an unset field),
 /// which means the default. utoipa's derive cannot name an empty enum value, hence by hand.
 fn choice_schema(values: &[&str], description: &str) -> RefOr<Schema> {

@@ -125,3 +125,17 @@ fn every_schema_reference_resolves() {
         );
     }
 }
+
+#[test]
+fn an_admin_run_names_its_observation_track() {
+    let doc = documented();
+    let run = &doc["components"]["schemas"]["AdminRunView"];
+    let required = run["required"].as_array().expect("required fields");
+    assert!(required.iter().any(|f| f == "observations"), "{run:#}");
+    assert_eq!(
+        run["properties"]["observations"]["$ref"], "#/components/schemas/ObservationsName",
+        "{run:#}"
+    );
+    let values = &doc["components"]["schemas"]["ObservationsName"]["enum"];
+    assert_eq!(values, &serde_json::json!(["standard", "privileged"]));
+}

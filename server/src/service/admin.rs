@@ -25,6 +25,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
+use kitchen_r_core::observations::ObservationTrack;
 use serde::Serialize;
 
 use super::{AppState, Organiser, now_ms, rfc3339};
@@ -139,6 +140,11 @@ pub(crate) struct RunView {
     pub submission: i64,
     pub team: String,
     pub split: String,
+    /// The board its scores go to: `privileged` when its policy asked for, and received,
+    /// privileged observations (ranked apart from `standard` runs). Every run listed here is a
+    /// policy run: plan files are scored at upload and have no run to watch.
+    #[schema(value_type = crate::http::openapi::ObservationsName)]
+    pub observations: ObservationTrack,
     pub state: RunState,
     pub episodes_total: i64,
     /// Episodes with a recorded result (including `episodes_gave_up`).
@@ -472,6 +478,7 @@ fn run_view(r: store::RunProgress, now: i64) -> RunView {
         submission: r.submission_id,
         team: r.team,
         split: r.split,
+        observations: ObservationTrack::of(r.privileged),
         state: r.state,
         episodes_total: r.episodes_total,
         episodes_done: r.done,

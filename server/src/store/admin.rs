@@ -162,6 +162,8 @@ pub(crate) struct RunProgress {
     pub cancelled_by: Option<String>,
     /// Mean wall time of the episodes that ran.
     pub mean_episode_ms: Option<f64>,
+    /// Its policy received privileged observations (the privileged track).
+    pub privileged: bool,
 }
 
 /// Every active policy run, then the `recent` latest others, newest first. Rescores (runs that
@@ -178,7 +180,9 @@ pub(crate) async fn runs(pool: &SqlitePool, recent: i64) -> sqlx::Result<Vec<Run
                  WHERE e.run_id = r.id AND e.failure IS NULL) AS started_at,
                 r.finished_at, r.cancelled_at, r.cancelled_by,
                 (SELECT AVG(e.wall_ms) FROM episode_results e
-                 WHERE e.run_id = r.id AND e.failure IS NULL) AS mean_episode_ms
+                 WHERE e.run_id = r.id AND e.failure IS NULL) AS mean_episode_ms,
+                -- Only policy rows get here (plan bodies are not JSON); absent = standard.
+                COALESCE(json_extract(s.body, '$.privileged_observations'), 0) AS privileged
          FROM scoring_runs r JOIN submissions s ON s.id = r.submission_id JOIN teams t ON t.id = s.team_id
          WHERE s.kind = 'policy' AND r.source_run_id IS NULL
            AND (r.state = 'active' OR r.id IN (

@@ -249,3 +249,63 @@ async fn the_page_logs_in_with_a_strict_http_only_cookie() {
     .await;
     assert_eq!(status, StatusCode::UNAUTHORIZED);
 }
+
+/// The `<tr>` of the console's runs table that shows `run`.
+fn run_row(page: &str, run: i64) -> &str {
+    let runs = &page[page.find("<h2>Runs</h2>").expect("a runs section")..];
+    let start = runs
+        .find(&format!("<tr><td class=n>{run}</td>"))
+        .unwrap_or_else(|| panic!("no row of run {run} in {page}"));
+    let row = &runs[start..];
+    &row[..row.find("</tr>").unwrap()]
+}
+
+#[tokio::test]
+async fn the_console_names_each_runs_observation_track_in_json_and_on_the_page() {
+    use kitchen_r_core::dataset::Split;
+
+    // One database, two policies: the first server's probe asks for privileged observations,
+    // the second's (a restart on the same file) does not.
+    let f = fixture(FakeProbe::privileged(2), |c| c.control.privileged_track = true).await;
+    let (alpha, bravo) = (f.team("alpha").await, f.team("bravo").await);
+    let privileged = (f.state)
+        .register_policy(&f.caller(&alpha).await, f.request(Split::Dev))
+        .await
+        .unwrap();
+    let other = f.reopen(FakeProbe::ok(2)).await;
+    let standard = other
+        .register_policy(&other.caller(Some(&bravo)).await.unwrap(), f.request(Split::Dev))
+        .await
+        .unwrap();
+
+    let app = router(f.state.clone());
+    let (status, _, body) = call(
+        &app,
+        bearer(Request::get("/api/v1/admin/runs"), ADMIN)
+            .body(Body::empty())
+            .unwrap(),
+    )
+    .await;
+    assert_eq!(status, StatusCode::OK);
+    let v: Value = serde_json::from_slice(&body).unwrap();
+    let track = |run: i64| {
+        let runs = v["runs"].as_array().unwrap();
+        let r = runs.iter().find(|r| r["run"] == run).unwrap();
+        (r["team"].as_str().unwrap(), r["observations"].as_str().unwrap())
+    };
+    assert_eq!(track(privileged.run_id), ("alpha", "privileged"), "{v:#}");
+    assert_eq!(track(standard.run_id), ("bravo", "standard"), "{v:#}");
+
+    let page = f.state.admin_page(f.admin().await).await.unwrap();
+    assert!(page.contains("<th>Observations</th>"), "{page}");
+    let row = run_row(&page, privileged.run_id);
+    assert!(
+        row.contains("<td>alpha</td>") && row.contains("<td>privileged</td>"),
+        "{row}"
+    );
+    let row = run_row(&page, standard.run_id);
+    assert!(
+        row.contains("<td>bravo</td>") && row.contains("<td>standard</td>"),
+        "{row}"
+    );
+}

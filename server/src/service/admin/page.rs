@@ -153,8 +153,8 @@ pub(super) fn console(c: &Console) -> String {
         body.push_str("<p><i>No policy run yet.</i></p>");
     } else {
         body.push_str(
-            "<table><tr><th>Run</th><th>Sub.</th><th>Team</th><th>Split</th><th>State</th><th>Progress</th>\
-<th>Running</th><th>Queued</th><th>Gave up</th><th>Started</th><th>Mean episode</th><th>ETA</th></tr>",
+            "<table><tr><th>Run</th><th>Sub.</th><th>Team</th><th>Split</th><th>Observations</th><th>State</th>\
+<th>Progress</th><th>Running</th><th>Queued</th><th>Gave up</th><th>Started</th><th>Mean episode</th><th>ETA</th></tr>",
         );
         for r in &c.runs.runs {
             let state = match (&r.cancelled_at, &r.cancelled_by) {
@@ -167,13 +167,14 @@ pub(super) fn console(c: &Console) -> String {
             };
             let _ = write!(
                 body,
-                "<tr><td class=n>{}</td><td class=n>{}</td><td>{}</td><td>{}</td><td>{state}</td>\
+                "<tr><td class=n>{}</td><td class=n>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{state}</td>\
 <td><progress max={} value={}></progress> {}/{}</td><td class=n>{}</td><td class=n>{}</td><td class=n>{}</td>\
 <td>{}</td><td>{}</td><td>{eta}</td></tr>",
                 r.run,
                 r.submission,
                 escape(&r.team),
                 escape(&r.split),
+                r.observations,
                 r.episodes_total.max(1),
                 r.episodes_done,
                 r.episodes_done,
