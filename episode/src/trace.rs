@@ -15,6 +15,8 @@
 //! where it ran out ([`Trace::budget_abort_at`]) and the replay ends the episode at that decision
 //! ([`RunOptions::budget_abort_at`]).
 
+use std::path::Path;
+
 use kitchen_r_sim::EpisodeConfig;
 use serde::{Deserialize, Serialize};
 
@@ -32,6 +34,11 @@ pub use replay::{ReplayError, ReplayPolicy, replay, replay_with};
 pub const FORMAT: &str = "kitchen-r-trace";
 /// The trace layout this build writes and reads.
 pub const VERSION: u32 = 1;
+
+/// The file name of an episode's trace: `<episode key>.trace.json`.
+pub fn file_name(episode_key: &str) -> String {
+    format!("{episode_key}.trace.json")
+}
 
 /// Everything that reproduces one online episode; see the module doc.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -227,6 +234,18 @@ impl Trace {
             )));
         }
         serde_json::from_slice(bytes).map_err(|e| ReplayError::Format(format!("trace: {e}")))
+    }
+
+    /// Write the trace to `path`.
+    pub fn save(&self, path: &Path) -> Result<(), String> {
+        std::fs::write(path, self.to_json()).map_err(|e| format!("writing the trace {}: {e}", path.display()))
+    }
+
+    /// Read the trace at `path`.
+    pub fn load(path: &Path) -> Result<Trace, ReplayError> {
+        let bytes = std::fs::read(path)
+            .map_err(|e| ReplayError::Format(format!("reading {}: {e}", path.display())))?;
+        Trace::from_json(&bytes).map_err(|e| ReplayError::Format(format!("{}: {e}", path.display())))
     }
 }
 
