@@ -109,6 +109,7 @@ fn run_oracle(args: &AuditArgs) -> anyhow::Result<OracleCheck> {
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
         ground_truth: Some(ground_truth),
         run: config.run_options(),
+        trace: None,
     };
     let mut done = 0;
     eprintln!("oracle: running every test instruction ({} jobs)", opts.jobs);

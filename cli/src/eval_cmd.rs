@@ -9,7 +9,7 @@ use anyhow::Context;
 use clap::Args;
 use kitchen_r_core::dataset::Split;
 use kitchen_r_episode::eval::{
-    EvalConfig, EvalOptions, EvalReport, PolicyChoice, evaluate, evaluate_batch, instructions,
+    EvalConfig, EvalOptions, EvalReport, PolicyChoice, Sr, evaluate, evaluate_batch, instructions,
 };
 use kitchen_r_sim::EpisodeConfig;
 use kitchen_r_worker::job::local::{
@@ -72,6 +72,11 @@ pub(crate) struct EvalArgs {
     /// oracle is then served on a loopback port and run through the workers' path.
     #[arg(long, value_name = "DIR")]
     record: Option<PathBuf>,
+    /// Write each online episode's trace to DIR/<episode key>.trace.json: the episode's
+    /// configuration, the run's settings and every answer of the policy, from which
+    /// `kitchen-r replay` reproduces the episode bit for bit (and renders its video) later.
+    #[arg(long, value_name = "DIR")]
+    trace: Option<PathBuf>,
 }
 
 pub(crate) fn eval(args: EvalArgs) -> anyhow::Result<()> {
@@ -110,6 +115,7 @@ pub(crate) fn eval(args: EvalArgs) -> anyhow::Result<()> {
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
         ground_truth: args.ground_truth,
         run: config.run_options(),
+        trace: args.trace,
     };
     let mut done = 0;
     let mut progress = |_, o: &kitchen_r_episode::runner::EpisodeOutcome| {
@@ -149,24 +155,29 @@ fn print_table(r: &EvalReport) {
         r.seed,
         r.jobs
     );
+    print_kinds(&r.by_kind, &r.overall);
+    println!(
+        "mean episode wall time {:.3} s   total wall time {:.1} s",
+        r.mean_episode_wall_s, r.total_wall_s
+    );
+}
+
+/// SR and mean sim time per task kind and overall (`eval`'s table, and `replay`'s).
+pub(crate) fn print_kinds(by_kind: &std::collections::BTreeMap<String, Sr>, overall: &Sr) {
     println!(
         "{:<14} {:>6} {:>8} {:>7} {:>15}",
         "task kind", "tasks", "success", "SR", "mean sim time"
     );
     let rows = ["navigation", "manipulation", "pick", "place"]
         .into_iter()
-        .filter_map(|k| r.by_kind.get(k).map(|s| (k, s)))
-        .chain(std::iter::once(("overall", &r.overall)));
+        .filter_map(|k| by_kind.get(k).map(|s| (k, s)))
+        .chain(std::iter::once(("overall", overall)));
     for (k, s) in rows {
         println!(
             "{k:<14} {:>6} {:>8} {:>7.3} {:>13.1} s",
             s.tasks, s.succeeded, s.sr, s.mean_task_sim_time
         );
     }
-    println!(
-        "mean episode wall time {:.3} s   total wall time {:.1} s",
-        r.mean_episode_wall_s, r.total_wall_s
-    );
 }
 
 /// `--policy http://…`: every instruction as the job the server would lease for it.
@@ -191,8 +202,9 @@ fn eval_endpoint(
             .jobs
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
         record: args.record.clone(),
+        trace: args.trace.clone(),
     };
-    if let Some(dir) = &args.record {
+    for dir in [&args.record, &args.trace].into_iter().flatten() {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
     let n = args.episodes.unwrap_or(usize::MAX);
@@ -219,6 +231,9 @@ fn eval_endpoint(
             eprintln!("    {:?}: {}", t.step, t.failure_reason);
         }
         crate::eval_record::print_video(e);
+        if !e.trace_error.is_empty() {
+            eprintln!("    no trace: {}", e.trace_error);
+        }
     };
     let report = match &batch {
         Some(b) => {

@@ -19,6 +19,7 @@ mod load_bench;
 mod policy_cmd;
 mod policy_submit;
 mod probe_glue;
+mod replay_cmd;
 mod serve_cmd;
 mod sim_cmd;
 mod submission_cmd;
@@ -66,6 +67,9 @@ enum Command {
     Bench(sim_cmd::BenchArgs),
     /// Evaluate a policy locally on a split, through the workers' episode runner.
     Eval(eval_cmd::EvalArgs),
+    /// Replay an episode from its trace (`eval --trace`), bit-identical to its evaluation,
+    /// into its video; refused when the replay disagrees with the recorded outcome.
+    Replay(replay_cmd::ReplayArgs),
     /// Collect expert trajectories into MCAP and/or HDF5.
     Collect(collect_cmd::CollectArgs),
     /// Serve a reference policy over the participant gRPC contract.
@@ -91,6 +95,7 @@ fn main() -> anyhow::Result<()> {
         Some(Command::Sim(args)) => sim_cmd::sim(args),
         Some(Command::Bench(args)) => sim_cmd::bench(args),
         Some(Command::Eval(args)) => eval_cmd::eval(args),
+        Some(Command::Replay(args)) => replay_cmd::replay(args),
         Some(Command::Collect(args)) => collect_cmd::collect_cmd(args),
         Some(Command::Policy(args)) => policy_cmd::policy(args),
         Some(Command::CheckPolicy(args)) => check_policy_cmd::check_policy(args),

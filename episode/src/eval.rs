@@ -8,7 +8,7 @@
 //! A saved batch (`--episodes-file`, [`evaluate_batch`]) runs exactly its configurations instead.
 
 use std::collections::BTreeMap;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::mpsc;
 use std::time::Instant;
@@ -20,6 +20,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::oracle::{ORACLE_NAME, OraclePolicy};
 use crate::runner::{EpisodeOutcome, RunError, RunOptions, run_episode};
+use crate::trace::{self, TracingPolicy};
 
 /// The policies `eval` can run in this build.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -61,6 +62,9 @@ pub enum EvalError {
     Run(#[from] RunError),
     #[error("eval config: {0}")]
     Config(String),
+    /// `--trace DIR`: a trace could not be written.
+    #[error("{0}")]
+    Trace(String),
     #[error("an evaluation thread panicked")]
     Panicked,
 }
@@ -77,6 +81,9 @@ pub struct EvalOptions {
     /// Ground truth for the test split (JSON Lines of instructions with plans).
     pub ground_truth: Option<PathBuf>,
     pub run: RunOptions,
+    /// `eval --trace DIR`: write each episode's trace ([`crate::trace`]) to
+    /// `DIR/<episode key>.trace.json`.
+    pub trace: Option<PathBuf>,
 }
 
 impl Default for EvalOptions {
@@ -89,6 +96,7 @@ impl Default for EvalOptions {
             jobs: 1,
             ground_truth: None,
             run: RunOptions::default(),
+            trace: None,
         }
     }
 }
@@ -276,6 +284,7 @@ pub(crate) fn run_all(
     policy: PolicyChoice,
     run: &RunOptions,
     jobs: usize,
+    trace: Option<&Path>,
     progress: &mut dyn FnMut(usize, &EpisodeOutcome),
 ) -> Result<Vec<EpisodeOutcome>, EvalError> {
     let next = AtomicUsize::new(0);
@@ -294,7 +303,8 @@ pub(crate) fn run_all(
                 loop {
                     let i = next.fetch_add(1, Ordering::SeqCst);
                     let Some(cfg) = configs.get(i) else { break };
-                    let r = one(assets, &mut sim, &sim_cfg, &sensors, cfg, &mut oracle, run);
+                    let world = (assets, &sim_cfg, &sensors);
+                    let r = one(world, &mut sim, cfg, &mut oracle, run, trace);
                     if tx.send((i, r)).is_err() {
                         break;
                     }
@@ -329,25 +339,39 @@ pub(crate) fn load<'a>(
     }
 }
 
+/// What every episode of a run is built from: assets and the simulator's configs.
+type World<'a> = (&'a Assets, &'a SimConfig, &'a SensorsConfig);
+
 fn one(
-    assets: &Assets,
+    (assets, sim_cfg, sensors): World<'_>,
     sim: &mut Option<Sim>,
-    sim_cfg: &SimConfig,
-    sensors: &SensorsConfig,
     cfg: &EpisodeConfig,
     policy: &mut OraclePolicy,
     run: &RunOptions,
+    trace: Option<&Path>,
 ) -> Result<EpisodeOutcome, EvalError> {
     let started = Instant::now();
     let s = load(sim, assets, sim_cfg, sensors, cfg)?;
-    let mut o = run_episode(s, policy, run, None, &mut ())?;
+    let mut o = match trace {
+        None => run_episode(s, policy, run, None, &mut ())?,
+        Some(dir) => {
+            let mut tracing = TracingPolicy::new(policy);
+            let o = run_episode(s, &mut tracing, run, None, &mut ())?;
+            let path = dir.join(trace::file_name(&cfg.id));
+            tracing
+                .into_trace(cfg.clone(), run, false, &o)
+                .save(&path)
+                .map_err(EvalError::Trace)?;
+            o
+        }
+    };
     // Count the reset (world build) in the episode's wall time too.
     o.wall_time_s = started.elapsed().as_secs_f64();
     Ok(o)
 }
 
 /// Aggregate outcomes into SR per kind and overall.
-pub(crate) fn summarize(episodes: &[EpisodeOutcome]) -> (Sr, BTreeMap<String, Sr>) {
+pub fn summarize(episodes: &[EpisodeOutcome]) -> (Sr, BTreeMap<String, Sr>) {
     let mut kinds: BTreeMap<String, (usize, usize, f64)> = BTreeMap::new();
     let mut all = (0, 0, 0.0);
     for t in episodes.iter().flat_map(|e| &e.tasks) {
@@ -400,7 +424,20 @@ fn evaluate_configs(
     progress: &mut dyn FnMut(usize, &EpisodeOutcome),
 ) -> Result<EvalReport, EvalError> {
     let started = Instant::now();
-    let episodes = run_all(assets, configs, opts.policy, &opts.run, opts.jobs, progress)?;
+    if let Some(dir) = &opts.trace {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| EvalError::Trace(format!("creating {}: {e}", dir.display())))?;
+    }
+    let trace = opts.trace.as_deref();
+    let episodes = run_all(
+        assets,
+        configs,
+        opts.policy,
+        &opts.run,
+        opts.jobs,
+        trace,
+        progress,
+    )?;
     let (overall, by_kind) = summarize(&episodes);
     let n = episodes.len().max(1) as f64;
     Ok(EvalReport {

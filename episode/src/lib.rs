@@ -2,7 +2,8 @@
 //! every evaluation uses ([`runner`]), the oracle expert ([`oracle`]), offline MSE ([`offline`])
 //! local evaluation of a split ([`eval`]), teleport-on-failure's expert states ([`teleport`])
 //! an episode driven one action at a time from outside ([`driven`], the Python environment) and
-//! expert training samples from parallel simulators ([`samples`]).
+//! expert training samples from parallel simulators ([`samples`]) and the traces that
+//! reproduce an episode for its video on demand ([`trace`]).
 //!
 //! It owns how a policy drives the simulator and what an episode's outcome is. It must not touch
 //! the network, a database or an async runtime (no tokio, tonic, prost or kitchen-r-proto):
@@ -17,3 +18,4 @@ pub mod policy;
 pub mod runner;
 pub mod samples;
 pub mod teleport;
+pub mod trace;

@@ -145,6 +145,7 @@ pub fn run_offline(
         max_consecutive_timeouts: u32::MAX,
         wall_budget: None,
         chunk_tolerance: ChunkTolerance::default(),
+        budget_abort_at: None,
     };
     // The runner captures the frames the participant's decisions show (its history); the
     // expert's own execution count (one action per query) stays.

@@ -124,8 +124,9 @@ pub struct PolicyInput<'a> {
     pub privileged_observation: Option<&'a PrivilegedObservation>,
 }
 
-/// Why a policy could not give a usable chunk; the task fails with this reason.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+/// Why a policy could not give a usable chunk; the task fails with this reason. Serde-able
+/// because a trace records it ([`crate::trace`]).
+#[derive(Debug, Clone, PartialEq, thiserror::Error, Serialize, Deserialize)]
 pub enum PolicyError {
     #[error("policy call failed: {0}")]
     Call(String),
@@ -148,6 +149,23 @@ pub trait Policy: Send {
     /// (rendering is most of an episode's cost); the robot state is always there.
     fn wants_images(&self) -> bool {
         true
+    }
+}
+
+/// A borrowed policy drives an episode as the policy itself, so wrappers such as
+/// [`crate::trace::TracingPolicy`] take either.
+impl<P: Policy + ?Sized> Policy for &mut P {
+    fn spec(&self) -> &PolicySpec {
+        (**self).spec()
+    }
+    fn reset(&mut self, episode_id: &str, task_index: usize, sub_task: &str) -> Result<(), PolicyError> {
+        (**self).reset(episode_id, task_index, sub_task)
+    }
+    fn act(&mut self, input: &PolicyInput<'_>) -> Result<Vec<[f64; ACTION_DIM]>, PolicyError> {
+        (**self).act(input)
+    }
+    fn wants_images(&self) -> bool {
+        (**self).wants_images()
     }
 }
 

@@ -41,6 +41,19 @@ pub struct RunOptions {
     /// How far a chunk may be off before it fails the task; slips within are corrected.
     #[serde(default)]
     pub chunk_tolerance: ChunkTolerance,
+    /// Replays only ([`crate::trace`]): end the episode for its wall-clock budget at exactly
+    /// this decision, where the recorded run's real clock ran out. A replay has no real time
+    /// to measure (it runs faster or slower than the run it reproduces), so it is told where.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub budget_abort_at: Option<Decision>,
+}
+
+/// A decision point of an episode: before policy call `calls + 1` of plan step `task`
+/// (`calls` = the calls the task had made, as [`TaskRecord::policy_calls`] counts them).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Decision {
+    pub task: usize,
+    pub calls: u32,
 }
 
 impl Default for RunOptions {
@@ -54,6 +67,7 @@ impl Default for RunOptions {
             max_consecutive_timeouts: 3,
             wall_budget: None,
             chunk_tolerance: ChunkTolerance::default(),
+            budget_abort_at: None,
         }
     }
 }
@@ -271,6 +285,16 @@ pub fn run_from_task(
 /// itself goes by [`TaskRecord::aborts_episode`]).
 const ABORT: &str = "episode aborted: ";
 
+/// Why the wall-clock budget ended an episode (after [`ABORT`]); a trace finds the decision it
+/// happened at by it.
+pub(crate) const OVER_BUDGET: &str = "wall-clock budget exceeded";
+
+/// Whether `task` failed because the episode ran out of its wall-clock budget (the task the
+/// budget ran out in; later tasks only inherit the reason).
+pub(crate) fn ran_out_of_budget(task: &TaskRecord) -> bool {
+    task.aborts_episode && task.failure.as_deref() == Some(&format!("{ABORT}{OVER_BUDGET}"))
+}
+
 fn failed(index: usize, step: String, sim_time: f64, reason: String, calls: u32) -> TaskRecord {
     TaskRecord {
         index,
@@ -371,8 +395,9 @@ fn run_task(
     history.push(sim, first, *ep.last_action);
     loop {
         let spent = ep.started.elapsed().saturating_sub(hook.overhead());
-        if opts.wall_budget.is_some_and(|b| spent > b) {
-            let why = "wall-clock budget exceeded".to_string();
+        let here = Decision { task: j, calls };
+        if opts.wall_budget.is_some_and(|b| spent > b) || opts.budget_abort_at == Some(here) {
+            let why = OVER_BUDGET.to_string();
             return end(sim, Some((why, true)), calls, corrections);
         }
         let world = (opts.privileged || opts.privileged_observations.is_some())

@@ -27,6 +27,7 @@ mod pages;
 mod participant_client;
 mod planning;
 mod privileged;
+mod replay;
 mod secrets;
 mod submission;
 mod video;

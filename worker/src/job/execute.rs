@@ -24,6 +24,7 @@ use kitchen_r_episode::oracle::OraclePolicy;
 use kitchen_r_episode::policy::{Corrections, Policy, Unreachable};
 use kitchen_r_episode::runner::{EpisodeOutcome, StepHook, run_episode};
 use kitchen_r_episode::teleport::expert_starts;
+use kitchen_r_episode::trace::{Trace, TracingPolicy};
 use kitchen_r_record::video::episode::{EpisodeVideo, RecordedVideo, VideoHook};
 
 /// The log tail kept with a result (the contract's cap).
@@ -147,17 +148,37 @@ pub fn execute_job_recording(
     ctx: &JobContext,
     control: &JobControl,
 ) -> (pb::EpisodeResult, Option<RecordedVideo>) {
+    let e = execute_job_traced(job, ctx, control);
+    (e.result, e.video)
+}
+
+/// What a job left: its result, the episode video if it asked for one, and the trace that
+/// reproduces the episode (online episodes that ran and were not cancelled; [`Trace`]).
+pub struct Executed {
+    pub result: pb::EpisodeResult,
+    pub video: Option<RecordedVideo>,
+    pub trace: Option<Trace>,
+}
+
+/// As [`execute_job_recording`], with the episode's trace.
+pub fn execute_job_traced(job: &pb::Job, ctx: &JobContext, control: &JobControl) -> Executed {
     let started = Instant::now();
     let mut log = Log::default();
     let result = run(job, ctx, control, &mut log);
-    let (mut out, mut video) = match result {
-        Ok(Ran { tasks, path, video }) => (
+    let (mut out, mut video, mut trace) = match result {
+        Ok(Ran {
+            tasks,
+            path,
+            video,
+            trace,
+        }) => (
             pb::EpisodeResult {
                 tasks,
                 path,
                 ..Default::default()
             },
             video,
+            trace,
         ),
         Err(e) => {
             log.line(format!("platform error: {e}"));
@@ -165,7 +186,7 @@ pub fn execute_job_recording(
                 platform_error: e.to_string(),
                 ..Default::default()
             };
-            (out, None)
+            (out, None, None)
         }
     };
     // A cancelled episode's tasks were cut short by us, not by the policy: never score them.
@@ -173,11 +194,16 @@ pub fn execute_job_recording(
         out.tasks.clear();
         out.path = None;
         video = None;
+        trace = None;
         out.platform_error = format!("cancelled: {}", control.reason());
     }
     out.wall_ms = started.elapsed().as_millis() as u64;
     out.log_tail = log.into_tail();
-    (out, video)
+    Executed {
+        result: out,
+        video,
+        trace,
+    }
 }
 
 /// What an episode that ran hands back.
@@ -185,6 +211,7 @@ struct Ran {
     tasks: Vec<pb::TaskResult>,
     path: Option<pb::EpisodePath>,
     video: Option<RecordedVideo>,
+    trace: Option<Trace>,
 }
 
 impl Ran {
@@ -193,6 +220,7 @@ impl Ran {
             tasks,
             path: None,
             video: None,
+            trace: None,
         }
     }
 }
@@ -277,17 +305,19 @@ fn run(job: &pb::Job, ctx: &JobContext, control: &JobControl, log: &mut Log) -> 
         None
     };
     let mut hook = PathHook::new(watch);
+    // Every online episode is traced (a chunk's copy per call, little beside the call itself),
+    // so a video can be rendered from the trace later instead of now.
+    let mut policy = TracingPolicy::new(policy);
     let (out, recording) = if spec.record_video {
         let video = EpisodeVideo::new(&cfg.plan, n_tasks, spec.video_max_bytes as usize);
         let mut recorder = VideoHook::new(&mut hook, video);
-        let out = run_episode(&mut sim, policy, &run, starts.as_deref(), &mut recorder)?;
+        let out = run_episode(&mut sim, &mut policy, &run, starts.as_deref(), &mut recorder)?;
         (out, Some(recorder.into_video()))
     } else {
-        (
-            run_episode(&mut sim, policy, &run, starts.as_deref(), &mut hook)?,
-            None,
-        )
+        let out = run_episode(&mut sim, &mut policy, &run, starts.as_deref(), &mut hook)?;
+        (out, None)
     };
+    let trace = policy.into_trace(cfg, &run, starts.is_some(), &out);
     // A cancelled episode is not scored, so its video is not worth the encoder's flush.
     let video = match control.is_cancelled() {
         true => None,
@@ -297,6 +327,7 @@ fn run(job: &pb::Job, ctx: &JobContext, control: &JobControl, log: &mut Log) -> 
         tasks: online_results(&out, log),
         path: Some(hook.into_path()),
         video,
+        trace: Some(trace),
     })
 }
 

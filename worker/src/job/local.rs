@@ -1,6 +1,6 @@
 //! `kitchen-r eval --policy http://HOST:PORT`: local evaluation of a policy endpoint through the
 //! workers' own path. Each instruction becomes the job the server would lease for it (same run
-//! seed, same settings, same episode key) and runs through [`execute_job_recording`], so the numbers a
+//! seed, same settings, same episode key) and runs through [`execute_job_traced`], so the numbers a
 //! participant gets here are the numbers the leaderboard will show for the same settings.
 //!
 //! Aggregation is the server's own (`kitchen_r_core::scoring::aggregate`): SR is the mean over
@@ -23,7 +23,7 @@ use kitchen_r_core::scoring::{self, TaskOutcome};
 use kitchen_r_proto::worker::v1 as pb;
 use serde::{Deserialize, Serialize};
 
-use super::execute::{JobControl, execute_job_recording};
+use super::execute::{JobControl, execute_job_traced};
 use super::{JobContext, JobError};
 use kitchen_r_contract::probe::{ProbeFailure, probe_endpoint};
 use kitchen_r_contract::{AllowedNetworks, RemoteConfig};
@@ -31,6 +31,7 @@ pub use kitchen_r_core::observations::ObservationTrack as Track;
 use kitchen_r_episode::eval::{Sr, task_kinds};
 use kitchen_r_episode::policy::PrivilegedScope;
 use kitchen_r_episode::runner::RunOptions;
+use kitchen_r_episode::trace;
 use kitchen_r_record::video::episode::RecordedVideo;
 use kitchen_r_sim::EpisodeConfig;
 use kitchen_r_sim::episode::as_instruction;
@@ -55,6 +56,10 @@ pub struct LocalSettings {
     /// `DIR/<episode key>.mp4`.
     #[serde(default)]
     pub record: Option<PathBuf>,
+    /// `eval --trace DIR`: write each online episode's trace (what reproduces it for a later
+    /// video, `kitchen_r_episode::trace`) to `DIR/<episode key>.trace.json`.
+    #[serde(default)]
+    pub trace: Option<PathBuf>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -71,6 +76,12 @@ pub struct LocalEpisode {
     /// `--record`: why the video could not be written (the episode's result is not affected).
     #[serde(default, skip_serializing_if = "String::is_empty")]
     pub video_error: String,
+    /// `--trace`: the trace file written.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub trace: Option<PathBuf>,
+    /// `--trace`: why no trace was written (the episode's result is not affected).
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub trace_error: String,
     /// What scoring needs of the job (not printed).
     #[serde(skip)]
     pub scoring: Option<scoring::Episode>,
@@ -247,8 +258,16 @@ fn evaluate_endpoint_with(
                     let i = next.fetch_add(1, Ordering::SeqCst);
                     let Some(job) = jobs.get(i) else { break };
                     let t = Instant::now();
-                    let (r, video) = execute_job_recording(job, ctx, &JobControl::default());
-                    let mut ep = episode(job, &r, t.elapsed().as_secs_f64());
+                    let done = execute_job_traced(job, ctx, &JobControl::default());
+                    let (r, video) = (&done.result, done.video);
+                    let mut ep = episode(job, r, t.elapsed().as_secs_f64());
+                    if let (Some(dir), Some(trace)) = (&s.trace, &done.trace) {
+                        let path = dir.join(trace::file_name(&job.episode_key));
+                        match trace.save(&path) {
+                            Ok(()) => ep.trace = Some(path),
+                            Err(e) => ep.trace_error = e,
+                        }
+                    }
                     if let (Some(dir), Some(v)) = (&s.record, video) {
                         match write_video(dir, &job.episode_key, v) {
                             Ok(v) => ep.video = Some(v),
@@ -294,6 +313,8 @@ fn episode(job: &pb::Job, r: &pb::EpisodeResult, wall_s: f64) -> LocalEpisode {
         wall_s,
         video: None,
         video_error: String::new(),
+        trace: None,
+        trace_error: String::new(),
     }
 }
 
@@ -396,6 +417,7 @@ mod tests {
             privileged_observations: None,
             jobs: 1,
             record: None,
+            trace: None,
         }
     }
 

@@ -20,7 +20,7 @@ use kitchen_r_sim::{Assets, EpisodeParams, SensorsConfig, SimConfig, SimError};
 use serde::{Deserialize, Serialize};
 
 pub use client::run_worker;
-pub use execute::{JobControl, execute_job, execute_job_recording};
+pub use execute::{Executed, JobControl, execute_job, execute_job_recording, execute_job_traced};
 
 use kitchen_r_contract::{AllowedNetworks, RemoteConfig};
 use kitchen_r_episode::runner::RunError;

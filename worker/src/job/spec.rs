@@ -156,6 +156,7 @@ pub(crate) fn run_options(spec: &pb::EpisodeSpec, ep: &pb::PolicyEndpoint) -> Re
         },
         wall_budget: limit_ms(ep.episode_budget_ms),
         chunk_tolerance: chunk_tolerance(ep)?,
+        budget_abort_at: None,
     })
 }
 

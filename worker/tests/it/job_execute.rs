@@ -218,6 +218,7 @@ fn local_eval_of_an_endpoint_gives_the_workers_numbers() {
         privileged_observations: None,
         jobs: 4,
         record: None,
+        trace: None,
     };
     let local = evaluate_endpoint(
         &server.url(),
