@@ -148,23 +148,25 @@ pub fn execute_job_recording(
     ctx: &JobContext,
     control: &JobControl,
 ) -> (pb::EpisodeResult, Option<RecordedVideo>) {
-    let e = execute_job_traced(job, ctx, control);
+    let e = execute_job_traced(job, ctx, control, false);
     (e.result, e.video)
 }
 
 /// What a job left: its result, the episode video if it asked for one, and the trace that
-/// reproduces the episode (online episodes that ran and were not cancelled; [`Trace`]).
+/// reproduces the episode (when asked for: online episodes that ran and were not cancelled;
+/// [`Trace`]).
 pub struct Executed {
     pub result: pb::EpisodeResult,
     pub video: Option<RecordedVideo>,
     pub trace: Option<Trace>,
 }
 
-/// As [`execute_job_recording`], with the episode's trace.
-pub fn execute_job_traced(job: &pb::Job, ctx: &JobContext, control: &JobControl) -> Executed {
+/// As [`execute_job_recording`]; with `trace`, also the episode's trace (`eval --trace`). Only
+/// callers that keep the trace ask for it: recording copies every chunk the policy returns.
+pub fn execute_job_traced(job: &pb::Job, ctx: &JobContext, control: &JobControl, trace: bool) -> Executed {
     let started = Instant::now();
     let mut log = Log::default();
-    let result = run(job, ctx, control, &mut log);
+    let result = run(job, ctx, control, trace, &mut log);
     let (mut out, mut video, mut trace) = match result {
         Ok(Ran {
             tasks,
@@ -225,7 +227,13 @@ impl Ran {
     }
 }
 
-fn run(job: &pb::Job, ctx: &JobContext, control: &JobControl, log: &mut Log) -> Result<Ran, JobError> {
+fn run(
+    job: &pb::Job,
+    ctx: &JobContext,
+    control: &JobControl,
+    trace: bool,
+    log: &mut Log,
+) -> Result<Ran, JobError> {
     let spec = job
         .episode
         .as_ref()
@@ -305,19 +313,21 @@ fn run(job: &pb::Job, ctx: &JobContext, control: &JobControl, log: &mut Log) -> 
         None
     };
     let mut hook = PathHook::new(watch);
-    // Every online episode is traced (a chunk's copy per call, little beside the call itself),
-    // so a video can be rendered from the trace later instead of now.
-    let mut policy = TracingPolicy::new(policy);
+    let mut tracing = None;
+    let policy: &mut dyn Policy = match trace {
+        true => tracing.insert(TracingPolicy::new(policy)),
+        false => policy,
+    };
     let (out, recording) = if spec.record_video {
         let video = EpisodeVideo::new(&cfg.plan, n_tasks, spec.video_max_bytes as usize);
         let mut recorder = VideoHook::new(&mut hook, video);
-        let out = run_episode(&mut sim, &mut policy, &run, starts.as_deref(), &mut recorder)?;
+        let out = run_episode(&mut sim, policy, &run, starts.as_deref(), &mut recorder)?;
         (out, Some(recorder.into_video()))
     } else {
-        let out = run_episode(&mut sim, &mut policy, &run, starts.as_deref(), &mut hook)?;
+        let out = run_episode(&mut sim, policy, &run, starts.as_deref(), &mut hook)?;
         (out, None)
     };
-    let trace = policy.into_trace(cfg, &run, starts.is_some(), &out);
+    let trace = tracing.map(|t| t.into_trace(cfg, &run, starts.is_some(), &out));
     // A cancelled episode is not scored, so its video is not worth the encoder's flush.
     let video = match control.is_cancelled() {
         true => None,
@@ -327,7 +337,7 @@ fn run(job: &pb::Job, ctx: &JobContext, control: &JobControl, log: &mut Log) -> 
         tasks: online_results(&out, log),
         path: Some(hook.into_path()),
         video,
-        trace: Some(trace),
+        trace,
     })
 }
 

@@ -258,7 +258,7 @@ fn evaluate_endpoint_with(
                     let i = next.fetch_add(1, Ordering::SeqCst);
                     let Some(job) = jobs.get(i) else { break };
                     let t = Instant::now();
-                    let done = execute_job_traced(job, ctx, &JobControl::default());
+                    let done = execute_job_traced(job, ctx, &JobControl::default(), s.trace.is_some());
                     let (r, video) = (&done.result, done.video);
                     let mut ep = episode(job, r, t.elapsed().as_secs_f64());
                     if let (Some(dir), Some(trace)) = (&s.trace, &done.trace) {
