@@ -152,7 +152,7 @@ def fit(model, opt, sched, X, Y, steps, batch, tag):
     model.train()
     n = len(X)
     t0 = time.time()
-    total = 0.0
+    loss = torch.tensor(float("nan"))
     for i in range(1, steps + 1):
         idx = torch.randint(0, n, (batch,), device=X.device)
         loss = ((model(X[idx]) - model.normalise_y(Y[idx])) ** 2).mean()
@@ -160,7 +160,6 @@ def fit(model, opt, sched, X, Y, steps, batch, tag):
         loss.backward()
         opt.step()
         sched.step()
-        total += loss.item() if i % 100 == 0 else 0.0
         if i % max(1, steps // 5) == 0:
             log(f"{tag}: step {i}/{steps} loss {loss.item():.5f} ({time.time() - t0:.0f} s)")
     model.eval()
@@ -216,14 +215,13 @@ def main():
     # round trip, and the training copy stays where it is.
     cpu_model = PrivilegedMLP(args.width, args.depth)
     torch.set_num_threads(max(1, min(4, os.cpu_count() or 1)))
-    ids = None
-    for r in range(1, args.rounds + 1):
+    if args.rounds:
         from gym_kitchen_r import KitchenREnv
 
-        if ids is None:
-            probe = KitchenREnv(images=False)
-            ids = probe.instruction_ids()
-            probe.close()
+        probe = KitchenREnv(images=False)
+        ids = probe.instruction_ids()
+        probe.close()
+    for r in range(1, args.rounds + 1):
         cpu_model.load_state_dict({k: v.cpu() for k, v in model.state_dict().items()})
         cpu_model.eval()
         rng = np.random.default_rng(1000 + r)
