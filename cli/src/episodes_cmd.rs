@@ -9,10 +9,11 @@ use anyhow::{Context, bail};
 use clap::{Args, Subcommand};
 use kitchen_r_core::dataset::{Instruction, read_jsonl};
 use kitchen_r_episode::eval::instruction_seed;
+use kitchen_r_episode::samples::instruction_episode;
 use kitchen_r_sim::episode::{load_batch, save_batch};
 use kitchen_r_sim::generator::splitmix;
 use kitchen_r_sim::material::Pattern;
-use kitchen_r_sim::randomise::{generate_varied, randomise};
+use kitchen_r_sim::randomise::generate_varied;
 use kitchen_r_sim::{Assets, EpisodeConfig, EpisodeParams};
 
 #[derive(Args, Debug)]
@@ -188,15 +189,14 @@ fn from_instruction(
     seed: u64,
     pass: usize,
 ) -> anyhow::Result<EpisodeConfig> {
-    let scene = assets.scene(&ins.scene)?;
     let run_seed = match pass {
         0 => seed,
         n => splitmix(seed ^ splitmix(n as u64)),
     };
     let s = instruction_seed(run_seed, &ins.id);
-    let mut cfg = EpisodeConfig::from_instruction(ins, scene, &assets.catalogue, p, s)
-        .with_context(|| format!("instruction {}", ins.id))?;
-    randomise(&mut cfg, scene, &assets.catalogue, p, s).with_context(|| format!("instruction {}", ins.id))?;
+    // The aspects switched off above are off in `p`, so `randomise = true` draws only the rest.
+    let mut cfg =
+        instruction_episode(assets, p, ins, s, true).with_context(|| format!("instruction {}", ins.id))?;
     if pass > 0 {
         cfg.id = format!("{}#{pass}", ins.id);
     }

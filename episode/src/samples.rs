@@ -46,12 +46,26 @@ pub fn collection_episode(
     }
     let instruction = &instructions[index % instructions.len()];
     let episode_seed = splitmix(seed ^ splitmix(index as u64));
-    let scene = assets.scene(&instruction.scene)?;
-    let mut cfg =
-        EpisodeConfig::from_instruction(instruction, scene, &assets.catalogue, params, episode_seed)?;
+    let mut cfg = instruction_episode(assets, params, instruction, episode_seed, randomise)?;
     cfg.id = format!("ep{index:05}");
+    Ok(cfg)
+}
+
+/// The episode of `instruction` drawn with episode seed `seed`, with the paper's randomisation
+/// (`configs/episodes.toml` `[randomise]`, from the same seed) when `randomise`. Collection,
+/// `kitchen-r episodes generate --from-dataset` and the Python environment all build their
+/// episodes with it, so the same seed is the same episode everywhere.
+pub fn instruction_episode(
+    assets: &Assets,
+    params: &EpisodeParams,
+    instruction: &Instruction,
+    seed: u64,
+    randomise: bool,
+) -> Result<EpisodeConfig, SimError> {
+    let scene = assets.scene(&instruction.scene)?;
+    let mut cfg = EpisodeConfig::from_instruction(instruction, scene, &assets.catalogue, params, seed)?;
     if randomise {
-        kitchen_r_sim::randomise(&mut cfg, scene, &assets.catalogue, params, episode_seed)?;
+        kitchen_r_sim::randomise(&mut cfg, scene, &assets.catalogue, params, seed)?;
     }
     Ok(cfg)
 }

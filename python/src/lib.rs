@@ -17,7 +17,8 @@ use kitchen_r_core::observations::PrivilegedScope;
 use kitchen_r_episode::driven::{DriveError, DriveOptions, DrivenEpisode, Progress};
 use kitchen_r_episode::eval::{instruction_seed, instructions};
 use kitchen_r_episode::runner::RunOptions;
-use kitchen_r_sim::{Assets, EpisodeConfig, EpisodeParams, SensorsConfig, Sim, SimConfig};
+use kitchen_r_episode::samples::instruction_episode;
+use kitchen_r_sim::{Assets, EpisodeParams, SensorsConfig, Sim, SimConfig};
 use pyo3::exceptions::{PyKeyError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -108,21 +109,9 @@ impl Inner {
         }
         let ins = self.find(instruction)?;
         check_task(ins, task)?;
-        let scene = self.assets.scene(&ins.scene).map_err(setup("scene"))?;
         let episode_seed = instruction_seed(seed, &ins.id);
-        let mut cfg =
-            EpisodeConfig::from_instruction(ins, scene, &self.assets.catalogue, &self.params, episode_seed)
-                .map_err(setup("episode"))?;
-        if self.randomise {
-            kitchen_r_sim::randomise(
-                &mut cfg,
-                scene,
-                &self.assets.catalogue,
-                &self.params,
-                episode_seed,
-            )
-            .map_err(setup("randomisation"))?;
-        }
+        let cfg = instruction_episode(&self.assets, &self.params, ins, episode_seed, self.randomise)
+            .map_err(setup("episode"))?;
         let sim = match self.idle.take() {
             Some(s) => s,
             None => {
