@@ -2,7 +2,8 @@
 //! against the outcome its evaluation recorded, and its video written as `eval --record`
 //! writes it (the workers' recorder, as a hook on the replay). A replay that disagrees with the
 //! recorded outcome writes nothing and exits non-zero: a video is shown only of the episode
-//! that was scored. The work is in `kitchen_r_episode::trace`.
+//! that was scored. A gzipped trace (as the server stores and serves it) is read as it is. The
+//! work is in `kitchen_r_episode::trace`.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -16,12 +17,13 @@ use kitchen_r_record::video::episode::{EpisodeVideo, VideoHook};
 
 #[derive(Args, Debug)]
 pub(crate) struct ReplayArgs {
-    /// The trace of one episode (`DIR/<episode key>.trace.json`, written by `eval --trace`).
+    /// The trace of one episode: `DIR/<episode key>.trace.json` written by `eval --trace`, or a
+    /// server's gzipped trace (`kitchen-r submission trace`, `.trace.json.gz`).
     #[arg(value_name = "TRACE")]
     trace: PathBuf,
     /// Where to write the episode video (both cameras at the control rate with the caption
     /// bar; AV1 MP4, as `eval --record` writes it) [default: the trace's path with
-    /// `.trace.json` replaced by `.mp4`].
+    /// `.trace.json` or `.trace.json.gz` replaced by `.mp4`].
     #[arg(long, value_name = "OUT.mp4", conflicts_with = "check_only")]
     video: Option<PathBuf>,
     /// Only check that the replay reproduces the recorded outcome bit for bit; render and
@@ -61,9 +63,10 @@ pub(crate) fn replay(args: ReplayArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// `DIR/<key>.trace.json` → `DIR/<key>.mp4`.
+/// `DIR/<key>.trace.json` (or `.trace.json.gz`) → `DIR/<key>.mp4`.
 fn default_video(trace: &Path) -> PathBuf {
     let name = trace.file_name().and_then(|n| n.to_str()).unwrap_or("episode");
+    let name = name.strip_suffix(".gz").unwrap_or(name);
     let stem = name
         .strip_suffix(".trace.json")
         .or_else(|| name.strip_suffix(".json"))

@@ -25,6 +25,7 @@ use crate::policy::{
 };
 use crate::runner::{Decision, EpisodeOutcome, RunOptions, TaskRecord, ran_out_of_budget};
 
+pub mod gzip;
 mod number;
 mod replay;
 
@@ -236,16 +237,30 @@ impl Trace {
         serde_json::from_slice(bytes).map_err(|e| ReplayError::Format(format!("trace: {e}")))
     }
 
+    /// The trace as gzipped JSON, the form workers upload and the server stores (an oracle
+    /// episode's 218 KB of JSON is about 31 KB gzipped).
+    pub fn to_json_gz(&self) -> Vec<u8> {
+        gzip::compress(&self.to_json())
+    }
+
+    /// A trace from JSON or gzipped JSON (told apart by the gzip magic number).
+    pub fn from_bytes(bytes: &[u8]) -> Result<Trace, ReplayError> {
+        match gzip::is_gzip(bytes) {
+            true => Trace::from_json(&gzip::decompress(bytes).map_err(ReplayError::Format)?),
+            false => Trace::from_json(bytes),
+        }
+    }
+
     /// Write the trace to `path`.
     pub fn save(&self, path: &Path) -> Result<(), String> {
         std::fs::write(path, self.to_json()).map_err(|e| format!("writing the trace {}: {e}", path.display()))
     }
 
-    /// Read the trace at `path`.
+    /// Read the trace at `path`: JSON, or gzipped JSON as the server serves it.
     pub fn load(path: &Path) -> Result<Trace, ReplayError> {
         let bytes = std::fs::read(path)
             .map_err(|e| ReplayError::Format(format!("reading {}: {e}", path.display())))?;
-        Trace::from_json(&bytes).map_err(|e| ReplayError::Format(format!("{}: {e}", path.display())))
+        Trace::from_bytes(&bytes).map_err(|e| ReplayError::Format(format!("{}: {e}", path.display())))
     }
 }
 
