@@ -23,6 +23,7 @@ mod replay_cmd;
 mod serve_cmd;
 mod sim_cmd;
 mod submission_cmd;
+mod submission_trace;
 mod submission_view;
 mod worker_cmd;
 

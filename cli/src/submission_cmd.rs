@@ -1,6 +1,7 @@
 //! `kitchen-r submission show ID [--json]` and `kitchen-r submission wait ID [--timeout S]`: a
 //! submission's state, its latest run's progress and results, as `GET /api/v1/submissions/{id}`
-//! gives them to its team (or the organiser).
+//! gives them to its team (or the organiser); `kitchen-r submission trace ID KEY` downloads an
+//! episode's trace (`crate::submission_trace`).
 //!
 //! Exit codes (the Python client in `starter-kit/` mirrors them): 0 when the run finished (or,
 //! for `show`, whenever the submission could be read); 1 on any error, a refused request, or a
@@ -55,6 +56,20 @@ enum SubmissionCommand {
         #[command(flatten)]
         auth: Auth,
     },
+    /// Download one episode's trace (gzipped JSON: the episode's configuration and every answer
+    /// of the policy), which `kitchen-r replay FILE` reproduces bit for bit into a video. Dev
+    /// episodes of the team's own submissions (the organiser: every episode).
+    Trace {
+        /// The submission's id.
+        id: i64,
+        /// The episode's key, e.g. `dev-0001` (`submission show --json` lists them).
+        episode_key: String,
+        /// Where to write it [default: `<EPISODE_KEY>.trace.json.gz`].
+        #[arg(short, long, value_name = "FILE")]
+        output: Option<std::path::PathBuf>,
+        #[command(flatten)]
+        auth: Auth,
+    },
 }
 
 #[derive(Args, Debug)]
@@ -88,6 +103,12 @@ pub(crate) fn submission(args: SubmissionArgs) -> anyhow::Result<()> {
             let snap = runtime()?.block_on(wait(&reqwest::Client::new(), &auth, id, timeout))?;
             finish(&snap, &auth.server, json)
         }
+        SubmissionCommand::Trace {
+            id,
+            episode_key,
+            output,
+            auth,
+        } => crate::submission_trace::download(id, &episode_key, output, &auth),
     }
 }
 

@@ -96,6 +96,7 @@ impl JobSpec {
             policy_episode_id: policy_episode_id.to_string(),
             // Set at lease from `[video]` (grpc_worker), not stored with the job.
             record_video: false,
+            video_on_demand: false,
             video_max_bytes: 0,
             privileged_observations: (match self.privileged_observations {
                 None => pb::PrivilegedScope::None,

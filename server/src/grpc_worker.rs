@@ -13,6 +13,7 @@ use crate::episodes::TaskOutcome;
 use crate::grpc::caller;
 use crate::service::AppState;
 use crate::service::jobs::{LeasedJob, Report};
+use crate::service::renders::LeasedRender;
 
 #[derive(Debug, Clone)]
 pub(crate) struct WorkerService {
@@ -32,13 +33,16 @@ impl WorkerService {
 
 /// A leased job on the wire; whether to record a video is the server's `[video]` setting now,
 /// not stored with the job, so the organiser can turn it off for queued work too. `test` says
-/// the episode is of the test split (recorded only with `[video] test_split`).
+/// the episode is of the test split (recorded only with `[video] test_split`). The video is
+/// always wanted on demand (issue #26): the worker uploads the trace, and a render job makes
+/// the video when it is first asked for.
 fn job(j: LeasedJob, video: &crate::config::VideoConfig, store_ok: bool, test: bool) -> pb::Job {
     let mut episode = j.spec.episode_proto(&j.policy_episode_id);
     episode.record_video = video.enabled
         && store_ok
         && (video.test_split || !test)
         && episode.mode == pb::EvalMode::Online as i32;
+    episode.video_on_demand = episode.record_video;
     episode.video_max_bytes = video.max_bytes;
     pb::Job {
         job_id: j.id,
@@ -48,6 +52,36 @@ fn job(j: LeasedJob, video: &crate::config::VideoConfig, store_ok: bool, test: b
         episode_key: j.episode_key,
         episode: Some(episode),
         policy: Some(j.spec.endpoint_proto()),
+        render: None,
+    }
+}
+
+/// A render job on the wire (`Job.render`): the trace and the stored result to check against.
+fn render_job(r: LeasedRender, video: &crate::config::VideoConfig) -> pb::Job {
+    pb::Job {
+        job_id: r.id,
+        attempt: r.attempt,
+        lease_expires_at_ms: r.lease_expires_at_ms,
+        run_id: r.run_id,
+        episode_key: r.episode_key,
+        episode: None,
+        policy: None,
+        render: Some(pb::RenderJob {
+            trace_gz: r.trace_gz,
+            expected: r.expected.iter().map(task_proto).collect(),
+            video_max_bytes: video.max_bytes,
+        }),
+    }
+}
+
+fn task_proto(t: &TaskOutcome) -> pb::TaskResult {
+    pb::TaskResult {
+        index: t.index,
+        step: t.step.clone(),
+        success: t.success,
+        completion_time_s: t.completion_time_s,
+        failure_reason: t.failure_reason.clone(),
+        ..Default::default()
     }
 }
 
@@ -56,19 +90,19 @@ impl Worker for WorkerService {
     async fn lease(&self, req: Request<pb::LeaseRequest>) -> Result<Response<pb::LeaseResponse>, Status> {
         let worker = caller(&req)?.worker()?;
         let m = req.into_inner();
-        let jobs = (self.state)
-            .lease(worker, &m.worker_id, m.max_jobs, m.wait_ms)
+        let (jobs, render) = (self.state)
+            .lease_work(worker, &m.worker_id, m.max_jobs, m.wait_ms, true)
             .await?;
         let store_ok = self.state.video_dir().is_some();
         let video = &self.state.config().video;
-        Ok(Response::new(pb::LeaseResponse {
-            jobs: (jobs.into_iter())
-                .map(|j| {
-                    let test = self.state.content().is_test(&j.spec.instruction_id);
-                    job(j, video, store_ok, test)
-                })
-                .collect(),
-        }))
+        let mut jobs: Vec<pb::Job> = (jobs.into_iter())
+            .map(|j| {
+                let test = self.state.content().is_test(&j.spec.instruction_id);
+                job(j, video, store_ok, test)
+            })
+            .collect();
+        jobs.extend(render.map(|r| render_job(r, video)));
+        Ok(Response::new(pb::LeaseResponse { jobs }))
     }
 
     async fn heartbeat(
@@ -77,9 +111,18 @@ impl Worker for WorkerService {
     ) -> Result<Response<pb::HeartbeatResponse>, Status> {
         let worker = caller(&req)?.worker()?;
         let m = req.into_inner();
-        let out = (self.state)
-            .heartbeat(worker, &m.worker_id, m.job_id, m.attempt)
-            .await?;
+        let out = match m.render {
+            true => {
+                (self.state)
+                    .render_heartbeat(worker, m.worker_id.trim(), m.job_id, m.attempt, m.progress)
+                    .await?
+            }
+            false => {
+                (self.state)
+                    .heartbeat(worker, &m.worker_id, m.job_id, m.attempt)
+                    .await?
+            }
+        };
         Ok(Response::new(pb::HeartbeatResponse {
             lease_expires_at_ms: out.lease_expires_at_ms.unwrap_or(0),
             cancelled: out.lease_expires_at_ms.is_none(),
@@ -133,6 +176,27 @@ impl Worker for WorkerService {
         caller(&req)?.worker()?;
         let (sha256, bytes) = upload::receive(&self.state, req.into_inner()).await?;
         Ok(Response::new(pb::UploadVideoResponse { sha256, bytes }))
+    }
+
+    async fn upload_trace(
+        &self,
+        req: Request<tonic::Streaming<pb::TraceChunk>>,
+    ) -> Result<Response<pb::UploadTraceResponse>, Status> {
+        caller(&req)?.worker()?;
+        let (sha256, bytes) = upload::receive_trace(&self.state, req.into_inner()).await?;
+        Ok(Response::new(pb::UploadTraceResponse { sha256, bytes }))
+    }
+
+    async fn fail_render(
+        &self,
+        req: Request<pb::FailRenderRequest>,
+    ) -> Result<Response<pb::FailRenderResponse>, Status> {
+        let worker = caller(&req)?.worker()?;
+        let m = req.into_inner();
+        let accepted = (self.state)
+            .fail_render(worker, m.worker_id.trim(), m.render_id, m.attempt, &m.error)
+            .await?;
+        Ok(Response::new(pb::FailRenderResponse { accepted }))
     }
 }
 

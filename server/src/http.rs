@@ -68,6 +68,10 @@ pub(crate) fn router(state: AppState) -> Router {
             "/api/v1/submissions/{id}/episodes/{episode_key}/video.mp4",
             get(video::api_video),
         )
+        .route(
+            "/api/v1/submissions/{id}/episodes/{episode_key}/trace",
+            get(video::api_trace),
+        )
         .route("/api/v1/leaderboard", get(leaderboard))
         .route("/api/v1/admin/resimulate", post(resimulate))
         .route("/api/v1/admin/stats", get(admin_stats))

@@ -32,6 +32,7 @@ mod plan_uploads;
 pub(crate) mod policies;
 pub(crate) mod portal;
 mod progress;
+pub(crate) mod renders;
 mod rescore;
 mod secrets;
 pub(crate) mod sessions;

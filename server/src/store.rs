@@ -21,9 +21,11 @@ mod compact;
 mod packed;
 pub(crate) mod portal;
 pub(crate) mod queue;
+pub(crate) mod renders;
 pub(crate) mod runs;
 pub(crate) mod secrets;
 pub(crate) mod sessions;
+pub(crate) mod traces;
 pub(crate) mod videos;
 
 use std::path::Path;

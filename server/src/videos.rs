@@ -11,7 +11,12 @@
 //! budget (`crate::service::video_budget`), and by the sweep, which deletes rows past retention.
 //! The server is the only writer of its video directory (one replica).
 //!
-//! Who sees a video is the path plot's rule (`AppState::episode_plot`), widened for the
+//! Videos on demand (issue #26): workers upload each episode's trace instead of its video
+//! (`<dir>/traces/<aa>/<sha256>.json.gz`, rows in `episode_traces`, the same retention), and the
+//! video is rendered from it by a worker when first asked for ([`traces`],
+//! `crate::service::renders`); the rendered file is then stored and linked as any video.
+//!
+//! Who sees a video (or a trace) is the path plot's rule (`AppState::episode_plot`), widened for the
 //! organiser: a team sees its own dev-split policy submissions' videos; the organiser sees every
 //! video, test split included. Test-split videos are recorded and stored, but a participant
 //! never gets them (they show the hidden plan being executed). Anything else is 404.
@@ -32,7 +37,7 @@ use crate::store;
 const SWEEP_EVERY: Duration = Duration::from_secs(3600);
 const DAY_MS: i64 = 86_400_000;
 
-pub(crate) use incoming::{Complete, Incoming, UploadError, file_path};
+pub(crate) use incoming::{Complete, Incoming, UploadError, file_path, trace_path};
 use incoming::{clear_partial, tmp_dir};
 
 /// A stored video to serve.
@@ -49,8 +54,10 @@ impl AppState {
         cfg.video.enabled.then(|| cfg.video.directory(&cfg.db)).flatten()
     }
 
-    /// The video of one episode of a submission's latest run; see the module doc for who may
-    /// see it. Anything else is not found.
+    /// The stored video of one episode of a submission's latest run, for whoever may see it;
+    /// anything else (no video stored yet, too) is not found. The HTTP routes ask
+    /// `AppState::video_or_render`, which also renders.
+    #[cfg(test)]
     pub(crate) async fn episode_video(
         &self,
         caller: &Caller,
@@ -59,25 +66,48 @@ impl AppState {
     ) -> Result<StoredVideo, ServiceError> {
         let not_found =
             || ServiceError::not_found(format!("a video of episode {episode_key:?} of submission {id}"));
-        let visible = self.visible_submission(caller, id).await?;
-        let dir = self.video_dir().ok_or_else(not_found)?;
-        // Test-split videos are the organiser's alone.
-        let (sub, _) = visible
-            .filter(|(s, organiser)| {
-                s.kind == SubmissionKind::Policy && (*organiser || s.split == Split::Dev.as_str())
-            })
-            .ok_or_else(not_found)?;
-        let run = store::latest_run(self.read_pool(), sub.id)
+        let (dir, run) = self.media_run(caller, id).await?.ok_or_else(not_found)?;
+        self.stored_video(&dir, run, episode_key)
             .await?
-            .ok_or_else(not_found)?;
-        let (sha256, _) = store::videos::video(self.read_pool(), run.episodes_run(), episode_key)
-            .await?
-            .ok_or_else(not_found)?;
-        let path = file_path(&dir, &sha256);
-        if !tokio::fs::try_exists(&path).await.unwrap_or(false) {
-            return Err(not_found());
+            .ok_or_else(not_found)
+    }
+
+    /// The stored video of `(run, key)`, when its file is there.
+    pub(crate) async fn stored_video(
+        &self,
+        dir: &Path,
+        run: i64,
+        key: &str,
+    ) -> Result<Option<StoredVideo>, ServiceError> {
+        let Some((sha256, _)) = store::videos::video(self.read_pool(), run, key).await? else {
+            return Ok(None);
+        };
+        let path = file_path(dir, &sha256);
+        match tokio::fs::try_exists(&path).await.unwrap_or(false) {
+            true => Ok(Some(StoredVideo { path, sha256 })),
+            false => Ok(None),
         }
-        Ok(StoredVideo { path, sha256 })
+    }
+
+    /// The video directory and the run whose episodes' media (video, trace) `caller` may have
+    /// of submission `id` (see the module doc); `None` for anything else.
+    pub(crate) async fn media_run(
+        &self,
+        caller: &Caller,
+        id: i64,
+    ) -> Result<Option<(PathBuf, i64)>, ServiceError> {
+        let visible = self.visible_submission(caller, id).await?;
+        let Some(dir) = self.video_dir() else {
+            return Ok(None);
+        };
+        // Test-split media are the organiser's alone.
+        let Some((sub, _)) = visible.filter(|(s, organiser)| {
+            s.kind == SubmissionKind::Policy && (*organiser || s.split == Split::Dev.as_str())
+        }) else {
+            return Ok(None);
+        };
+        let run = store::latest_run(self.read_pool(), sub.id).await?;
+        Ok(run.map(|r| (dir, r.episodes_run())))
     }
 
     /// The episodes of `run` with a video row (none when videos are off): `None` for a stored
@@ -104,7 +134,8 @@ impl AppState {
         }
         let before = now - i64::from(cfg.retention_days) * DAY_MS;
         let orphans = store::videos::expire(self.pool(), before).await?;
-        Ok(self.delete_unlinked(&dir, orphans).await)
+        let traces = store::traces::expire(self.pool(), before).await?;
+        Ok(self.delete_unlinked(&dir, orphans).await + self.delete_unlinked_traces(&dir, traces).await)
     }
 
     /// Delete the stored files that no row names: left by a process killed between placing a
@@ -199,3 +230,4 @@ pub(crate) async fn sweeper(state: AppState, mut stop: tokio::sync::watch::Recei
 mod incoming;
 #[cfg(test)]
 pub(crate) mod tests;
+mod traces;

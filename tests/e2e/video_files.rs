@@ -86,6 +86,7 @@ fn first_chunk(job: &pb::Job, data: Vec<u8>, total: u64) -> pb::VideoChunk {
         worker_id: "hand-worker".into(),
         total_bytes: total,
         data,
+        render: false,
     }
 }
 

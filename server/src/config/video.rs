@@ -1,5 +1,6 @@
-//! `[video]`: episode videos (issue #15). The organiser decides centrally: the setting travels
-//! to the workers with every leased job (`EpisodeSpec.record_video`, `video_max_bytes`).
+//! `[video]`: episode videos (issue #15), rendered on demand from traces (issue #26). The
+//! organiser decides centrally: the setting travels to the workers with every leased job
+//! (`EpisodeSpec.record_video`, `video_on_demand`, `video_max_bytes`).
 
 use std::path::PathBuf;
 
@@ -10,17 +11,17 @@ use super::ConfigError;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct VideoConfig {
-    /// Workers record a video of every online dev-split episode and upload it; false: none is
-    /// recorded, and stored ones are no longer served.
+    /// Workers record the trace of every online dev-split episode and upload it; its video is
+    /// rendered from it by a worker when first asked for. false: nothing is recorded, and stored
+    /// videos are no longer served.
     pub enabled: bool,
-    /// Record test-split episodes too (shown to the organiser only). Off by default: a video
-    /// costs about 13 s of a core per episode (README, "Episode video"), and a test run is the
-    /// contest's largest, run by every team at the deadline.
+    /// Record test-split episodes' traces too (their videos shown to the organiser only). Off by
+    /// default: a test run is the contest's largest, run by every team at the deadline.
     pub test_split: bool,
     /// Delete videos older than this many days (a sweep runs at start and every hour); 0 keeps
     /// them forever.
     pub retention_days: u32,
-    /// Largest video file accepted, bytes (workers do not upload a larger one).
+    /// Largest video (or gzipped trace) file accepted, bytes (workers do not upload a larger one).
     pub max_bytes: u64,
     /// Most bytes of stored video one team's episodes may link; an upload past it first
     /// removes that team's oldest videos (their episodes say so where the video was).

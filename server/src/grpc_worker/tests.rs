@@ -112,6 +112,7 @@ async fn lease_heartbeat_and_report_over_grpc() {
         job_id: job.job_id,
         attempt: 1,
         tasks_done: 0,
+        ..Default::default()
     };
     let out = client
         .heartbeat(with_token(hb.clone(), WORKER))

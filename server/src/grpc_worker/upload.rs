@@ -1,7 +1,9 @@
-//! `UploadVideo`: an episode video streamed in chunks after the episode's result. The first
-//! chunk names the job; the upload is accepted only for a job whose result that attempt
-//! reported, so a worker token cannot attach a file to any other episode. The announced size
-//! is booked against the storage budgets before a byte is written (`service::video_budget`).
+//! `UploadVideo` and `UploadTrace`: an episode video or trace streamed in chunks after the
+//! episode's result. The first chunk names the job; the upload is accepted only for a job whose
+//! result that attempt reported (or, for a render's video, the render lease it names), so a
+//! worker token cannot attach a file to any other episode. A video's announced size is booked
+//! against the storage budgets before a byte is written (`service::video_budget`); traces are
+//! small (tens of KB gzipped) and limited by `[video] max_bytes` only.
 
 use kitchen_r_proto::worker::v1 as pb;
 use tonic::{Status, Streaming};
@@ -24,14 +26,20 @@ pub(super) async fn receive(
         .message()
         .await?
         .ok_or_else(|| Status::invalid_argument("an empty upload: the first chunk must name the job"))?;
-    let known = store::videos::reported_job(
-        state.read_pool(),
-        first.job_id,
-        first.attempt,
-        first.run_id,
-        &first.episode_key,
-    )
-    .await
+    let (id, attempt) = (first.job_id, i64::from(first.attempt));
+    let known = match first.render {
+        true => store::renders::held(state.read_pool(), id, attempt, first.run_id, &first.episode_key).await,
+        false => {
+            store::videos::reported_job(
+                state.read_pool(),
+                id,
+                first.attempt,
+                first.run_id,
+                &first.episode_key,
+            )
+            .await
+        }
+    }
     .map_err(|e| Status::internal(e.to_string()))?;
     if !known {
         return Err(Status::failed_precondition(format!(
@@ -57,7 +65,50 @@ pub(super) async fn receive(
         .store_video(&dir, booking, run, key, file)
         .await
         .map_err(refused)?;
-    tracing::info!(run, episode = %key, bytes, sha256 = %sha, "episode video stored");
+    if first.render {
+        store::renders::done(state.pool(), id, attempt, &sha, crate::service::now_ms())
+            .await
+            .map_err(|e| Status::internal(e.to_string()))?;
+    }
+    tracing::info!(run, episode = %key, bytes, sha256 = %sha, render = first.render, "episode video stored");
+    Ok((sha, bytes))
+}
+
+/// Read a trace stream to its end, store the file and link it; returns its sha256 and size.
+pub(super) async fn receive_trace(
+    state: &AppState,
+    mut stream: Streaming<pb::TraceChunk>,
+) -> Result<(String, u64), Status> {
+    let Some(dir) = state.video_dir() else {
+        return Err(Status::failed_precondition(
+            "this server does not store episode traces (`[video] enabled` is false or it has no video directory)",
+        ));
+    };
+    let first = stream
+        .message()
+        .await?
+        .ok_or_else(|| Status::invalid_argument("an empty upload: the first chunk must name the job"))?;
+    let (run, key) = (first.run_id, first.episode_key.as_str());
+    let known = store::videos::reported_job(state.read_pool(), first.job_id, first.attempt, run, key)
+        .await
+        .map_err(|e| Status::internal(e.to_string()))?;
+    if !known {
+        return Err(Status::failed_precondition(format!(
+            "job {} attempt {} has no reported result for run {run} episode {key:?}",
+            first.job_id, first.attempt
+        )));
+    }
+    let limit = state.config().video.max_bytes;
+    let mut file = Incoming::start(&dir, first.total_bytes, limit)
+        .await
+        .map_err(refused)?;
+    file.write(&first.data).await.map_err(refused)?;
+    while let Some(chunk) = stream.message().await? {
+        file.write(&chunk.data).await.map_err(refused)?;
+    }
+    let file = file.finish().await.map_err(refused)?;
+    let (sha, bytes) = state.store_trace(&dir, run, key, file).await.map_err(refused)?;
+    tracing::info!(run, episode = %key, bytes, sha256 = %sha, "episode trace stored");
     Ok((sha, bytes))
 }
 

@@ -322,17 +322,25 @@ async fn submission_page(
         Who::Organiser(o) => Caller::Organiser(*o),
         Who::Nobody => return Ok(to_login(&format!("/submissions/{id}"))),
     };
-    let view = match s.get_submission(&caller, id).await {
+    let mut view = match s.get_submission(&caller, id).await {
         Ok(v) => v,
         Err(ServiceError::NotFound { .. }) => return Ok(not_found(&headers, &who, "such submission")),
         Err(e) => return Err(e),
     };
+    // Showing an episode asks for its video: queue the renders the page would show (issue #26).
+    if s.render_shown(&caller, id, &view).await? {
+        view = s.get_submission(&caller, id).await?;
+    }
     let running = submission::running(&view);
     let eta = (view.latest_run.as_ref())
         .and_then(|r| r.evaluation.as_ref())
         .and_then(|e| e.eta.clone());
     let title = format!("Submission {id}");
-    let refresh = running.then_some(submission::REFRESH_S);
+    let refresh = match (running, submission::rendering(&view)) {
+        (true, _) => Some(submission::REFRESH_S),
+        (false, true) => Some(submission::RENDER_REFRESH_S),
+        (false, false) => None,
+    };
     let body = submission::body(&view, eta.as_ref());
     Ok(respond(&headers, &who, StatusCode::OK, &title, refresh, &body))
 }

@@ -5,7 +5,14 @@
 //! - `GET /submissions/{id}/episodes/{key}/video.mp4`: the same by the page's cookie session
 //!   (a `<video src>` cannot send a bearer header), like the path plot's page route.
 //!
-//! Who may see which video is `AppState::episode_video`'s (see `crate::videos`). Range support:
+//! Videos on demand (issue #26): an episode with a stored trace and no video yet queues a render
+//! when its video is asked for and answers `202 Accepted` with `Retry-After` and
+//! `{"status": "queued" | "rendering", "progress": 0..1}` until the video is stored; a render
+//! that failed (the replay disagreed with the stored result) answers `409` with
+//! `{"status": "failed", "error": why, "code": "video_render_failed"}`. The trace itself is
+//! served gzipped at `.../trace` to the same callers ([`api_trace`]).
+//!
+//! Who may see which video is `AppState::media_run`'s (see `crate::videos`). Range support:
 //! one `bytes=` range (`a-b`, `a-`, `-n`) is answered 206 with `Content-Range`; a range past the
 //! end is 416 with `Content-Range: bytes */<size>`; several ranges, a malformed header, or an
 //! `If-Range` that does not match the ETag get the whole file (200), as RFC 9110 allows. Every
@@ -17,7 +24,7 @@
 use axum::body::Body;
 use axum::extract::State;
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
-use axum::response::Response;
+use axum::response::{IntoResponse, Response};
 use bytes::Bytes;
 use tokio::io::{AsyncReadExt, AsyncSeekExt};
 
@@ -25,8 +32,10 @@ use super::conditional;
 use super::extract::PathArg;
 use super::pages::session_caller;
 use crate::error::ServiceError;
+use crate::service::renders::VideoState;
 use crate::service::{AppState, Caller};
 use crate::videos::StoredVideo;
+use serde_json::json;
 
 /// Bytes read from the file per body chunk.
 const READ_CHUNK: usize = 64 << 10;
@@ -41,8 +50,61 @@ pub(super) async fn api_video(
     let id: i64 = id
         .parse()
         .map_err(|_| ServiceError::not_found(format!("submission {id:?}")))?;
-    let video = s.episode_video(&caller, id, &key).await?;
-    respond(&video, &headers).await
+    let video = s.video_or_render(&caller, id, &key).await?;
+    respond_state(video, &headers).await
+}
+
+/// `GET /api/v1/submissions/{id}/episodes/{key}/trace`: the episode's trace, gzipped JSON (what
+/// `kitchen-r replay` reads), for whoever may see its video.
+pub(super) async fn api_trace(
+    State(s): State<AppState>,
+    PathArg((id, key)): PathArg<(String, String)>,
+    caller: Caller,
+) -> Result<Response, ServiceError> {
+    let id: i64 = id
+        .parse()
+        .map_err(|_| ServiceError::not_found(format!("submission {id}")))?;
+    let trace = s.episode_trace(&caller, id, &key).await?;
+    let bytes = tokio::fs::read(&trace.path)
+        .await
+        .map_err(|e| anyhow::anyhow!("reading {}: {e}", trace.path.display()))?;
+    let name = format!(
+        "attachment; filename=\"{}.trace.json.gz\"",
+        key.replace(['"', '/', '\\'], "_")
+    );
+    Response::builder()
+        .header(header::CONTENT_TYPE, "application/gzip")
+        .header(header::CONTENT_DISPOSITION, name)
+        .header(header::ETAG, format!("\"{}\"", trace.sha256))
+        .header(header::CACHE_CONTROL, "private, max-age=3600")
+        .body(Body::from(bytes))
+        .map_err(|e| anyhow::Error::from(e).into())
+}
+
+/// Seconds a client should wait before asking again for a video being rendered.
+const RETRY_RENDER_S: u64 = 2;
+
+/// The video, or what its render is doing.
+async fn respond_state(state: VideoState, headers: &HeaderMap) -> Result<Response, ServiceError> {
+    let (status, body) = match state {
+        VideoState::Ready(video) => return respond(&video, headers).await,
+        VideoState::Rendering { leased, progress } => (
+            StatusCode::ACCEPTED,
+            json!({"status": if leased { "rendering" } else { "queued" }, "progress": progress}),
+        ),
+        VideoState::Failed(why) => {
+            let mut body = crate::error::error_body(&why, "video_render_failed");
+            body["status"] = json!("failed");
+            (StatusCode::CONFLICT, body)
+        }
+    };
+    let mut resp = (status, axum::Json(body)).into_response();
+    let h = resp.headers_mut();
+    h.insert(header::CACHE_CONTROL, HeaderValue::from_static("no-store"));
+    if status == StatusCode::ACCEPTED {
+        h.insert(header::RETRY_AFTER, HeaderValue::from(RETRY_RENDER_S));
+    }
+    Ok(resp)
 }
 
 /// The page route: the team (or organiser console) cookie, or a bearer header.
@@ -57,8 +119,8 @@ pub(super) async fn page_video(
         .await?
         .ok_or_else(not_found)?;
     let sub = id.parse::<i64>().map_err(|_| not_found())?;
-    let video = s.episode_video(&caller, sub, &key).await?;
-    respond(&video, &headers).await
+    let video = s.video_or_render(&caller, sub, &key).await?;
+    respond_state(video, &headers).await
 }
 
 /// What a `Range` header asks of a file of `len` bytes.

@@ -20,6 +20,7 @@ use tokio::time::Instant;
 
 use self::checks::MAX_REASON_CHARS;
 use super::metrics::record;
+use super::renders::LeasedRender;
 use super::{AppState, WorkerCred, now_ms};
 use crate::episodes::{JobSpec, TaskOutcome};
 use crate::error::ServiceError;
@@ -94,18 +95,36 @@ impl AppState {
         self.inner.jobs_ready.notify_waiters();
     }
 
-    fn lease_ms(&self) -> i64 {
+    pub(super) fn lease_ms(&self) -> i64 {
         i64::try_from(self.config().control.lease_s.saturating_mul(1000)).unwrap_or(i64::MAX / 2)
     }
 
-    /// Claim up to `max_jobs` jobs for `worker_id`, waiting up to `wait_ms` for work.
+    /// Claim up to `max_jobs` evaluation jobs for `worker_id`, waiting up to `wait_ms` for work
+    /// (the tests' way in; workers call [`Self::lease_work`]).
+    #[cfg(test)]
     pub(crate) async fn lease(
+        &self,
+        cred: WorkerCred,
+        worker_id: &str,
+        max_jobs: u32,
+        wait_ms: u32,
+    ) -> Result<Vec<LeasedJob>, ServiceError> {
+        Ok(self
+            .lease_work(cred, worker_id, max_jobs, wait_ms, false)
+            .await?
+            .0)
+    }
+
+    /// As [`Self::lease`]; with `renders`, a video render (`super::renders`) when no evaluation
+    /// job is queued: the lowest priority, one per call.
+    pub(crate) async fn lease_work(
         &self,
         _: WorkerCred,
         worker_id: &str,
         max_jobs: u32,
         wait_ms: u32,
-    ) -> Result<Vec<LeasedJob>, ServiceError> {
+        renders: bool,
+    ) -> Result<(Vec<LeasedJob>, Option<LeasedRender>), ServiceError> {
         let worker = validate_worker_id(worker_id)?;
         if !(1..=MAX_JOBS_PER_LEASE).contains(&max_jobs) {
             return Err(ServiceError::BadRequest(format!(
@@ -121,7 +140,7 @@ impl AppState {
             notified.as_mut().enable();
             // No new leases while stopping: the results could not be reported to this process.
             if self.inner.stopping.load(std::sync::atomic::Ordering::SeqCst) {
-                return Ok(Vec::new());
+                return Ok((Vec::new(), None));
             }
             let now = now_ms();
             // A read first: idle workers polling must not take the write lock every time.
@@ -140,14 +159,18 @@ impl AppState {
                 }
                 false => Vec::new(),
             };
-            if !claimed.is_empty() || Instant::now() >= deadline {
+            let render = match renders && claimed.is_empty() {
+                true => self.claim_render(worker).await?,
+                false => None,
+            };
+            if !claimed.is_empty() || render.is_some() || Instant::now() >= deadline {
                 self.worker_seen(worker);
                 self.record_queue_waits(&claimed, now).await;
                 let jobs = self.hand_out(claimed, worker).await?;
                 for j in &jobs {
                     tracing::info!(job = j.id, run = j.run_id, episode = %j.episode_key, attempt = j.attempt, worker, "job leased");
                 }
-                return Ok(jobs);
+                return Ok((jobs, render));
             }
             let _ = tokio::time::timeout_at(deadline.min(Instant::now() + POLL_INTERVAL), notified).await;
         }
@@ -306,6 +329,7 @@ impl AppState {
     /// had all its attempts.
     pub(crate) async fn reap_expired(&self, now: i64) -> Result<ReapReport, ServiceError> {
         let mut report = ReapReport::default();
+        self.reap_renders(now).await?;
         // A cheap read first, so the periodic reaper takes the write lock only when needed.
         if queue::expired(&mut *self.pool().acquire().await?, now)
             .await?
@@ -333,6 +357,11 @@ impl AppState {
         self.after_queue_write(report.runs_finished > 0);
         tracing::info!(?report, "expired leases reaped");
         Ok(report)
+    }
+
+    /// Wake long-polling leases: there is work (a render was queued).
+    pub(crate) fn wake_leases(&self) {
+        self.inner.jobs_ready.notify_waiters();
     }
 
     /// Wake long-polling leases (a job was requeued or a concurrency slot freed) and drop the

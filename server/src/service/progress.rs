@@ -98,9 +98,15 @@ pub(crate) struct EpisodeView {
     /// The top-down plot of where the robot went (dev split, online episodes with a stored path).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub plot_url: Option<String>,
-    /// The episode video (dev split, online episodes with a stored video; `[video]`).
+    /// Where the episode video is served (dev split, online episodes with a stored video or a
+    /// trace to render it from; `[video]`). Without a stored video, asking for it renders it
+    /// first: `202` with the render's progress until it is ready (`video.status`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub video_url: Option<String>,
+    /// The episode video's state: ready, available (rendered when asked for), queued,
+    /// rendering (with progress) or failed (with why).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub video: Option<super::renders::VideoView>,
     /// Why the episode has no video any more, where `video_url` would be: removed to keep a
     /// storage budget (`[video] team_max_bytes` or `total_max_bytes`), or not stored.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -117,9 +123,13 @@ impl AppState {
         let source = run.episodes_run();
         let counts = run_store::job_counts(self.read_pool(), source).await?;
         let results = run_store::results(self.read_pool(), source).await?;
-        let mut videos = match hidden {
+        let mut notes = match hidden {
             true => Default::default(),
             false => self.video_keys(source).await?,
+        };
+        let mut videos = match hidden {
+            true => Default::default(),
+            false => self.video_views(source, |k| video_url(submission, k)).await?,
         };
         let state = match run.state {
             RunState::Finished => "finished",
@@ -136,9 +146,17 @@ impl AppState {
                     e.plot_url = Some(plot_url(submission, &e.key));
                 }
                 match videos.remove(&e.key) {
-                    Some(None) => e.video_url = Some(video_url(submission, &e.key)),
-                    Some(Some(note)) => e.video_note = Some(note),
-                    None => {}
+                    Some(v) if v.status == "failed" => {
+                        let why = v.error.clone().unwrap_or_default();
+                        e.video_note = Some(format!("no video: {why}"));
+                        e.video = Some(v);
+                    }
+                    Some(v) => {
+                        e.video_url = v.url.clone();
+                        e.video = Some(v);
+                    }
+                    // No video and no trace to render one from: why, when known.
+                    None => e.video_note = notes.remove(&e.key).flatten(),
                 }
                 e
             })
@@ -270,6 +288,7 @@ fn episode_view(r: ResultRow) -> EpisodeView {
         log_tail: Some(r.log_tail),
         plot_url: None,
         video_url: None,
+        video: None,
         video_note: None,
     }
 }
@@ -293,6 +312,7 @@ mod tests {
             log_tail: None,
             plot_url: None,
             video_url: None,
+            video: None,
             video_note: None,
         };
         let hidden = failure_counts(std::slice::from_ref(&given_up), true);

@@ -172,6 +172,40 @@ impl AppState {
         Ok((sha, bytes))
     }
 
+    /// The lock that orders every decision on a file of the video directory (traces too).
+    pub(crate) async fn file_turn(&self) -> tokio::sync::MutexGuard<'_, ()> {
+        self.inner.videos.turn.lock().await
+    }
+
+    /// Link the stored video file `sha` to `(run, key)` (a render of the same trace made it
+    /// already). Not booked against the budgets: the row counts from now on, and the next upload
+    /// evicts what the budgets need gone. `false` when the file is gone.
+    pub(crate) async fn link_stored_video(
+        &self,
+        dir: &Path,
+        run: i64,
+        key: &str,
+        sha: &str,
+    ) -> Result<bool, ServiceError> {
+        let Some((team, _)) = store::team_of_run(self.read_pool(), run).await? else {
+            return Ok(false);
+        };
+        let _turn = self.inner.videos.turn.lock().await;
+        let Ok(meta) = tokio::fs::metadata(file_path(dir, sha)).await else {
+            return Ok(false);
+        };
+        let row = Row {
+            run,
+            key,
+            team,
+            now: now_ms(),
+        };
+        let replaced = store::link(self.pool(), row, sha, meta.len()).await?;
+        self.delete_unlinked_locked(dir, replaced.into_iter().collect())
+            .await;
+        Ok(true)
+    }
+
     /// Set the stored-bytes gauge from the database (nothing without a recorder).
     pub(crate) async fn record_stored_video_bytes(&self) {
         if !m::installed() {

@@ -16,14 +16,22 @@ pub(crate) fn file_path(dir: &Path, sha256: &str) -> PathBuf {
         .join(format!("{sha256}.mp4"))
 }
 
+/// Where the trace file with hash `sha256` lives under the video directory `dir`:
+/// `<dir>/traces/<aa>/<sha256>.json.gz`, beside the videos, so the same `tmp/` and rename serve.
+pub(crate) fn trace_path(dir: &Path, sha256: &str) -> PathBuf {
+    dir.join("traces")
+        .join(&sha256[..2.min(sha256.len())])
+        .join(format!("{sha256}.json.gz"))
+}
+
 /// Why an upload was not stored.
 #[derive(Debug, thiserror::Error)]
 pub(crate) enum UploadError {
-    #[error("the video is {got} bytes, over the announced {announced}")]
+    #[error("the file is {got} bytes, over the announced {announced}")]
     Longer { got: u64, announced: u64 },
     #[error("the stream ended after {got} of {announced} bytes")]
     Short { got: u64, announced: u64 },
-    #[error("the video is {size} bytes, over the server's limit of {limit} (`[video] max_bytes`)")]
+    #[error("the file is {size} bytes, over the server's limit of {limit} (`[video] max_bytes`)")]
     TooLarge { size: u64, limit: u64 },
     /// A budget cannot hold the video even with every older video removed: uploads in flight
     /// hold the rest of it. The message says which budget.
@@ -146,8 +154,13 @@ pub(crate) struct Complete {
 impl Complete {
     /// Move the file to its content name under `dir` (kept as it is when that file is there
     /// already: same name, same bytes).
-    pub(crate) async fn place(mut self, dir: &Path) -> Result<PathBuf, UploadError> {
+    pub(crate) async fn place(self, dir: &Path) -> Result<PathBuf, UploadError> {
         let dest = file_path(dir, &self.sha256);
+        self.place_at(dest).await
+    }
+
+    /// Move the file to `dest` (its content name), kept as it is when that file is there.
+    pub(crate) async fn place_at(mut self, dest: PathBuf) -> Result<PathBuf, UploadError> {
         if let Some(parent) = dest.parent() {
             tokio::fs::create_dir_all(parent).await?;
         }

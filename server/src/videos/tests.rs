@@ -7,6 +7,7 @@ use super::*;
 use crate::testutil::{FakeProbe, Fixture, WORKER, fixture};
 
 mod budget;
+mod renders;
 
 /// `(job id, attempt, run, key)` of every reported online job, dev run first.
 pub(super) async fn done_jobs(f: &Fixture) -> Vec<(i64, i64, i64, String)> {

@@ -37,9 +37,8 @@ use tonic::{Code, Request, Status};
 use tracing::{Instrument, error, info, info_span, warn};
 
 use super::cores::Cores;
-use super::execute::{JobControl, execute_job_recording};
+use super::execute::{Executed, JobControl, execute_job_traced};
 use super::{JobContext, WorkerConfig, WorkerError};
-use kitchen_r_record::video::episode::RecordedVideo;
 
 /// How long a shutting-down worker keeps trying to hand in its last result.
 const SHUTDOWN_GRACE: Duration = Duration::from_secs(5);
@@ -70,12 +69,13 @@ pub(crate) type Client = WorkerClient<InterceptedService<Channel, Auth>>;
 
 /// A worker ready to run: configuration checked, assets and dataset loaded.
 pub struct Worker {
-    id: String,
+    pub(super) id: String,
     cfg: WorkerConfig,
-    /// One permit per slot: the episodes in flight share them while they simulate.
-    cores: Cores,
-    ctx: Arc<JobContext>,
-    client: Client,
+    /// One permit per slot: the episodes in flight share them while they simulate (and a
+    /// render job while it replays, `super::render`).
+    pub(super) cores: Cores,
+    pub(super) ctx: Arc<JobContext>,
+    pub(super) client: Client,
 }
 
 impl std::fmt::Debug for Worker {
@@ -242,7 +242,10 @@ impl Worker {
                             continue;
                         }
                         let (w, mut stop) = (self.clone(), stop.clone());
-                        jobs.spawn(async move { w.job(job, &mut stop).await });
+                        match job.render.is_some() {
+                            true => jobs.spawn(async move { w.render_job(job, &mut stop).await }),
+                            false => jobs.spawn(async move { w.job(job, &mut stop).await }),
+                        };
                     }
                 }
                 Err(s) if matches!(s.code(), Code::Unauthenticated | Code::PermissionDenied) => {
@@ -284,10 +287,13 @@ impl Worker {
             // When draining began: the episode may run until `drain + grace`.
             let mut drain = (*stop.borrow()).then(Instant::now);
             let (mut released, mut dropped) = (false, false);
-            let (result, video) = loop {
+            let (result, video, trace) = loop {
                 let cut = drain.map(|t| tokio::time::Instant::from_std(t + grace));
                 tokio::select! {
-                    r = &mut done => break r.unwrap_or_else(|_| (platform("the episode thread panicked"), None)),
+                    r = &mut done => break r.map_or_else(
+                        |_| (platform("the episode thread panicked"), None, None),
+                        |e| (e.result, e.video, e.trace),
+                    ),
                     () = tokio::time::sleep(next) => {
                         next = self.heartbeat(&job, &control, &mut dropped).await;
                     }
@@ -320,7 +326,12 @@ impl Worker {
             );
             self.report(&job, result, drain.is_some(), stop).await;
             if let Some(v) = video {
-                super::upload::upload_video(&self.client, &self.id, &job, v.mp4).await;
+                // Logged inside; the result is in either way.
+                let _ = super::upload::upload_video(&self.client, &self.id, &job, v.mp4).await;
+            }
+            if let Some(t) = trace {
+                let gz = tokio::task::spawn_blocking(move || t.to_json_gz()).await.unwrap_or_default();
+                super::upload::upload_trace(&self.client, &self.id, &job, gz).await;
             }
         }
         .instrument(span)
@@ -374,6 +385,7 @@ impl Worker {
             job_id: job.job_id,
             attempt: job.attempt,
             tasks_done: control.tasks_done(),
+            ..Default::default()
         });
         req.set_timeout(Duration::from_secs(10));
         match self.client.clone().heartbeat(req).await {
@@ -505,15 +517,12 @@ impl Pacer {
 }
 
 /// Run the episode on a thread of its own; the receiver yields its result.
-fn spawn_episode(
-    job: pb::Job,
-    ctx: Arc<JobContext>,
-    control: JobControl,
-) -> oneshot::Receiver<(pb::EpisodeResult, Option<RecordedVideo>)> {
+fn spawn_episode(job: pb::Job, ctx: Arc<JobContext>, control: JobControl) -> oneshot::Receiver<Executed> {
     let (tx, rx) = oneshot::channel();
     let name = format!("episode-{}", job.job_id);
     let spawned = std::thread::Builder::new().name(name).spawn(move || {
-        let _ = tx.send(execute_job_recording(&job, &ctx, &control));
+        // The trace only when the job wants its video on demand (`execute_job_traced`).
+        let _ = tx.send(execute_job_traced(&job, &ctx, &control, false));
     });
     if let Err(e) = spawned {
         // `tx` went with the closure; the dropped sender reads as a platform error.
@@ -530,7 +539,7 @@ fn platform(why: &str) -> pb::EpisodeResult {
 }
 
 /// A third of the time left on the lease, within [0.5 s, 60 s].
-fn heartbeat_in(expires_at_ms: i64) -> Duration {
+pub(super) fn heartbeat_in(expires_at_ms: i64) -> Duration {
     let now = SystemTime::now()
         .duration_since(UNIX_EPOCH)
         .map_or(0, |d| d.as_millis() as i64);

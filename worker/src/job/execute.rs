@@ -162,7 +162,9 @@ pub struct Executed {
 }
 
 /// As [`execute_job_recording`]; with `trace`, also the episode's trace (`eval --trace`). Only
-/// callers that keep the trace ask for it: recording copies every chunk the policy returns.
+/// callers that keep the trace ask for it: recording copies every chunk the policy returns. A
+/// job that wants its video on demand (`record_video` and `video_on_demand`) always leaves its
+/// trace and no video.
 pub fn execute_job_traced(job: &pb::Job, ctx: &JobContext, control: &JobControl, trace: bool) -> Executed {
     let started = Instant::now();
     let mut log = Log::default();
@@ -314,11 +316,13 @@ fn run(
     };
     let mut hook = PathHook::new(watch);
     let mut tracing = None;
-    let policy: &mut dyn Policy = match trace {
+    // A video wanted on demand: the trace, which renders it later, instead of the video now.
+    let on_demand = spec.record_video && spec.video_on_demand;
+    let policy: &mut dyn Policy = match trace || on_demand {
         true => tracing.insert(TracingPolicy::new(policy)),
         false => policy,
     };
-    let (out, recording) = if spec.record_video {
+    let (out, recording) = if spec.record_video && !on_demand {
         let video = EpisodeVideo::new(&cfg.plan, n_tasks, spec.video_max_bytes as usize);
         let mut recorder = VideoHook::new(&mut hook, video);
         let out = run_episode(&mut sim, policy, &run, starts.as_deref(), &mut recorder)?;

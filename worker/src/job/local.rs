@@ -157,6 +157,8 @@ pub(crate) fn local_job(ins: &Instruction, url: &str, s: &LocalSettings, remote:
             place_targets: super::spec::place_targets(ins),
             policy_episode_id: String::new(),
             record_video: s.record.is_some(),
+            // `eval --record` wants the video now.
+            video_on_demand: false,
             video_max_bytes: 0,
             privileged_observations: super::spec::privileged_scope_to_wire(s.privileged_observations),
         }),
@@ -171,6 +173,7 @@ pub(crate) fn local_job(ins: &Instruction, url: &str, s: &LocalSettings, remote:
             quat_norm_tolerance: Some(s.run.chunk_tolerance.quat_norm),
             gripper_margin: Some(s.run.chunk_tolerance.gripper_margin),
         }),
+        render: None,
     }
 }
 

@@ -10,6 +10,7 @@ pub mod cores;
 mod execute;
 pub mod local;
 mod path;
+mod render;
 pub mod spec;
 mod upload;
 

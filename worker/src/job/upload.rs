@@ -1,33 +1,32 @@
-//! The episode video's upload (`UploadVideo`): after the result is reported, the MP4 goes to
-//! the server as a stream of chunks. Best-effort by design: the score is what matters, so a
-//! failed upload is retried a few times, logged, and given up; it never delays or changes the
-//! result, which is already in.
+//! Uploads after the result: the episode video (`UploadVideo`) or the episode trace
+//! (`UploadTrace`, videos on demand) go to the server as a stream of chunks. Best-effort by
+//! design: the score is what matters, so a failed upload is retried a few times, logged, and
+//! given up; it never delays or changes the result, which is already in. A render job's video
+//! (`VideoChunk.render`) goes the same way, and its failure is the render's.
 
+use std::future::Future;
 use std::time::Duration;
 
 use kitchen_r_proto::worker::v1 as pb;
-use tonic::Request;
+use tonic::{Request, Status};
 use tracing::{info, warn};
 
 use super::client::Client;
 
 /// Bytes per chunk (the server decodes messages of up to 1 MiB).
 pub(crate) const CHUNK: usize = 256 << 10;
-/// Tries before the video is given up.
+/// Tries before an upload is given up.
 const TRIES: u32 = 3;
 
 /// The chunks of `mp4` for `job`: the first names the job and the size, the rest carry bytes.
+/// A render job's first chunk says so (`render`).
 pub(crate) fn chunks(worker_id: &str, job: &pb::Job, mp4: &[u8]) -> Vec<pb::VideoChunk> {
-    let mut out: Vec<pb::VideoChunk> = mp4
-        .chunks(CHUNK)
+    let mut out: Vec<pb::VideoChunk> = pieces(mp4)
         .map(|data| pb::VideoChunk {
             data: data.to_vec(),
             ..Default::default()
         })
         .collect();
-    if out.is_empty() {
-        out.push(pb::VideoChunk::default());
-    }
     let first = &mut out[0];
     first.worker_id = worker_id.to_string();
     first.job_id = job.job_id;
@@ -35,26 +34,91 @@ pub(crate) fn chunks(worker_id: &str, job: &pb::Job, mp4: &[u8]) -> Vec<pb::Vide
     first.run_id = job.run_id;
     first.episode_key = job.episode_key.clone();
     first.total_bytes = mp4.len() as u64;
+    first.render = job.render.is_some();
     out
 }
 
-/// Upload `mp4`, retrying transport failures; logs the outcome and never fails.
-pub(crate) async fn upload_video(client: &Client, worker_id: &str, job: &pb::Job, mp4: Vec<u8>) {
-    let size = mp4.len();
-    let timeout = Duration::from_secs(30) + Duration::from_millis((size / 1024) as u64);
-    for attempt in 1..=TRIES {
-        let stream = tokio_stream::iter(chunks(worker_id, job, &mp4));
-        let mut req = Request::new(stream);
+/// The chunks of a gzipped trace, as [`chunks`] cuts a video.
+pub(crate) fn trace_chunks(worker_id: &str, job: &pb::Job, gz: &[u8]) -> Vec<pb::TraceChunk> {
+    let mut out: Vec<pb::TraceChunk> = pieces(gz)
+        .map(|data| pb::TraceChunk {
+            data: data.to_vec(),
+            ..Default::default()
+        })
+        .collect();
+    let first = &mut out[0];
+    first.worker_id = worker_id.to_string();
+    first.job_id = job.job_id;
+    first.attempt = job.attempt;
+    first.run_id = job.run_id;
+    first.episode_key = job.episode_key.clone();
+    first.total_bytes = gz.len() as u64;
+    out
+}
+
+/// `bytes` in [`CHUNK`]s; one empty piece for an empty file (the first chunk names the job).
+fn pieces(bytes: &[u8]) -> impl Iterator<Item = &[u8]> {
+    let empty: &[u8] = &[];
+    bytes.chunks(CHUNK).chain(bytes.is_empty().then_some(empty))
+}
+
+/// Upload `mp4`, retrying transport failures; logs the outcome. `Err` says why the video was
+/// not stored (a render job reports it as its failure).
+pub(crate) async fn upload_video(
+    client: &Client,
+    worker_id: &str,
+    job: &pb::Job,
+    mp4: Vec<u8>,
+) -> Result<(), String> {
+    let timeout = timeout_for(mp4.len());
+    let sent = with_retries("episode video", mp4.len(), || {
+        let mut req = Request::new(tokio_stream::iter(chunks(worker_id, job, &mp4)));
         req.set_timeout(timeout);
-        match client.clone().upload_video(req).await {
-            Ok(r) => {
-                let r = r.into_inner();
-                info!(bytes = r.bytes, sha256 = %r.sha256, "episode video uploaded");
-                return;
+        let mut client = client.clone();
+        async move {
+            let r = client.upload_video(req).await?.into_inner();
+            Ok((r.sha256, r.bytes))
+        }
+    });
+    sent.await
+}
+
+/// Upload a gzipped trace, as [`upload_video`] does a video.
+pub(crate) async fn upload_trace(client: &Client, worker_id: &str, job: &pb::Job, gz: Vec<u8>) {
+    let timeout = timeout_for(gz.len());
+    let sent = with_retries("episode trace", gz.len(), || {
+        let mut req = Request::new(tokio_stream::iter(trace_chunks(worker_id, job, &gz)));
+        req.set_timeout(timeout);
+        let mut client = client.clone();
+        async move {
+            let r = client.upload_trace(req).await?.into_inner();
+            Ok((r.sha256, r.bytes))
+        }
+    });
+    // Logged by `with_retries`; the result is in either way.
+    let _ = sent.await;
+}
+
+/// 30 s and a millisecond per KiB.
+fn timeout_for(size: usize) -> Duration {
+    Duration::from_secs(30) + Duration::from_millis((size / 1024) as u64)
+}
+
+/// Call `send` up to [`TRIES`] times while it fails with a retryable status.
+async fn with_retries<F, Fut>(what: &str, size: usize, mut send: F) -> Result<(), String>
+where
+    F: FnMut() -> Fut,
+    Fut: Future<Output = Result<(String, u64), Status>>,
+{
+    for attempt in 1..=TRIES {
+        match send().await {
+            Ok((sha256, bytes)) => {
+                info!(bytes, %sha256, "{what} uploaded");
+                return Ok(());
             }
             Err(s) if attempt < TRIES && super::client::retryable(&s) => {
                 warn!(
-                    "uploading the episode video failed ({:?}: {}); retrying",
+                    "uploading the {what} failed ({:?}: {}); retrying",
                     s.code(),
                     s.message()
                 );
@@ -63,14 +127,15 @@ pub(crate) async fn upload_video(client: &Client, worker_id: &str, job: &pb::Job
             Err(s) => {
                 warn!(
                     bytes = size,
-                    "the episode video was not stored ({:?}: {}); the result is not affected",
+                    "the {what} was not stored ({:?}: {}); the result is not affected",
                     s.code(),
                     s.message()
                 );
-                return;
+                return Err(format!("the server did not store the video: {}", s.message()));
             }
         }
     }
+    Err(format!("the {what} upload was not accepted"))
 }
 
 #[cfg(test)]
@@ -94,8 +159,17 @@ mod tests {
             (c[0].episode_key.as_str(), c[0].total_bytes),
             ("dev-0001", mp4.len() as u64)
         );
-        assert!(c[1].episode_key.is_empty() && c[1].job_id == 0);
+        assert!(c[1].episode_key.is_empty() && c[1].job_id == 0 && !c[0].render);
         let joined: Vec<u8> = c.iter().flat_map(|x| x.data.iter().copied()).collect();
         assert_eq!(joined, mp4);
+        let t = trace_chunks("w1", &job, &mp4[..10]);
+        assert_eq!((t.len(), t[0].total_bytes, t[0].job_id), (1, 10, 7));
+        assert_eq!(trace_chunks("w1", &job, &[]).len(), 1);
+        // A render job's video says it is one.
+        let render = pb::Job {
+            render: Some(pb::RenderJob::default()),
+            ..job
+        };
+        assert!(chunks("w1", &render, b"mp4")[0].render);
     }
 }

@@ -51,6 +51,7 @@ pub(crate) fn job(url: &str, mode: pb::EvalMode, steps: u32, privileged: bool) -
             place_targets: kitchen_r_worker::job::spec::place_targets(ins),
             policy_episode_id: "ep-0123456789abcdef01234567".into(),
             record_video: false,
+            video_on_demand: false,
             video_max_bytes: 0,
             privileged_observations: 0,
         }),
@@ -63,6 +64,7 @@ pub(crate) fn job(url: &str, mode: pb::EvalMode, steps: u32, privileged: bool) -
             max_successive_timeouts: 3,
             ..Default::default()
         }),
+        render: None,
     }
 }
 

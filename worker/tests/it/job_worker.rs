@@ -32,6 +32,12 @@ struct State {
     /// many reports had arrived when each upload began.
     videos: Vec<(pb::VideoChunk, Vec<u8>, usize)>,
     upload_calls: u32,
+    /// Episode traces uploaded (videos on demand): the first chunk and the joined bytes.
+    traces: Vec<(pb::TraceChunk, Vec<u8>)>,
+    /// Render jobs reported failed.
+    render_failures: Vec<pb::FailRenderRequest>,
+    /// Heartbeats of render leases: (render id, progress).
+    render_heartbeats: Vec<(i64, f32)>,
 }
 
 #[derive(Clone)]
@@ -79,7 +85,11 @@ impl Worker for TestWorkerServer {
     ) -> Result<Response<pb::HeartbeatResponse>, Status> {
         authed(&req)?;
         let r = req.into_inner();
-        self.0.lock().unwrap().heartbeats.push((r.job_id, r.attempt));
+        let mut s = self.0.lock().unwrap();
+        match r.render {
+            true => s.render_heartbeats.push((r.job_id, r.progress)),
+            false => s.heartbeats.push((r.job_id, r.attempt)),
+        }
         Ok(Response::new(pb::HeartbeatResponse {
             lease_expires_at_ms: now_ms() + 1_500,
             cancelled: false,
@@ -140,6 +150,36 @@ impl Worker for TestWorkerServer {
             bytes: n,
         }))
     }
+
+    async fn upload_trace(
+        &self,
+        req: Request<tonic::Streaming<pb::TraceChunk>>,
+    ) -> Result<Response<pb::UploadTraceResponse>, Status> {
+        authed(&req)?;
+        let mut stream = req.into_inner();
+        let mut first: Option<pb::TraceChunk> = None;
+        let mut bytes = Vec::new();
+        while let Some(mut c) = stream.message().await? {
+            bytes.append(&mut c.data);
+            first.get_or_insert(c);
+        }
+        let first = first.ok_or_else(|| Status::invalid_argument("empty"))?;
+        let n = bytes.len() as u64;
+        self.0.lock().unwrap().traces.push((first, bytes));
+        Ok(Response::new(pb::UploadTraceResponse {
+            sha256: String::new(),
+            bytes: n,
+        }))
+    }
+
+    async fn fail_render(
+        &self,
+        req: Request<pb::FailRenderRequest>,
+    ) -> Result<Response<pb::FailRenderResponse>, Status> {
+        authed(&req)?;
+        self.0.lock().unwrap().render_failures.push(req.into_inner());
+        Ok(Response::new(pb::FailRenderResponse { accepted: true }))
+    }
 }
 
 fn start(state: Arc<Mutex<State>>, rt: &tokio::runtime::Runtime) -> String {
@@ -193,6 +233,7 @@ fn job(id: i64, policy: &str) -> pb::Job {
             place_targets: kitchen_r_worker::job::spec::place_targets(ins),
             policy_episode_id: String::new(),
             record_video: false,
+            video_on_demand: false,
             video_max_bytes: 0,
             privileged_observations: 0,
         }),
@@ -202,6 +243,7 @@ fn job(id: i64, policy: &str) -> pb::Job {
             startup_deadline_ms: 5_000,
             ..Default::default()
         }),
+        render: None,
     }
 }
 
@@ -511,4 +553,93 @@ fn a_recorded_episode_video_is_uploaded_in_chunks_after_its_report() {
     assert_eq!(&mp4[4..8], b"ftyp");
     let log = &s.reports[0].result.as_ref().unwrap().log_tail;
     assert!(log.contains("video: 20 frames"), "{log}");
+}
+
+/// Videos on demand (issue #26): a job that wants its video on demand uploads its trace, not a
+/// video, after its report; a render job of that trace uploads the video (marked `render`) with
+/// its progress heartbeated; a render job whose stored result disagrees with the replay is
+/// reported failed and uploads nothing.
+#[test]
+fn an_on_demand_episode_uploads_its_trace_and_a_render_job_makes_its_video_or_refuses() {
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let policy = slow_still();
+    let mut on_demand = job(1, &policy.url());
+    if let Some(e) = on_demand.episode.as_mut() {
+        e.record_video = true;
+        e.video_on_demand = true;
+    }
+    let state = Arc::new(Mutex::new(State {
+        queue: vec![on_demand],
+        ..State::default()
+    }));
+    let url = start(state.clone(), &rt);
+    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+    let worker = rt.spawn(run_worker(config(&url, "worker-secret"), async {
+        let _ = stop_rx.await;
+    }));
+    let wait = |what: &str, done: &dyn Fn(&State) -> bool| {
+        let t = Instant::now();
+        while !done(&state.lock().unwrap()) {
+            assert!(t.elapsed() < Duration::from_secs(120), "{what} never happened");
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    };
+    wait("the trace upload", &|s| !s.traces.is_empty());
+    let (gz, tasks) = {
+        let s = state.lock().unwrap();
+        assert!(s.videos.is_empty(), "a video was rendered during evaluation");
+        assert_eq!(
+            s.reports.len(),
+            1,
+            "the result is reported before the trace is sent"
+        );
+        let (first, gz) = s.traces[0].clone();
+        assert_eq!(
+            (first.job_id, first.run_id, first.total_bytes),
+            (1, 1, gz.len() as u64)
+        );
+        assert_eq!(&gz[..2], &[0x1f, 0x8b], "gzipped");
+        let log = &s.reports[0].result.as_ref().unwrap().log_tail;
+        assert!(!log.contains("video:"), "{log}");
+        (gz, s.reports[0].result.as_ref().unwrap().tasks.clone())
+    };
+    let render = |id: i64, expected: Vec<pb::TaskResult>| pb::Job {
+        job_id: id,
+        attempt: 1,
+        lease_expires_at_ms: now_ms() + 1_500,
+        run_id: 1,
+        episode_key: "dev-0001".into(),
+        episode: None,
+        policy: None,
+        render: Some(pb::RenderJob {
+            trace_gz: gz.clone(),
+            expected,
+            video_max_bytes: 0,
+        }),
+    };
+    let mut tampered = tasks.clone();
+    tampered[0].success = !tampered[0].success;
+    tampered[0].completion_time_s = 1.0;
+    {
+        let mut s = state.lock().unwrap();
+        s.queue.push(render(50, tasks));
+        s.queue.push(render(51, tampered));
+    }
+    wait("the render", &|s| {
+        !s.videos.is_empty() && !s.render_failures.is_empty()
+    });
+    stop_tx.send(()).unwrap();
+    rt.block_on(worker).unwrap().unwrap();
+    let s = state.lock().unwrap();
+    let (first, mp4, _) = &s.videos[0];
+    assert!(first.render && first.job_id == 50, "{first:?}");
+    assert_eq!(&mp4[4..8], b"ftyp");
+    assert_eq!(s.videos.len(), 1, "the refused render uploaded a video");
+    let failed = &s.render_failures[0];
+    assert_eq!(failed.render_id, 51);
+    assert!(
+        failed.error.contains("replay disagrees with the stored result"),
+        "{}",
+        failed.error
+    );
 }

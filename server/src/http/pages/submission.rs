@@ -14,6 +14,9 @@ use crate::service::{EpisodeView, PolicyRunView, SubmissionView};
 
 /// Seconds between reloads while the evaluation is queued or running.
 pub(super) const REFRESH_S: u32 = 10;
+/// Seconds between reloads while an episode's video renders (the pages run no script, so a
+/// reload is how "Rendering video… N %" advances and the player appears).
+pub(super) const RENDER_REFRESH_S: u32 = 3;
 
 /// Whether the page should reload itself (an evaluation still going).
 pub(super) fn running(v: &SubmissionView) -> bool {
@@ -23,6 +26,18 @@ pub(super) fn running(v: &SubmissionView) -> bool {
         .and_then(|r| r.evaluation.as_ref())
         .map(|e| e.state);
     matches!(state, Some("queued" | "running"))
+}
+
+/// Whether an episode's video is being rendered for the page (issue #26).
+pub(super) fn rendering(v: &SubmissionView) -> bool {
+    let evaluation = v.latest_run.as_ref().and_then(|r| r.evaluation.as_ref());
+    evaluation.is_some_and(|e| e.episodes.iter().any(|ep| video_pending(ep).is_some()))
+}
+
+/// The share done of the episode's video render, while it is queued or rendering.
+fn video_pending(ep: &EpisodeView) -> Option<f64> {
+    let v = ep.video.as_ref()?;
+    matches!(v.status.as_str(), "available" | "queued" | "rendering").then_some(v.progress)
 }
 
 fn state_words(state: &str) -> &'static str {
@@ -273,12 +288,20 @@ fn episode_row(ep: &EpisodeView) -> String {
 /// The episode's video and path plot (issue #15, items 1 and 2), placed under the episode's
 /// key; only what exists is shown (neither ever on the test split: the view has no URL there).
 /// Both are served to the page's session at the API path less its `/api/v1` prefix. A video
-/// removed to keep a storage budget shows its note instead of a player (never a broken one).
+/// removed to keep a storage budget, or whose render failed, shows its note instead of a player
+/// (never a broken one), and one being rendered says so with its progress (issue #26).
 fn media(ep: &EpisodeView) -> String {
     let page = |url: &str| escape(url.strip_prefix("/api/v1").unwrap_or(url));
     let key = escape(&ep.key);
     let mut out = String::new();
-    if let Some(video) = ep.video_url.as_deref() {
+    if let Some(progress) = video_pending(ep) {
+        // Never a player before its file exists: the page reloads until the render is done.
+        let _ = write!(
+            out,
+            "<br><span class=\"muted video-rendering\" role=status>Rendering video… {:.0} %</span>",
+            (progress * 100.0).clamp(0.0, 100.0)
+        );
+    } else if let Some(video) = ep.video_url.as_deref() {
         let src = page(video);
         // `preload=metadata`: a page of many episodes fetches only each file's header (the
         // server answers byte ranges) until one is played.
@@ -324,6 +347,7 @@ mod tests {
             log_tail: None,
             plot_url: None,
             video_url: video_url.map(str::to_string),
+            video: None,
             video_note: video_note.map(str::to_string),
         }
     }
@@ -339,5 +363,20 @@ mod tests {
             None,
         ));
         assert!(html.contains("<video"), "{html}");
+    }
+
+    #[test]
+    fn a_video_being_rendered_shows_its_progress_instead_of_a_player() {
+        let url = "/api/v1/submissions/1/episodes/dev-0001/video.mp4";
+        let mut ep = episode(Some(url), None);
+        ep.video = Some(crate::service::renders::VideoView {
+            status: "rendering".into(),
+            progress: 0.42,
+            url: Some(url.into()),
+            error: None,
+        });
+        let html = media(&ep);
+        assert!(!html.contains("<video"), "{html}");
+        assert!(html.contains("Rendering video… 42 %"), "{html}");
     }
 }

@@ -1,0 +1,315 @@
+//! Videos rendered on demand (issue #26): an online episode's trace is stored instead of its
+//! video, and the video is rendered from it by a simulation worker when first asked for (the
+//! server never steps physics).
+//!
+//! Policy:
+//! - asking for an episode's video (its URL, or a page showing the episode) with no video
+//!   stored but a trace queues a render (`video_renders`) and answers "rendering"; a render of
+//!   the same trace that finished before lends its video at once (the trace is the cache key);
+//! - renders go to workers through `Lease` at the lowest priority: only while no evaluation job
+//!   is queued (checked in the claim itself), one per call, so evaluation is never delayed;
+//! - a render lease is heartbeated with its progress; one that expires (a killed worker) is
+//!   queued again like an episode job, and fails after `control.max_attempts` leases;
+//! - the worker checks the replay against the trace and the stored result the render job
+//!   carries; on disagreement it reports the render failed and no video is stored. A failed
+//!   render of a trace is not tried again (the same replay would disagree again): the episode
+//!   shows why. A new trace of the episode queues a new render.
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use serde::Serialize;
+
+use super::jobs::HeartbeatOutcome;
+use super::{AppState, Caller, WorkerCred, now_ms};
+use crate::episodes::TaskOutcome;
+use crate::error::ServiceError;
+use crate::store::{self, renders as store_renders};
+use crate::videos::{StoredVideo, trace_path};
+
+/// Longest failure text kept for a render.
+const MAX_ERROR_CHARS: usize = 2000;
+
+/// What an episode's video is now.
+#[derive(Debug, Clone)]
+pub(crate) enum VideoState {
+    Ready(StoredVideo),
+    /// Queued (`leased` false) or being rendered, with the share done.
+    Rendering {
+        leased: bool,
+        progress: f64,
+    },
+    Failed(String),
+}
+
+/// A render job as handed to a worker.
+#[derive(Debug, Clone)]
+pub(crate) struct LeasedRender {
+    pub id: i64,
+    pub attempt: u32,
+    pub lease_expires_at_ms: i64,
+    pub run_id: i64,
+    pub episode_key: String,
+    pub trace_gz: Vec<u8>,
+    pub expected: Vec<TaskOutcome>,
+}
+
+/// An episode's video as the API shows it (`EpisodeView.video`).
+#[derive(Debug, Clone, PartialEq, Serialize, utoipa::ToSchema)]
+pub(crate) struct VideoView {
+    /// `ready` (stored: `url` plays it), `available` (a trace is stored: asking for `url` renders
+    /// the video), `queued` or `rendering` (asked for; poll `url` or this view), `failed`
+    /// (`error` says why: the replay disagreed with the stored result, say).
+    pub status: String,
+    /// Share of the render done, 0 to 1 (`rendering`; 1 when `ready`).
+    pub progress: f64,
+    /// Where the video is served (202 while it renders).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub url: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+}
+
+impl AppState {
+    /// The video of one episode a caller may see, or the state of its render, queued now when
+    /// there is a trace and no video. Not found when the episode has neither (or is not the
+    /// caller's to see).
+    pub(crate) async fn video_or_render(
+        &self,
+        caller: &Caller,
+        id: i64,
+        key: &str,
+    ) -> Result<VideoState, ServiceError> {
+        let not_found = || ServiceError::not_found(format!("a video of episode {key:?} of submission {id}"));
+        let (dir, run) = self.media_run(caller, id).await?.ok_or_else(not_found)?;
+        self.ask_video(&dir, run, key).await?.ok_or_else(not_found)
+    }
+
+    /// The video of `(run, key)` or its render's state, queuing the render when needed; `None`
+    /// when there is neither a video nor a trace.
+    pub(crate) async fn ask_video(
+        &self,
+        dir: &Path,
+        run: i64,
+        key: &str,
+    ) -> Result<Option<VideoState>, ServiceError> {
+        if let Some(v) = self.stored_video(dir, run, key).await? {
+            return Ok(Some(VideoState::Ready(v)));
+        }
+        let Some(trace) = store::traces::trace(self.read_pool(), run, key).await? else {
+            return Ok(None);
+        };
+        if let Some(r) = store_renders::render(self.read_pool(), run, key).await?
+            && r.trace_sha256 == trace
+        {
+            match r.state.as_str() {
+                "queued" | "leased" => {
+                    return Ok(Some(VideoState::Rendering {
+                        leased: r.state == "leased",
+                        progress: r.progress,
+                    }));
+                }
+                "failed" => return Ok(Some(VideoState::Failed(r.error.unwrap_or_default()))),
+                // Done, but its video is gone since (retention, a budget): render again.
+                _ => {}
+            }
+        }
+        let now = now_ms();
+        store_renders::request(self.pool(), run, key, &trace, now).await?;
+        // The same trace rendered before: its video is this episode's too.
+        if let Some(video) = store_renders::rendered(self.read_pool(), &trace).await?
+            && self.link_stored_video(dir, run, key, &video).await?
+        {
+            store_renders::reused(self.pool(), run, key, &video, now).await?;
+            tracing::info!(run, episode = %key, sha256 = %video, "video of the same trace reused");
+            return Ok(self.stored_video(dir, run, key).await?.map(VideoState::Ready));
+        }
+        tracing::info!(run, episode = %key, "video render queued");
+        self.wake_leases();
+        Ok(Some(VideoState::Rendering {
+            leased: false,
+            progress: 0.0,
+        }))
+    }
+
+    /// A page shows `view` (submission `id`) to `caller`: queue the renders of the episodes it
+    /// shows with a trace and no video. `true` when one was queued (the view is out of date).
+    pub(crate) async fn render_shown(
+        &self,
+        caller: &Caller,
+        id: i64,
+        view: &super::SubmissionView,
+    ) -> Result<bool, ServiceError> {
+        let evaluation = view.latest_run.as_ref().and_then(|r| r.evaluation.as_ref());
+        let available: Vec<&str> = (evaluation.iter())
+            .flat_map(|e| &e.episodes)
+            .filter(|ep| ep.video.as_ref().is_some_and(|v| v.status == "available"))
+            .map(|ep| ep.key.as_str())
+            .collect();
+        if available.is_empty() {
+            return Ok(false);
+        }
+        let Some((dir, run)) = self.media_run(caller, id).await? else {
+            return Ok(false);
+        };
+        for key in available {
+            self.ask_video(&dir, run, key).await?;
+        }
+        Ok(true)
+    }
+
+    /// Each episode of `run`'s video as the API shows it: every episode with a trace, a video or
+    /// a render. Reads only: nothing is queued.
+    pub(crate) async fn video_views(
+        &self,
+        run: i64,
+        url: impl Fn(&str) -> String,
+    ) -> Result<HashMap<String, VideoView>, ServiceError> {
+        let mut out = HashMap::new();
+        if self.video_dir().is_none() {
+            return Ok(out);
+        }
+        let view = |status: &str, progress: f64, key: &str| VideoView {
+            status: status.into(),
+            progress,
+            url: Some(url(key)),
+            error: None,
+        };
+        for key in store::traces::keys(self.read_pool(), run).await? {
+            out.insert(key.clone(), view("available", 0.0, &key));
+        }
+        for r in store_renders::of_run(self.read_pool(), run).await? {
+            let v = match r.state.as_str() {
+                "queued" => view("queued", 0.0, &r.episode_key),
+                "leased" => view("rendering", r.progress, &r.episode_key),
+                "failed" => VideoView {
+                    error: r.error.clone(),
+                    ..view("failed", 0.0, &r.episode_key)
+                },
+                _ => continue,
+            };
+            out.insert(r.episode_key.clone(), v);
+        }
+        for (key, note) in self.video_keys(run).await? {
+            if note.is_none() {
+                out.insert(key.clone(), view("ready", 1.0, &key));
+            }
+        }
+        Ok(out)
+    }
+
+    /// Lease the oldest queued render to `worker`, unless an evaluation job waits.
+    pub(crate) async fn claim_render(&self, worker: &str) -> Result<Option<LeasedRender>, ServiceError> {
+        let Some(dir) = self.video_dir() else {
+            return Ok(None);
+        };
+        if !store_renders::any_queued(self.read_pool()).await? {
+            return Ok(None);
+        }
+        let now = now_ms();
+        let until = now + self.lease_ms();
+        let Some(c) = store_renders::claim(self.pool(), worker, now, until).await? else {
+            return Ok(None);
+        };
+        let lease = store_renders::Lease {
+            id: c.id,
+            attempt: c.attempt,
+            owner: worker,
+        };
+        let expected = store_renders::stored_tasks(self.read_pool(), c.run_id, &c.episode_key).await?;
+        let trace = tokio::fs::read(trace_path(&dir, &c.trace_sha256)).await;
+        let (expected, trace_gz) = match (expected, trace) {
+            (Some(e), Ok(t)) => (e, t),
+            (None, _) => {
+                return self
+                    .refuse_render(lease, "the episode has no stored result")
+                    .await;
+            }
+            (_, Err(e)) => {
+                return self
+                    .refuse_render(lease, &format!("the trace file cannot be read: {e}"))
+                    .await;
+            }
+        };
+        tracing::info!(render = c.id, run = c.run_id, episode = %c.episode_key, attempt = c.attempt, worker, "render leased");
+        Ok(Some(LeasedRender {
+            id: c.id,
+            attempt: u32::try_from(c.attempt).unwrap_or(u32::MAX),
+            lease_expires_at_ms: c.lease_expires_at,
+            run_id: c.run_id,
+            episode_key: c.episode_key,
+            trace_gz,
+            expected,
+        }))
+    }
+
+    async fn refuse_render(
+        &self,
+        lease: store_renders::Lease<'_>,
+        why: &str,
+    ) -> Result<Option<LeasedRender>, ServiceError> {
+        tracing::warn!(render = lease.id, %why, "render not handed out");
+        store_renders::fail(self.pool(), lease, why, now_ms()).await?;
+        Ok(None)
+    }
+
+    /// Extend a render lease and record its progress.
+    pub(crate) async fn render_heartbeat(
+        &self,
+        _: WorkerCred,
+        worker: &str,
+        id: i64,
+        attempt: u32,
+        progress: f32,
+    ) -> Result<HeartbeatOutcome, ServiceError> {
+        let now = now_ms();
+        let lease = store_renders::Lease {
+            id,
+            attempt: i64::from(attempt),
+            owner: worker,
+        };
+        let p = if progress.is_finite() {
+            f64::from(progress)
+        } else {
+            0.0
+        };
+        let until = store_renders::heartbeat(self.pool(), lease, now + self.lease_ms(), p, now).await?;
+        Ok(HeartbeatOutcome {
+            lease_expires_at_ms: until,
+        })
+    }
+
+    /// A worker could not render: the episode shows `error` where its video would be.
+    pub(crate) async fn fail_render(
+        &self,
+        _: WorkerCred,
+        worker: &str,
+        id: i64,
+        attempt: u32,
+        error: &str,
+    ) -> Result<bool, ServiceError> {
+        let error = match error.trim() {
+            "" => "the worker made no video and said nothing why".to_string(),
+            e => e.chars().take(MAX_ERROR_CHARS).collect(),
+        };
+        let lease = store_renders::Lease {
+            id,
+            attempt: i64::from(attempt),
+            owner: worker,
+        };
+        let failed = store_renders::fail(self.pool(), lease, &error, now_ms()).await?;
+        tracing::warn!(render = id, attempt, worker, failed, %error, "render failed");
+        Ok(failed)
+    }
+
+    /// Queue again the renders whose lease expired; returns how many.
+    pub(crate) async fn reap_renders(&self, now: i64) -> Result<u64, ServiceError> {
+        let max = i64::from(self.config().control.max_attempts);
+        let n = store_renders::reap(self.pool(), now, max).await?;
+        if n > 0 {
+            tracing::info!(requeued = n, "expired render leases queued again");
+            self.wake_leases();
+        }
+        Ok(n)
+    }
+}
