@@ -91,7 +91,7 @@ impl Worker for WorkerService {
         let worker = caller(&req)?.worker()?;
         let m = req.into_inner();
         let (jobs, render) = (self.state)
-            .lease_work(worker, &m.worker_id, m.max_jobs, m.wait_ms, true)
+            .lease_work(worker, &m.worker_id, m.max_jobs, m.wait_ms, m.max_renders > 0)
             .await?;
         let store_ok = self.state.video_dir().is_some();
         let video = &self.state.config().video;

@@ -160,7 +160,7 @@ impl AppState {
             }
             deleted += self.delete_unlinked(&dir, unlinked).await;
         }
-        Ok(deleted)
+        Ok(deleted + self.sweep_unlinked_traces(&dir).await?)
     }
 }
 

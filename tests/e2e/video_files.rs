@@ -38,6 +38,7 @@ async fn lease_and_report(client: &mut WorkerClient<Channel>) -> pb::Job {
         worker_id: "hand-worker".into(),
         max_jobs: 1,
         wait_ms: 5000,
+        max_renders: 0,
     };
     let job = client
         .lease(authed(lease))

@@ -27,6 +27,7 @@ async fn leased(f: &Fixture, client: &mut Client) -> (pb::Job, pb::Job) {
         worker_id: "w1".into(),
         max_jobs: 8,
         wait_ms: 0,
+        max_renders: 0,
     };
     let jobs = client.lease(with_token(lease)).await.unwrap().into_inner().jobs;
     assert_eq!(jobs.len(), 2);

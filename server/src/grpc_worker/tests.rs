@@ -16,6 +16,7 @@ fn lease_req() -> pb::LeaseRequest {
         worker_id: "host-1/42".into(),
         max_jobs: 8,
         wait_ms: 0,
+        max_renders: 0,
     }
 }
 

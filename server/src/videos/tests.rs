@@ -206,6 +206,7 @@ fn lease(max_jobs: u32) -> Request<pb::LeaseRequest> {
         worker_id: "w1".into(),
         max_jobs,
         wait_ms: 0,
+        max_renders: 0,
     });
     req.metadata_mut()
         .insert("authorization", format!("Bearer {WORKER}").parse().unwrap());

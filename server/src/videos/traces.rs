@@ -59,6 +59,27 @@ impl AppState {
         Ok((sha, bytes))
     }
 
+    /// Delete the trace files no row names (a process killed between placing and linking one);
+    /// at start, with the videos' sweep. Returns how many were deleted.
+    pub(super) async fn sweep_unlinked_traces(&self, dir: &Path) -> Result<usize, ServiceError> {
+        let mut deleted = 0;
+        for sub in super::subdirs(&dir.join("traces")).await? {
+            let mut unlinked = Vec::new();
+            let mut files = tokio::fs::read_dir(&sub).await.map_err(super::io)?;
+            while let Some(f) = files.next_entry().await.map_err(super::io)? {
+                let name = f.file_name();
+                let Some(sha) = name.to_str().and_then(|n| n.strip_suffix(".json.gz")) else {
+                    continue;
+                };
+                if !store::traces::linked(self.read_pool(), sha).await? {
+                    unlinked.push(sha.to_string());
+                }
+            }
+            deleted += self.delete_unlinked_traces(dir, unlinked).await;
+        }
+        Ok(deleted)
+    }
+
     /// Delete the trace files `shas` that no row names (checked again under the file lock).
     pub(crate) async fn delete_unlinked_traces(&self, dir: &Path, shas: Vec<String>) -> usize {
         let _turn = self.file_turn().await;

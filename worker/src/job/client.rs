@@ -187,13 +187,16 @@ impl Worker {
     ) -> Result<(), WorkerError> {
         let mut backoff = Backoff::default();
         let mut pacer = Pacer::new(self.cores.clone(), self.cfg.episode_limit());
+        let renders = super::render::InFlight::default();
         let wait = self.cfg.lease_wait();
         loop {
             while jobs.try_join_next().is_some() {}
             if *stop.borrow() {
                 return Ok(());
             }
-            let room = pacer.room(jobs.len());
+            // Renders run beside episodes (at background priority): only episodes are paced.
+            let rendering = renders.in_flight();
+            let room = pacer.room(jobs.len().saturating_sub(rendering));
             if room == 0 {
                 // Full, or the cores were busy: look again when an episode ends or a window passes.
                 tokio::select! {
@@ -207,6 +210,8 @@ impl Worker {
                 worker_id: self.id.clone(),
                 max_jobs: room.min(MAX_JOBS_PER_CALL) as u32,
                 wait_ms: self.cfg.lease_wait_ms,
+                // At most one render per slot in flight.
+                max_renders: self.cores.total().saturating_sub(rendering).min(1) as u32,
             });
             req.set_timeout(wait + Duration::from_secs(10));
             let asked = Instant::now();
@@ -243,7 +248,13 @@ impl Worker {
                         }
                         let (w, mut stop) = (self.clone(), stop.clone());
                         match job.render.is_some() {
-                            true => jobs.spawn(async move { w.render_job(job, &mut stop).await }),
+                            true => {
+                                let counted = renders.start();
+                                jobs.spawn(async move {
+                                    w.render_job(job, &mut stop).await;
+                                    drop(counted);
+                                })
+                            }
                             false => jobs.spawn(async move { w.job(job, &mut stop).await }),
                         };
                     }

@@ -119,6 +119,18 @@ impl Cores {
         i.turn.notify_all();
     }
 
+    /// Take a permit only when one is free and no episode waits for one (video renders, issue
+    /// #26): background work never goes ahead of an episode.
+    fn take_background(&self) {
+        let Some(i) = &self.0 else { return };
+        let mut s = lock(&i.state);
+        while !(s.free > 0 && s.waiting.is_empty()) {
+            s = i.turn.wait(s).unwrap_or_else(|p| p.into_inner());
+        }
+        s.settle(i.total);
+        s.free -= 1;
+    }
+
     fn give(&self) {
         let Some(i) = &self.0 else { return };
         let mut s = lock(&i.state);
@@ -146,6 +158,23 @@ impl Core {
         if !self.held {
             self.cores.take();
             self.held = true;
+        }
+    }
+
+    /// Wait for a permit that no episode is waiting for (background work); no-op when held.
+    pub fn hold_background(&mut self) {
+        if !self.held {
+            self.cores.take_background();
+            self.held = true;
+        }
+    }
+
+    /// Background work between two steps: give the permit back and take it again once no
+    /// episode waits, so an episode never waits on background work for longer than one step.
+    pub fn yield_to_episodes(&mut self) {
+        if self.held {
+            self.release();
+            self.hold_background();
         }
     }
 
@@ -236,6 +265,33 @@ mod tests {
         // Every permit came back.
         let mut all: Vec<Core> = (0..2).map(|_| cores.core()).collect();
         all.iter_mut().for_each(Core::hold);
+    }
+
+    #[test]
+    fn background_work_yields_its_core_to_a_waiting_episode() {
+        let cores = Cores::new(1);
+        let mut render = cores.core();
+        render.hold_background();
+        let got = Arc::new(AtomicUsize::new(0));
+        let episode = {
+            let (cores, got) = (cores.clone(), got.clone());
+            std::thread::spawn(move || {
+                let mut core = cores.core();
+                core.hold();
+                got.store(1, Ordering::SeqCst);
+                std::thread::sleep(Duration::from_millis(50));
+                // Still the episode's: the render has not taken the permit back meanwhile.
+                assert_eq!(got.load(Ordering::SeqCst), 1);
+                core.release();
+            })
+        };
+        // Wait until the episode queues for the permit, then yield: the episode goes first.
+        while lock(&cores.0.as_ref().unwrap().state).waiting.is_empty() {
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        render.yield_to_episodes();
+        got.store(2, Ordering::SeqCst);
+        episode.join().unwrap();
     }
 
     #[test]

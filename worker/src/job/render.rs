@@ -4,6 +4,11 @@
 //! (the recorder `eval --record` uses, as a hook on the replay), heartbeats the render's
 //! progress, and uploads the MP4 through `UploadVideo`, which completes the render.
 //!
+//! Rendering never delays evaluation: the server hands a render out only while no evaluation
+//! job is queued, the worker takes at most one render per slot and keeps leasing episodes
+//! beside them, and a render's thread holds its core at background priority, giving it to any
+//! waiting episode between two steps.
+//!
 //! Policy: a video is made only of the episode that was scored. The replay must reproduce the
 //! trace bit for bit (`kitchen_r_episode::trace::replay_with`) and its outcome must agree with
 //! the result the server stored (`RenderJob.expected`); otherwise nothing is uploaded and the
@@ -12,7 +17,7 @@
 //! expires.
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicUsize, Ordering};
 use std::time::Duration;
 
 use kitchen_r_episode::runner::{StepHook, TaskRecord};
@@ -26,7 +31,7 @@ use tracing::{Instrument, info, info_span, warn};
 
 use super::JobContext;
 use super::client::Worker;
-use super::cores::Cores;
+use super::cores::{Core, Cores};
 
 /// The share of a render spent replaying; the rest is the encoder's flush and the upload.
 const REPLAY_SHARE: f32 = 0.95;
@@ -55,10 +60,37 @@ impl RenderControl {
     }
 }
 
-/// Counts the replay's progress in sim time and stops it when cancelled.
+/// Render jobs in flight in one worker (the lease loop asks for one more only below its slots).
+#[derive(Debug, Default, Clone)]
+pub(crate) struct InFlight(Arc<AtomicUsize>);
+
+impl InFlight {
+    pub(crate) fn in_flight(&self) -> usize {
+        self.0.load(Ordering::SeqCst)
+    }
+
+    /// Count one render until the returned guard is dropped.
+    pub(crate) fn start(&self) -> InFlightGuard {
+        self.0.fetch_add(1, Ordering::SeqCst);
+        InFlightGuard(self.0.clone())
+    }
+}
+
+/// One render counted in [`InFlight`].
+pub(crate) struct InFlightGuard(Arc<AtomicUsize>);
+
+impl Drop for InFlightGuard {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::SeqCst);
+    }
+}
+
+/// Counts the replay's progress in sim time, stops it when cancelled, and lets every episode
+/// waiting for a core go first between two steps (rendering is background work).
 struct Progress<'a> {
     control: &'a RenderControl,
     total_sim_s: f64,
+    core: &'a mut Core,
 }
 
 impl StepHook for Progress<'_> {
@@ -66,6 +98,7 @@ impl StepHook for Progress<'_> {
         if self.control.cancelled.load(Ordering::SeqCst) {
             return Err("render cancelled".into());
         }
+        self.core.yield_to_episodes();
         let share = (info.time / self.total_sim_s.max(1e-9)) as f32;
         self.control.set_progress(share.min(1.0) * REPLAY_SHARE);
         Ok(())
@@ -78,14 +111,17 @@ pub(crate) fn render(
     job: &pb::RenderJob,
     ctx: &JobContext,
     control: &RenderControl,
+    core: &mut Core,
 ) -> Result<RecordedVideo, String> {
     let trace = Trace::from_bytes(&job.trace_gz).map_err(|e| format!("the trace does not load: {e}"))?;
     let plan = &trace.episode.plan;
     let n_tasks = trace.run.max_tasks.map_or(plan.len(), |m| m.min(plan.len()));
     let video = EpisodeVideo::new(plan, n_tasks, job.video_max_bytes as usize);
+    core.hold_background();
     let mut progress = Progress {
         control,
         total_sim_s: trace.outcome.sim_time,
+        core,
     };
     let mut recorder = VideoHook::new(&mut progress, video);
     let out =
@@ -95,7 +131,10 @@ pub(crate) fn render(
             e => format!("the replay failed: {e}"),
         })?;
     agrees_with_stored(&out.tasks, &job.expected).map_err(|what| format!("{DISAGREES}: {what}"))?;
-    recorder.into_video().finish()
+    let video = recorder.into_video();
+    // The encoder's flush is one block of work: it waits, too, until no episode waits.
+    core.yield_to_episodes();
+    video.finish()
 }
 
 /// The replay's outcome against the result the server stored: the same tasks, the same
@@ -230,7 +269,8 @@ impl Worker {
     }
 }
 
-/// Render on a thread of its own, holding a simulation core while it replays.
+/// Render on a thread of its own, holding a simulation core while it replays, at a lower
+/// priority than any episode ([`Core::hold_background`]).
 fn spawn_render(
     job: &pb::Job,
     ctx: Arc<JobContext>,
@@ -243,8 +283,7 @@ fn spawn_render(
         .name(format!("render-{}", job.job_id))
         .spawn(move || {
             let mut core = cores.core();
-            core.hold();
-            let _ = tx.send(render(&job_spec, &ctx, &control));
+            let _ = tx.send(render(&job_spec, &ctx, &control, &mut core));
         });
     if let Err(e) = spawned {
         warn!("cannot start a render thread: {e}");
