@@ -159,6 +159,17 @@ class Batcher:
             raise item["error"]
         return item["y"]
 
+    def warm_up(self):
+        """One forward of every batch shape `_run` pads to (on the CPU, of batch 1)."""
+        dev = next(self.model.parameters()).device
+        top = max(1, self.max_batch - 1).bit_length()
+        z = FT.RENDER_SIZE
+        x = (np.zeros((len(FT.CAMERAS), FT.HISTORY, z, z, 3), np.uint8), np.zeros(FT.STATE_DIM, np.float32),
+             np.zeros(FT.MAX_WORDS, np.int64))
+        for n in ([1 << k for k in range(top + 1)] if dev.type == "cuda" else [1]):
+            with self.lock:
+                self._run([{"x": x}] * n)
+
     def _loop(self):
         while True:
             with self.cond:

@@ -39,6 +39,10 @@ class CameraRunner:
         self.vocab_index = {w: i for i, w in enumerate(self.vocab)}
         self.batcher = Batcher(self.model, max_batch=max_batch)
         self.clock = TaskClock(F.CONTROL_DT)
+        # Before the port opens: on CUDA the first forward of each batch shape autotunes for
+        # seconds (8.4 s measured on an H100), which would land on an episode's first Act and
+        # its 10 s deadline.
+        self.batcher.warm_up()
 
     def reset(self, episode_id, task_index, sub_task):
         self.clock.reset(episode_id)

@@ -57,10 +57,13 @@ def log(msg):
 class Rows:
     """The training set on the training device: images uint8 (N, cameras, HISTORY, S, S, 3),
     state float32, word ids int16, labels float32 (N, 160), the auxiliary goal target and its
-    mask (N, AUX_DIM; zeros when no privileged observation was streamed). Grows by 1.5x."""
+    mask (N, AUX_DIM; zeros when no privileged observation was streamed). `capacity`: rows to
+    allocate at once (the run's estimate): growing a tensor copies it, and at 2,700 episodes
+    (about 40 GiB) the old and new copies together would not fit an 80 GiB card. Grows by 1.25x
+    past it."""
 
-    def __init__(self, size, device):
-        self.size, self.device, self.n = size, device, 0
+    def __init__(self, size, device, capacity=1024):
+        self.size, self.device, self.n, self.capacity = size, device, 0, capacity
         self.t = None
 
     def add(self, images, state, words, y, aux, aux_mask):
@@ -73,7 +76,7 @@ class Rows:
                "aux_mask": torch.from_numpy(np.stack(aux_mask)).to(self.device)}
         k = len(ims)
         if self.t is None or self.n + k > len(self.t["y"]):
-            cap = max(self.n + k, int(1.5 * (len(self.t["y"]) if self.t else 0)), 1024)
+            cap = max(self.n + k, int(1.25 * len(self.t["y"])) if self.t else self.capacity, 1024)
             grown = {n: torch.empty((cap,) + tuple(v.shape[1:]), dtype=v.dtype, device=self.device) for n, v in new.items()}
             if self.t is not None:
                 for n in grown:
@@ -326,7 +329,8 @@ def main():
 
     vocab = F.dev_vocab()
     vocab_index = {w: i for i, w in enumerate(vocab)}
-    rows = Rows(args.image_size, device)
+    # About 132 expert rows an episode; a DAgger episode adds up to about 300 labelled rows.
+    rows = Rows(args.image_size, device, capacity=int(args.episodes * 140 + args.rounds * args.round_episodes * 300))
     logbook["expert"] = expert_rows(rows, vocab_index, args)
     if rows.n == 0:
         sys.exit("no expert rows: raise --episodes or --collect-minutes")
