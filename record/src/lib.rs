@@ -17,10 +17,12 @@
 pub mod bench;
 mod cdr;
 pub mod collect;
+mod frame;
 pub mod hdf5_aloha;
 pub mod lerobot;
 pub mod mcap_ros2;
 pub mod rate;
+pub mod replay;
 mod ros2_msgs;
 pub mod video;
 

@@ -5,11 +5,12 @@ use kitchen_r_sim::config::MonitorConfig;
 use kitchen_r_sim::task::MonitorTrip;
 use kitchen_r_sim::{Action, Observation, Sim, StepInfo};
 
+use crate::frame::frame_of;
 use crate::hdf5_aloha::Hdf5Recorder;
 use crate::lerobot::EpisodeRecorder;
 use crate::mcap_ros2::McapRecorder;
 use crate::rate::RateMonitor;
-use crate::{CameraFrame, Frame, TaskSpan};
+use crate::{Frame, TaskSpan};
 use kitchen_r_episode::runner::StepHook;
 
 /// Why an episode was discarded, as counted in the summary.
@@ -93,36 +94,7 @@ impl Recorder {
 
     fn frame(&mut self, sim: &Sim, action: &Action, info: &StepInfo, task: usize) -> Frame {
         let obs = self.latest.take().unwrap_or_else(|| sim.observe());
-        // Odometry as the policy contract gives it (relative to the episode's start pose), not
-        // the world pose in `info`: a policy trained on recordings must see what it is sent.
-        let base_pose = obs.odometry.pose;
-        let (_, qd) = sim.joints();
-        let mut qpos = info.joints.to_vec();
-        qpos.push(info.gripper);
-        let mut qvel = qd.to_vec();
-        qvel.push(0.0);
-        Frame {
-            time: info.time,
-            cameras: obs
-                .images
-                .into_iter()
-                .map(|c| CameraFrame {
-                    name: c.name,
-                    width: c.width,
-                    height: c.height,
-                    rgb: c.rgb,
-                    depth: if self.depth { c.depth } else { Vec::new() },
-                })
-                .collect(),
-            lidar: obs.lidar.map(|l| l.points),
-            base_pose,
-            base_twist: info.base_velocity,
-            action: action.0,
-            qpos,
-            qvel,
-            ee_pose: info.ee_pose,
-            task,
-        }
+        frame_of(sim, obs, action, info, task, self.depth)
     }
 
     fn record(&mut self, sim: &Sim, action: &Action, info: &StepInfo, task: usize) -> Result<(), Trip> {

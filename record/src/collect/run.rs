@@ -12,9 +12,10 @@ use kitchen_r_core::dataset::{Instruction, Split};
 use kitchen_r_sim::{Assets, EpisodeConfig, EpisodeParams, Sim, SimConfig, SimError};
 
 use super::hook::{Recorder, Trip};
-use super::sensors::{camera_specs, mounts, rate_monitor, sensors};
+use super::sensors::{camera_specs, rate_monitor, sensors};
 use super::{CollectError, CollectOptions, CollectSummary, ManifestEntry};
 use crate::EpisodeMeta;
+use crate::frame::mounts;
 use crate::hdf5_aloha::{Hdf5Options, Hdf5Recorder};
 use crate::lerobot::{EpisodeRecorder, LeRobotDataset};
 use crate::mcap_ros2::McapRecorder;

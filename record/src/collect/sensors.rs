@@ -1,10 +1,9 @@
 //! What a collection run records: the sensors (less the cameras `--cameras` leaves out), their
-//! mounts as static transforms, and the recording-rate monitor over the topics actually written.
+//! camera specs, and the recording-rate monitor over the topics actually written.
 
 use kitchen_r_sim::SensorsConfig;
 
 use super::{CollectError, CollectOptions};
-use crate::StaticTransform;
 use crate::lerobot::CameraSpec;
 use crate::rate::RateMonitor;
 
@@ -60,36 +59,4 @@ pub(super) fn rate_monitor(opts: &CollectOptions) -> Result<RateMonitor, Collect
         .map(|(t, hz)| (t.clone(), *hz))
         .collect();
     Ok(RateMonitor::new(min_hz, opts.config.rates.window_s))
-}
-
-/// Static transforms of the sensor mounts (`/tf_static`).
-pub(super) fn mounts(sensors: &SensorsConfig) -> Vec<StaticTransform> {
-    use kitchen_r_sim::config::Mount;
-    let parent = |m: Mount| match m {
-        Mount::Base => "base_link",
-        Mount::Gripper => "ee_link",
-        Mount::World => "odom",
-    };
-    let mut out: Vec<StaticTransform> = sensors
-        .cameras
-        .iter()
-        .map(|c| {
-            let q = nalgebra::UnitQuaternion::from_euler_angles(c.rpy[0], c.rpy[1], c.rpy[2]);
-            StaticTransform {
-                parent: parent(c.mount).into(),
-                child: format!("{}_optical_frame", c.name),
-                translation: c.position,
-                rotation: [q.w, q.i, q.j, q.k],
-            }
-        })
-        .collect();
-    if let Some(l) = &sensors.lidar {
-        out.push(StaticTransform {
-            parent: parent(l.mount).into(),
-            child: "lidar".into(),
-            translation: l.position,
-            rotation: [1.0, 0.0, 0.0, 0.0],
-        });
-    }
-    out
 }
