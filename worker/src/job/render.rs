@@ -203,7 +203,7 @@ impl Worker {
                     }
                 }
             };
-            let result = match result {
+            let why = match result {
                 Ok(video) => {
                     info!(
                         frames = video.frames,
@@ -211,14 +211,21 @@ impl Worker {
                         encode_s = video.encode_time.as_secs_f64(),
                         "rendered"
                     );
-                    super::upload::upload_video(&self.client, &self.id, &job, video.mp4).await
+                    match super::upload::upload_video(&self.client, &self.id, &job, video.mp4).await {
+                        Ok(()) => return,
+                        // The server may take it later (a budget full of uploads in flight, a
+                        // restart): the lease expires and the render is queued again.
+                        Err(s) if super::client::retryable(&s) => {
+                            warn!("the rendered video was not stored ({:?}: {}); the render will be tried again", s.code(), s.message());
+                            return;
+                        }
+                        Err(s) => format!("the server did not store the video: {}", s.message()),
+                    }
                 }
-                Err(why) => Err(why),
+                Err(why) => why,
             };
-            if let Err(why) = result {
-                warn!(%why, "render failed");
-                self.fail_render(&job, &why).await;
-            }
+            warn!(%why, "render failed");
+            self.fail_render(&job, &why).await;
         }
         .instrument(span)
         .await;

@@ -62,14 +62,14 @@ fn pieces(bytes: &[u8]) -> impl Iterator<Item = &[u8]> {
     bytes.chunks(CHUNK).chain(bytes.is_empty().then_some(empty))
 }
 
-/// Upload `mp4`, retrying transport failures; logs the outcome. `Err` says why the video was
-/// not stored (a render job reports it as its failure).
+/// Upload `mp4`, retrying transport failures; logs the outcome. `Err` is the server's last
+/// answer when the video was not stored (a render job decides from it whether it failed).
 pub(crate) async fn upload_video(
     client: &Client,
     worker_id: &str,
     job: &pb::Job,
     mp4: Vec<u8>,
-) -> Result<(), String> {
+) -> Result<(), Status> {
     let timeout = timeout_for(mp4.len());
     let sent = with_retries("episode video", mp4.len(), || {
         let mut req = Request::new(tokio_stream::iter(chunks(worker_id, job, &mp4)));
@@ -105,7 +105,7 @@ fn timeout_for(size: usize) -> Duration {
 }
 
 /// Call `send` up to [`TRIES`] times while it fails with a retryable status.
-async fn with_retries<F, Fut>(what: &str, size: usize, mut send: F) -> Result<(), String>
+async fn with_retries<F, Fut>(what: &str, size: usize, mut send: F) -> Result<(), Status>
 where
     F: FnMut() -> Fut,
     Fut: Future<Output = Result<(String, u64), Status>>,
@@ -131,11 +131,11 @@ where
                     s.code(),
                     s.message()
                 );
-                return Err(format!("the server did not store the video: {}", s.message()));
+                return Err(s);
             }
         }
     }
-    Err(format!("the {what} upload was not accepted"))
+    Err(Status::unknown(format!("the {what} upload was not accepted")))
 }
 
 #[cfg(test)]
