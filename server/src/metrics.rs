@@ -36,6 +36,9 @@ pub(crate) const JOB_RETRIES: &str = "kitchen_r_job_retries_total";
 pub(crate) const LEASES_RECLAIMED: &str = "kitchen_r_leases_reclaimed_total";
 pub(crate) const VIDEO_EVICTIONS: &str = "kitchen_r_video_evictions_total";
 pub(crate) const VIDEO_STORED_BYTES: &str = "kitchen_r_video_stored_bytes";
+pub(crate) const VIDEO_RENDERS: &str = "kitchen_r_video_renders_total";
+/// The `outcome` label values of [`VIDEO_RENDERS`].
+pub(crate) const RENDER_OUTCOMES: [&str; 5] = ["queued", "reused", "done", "failed", "requeued"];
 
 /// The Prometheus text format's content type.
 pub(crate) const CONTENT_TYPE: &str = "text/plain; version=0.0.4; charset=utf-8";
@@ -162,6 +165,10 @@ fn describe() {
         VIDEO_EVICTIONS,
         "Episode videos removed to keep a storage budget, by budget (team: [video] team_max_bytes; total: total_max_bytes)"
     );
+    describe_counter!(
+        VIDEO_RENDERS,
+        "Episode videos rendered on demand from traces, by outcome (queued: asked for; reused: another episode's render of the same trace; done: rendered and stored; failed: refused, e.g. the replay disagreed with the stored result; requeued: a lost render lease queued again)"
+    );
     metrics::describe_gauge!(
         VIDEO_STORED_BYTES,
         metrics::Unit::Bytes,
@@ -174,6 +181,9 @@ fn describe() {
         metrics::counter!(VIDEO_EVICTIONS, "budget" => budget).increment(0);
     }
     metrics::counter!(LEASES_RECLAIMED).increment(0);
+    for outcome in RENDER_OUTCOMES {
+        metrics::counter!(VIDEO_RENDERS, "outcome" => outcome).increment(0);
+    }
 }
 
 /// What the recorder holds (empty when none is installed), and the build info.

@@ -123,6 +123,11 @@ async fn metrics_follow_a_policy_evaluation_without_naming_the_team() {
         value(&text, r#"kitchen_r_jobs_finished_total{outcome="failed"}"#),
         0.0
     );
+    // Videos on demand: nothing asked for a video, so no render yet (the series exist at 0).
+    assert_eq!(
+        value(&text, r#"kitchen_r_video_renders_total{outcome="queued"}"#),
+        0.0
+    );
     // Requests, by matched route (no ids) and status.
     let http = |method: &str, route: &str, status: u16| {
         format!(r#"kitchen_r_http_requests_total{{method="{method}",route="{route}",status="{status}"}}"#)

@@ -66,9 +66,7 @@ pub(super) async fn receive(
         .await
         .map_err(refused)?;
     if first.render {
-        store::renders::done(state.pool(), id, attempt, &sha, crate::service::now_ms())
-            .await
-            .map_err(|e| Status::internal(e.to_string()))?;
+        state.render_done(id, attempt, &sha).await?;
     }
     tracing::info!(run, episode = %key, bytes, sha256 = %sha, render = first.render, "episode video stored");
     Ok((sha, bytes))

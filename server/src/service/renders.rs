@@ -121,9 +121,11 @@ impl AppState {
             && self.link_stored_video(dir, run, key, &video).await?
         {
             store_renders::reused(self.pool(), run, key, &video, now).await?;
+            rendered_metric("reused", 1);
             tracing::info!(run, episode = %key, sha256 = %video, "video of the same trace reused");
             return Ok(self.stored_video(dir, run, key).await?.map(VideoState::Ready));
         }
+        rendered_metric("queued", 1);
         tracing::info!(run, episode = %key, "video render queued");
         self.wake_leases();
         Ok(Some(VideoState::Rendering {
@@ -243,6 +245,13 @@ impl AppState {
         }))
     }
 
+    /// A rendered video was stored: its render is done.
+    pub(crate) async fn render_done(&self, id: i64, attempt: i64, video: &str) -> Result<(), ServiceError> {
+        store_renders::done(self.pool(), id, attempt, video, now_ms()).await?;
+        rendered_metric("done", 1);
+        Ok(())
+    }
+
     async fn refuse_render(
         &self,
         lease: store_renders::Lease<'_>,
@@ -250,6 +259,7 @@ impl AppState {
     ) -> Result<Option<LeasedRender>, ServiceError> {
         tracing::warn!(render = lease.id, %why, "render not handed out");
         store_renders::fail(self.pool(), lease, why, now_ms()).await?;
+        rendered_metric("failed", 1);
         Ok(None)
     }
 
@@ -298,6 +308,7 @@ impl AppState {
             owner: worker,
         };
         let failed = store_renders::fail(self.pool(), lease, &error, now_ms()).await?;
+        rendered_metric("failed", u64::from(failed));
         tracing::warn!(render = id, attempt, worker, failed, %error, "render failed");
         Ok(failed)
     }
@@ -307,9 +318,15 @@ impl AppState {
         let max = i64::from(self.config().control.max_attempts);
         let n = store_renders::reap(self.pool(), now, max).await?;
         if n > 0 {
+            rendered_metric("requeued", n);
             tracing::info!(requeued = n, "expired render leases queued again");
             self.wake_leases();
         }
         Ok(n)
     }
+}
+
+/// Count renders by outcome (`crate::metrics::VIDEO_RENDERS`).
+fn rendered_metric(outcome: &'static str, n: u64) {
+    metrics::counter!(crate::metrics::VIDEO_RENDERS, "outcome" => outcome).increment(n);
 }
