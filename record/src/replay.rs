@@ -106,13 +106,18 @@ impl ReplayRecorder {
         })
     }
 
+    /// Whether this step's images go to PNG files.
+    fn keeps_png(&self) -> bool {
+        self.frames
+            .as_ref()
+            .is_some_and(|f| self.steps.is_multiple_of(f.every.max(1)))
+    }
+
     fn write(&mut self, frame: &Frame) -> Result<(), RecordError> {
         if let Some(m) = &mut self.mcap {
             m.write_frame(frame, None)?;
         }
-        if let Some(f) = &self.frames
-            && self.steps.is_multiple_of(f.every.max(1))
-        {
+        if let Some(f) = self.frames.as_ref().filter(|_| self.keeps_png()) {
             for c in &frame.cameras {
                 let path = f.dir.join(format!("{:06}_{}.png", self.steps, c.name));
                 image::save_buffer(&path, &c.rgb, c.width, c.height, image::ExtendedColorType::Rgb8)
@@ -128,8 +133,9 @@ impl ReplayRecorder {
 }
 
 impl StepHook for ReplayRecorder {
+    /// Every step's rendering for an MCAP; PNG frames alone render only the steps they keep.
     fn wants_observation(&self) -> bool {
-        true
+        self.mcap.is_some()
     }
 
     fn observation(&mut self, obs: &Observation) {
@@ -151,13 +157,16 @@ impl StepHook for ReplayRecorder {
     }
 
     fn on_step(&mut self, sim: &Sim, action: &Action, info: &StepInfo) -> Result<(), String> {
-        let obs = self.latest.take().unwrap_or_else(|| sim.observe());
-        let task = info.task.as_ref().map_or(0, |t| t.index);
-        let frame = frame_of(sim, obs, action, info, task, true);
-        if self.error.is_none()
-            && let Err(e) = self.write(&frame)
-        {
-            self.error = Some(e);
+        let latest = self.latest.take();
+        if self.mcap.is_some() || self.keeps_png() {
+            let obs = latest.unwrap_or_else(|| sim.observe());
+            let task = info.task.as_ref().map_or(0, |t| t.index);
+            let frame = frame_of(sim, obs, action, info, task, true);
+            if self.error.is_none()
+                && let Err(e) = self.write(&frame)
+            {
+                self.error = Some(e);
+            }
         }
         self.steps += 1;
         Ok(())
