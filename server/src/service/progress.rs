@@ -153,6 +153,10 @@ impl AppState {
                     }
                     Some(v) => {
                         e.video_url = v.url.clone();
+                        // Rendered once and removed since (a budget): why, until asked again.
+                        if v.status == "available" {
+                            e.video_note = notes.remove(&e.key).flatten();
+                        }
                         e.video = Some(v);
                     }
                     // No video and no trace to render one from: why, when known.

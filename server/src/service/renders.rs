@@ -154,10 +154,17 @@ impl AppState {
         let Some((dir, run)) = self.media_run(caller, id).await? else {
             return Ok(false);
         };
+        // A video removed to keep a budget is rendered again only when asked for by its URL: a
+        // page whose run outgrew its budget would otherwise evict and render in a circle.
+        let notes = self.video_keys(run).await?;
+        let mut queued = false;
         for key in available {
-            self.ask_video(&dir, run, key).await?;
+            if !matches!(notes.get(key), Some(Some(_))) {
+                self.ask_video(&dir, run, key).await?;
+                queued = true;
+            }
         }
-        Ok(true)
+        Ok(queued)
     }
 
     /// Each episode of `run`'s video as the API shows it: every episode with a trace, a video or

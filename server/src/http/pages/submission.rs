@@ -34,10 +34,23 @@ pub(super) fn rendering(v: &SubmissionView) -> bool {
     evaluation.is_some_and(|e| e.episodes.iter().any(|ep| video_pending(ep).is_some()))
 }
 
-/// The share done of the episode's video render, while it is queued or rendering.
+/// The share done of the episode's video render, while it is queued or rendering (the page
+/// asks for every available video it shows, except one removed to keep a budget: that one
+/// shows why, `video_note`).
 fn video_pending(ep: &EpisodeView) -> Option<f64> {
     let v = ep.video.as_ref()?;
-    matches!(v.status.as_str(), "available" | "queued" | "rendering").then_some(v.progress)
+    let pending = match v.status.as_str() {
+        "queued" | "rendering" => true,
+        "available" => ep.video_note.is_none(),
+        _ => false,
+    };
+    pending.then_some(v.progress)
+}
+
+/// Whether the episode's video file is there to play (views without a render state, from
+/// videos recorded during evaluation, name only stored videos).
+fn video_ready(ep: &EpisodeView) -> bool {
+    ep.video.as_ref().is_none_or(|v| v.status == "ready")
 }
 
 fn state_words(state: &str) -> &'static str {
@@ -301,7 +314,7 @@ fn media(ep: &EpisodeView) -> String {
             "<br><span class=\"muted video-rendering\" role=status>Rendering video… {:.0} %</span>",
             (progress * 100.0).clamp(0.0, 100.0)
         );
-    } else if let Some(video) = ep.video_url.as_deref() {
+    } else if let Some(video) = ep.video_url.as_deref().filter(|_| video_ready(ep)) {
         let src = page(video);
         // `preload=metadata`: a page of many episodes fetches only each file's header (the
         // server answers byte ranges) until one is played.
@@ -317,6 +330,10 @@ aria-label=\"Episode {key}: both cameras with the task and time captioned\">\
             "<br><span class=\"muted video-note\">{}</span>",
             escape(note)
         );
+        // Removed to keep a budget but still renderable from its trace: asking renders it.
+        if let Some(video) = ep.video_url.as_deref() {
+            let _ = write!(out, " <a href=\"{}\">render it again</a>", page(video));
+        }
     }
     if let Some(plot) = ep.plot_url.as_deref() {
         let src = page(plot);
@@ -378,5 +395,24 @@ mod tests {
         let html = media(&ep);
         assert!(!html.contains("<video"), "{html}");
         assert!(html.contains("Rendering video… 42 %"), "{html}");
+        // Removed to keep a budget, renderable again: its note and a link, never a player.
+        let mut evicted = episode(Some(url), Some("video removed to keep team a's videos within"));
+        evicted.video = Some(crate::service::renders::VideoView {
+            status: "available".into(),
+            progress: 0.0,
+            url: Some(url.into()),
+            error: None,
+        });
+        let html = media(&evicted);
+        assert!(!html.contains("<video") && !html.contains("Rendering"), "{html}");
+        assert!(
+            html.contains("video removed") && html.contains("render it again"),
+            "{html}"
+        );
+        assert!(!rendering_ep(&evicted));
+    }
+
+    fn rendering_ep(ep: &EpisodeView) -> bool {
+        video_pending(ep).is_some()
     }
 }
