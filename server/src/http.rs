@@ -242,7 +242,7 @@ async fn rotate_team_token(
     tag = "dataset",
     summary = "A split's instructions (JSON Lines)",
     description = "One JSON object a line: the instruction's id, scene and text; on the dev split also its plan. The `x-kitchen-r-split-kind` header says `dev`, `public-sample` or `private`.",
-    params(("split" = openapi::SplitName, Path, description = "`dev` or `test`", example = "dev")),
+    params(("split" = crate::schema::SplitName, Path, description = "`dev` or `test`", example = "dev")),
     responses(
         (status = 200, description = "The instructions, one JSON object a line", content_type = "application/x-ndjson", body = String,
             headers(("x-kitchen-r-split-kind" = String, description = "`dev`, `public-sample` or `private`"))),
@@ -384,7 +384,7 @@ async fn read_limited(body: Body, limit: usize) -> Result<Vec<u8>, ServiceError>
     tag = "submissions",
     summary = "Submit a plan file (planning track)",
     description = "The body is JSON Lines: one object a line, `{\"id\": instruction id, \"plan\": [sub-task sentences]}`. Other fields of a line are ignored and dropped before storage: the stored file holds only `id` and `plan`. It is scored at once; on the dev split per-instruction results follow on the submission.",
-    params(("split" = openapi::SplitName, Query, description = "`dev` or `test`", example = "dev"),
+    params(("split" = crate::schema::SplitName, Query, description = "`dev` or `test`", example = "dev"),
         ("reference" = Option<openapi::FlagParam>, Query, description = "Organiser only: file it as the planning board's baseline row (reserved `(baseline)` team, no quota)")),
     request_body(content = String, content_type = "application/x-ndjson", description = "The plan file: one JSON object a line",
         example = json!("{\"id\": \"dev-0001\", \"plan\": [\"move to the blue zone\", \"pick the bowl\", \"move to the red zone\", \"place the bowl\"]}\n")),

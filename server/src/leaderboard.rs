@@ -82,7 +82,7 @@ pub(crate) struct Leaderboard {
     #[serde(skip_serializing_if = "Option::is_none")]
     #[schema(value_type = Option<String>, example = "standard")]
     pub observations: Option<ObservationTrack>,
-    #[schema(value_type = crate::http::openapi::SplitName)]
+    #[schema(value_type = crate::schema::SplitName)]
     pub split: Split,
     pub rows: Vec<Row>,
 }

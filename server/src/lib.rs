@@ -14,8 +14,10 @@
 //!
 //! Imports go one way: adapters ([`http`], [`grpc`], [`grpc_worker`]) → [`service`] →
 //! [`store`], [`leaderboard`], [`content`], [`episodes`] → [`error`] → [`plans`] → the leaf
-//! modules [`scores`], [`clock`], [`states`], [`config`]. Nothing below the service imports the
-//! service or an adapter (tests aside).
+//! modules [`scores`], [`schema`], [`clock`], [`states`], [`config`]. Nothing below the service
+//! imports the service or an adapter (tests aside), and nothing outside an adapter imports one:
+//! schema stand-ins the OpenAPI document needs live with the domain types ([`scores`],
+//! [`schema`]), never as an import of [`http`] from the domain (issue #29).
 
 mod clock;
 mod config;
@@ -30,6 +32,7 @@ pub mod metrics;
 pub mod plans;
 mod plots;
 mod probe;
+mod schema;
 mod scores;
 mod secrets;
 mod service;

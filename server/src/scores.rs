@@ -11,22 +11,24 @@
 use serde::{Serialize, Serializer};
 
 use kitchen_r_core::scoring::RunScores;
+use utoipa::openapi::RefOr;
+use utoipa::openapi::schema::{ObjectBuilder, OneOfBuilder, Schema, SchemaType, Type};
 
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, utoipa::ToSchema)]
 pub(crate) struct Scores {
-    #[schema(schema_with = crate::http::openapi::score_schema)]
+    #[schema(schema_with = score_schema)]
     #[serde(serialize_with = "score")]
     pub em: Option<f64>,
-    #[schema(schema_with = crate::http::openapi::score_schema)]
+    #[schema(schema_with = score_schema)]
     #[serde(serialize_with = "score", skip_serializing_if = "Option::is_none")]
     pub sr: Option<f64>,
-    #[schema(schema_with = crate::http::openapi::score_schema)]
+    #[schema(schema_with = score_schema)]
     #[serde(serialize_with = "score", skip_serializing_if = "Option::is_none")]
     pub mse: Option<f64>,
-    #[schema(schema_with = crate::http::openapi::score_schema)]
+    #[schema(schema_with = score_schema)]
     #[serde(serialize_with = "score", skip_serializing_if = "Option::is_none")]
     pub m: Option<f64>,
-    #[schema(schema_with = crate::http::openapi::score_schema)]
+    #[schema(schema_with = score_schema)]
     #[serde(serialize_with = "score", skip_serializing_if = "Option::is_none")]
     pub p: Option<f64>,
 }
@@ -73,6 +75,22 @@ pub(crate) fn fmt_score(v: Option<f64>) -> String {
         Some(_) => "-inf".into(),
         None => String::new(),
     }
+}
+
+/// A score: a number, `null` when it cannot be computed (no episode, NaN), or the strings
+/// `inf` / `-inf` (JSON has no infinities).
+fn score_schema() -> impl Into<RefOr<Schema>> {
+    OneOfBuilder::new()
+        .item(ObjectBuilder::new().schema_type(SchemaType::new(Type::Number)))
+        .item(ObjectBuilder::new().schema_type(SchemaType::new(Type::Null)))
+        .item(
+            ObjectBuilder::new()
+                .schema_type(SchemaType::new(Type::String))
+                .enum_values(Some(["inf", "-inf"])),
+        )
+        .description(Some(
+            "A number; null when it cannot be computed; \"inf\" or \"-inf\" when infinite.",
+        ))
 }
 
 #[cfg(test)]

@@ -15,10 +15,12 @@ use axum::http::{HeaderValue, header};
 use axum::response::{IntoResponse, Response};
 use serde::{Deserialize, Serialize};
 use utoipa::openapi::path::Operation;
-use utoipa::openapi::schema::{ObjectBuilder, OneOfBuilder, Schema, SchemaType, Type};
+use utoipa::openapi::schema::{ObjectBuilder, Schema, SchemaType, Type};
 use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityScheme};
 use utoipa::openapi::{ContentBuilder, OpenApi as Document, RefOr, ResponseBuilder};
 use utoipa::{Modify, OpenApi, ToSchema};
+
+use crate::schema::SplitName;
 
 /// The security scheme of routes that take a team's token.
 pub(crate) const TEAM: &str = "team_token";
@@ -131,22 +133,6 @@ pub(crate) struct ErrorBody {
     pub retry_after_s: Option<u64>,
 }
 
-/// A dataset split as named in paths, queries and bodies.
-#[derive(Debug, Clone, Copy, Serialize, Deserialize, ToSchema)]
-#[serde(rename_all = "lowercase")]
-pub(crate) enum SplitName {
-    Dev,
-    Test,
-}
-
-/// The observation track of a policy run (`kitchen_r_core::observations::ObservationTrack`).
-#[derive(Debug, Clone, Copy, Serialize, Deserialize, ToSchema)]
-#[serde(rename_all = "lowercase")]
-pub(crate) enum ObservationsName {
-    Standard,
-    Privileged,
-}
-
 /// A query parameter's values, and the empty string (as an HTML form sends an unset field),
 /// which means the default. utoipa's derive cannot name an empty enum value, hence by hand.
 fn choice_schema(values: &[&str], description: &str) -> RefOr<Schema> {
@@ -248,22 +234,6 @@ pub(crate) struct TeamRequest {
 pub(crate) struct ResimulateRequest {
     /// The policy submission to simulate again.
     pub submission: i64,
-}
-
-/// A score: a number, `null` when it cannot be computed (no episode, NaN), or the strings
-/// `inf` / `-inf` (JSON has no infinities).
-pub(crate) fn score_schema() -> impl Into<RefOr<Schema>> {
-    OneOfBuilder::new()
-        .item(ObjectBuilder::new().schema_type(SchemaType::new(Type::Number)))
-        .item(ObjectBuilder::new().schema_type(SchemaType::new(Type::Null)))
-        .item(
-            ObjectBuilder::new()
-                .schema_type(SchemaType::new(Type::String))
-                .enum_values(Some(["inf", "-inf"])),
-        )
-        .description(Some(
-            "A number; null when it cannot be computed; \"inf\" or \"-inf\" when infinite.",
-        ))
 }
 
 /// Adds the security schemes and the error answers every route shares.

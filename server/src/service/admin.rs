@@ -143,7 +143,7 @@ pub(crate) struct RunView {
     /// The board its scores go to: `privileged` when its policy asked for, and received,
     /// privileged observations (ranked apart from `standard` runs). Every run listed here is a
     /// policy run: plan files are scored at upload and have no run to watch.
-    #[schema(value_type = crate::http::openapi::ObservationsName)]
+    #[schema(value_type = crate::schema::ObservationsName)]
     pub observations: ObservationTrack,
     pub state: RunState,
     pub episodes_total: i64,

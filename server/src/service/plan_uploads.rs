@@ -17,7 +17,7 @@ const DAY_MS: i64 = 86_400_000;
 #[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
 pub(crate) struct Submitted {
     pub id: i64,
-    #[schema(value_type = crate::http::openapi::SplitName)]
+    #[schema(value_type = crate::schema::SplitName)]
     pub split: Split,
     pub scores: Scores,
     pub warnings: Vec<String>,

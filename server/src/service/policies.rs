@@ -41,7 +41,7 @@ const MAX_TOKEN_CHARS: usize = 4096;
 pub(crate) struct RegisterPolicy {
     /// `http://host:port` or `https://host:port`.
     pub endpoint: String,
-    #[schema(value_type = crate::http::openapi::SplitName)]
+    #[schema(value_type = crate::schema::SplitName)]
     pub split: Split,
     /// Bearer token the evaluator sends to the endpoint; stored sealed, never shown back.
     #[serde(default)]
@@ -62,7 +62,7 @@ pub(crate) struct RegisterPolicy {
 pub(crate) struct Registered {
     pub id: i64,
     pub run_id: i64,
-    #[schema(value_type = crate::http::openapi::SplitName)]
+    #[schema(value_type = crate::schema::SplitName)]
     pub split: Split,
     /// Instructions evaluated.
     pub instructions: usize,
