@@ -18,6 +18,7 @@
 //! imports the service or an adapter (tests aside), and nothing outside an adapter imports one:
 //! schema stand-ins the OpenAPI document needs live with the domain types ([`scores`],
 //! [`schema`]), never as an import of [`http`] from the domain (issue #29).
+//! `layering_tests` checks this on the source text.
 
 mod clock;
 mod config;
@@ -27,6 +28,8 @@ mod error;
 mod grpc;
 mod grpc_worker;
 mod http;
+#[cfg(test)]
+mod layering_tests;
 mod leaderboard;
 pub mod metrics;
 pub mod plans;
