@@ -25,6 +25,7 @@ pub(crate) mod admin;
 pub(crate) mod auth;
 mod board;
 pub(crate) mod jobs;
+pub(crate) mod lease_limits;
 mod limits;
 mod login_throttle;
 mod metrics;

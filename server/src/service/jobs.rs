@@ -19,6 +19,7 @@ use serde::Serialize;
 use tokio::time::Instant;
 
 use self::checks::MAX_REASON_CHARS;
+use super::lease_limits::{MAX_JOBS_PER_LEASE, MAX_LEASE_WAIT_MS};
 use super::metrics::record;
 use super::renders::LeasedRender;
 use super::{AppState, WorkerCred, now_ms};
@@ -27,9 +28,6 @@ use crate::error::ServiceError;
 use crate::states::JobState;
 use crate::store::queue::{self, NewResult};
 
-/// Most jobs one Lease call hands out, and the longest it is held open.
-pub(crate) const MAX_JOBS_PER_LEASE: u32 = 64;
-pub(crate) const MAX_LEASE_WAIT_MS: u32 = 30_000;
 /// Cap of the stored log tail (worker.proto: 64 KiB).
 pub(crate) const MAX_LOG_TAIL_BYTES: usize = 64 << 10;
 const MAX_TASKS: usize = 256;
