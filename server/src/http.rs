@@ -43,6 +43,7 @@ mod pages;
 mod session;
 pub(crate) mod stack;
 mod video;
+mod viewer;
 
 pub(crate) fn router(state: AppState) -> Router {
     let cfg = state.config();

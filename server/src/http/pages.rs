@@ -30,17 +30,14 @@ use kitchen_r_core::dataset::Split;
 use serde::Deserialize;
 
 use super::extract::{ClientAddr, PathArg, QueryArgs};
-use super::{admin, session};
+use super::session;
+use super::viewer::{TEAM_COOKIE, Who, session_caller, who};
 use crate::error::ServiceError;
 use crate::leaderboard::Track;
 use crate::service::sessions::{Login, Role};
-use crate::service::{AppState, Caller, Organiser};
-use crate::store::Team;
+use crate::service::{AppState, Caller};
 use kitchen_r_core::observations::ObservationTrack;
 use layout::Viewer;
-
-/// The team session cookie; its value is a session id (`crate::service::sessions`).
-pub(super) const TEAM_COOKIE: &str = "kitchen_r_team";
 
 pub(super) fn routes() -> Router<AppState> {
     Router::new()
@@ -70,31 +67,6 @@ async fn favicon() -> Response {
         StatusCode::NO_CONTENT,
         [(axum::http::header::CACHE_CONTROL, "public, max-age=86400")],
     ))
-}
-
-/// Who opened a page: a bearer header first (scripts), then the team cookie, then the
-/// organiser's console cookie.
-enum Who {
-    Nobody,
-    Team(Team),
-    Organiser(Organiser),
-}
-
-async fn who(s: &AppState, caller: Caller, headers: &HeaderMap) -> Result<Who, ServiceError> {
-    match caller {
-        Caller::Team(t) => return Ok(Who::Team(t)),
-        Caller::Organiser(o) => return Ok(Who::Organiser(o)),
-        _ => {}
-    }
-    if let Some(id) = session::session_id(headers, TEAM_COOKIE)
-        && let Caller::Team(t) = s.session(id).await?
-    {
-        return Ok(Who::Team(t));
-    }
-    Ok(match admin::organiser_session(s, headers).await? {
-        Some(o) => Who::Organiser(o),
-        None => Who::Nobody,
-    })
 }
 
 /// Render `body` in the frame for `who`, with the logout form's CSRF field.
@@ -271,20 +243,6 @@ async fn logout(
     }
     let gone = session::set_cookie(TEAM_COOKIE, "", Some(0), session::https(&headers));
     Ok(session::see_other("/contest", &[gone]))
-}
-
-/// The caller a page's media request acts as: the team or organiser of its session cookie (or
-/// bearer header); `None` for nobody, whom media routes answer as not found.
-pub(super) async fn session_caller(
-    s: &AppState,
-    caller: Caller,
-    headers: &HeaderMap,
-) -> Result<Option<Caller>, ServiceError> {
-    Ok(match who(s, caller, headers).await? {
-        Who::Team(t) => Some(Caller::Team(t)),
-        Who::Organiser(o) => Some(Caller::Organiser(o)),
-        Who::Nobody => None,
-    })
 }
 
 /// An episode's path plot for the page's `<img>` (the API's `plot_url` takes a bearer token,

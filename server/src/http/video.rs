@@ -30,7 +30,7 @@ use tokio::io::{AsyncReadExt, AsyncSeekExt};
 
 use super::conditional;
 use super::extract::PathArg;
-use super::pages::session_caller;
+use super::viewer::session_caller;
 use crate::error::ServiceError;
 use crate::service::renders::VideoState;
 use crate::service::{AppState, Caller};

@@ -3,7 +3,7 @@ use axum::http::{HeaderValue, Request, header};
 use tower::ServiceExt;
 
 use super::*;
-use crate::http::router;
+use crate::http::{admin, router};
 use crate::testutil::{ADMIN, FakeProbe, Fixture, fixture};
 
 pub(super) struct Answer {
