@@ -10,7 +10,9 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use crate::ContentError;
-use crate::scene::Rgb;
+
+/// sRGB colour, each channel in `[0, 1]`.
+pub type Rgb = [f32; 3];
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

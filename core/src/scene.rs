@@ -12,9 +12,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::ContentError;
 use crate::catalogue::{Catalogue, Role};
-
-/// sRGB colour, each channel in `[0, 1]`.
-pub type Rgb = [f32; 3];
+// Defined beside the catalogue's colour variants (so the catalogue need not import the scene,
+// issue #29) and still named here, where scene files use it.
+pub use crate::catalogue::Rgb;
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
