@@ -6,53 +6,14 @@ use std::collections::BTreeSet;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
 use super::episode::StagedEpisode;
+use super::ledger::{EpisodeRecord, Spec, chunk_file};
 use super::meta;
-use super::stats::FeatureStats;
 use super::tables::{self, DataRows, EpisodeRow};
-use super::{CHUNKS_SIZE, CameraSpec, EPISODES_PER_FILE, FPS, LeRobotError, io_err, write_atomic};
+use super::{CameraSpec, EPISODES_PER_FILE, FPS, LeRobotError, io_err, write_atomic};
 use crate::video::EncodedVideo;
-
-/// One ledger line: an episode in the dataset and everything the metadata is rebuilt from.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub(super) struct EpisodeRecord {
-    pub episode_index: usize,
-    pub collect_index: usize,
-    pub episode_id: String,
-    pub scene: String,
-    pub instruction: String,
-    pub tasks: Vec<String>,
-    pub length: usize,
-    /// Global file number: chunk `file / 1000`, file `file % 1000`.
-    pub file: usize,
-    pub from_index: usize,
-    pub from_timestamp: f64,
-    pub stats: Vec<(String, FeatureStats)>,
-}
-
-/// The features every episode must share (checked when a staged episode is appended).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub(super) struct Spec {
-    /// Numeric features: key and per-dimension names.
-    pub columns: Vec<(String, Vec<String>)>,
-    pub cameras: Vec<CameraSpec>,
-}
-
-impl Spec {
-    fn of(e: &StagedEpisode) -> Spec {
-        Spec {
-            columns: e
-                .columns
-                .iter()
-                .map(|c| (c.key.clone(), c.names.clone()))
-                .collect(),
-            cameras: e.cameras.clone(),
-        }
-    }
-}
 
 /// A LeRobotDataset being collected into.
 #[derive(Debug)]
@@ -62,10 +23,6 @@ pub struct LeRobotDataset {
     spec: Option<Spec>,
     staged: BTreeSet<usize>,
     per_file: usize,
-}
-
-pub(super) fn chunk_file(file: usize) -> (usize, usize) {
-    (file / CHUNKS_SIZE, file % CHUNKS_SIZE)
 }
 
 fn rel(kind: &str, file: usize, ext: &str) -> String {

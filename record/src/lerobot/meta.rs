@@ -3,8 +3,8 @@
 
 use serde_json::{Value, json};
 
-use super::dataset::{EpisodeRecord, Spec, chunk_file};
 use super::episode::StagedEpisode;
+use super::ledger::{EpisodeRecord, Spec, chunk_file};
 use super::stats::FeatureStats;
 use super::tables::EpisodeRow;
 use super::{CHUNKS_SIZE, FPS};

@@ -32,6 +32,7 @@
 
 mod dataset;
 mod episode;
+mod ledger;
 mod meta;
 mod stats;
 mod tables;
