@@ -10,7 +10,7 @@ use anyhow::{Context, bail};
 use clap::{Args, Subcommand};
 use serde_json::Value;
 
-use crate::client_cmd::{ServerArgs, json, runtime, send, url};
+use crate::server_client::{ServerArgs, json, runtime, send, url};
 
 #[derive(Args, Debug)]
 pub(crate) struct AdminArgs {

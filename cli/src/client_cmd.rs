@@ -8,12 +8,7 @@ use anyhow::{Context, bail};
 use clap::{Args, Subcommand, ValueEnum};
 use serde_json::Value;
 
-#[derive(Args, Debug)]
-pub(crate) struct ServerArgs {
-    /// Server base URL.
-    #[arg(long, env = "KITCHEN_R_SERVER", default_value = "http://127.0.0.1:8080")]
-    pub server: String,
-}
+use crate::server_client::{ServerArgs, json, runtime, send, url};
 
 #[derive(Args, Debug)]
 pub(crate) struct TeamArgs {
@@ -129,37 +124,6 @@ pub(crate) struct RescoreArgs {
     /// Organiser token.
     #[arg(long, env = "KITCHEN_R_ADMIN_TOKEN", hide_env_values = true)]
     admin_token: String,
-}
-
-pub(crate) fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
-    tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .context("starting the async runtime")
-}
-
-pub(crate) fn url(server: &ServerArgs, path: &str) -> String {
-    format!("{}{path}", server.server.trim_end_matches('/'))
-}
-
-/// Send, and turn a non-2xx answer into an error carrying the server's message, error code and
-/// request id.
-pub(crate) async fn send(req: reqwest::RequestBuilder) -> anyhow::Result<reqwest::Response> {
-    let resp = req.send().await.context("cannot reach the server")?;
-    if resp.status().is_success() {
-        return Ok(resp);
-    }
-    let status = resp.status();
-    let text = resp.text().await.unwrap_or_default();
-    bail!(crate::submission_view::error_message(status.as_u16(), &text))
-}
-
-pub(crate) async fn json(req: reqwest::RequestBuilder) -> anyhow::Result<Value> {
-    send(req)
-        .await?
-        .json()
-        .await
-        .context("the server's answer is not JSON")
 }
 
 pub(crate) fn team(args: TeamArgs) -> anyhow::Result<()> {

@@ -21,6 +21,7 @@ mod policy_submit;
 mod probe_glue;
 mod replay_cmd;
 mod serve_cmd;
+mod server_client;
 mod sim_cmd;
 mod submission_cmd;
 mod submission_trace;

@@ -6,8 +6,9 @@ use std::time::Duration;
 use clap::Args;
 use serde_json::json;
 
-use crate::client_cmd::{ServerArgs, json as send_json, runtime, url};
-use crate::submission_cmd::{self, Auth};
+use crate::server_client::Auth;
+use crate::server_client::{ServerArgs, json as send_json, runtime, url};
+use crate::submission_cmd;
 
 #[derive(Args, Debug)]
 pub(crate) struct PolicySubmitArgs {

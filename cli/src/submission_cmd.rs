@@ -17,7 +17,7 @@ use anyhow::{Context, bail};
 use clap::{Args, Subcommand};
 use serde_json::Value;
 
-use crate::client_cmd::{ServerArgs, runtime, url};
+use crate::server_client::{Auth, ServerArgs, error_message, runtime, url};
 use crate::submission_view::{self, Snapshot};
 
 /// `wait` ran past `--timeout` (the code coreutils' `timeout` uses).
@@ -70,15 +70,6 @@ enum SubmissionCommand {
         #[command(flatten)]
         auth: Auth,
     },
-}
-
-#[derive(Args, Debug)]
-pub(crate) struct Auth {
-    #[command(flatten)]
-    pub server: ServerArgs,
-    /// Team token (or the organiser token, which sees every submission).
-    #[arg(long, env = "KITCHEN_R_TOKEN", hide_env_values = true)]
-    pub token: String,
 }
 
 pub(crate) fn submission(args: SubmissionArgs) -> anyhow::Result<()> {
@@ -172,7 +163,7 @@ pub(crate) async fn fetch(client: &reqwest::Client, auth: &Auth, id: i64) -> Res
     let text = resp.text().await.unwrap_or_default();
     if !status.is_success() {
         return Err(FetchError {
-            error: anyhow::anyhow!(submission_view::error_message(status.as_u16(), &text)),
+            error: anyhow::anyhow!(error_message(status.as_u16(), &text)),
             transient: status.is_server_error() || status.as_u16() == 429,
             retry_after,
         });

@@ -8,9 +8,7 @@ use std::time::Duration;
 
 use anyhow::{Context, bail};
 
-use crate::client_cmd::{runtime, url};
-use crate::submission_cmd::Auth;
-use crate::submission_view;
+use crate::server_client::{Auth, error_message, runtime, url};
 
 /// Download the trace and write it to `out` (default `<episode key>.trace.json.gz`).
 pub(crate) fn download(id: i64, key: &str, out: Option<PathBuf>, auth: &Auth) -> anyhow::Result<()> {
@@ -30,7 +28,7 @@ pub(crate) fn download(id: i64, key: &str, out: Option<PathBuf>, auth: &Auth) ->
         let status = resp.status();
         if !status.is_success() {
             let text = resp.text().await.unwrap_or_default();
-            bail!("{}", submission_view::error_message(status.as_u16(), &text));
+            bail!("{}", error_message(status.as_u16(), &text));
         }
         resp.bytes().await.context("reading the trace")
     })?;

@@ -9,7 +9,7 @@
 
 use serde_json::Value;
 
-use crate::client_cmd::{ServerArgs, url};
+use crate::server_client::{ServerArgs, url};
 
 /// One answer of `GET /api/v1/submissions/{id}`.
 pub(crate) struct Snapshot {
@@ -325,30 +325,6 @@ pub(crate) fn duration(secs: f64) -> String {
     }
 }
 
-/// A refused request in words: the server's message, status, error code and request id (to
-/// quote when reporting a problem).
-pub(crate) fn error_message(status: u16, body: &str) -> String {
-    let v: Value = serde_json::from_str(body).unwrap_or(Value::Null);
-    let Some(msg) = v["error"].as_str() else {
-        let body = body.trim();
-        return match body.is_empty() {
-            true => format!("the server answered HTTP {status}"),
-            false => format!("{body} (HTTP {status})"),
-        };
-    };
-    let mut extra = Vec::new();
-    if let Some(c) = v["code"].as_str() {
-        extra.push(format!("code {c}"));
-    }
-    if let Some(r) = v["request_id"].as_str() {
-        extra.push(format!("request id {r}"));
-    }
-    match extra.is_empty() {
-        true => format!("{msg} (HTTP {status})"),
-        false => format!("{msg} (HTTP {status}) [{}]", extra.join(", ")),
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -365,16 +341,6 @@ mod tests {
         };
         assert_eq!(eta_s(&snap), Some(180.0));
         assert!(progress_line(&snap).ends_with("2/8 episodes done, 2 running, ETA 3m 00s"));
-    }
-
-    #[test]
-    fn errors_quote_code_and_request_id() {
-        let body = r#"{"error":"submission 9 not found","code":"not_found","request_id":"abc"}"#;
-        assert_eq!(
-            error_message(404, body),
-            "submission 9 not found (HTTP 404) [code not_found, request id abc]"
-        );
-        assert_eq!(error_message(502, ""), "the server answered HTTP 502");
     }
 
     #[test]
