@@ -26,7 +26,7 @@ use crate::config::Config;
 use crate::error::{REQUEST_ID_HEADER, ServiceError, request_id_from, with_request_id};
 use crate::leaderboard::Track;
 use crate::probe::BoxFuture;
-use crate::service::lease_limits::MAX_LEASE_WAIT_MS;
+use crate::service::lease::MAX_LEASE_WAIT_MS;
 use crate::service::{AppState, EpisodeView, RegisterPolicy, Scores, SubmissionView};
 
 #[derive(Debug, Clone)]

@@ -25,7 +25,7 @@ pub(crate) mod admin;
 pub(crate) mod auth;
 mod board;
 pub(crate) mod jobs;
-pub(crate) mod lease_limits;
+pub(crate) mod lease;
 mod limits;
 mod login_throttle;
 mod metrics;

@@ -19,7 +19,7 @@ use serde::Serialize;
 use tokio::time::Instant;
 
 use self::checks::MAX_REASON_CHARS;
-use super::lease_limits::{MAX_JOBS_PER_LEASE, MAX_LEASE_WAIT_MS};
+use super::lease::{HeartbeatOutcome, MAX_JOBS_PER_LEASE, MAX_LEASE_WAIT_MS};
 use super::metrics::record;
 use super::renders::LeasedRender;
 use super::{AppState, WorkerCred, now_ms};
@@ -69,12 +69,6 @@ pub(crate) struct Report {
 pub(crate) struct ReportOutcome {
     pub accepted: bool,
     pub duplicate: bool,
-}
-
-/// `None` expiry means the lease is gone: stop working.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) struct HeartbeatOutcome {
-    pub lease_expires_at_ms: Option<i64>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]

@@ -65,9 +65,7 @@ impl AppState {
     /// period, and at least a long-polling Lease call's longest wait.
     fn worker_window(&self) -> Duration {
         let lease = Duration::from_secs(self.config().control.lease_s);
-        lease.max(
-            Duration::from_millis(u64::from(super::lease_limits::MAX_LEASE_WAIT_MS)) + Duration::from_secs(5),
-        )
+        lease.max(Duration::from_millis(u64::from(super::lease::MAX_LEASE_WAIT_MS)) + Duration::from_secs(5))
     }
 
     fn workers_connected(&self) -> usize {

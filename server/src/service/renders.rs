@@ -20,7 +20,7 @@ use std::path::Path;
 
 use serde::Serialize;
 
-use super::jobs::HeartbeatOutcome;
+use super::lease::HeartbeatOutcome;
 use super::{AppState, Caller, WorkerCred, now_ms};
 use crate::episodes::TaskOutcome;
 use crate::error::ServiceError;
