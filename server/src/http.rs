@@ -37,6 +37,7 @@ type Params = QueryArgs<HashMap<String, String>>;
 
 mod admin;
 mod conditional;
+mod error_body;
 mod extract;
 pub(crate) mod openapi;
 mod pages;
