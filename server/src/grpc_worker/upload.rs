@@ -10,7 +10,7 @@ use tonic::{Status, Streaming};
 
 use crate::service::AppState;
 use crate::store;
-use crate::videos::{Incoming, UploadError};
+use crate::videos::{Complete, Incoming, UploadError};
 
 /// Read the stream to its end, store the file and link it; returns its sha256 and size.
 pub(super) async fn receive(
@@ -22,10 +22,7 @@ pub(super) async fn receive(
             "this server does not store episode videos (`[video] enabled` is false or it has no video directory)",
         ));
     };
-    let first = stream
-        .message()
-        .await?
-        .ok_or_else(|| Status::invalid_argument("an empty upload: the first chunk must name the job"))?;
+    let first = first_chunk(&mut stream).await?;
     let (id, attempt) = (first.job_id, i64::from(first.attempt));
     let known = match first.render {
         true => store::renders::held(state.read_pool(), id, attempt, first.run_id, &first.episode_key).await,
@@ -42,25 +39,23 @@ pub(super) async fn receive(
     }
     .map_err(|e| Status::internal(e.to_string()))?;
     if !known {
-        return Err(Status::failed_precondition(format!(
-            "job {} attempt {} has no reported result for run {} episode {:?}",
-            first.job_id, first.attempt, first.run_id, first.episode_key
-        )));
+        return Err(unknown_job(
+            first.job_id,
+            first.attempt,
+            first.run_id,
+            &first.episode_key,
+        ));
     }
     let (run, key) = (first.run_id, first.episode_key.as_str());
     let limit = state.config().video.max_bytes;
-    let mut file = Incoming::start(&dir, first.total_bytes, limit)
+    let file = Incoming::start(&dir, first.total_bytes, limit)
         .await
         .map_err(refused)?;
     let booking = state
         .book_video(&dir, run, key, first.total_bytes)
         .await
         .map_err(refused)?;
-    file.write(&first.data).await.map_err(refused)?;
-    while let Some(chunk) = stream.message().await? {
-        file.write(&chunk.data).await.map_err(refused)?;
-    }
-    let file = file.finish().await.map_err(refused)?;
+    let file = write_all(file, &first.data, &mut stream, |c: &pb::VideoChunk| &c.data).await?;
     let (sha, bytes) = state
         .store_video(&dir, booking, run, key, file)
         .await
@@ -82,32 +77,50 @@ pub(super) async fn receive_trace(
             "this server does not store episode traces (`[video] enabled` is false or it has no video directory)",
         ));
     };
-    let first = stream
-        .message()
-        .await?
-        .ok_or_else(|| Status::invalid_argument("an empty upload: the first chunk must name the job"))?;
+    let first = first_chunk(&mut stream).await?;
     let (run, key) = (first.run_id, first.episode_key.as_str());
     let known = store::videos::reported_job(state.read_pool(), first.job_id, first.attempt, run, key)
         .await
         .map_err(|e| Status::internal(e.to_string()))?;
     if !known {
-        return Err(Status::failed_precondition(format!(
-            "job {} attempt {} has no reported result for run {run} episode {key:?}",
-            first.job_id, first.attempt
-        )));
+        return Err(unknown_job(first.job_id, first.attempt, run, key));
     }
     let limit = state.config().video.max_bytes;
-    let mut file = Incoming::start(&dir, first.total_bytes, limit)
+    let file = Incoming::start(&dir, first.total_bytes, limit)
         .await
         .map_err(refused)?;
-    file.write(&first.data).await.map_err(refused)?;
-    while let Some(chunk) = stream.message().await? {
-        file.write(&chunk.data).await.map_err(refused)?;
-    }
-    let file = file.finish().await.map_err(refused)?;
+    let file = write_all(file, &first.data, &mut stream, |c: &pb::TraceChunk| &c.data).await?;
     let (sha, bytes) = state.store_trace(&dir, run, key, file).await.map_err(refused)?;
     tracing::info!(run, episode = %key, bytes, sha256 = %sha, "episode trace stored");
     Ok((sha, bytes))
+}
+
+/// The first chunk, which names the job.
+async fn first_chunk<T>(stream: &mut Streaming<T>) -> Result<T, Status> {
+    stream
+        .message()
+        .await?
+        .ok_or_else(|| Status::invalid_argument("an empty upload: the first chunk must name the job"))
+}
+
+fn unknown_job(job_id: i64, attempt: u32, run: i64, key: &str) -> Status {
+    Status::failed_precondition(format!(
+        "job {job_id} attempt {attempt} has no reported result for run {run} episode {key:?}"
+    ))
+}
+
+/// The first chunk's bytes, then every later chunk's, into `file`; the finished file.
+async fn write_all<T>(
+    mut file: Incoming,
+    first: &[u8],
+    stream: &mut Streaming<T>,
+    data: impl Fn(&T) -> &[u8],
+) -> Result<Complete, Status> {
+    file.write(first).await.map_err(refused)?;
+    while let Some(chunk) = stream.message().await? {
+        file.write(data(&chunk)).await.map_err(refused)?;
+    }
+    file.finish().await.map_err(refused)
 }
 
 fn refused(e: UploadError) -> Status {

@@ -21,38 +21,50 @@ const TRIES: u32 = 3;
 /// The chunks of `mp4` for `job`: the first names the job and the size, the rest carry bytes.
 /// A render job's first chunk says so (`render`).
 pub(crate) fn chunks(worker_id: &str, job: &pb::Job, mp4: &[u8]) -> Vec<pb::VideoChunk> {
-    let mut out: Vec<pb::VideoChunk> = pieces(mp4)
-        .map(|data| pb::VideoChunk {
-            data: data.to_vec(),
-            ..Default::default()
-        })
-        .collect();
-    let first = &mut out[0];
-    first.worker_id = worker_id.to_string();
-    first.job_id = job.job_id;
-    first.attempt = job.attempt;
-    first.run_id = job.run_id;
-    first.episode_key = job.episode_key.clone();
-    first.total_bytes = mp4.len() as u64;
-    first.render = job.render.is_some();
+    let mut out = cut::<pb::VideoChunk>(worker_id, job, mp4);
+    out[0].render = job.render.is_some();
     out
 }
 
 /// The chunks of a gzipped trace, as [`chunks`] cuts a video.
 pub(crate) fn trace_chunks(worker_id: &str, job: &pb::Job, gz: &[u8]) -> Vec<pb::TraceChunk> {
-    let mut out: Vec<pb::TraceChunk> = pieces(gz)
-        .map(|data| pb::TraceChunk {
-            data: data.to_vec(),
-            ..Default::default()
-        })
-        .collect();
-    let first = &mut out[0];
-    first.worker_id = worker_id.to_string();
-    first.job_id = job.job_id;
-    first.attempt = job.attempt;
-    first.run_id = job.run_id;
-    first.episode_key = job.episode_key.clone();
-    first.total_bytes = gz.len() as u64;
+    cut::<pb::TraceChunk>(worker_id, job, gz)
+}
+
+/// An upload's chunk message: bytes, and the job-naming header its first chunk carries.
+trait Chunk: Default {
+    fn with_data(data: Vec<u8>) -> Self;
+    fn name_job(&mut self, worker_id: &str, job: &pb::Job, total_bytes: u64);
+}
+
+// The two messages have the same fields (proto/kitchen_r/worker/v1/worker.proto).
+macro_rules! chunk_message {
+    ($t:ty) => {
+        impl Chunk for $t {
+            fn with_data(data: Vec<u8>) -> Self {
+                Self {
+                    data,
+                    ..Default::default()
+                }
+            }
+            fn name_job(&mut self, worker_id: &str, job: &pb::Job, total_bytes: u64) {
+                self.worker_id = worker_id.to_string();
+                self.job_id = job.job_id;
+                self.attempt = job.attempt;
+                self.run_id = job.run_id;
+                self.episode_key = job.episode_key.clone();
+                self.total_bytes = total_bytes;
+            }
+        }
+    };
+}
+chunk_message!(pb::VideoChunk);
+chunk_message!(pb::TraceChunk);
+
+/// `bytes` as chunks, the first naming the job and the size.
+fn cut<C: Chunk>(worker_id: &str, job: &pb::Job, bytes: &[u8]) -> Vec<C> {
+    let mut out: Vec<C> = pieces(bytes).map(|d| C::with_data(d.to_vec())).collect();
+    out[0].name_job(worker_id, job, bytes.len() as u64);
     out
 }
 
