@@ -19,6 +19,7 @@ use clap::Args;
 use kitchen_r_episode::eval::summarize;
 use kitchen_r_episode::runner::EpisodeOutcome;
 use kitchen_r_episode::trace::{Trace, replay_with};
+use kitchen_r_record::keep_cameras;
 use kitchen_r_record::replay::{FramesOut, ReplayRecorder, episode_meta};
 use kitchen_r_record::video::episode::{EpisodeVideo, VideoHook};
 use kitchen_r_sim::{Assets, SensorsConfig, SimConfig};
@@ -83,11 +84,7 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
 fn sensors(names: &[String], size: Option<(u32, u32)>) -> anyhow::Result<SensorsConfig> {
     let mut s = SensorsConfig::load_default()?;
     if !names.is_empty() {
-        let known: Vec<&str> = s.cameras.iter().map(|c| c.name.as_str()).collect();
-        if let Some(bad) = names.iter().find(|n| !known.contains(&n.as_str())) {
-            anyhow::bail!("--camera: no camera {bad:?} (configured: {})", known.join(", "));
-        }
-        s.cameras.retain(|c| names.contains(&c.name));
+        keep_cameras(&mut s, names).map_err(|e| anyhow::anyhow!("--camera: {e}"))?;
     }
     if let Some((w, h)) = size {
         for c in &mut s.cameras {

@@ -7,6 +7,17 @@ use kitchen_r_sim::{Action, Observation, Sim, StepInfo};
 
 use crate::{CameraFrame, Frame, StaticTransform};
 
+/// Keep only the cameras `names` of `sensors`, in their configured order (the order of the
+/// recorded topics and datasets); an unknown name is an error listing the configured ones.
+pub fn keep_cameras(sensors: &mut SensorsConfig, names: &[String]) -> Result<(), String> {
+    let known: Vec<&str> = sensors.cameras.iter().map(|c| c.name.as_str()).collect();
+    if let Some(bad) = names.iter().find(|n| !known.contains(&n.as_str())) {
+        return Err(format!("no camera {bad:?} (configured: {})", known.join(", ")));
+    }
+    sensors.cameras.retain(|c| names.contains(&c.name));
+    Ok(())
+}
+
 /// The [`Frame`] of one control step from its rendered observation (`depth`: keep depth images).
 pub(crate) fn frame_of(
     sim: &Sim,

@@ -18,6 +18,7 @@ pub mod bench;
 mod cdr;
 pub mod collect;
 mod frame;
+pub use frame::keep_cameras;
 pub mod hdf5_aloha;
 pub mod lerobot;
 pub mod mcap_ros2;

@@ -3,6 +3,8 @@
 
 use kitchen_r_sim::SensorsConfig;
 
+use crate::frame::keep_cameras;
+
 use super::{CollectError, CollectOptions};
 use crate::lerobot::CameraSpec;
 use crate::rate::RateMonitor;
@@ -14,18 +16,10 @@ pub(super) fn sensors(opts: &CollectOptions) -> Result<SensorsConfig, CollectErr
         None => SensorsConfig::load_default()?,
     };
     if let Some(names) = &opts.cameras {
-        let known: Vec<String> = s.cameras.iter().map(|c| c.name.clone()).collect();
-        if let Some(bad) = names.iter().find(|n| !known.contains(n)) {
-            return Err(CollectError::Config(format!(
-                "--cameras: no camera {bad:?} (configured: {})",
-                known.join(", ")
-            )));
-        }
         if names.is_empty() {
             return Err(CollectError::Config("--cameras: name at least one camera".into()));
         }
-        // Keep the configured order: it is the order of the recorded topics and datasets.
-        s.cameras.retain(|c| names.contains(&c.name));
+        keep_cameras(&mut s, names).map_err(|e| CollectError::Config(format!("--cameras: {e}")))?;
     }
     Ok(s)
 }
