@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# What the episode video costs (README "Episode video"): the same episodes evaluated through the
+# What the episode video costs (docs/measured/video.md): the same episodes evaluated through the
 # workers' runner against a policy served on loopback, once without and once with `--record DIR`,
 # one episode at a time (--jobs 1, one core). Prints, per episode, the wall time without and with
 # the video, the time spent composing and encoding frames (from `eval --record`), frames and

@@ -83,7 +83,7 @@ pub(crate) fn print_video(e: &LocalEpisode) {
     }
 }
 
-/// Means over the episodes that wrote a video (the README's cost figures).
+/// Means over the episodes that wrote a video (the cost figures of docs/measured/video.md).
 pub(crate) fn print_video_totals(r: &LocalReport) {
     let videos: Vec<_> = r.episodes.iter().filter_map(|e| e.video.as_ref()).collect();
     if videos.is_empty() {

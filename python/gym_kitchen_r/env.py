@@ -86,7 +86,7 @@ class KitchenREnv(gym.Env):
     expert's chunk in ``info`` at every step), ``privileged`` (put the full reference world state in
     ``info``), ``privileged_observation`` (put in ``info`` what the privileged track sends a policy
     that asks for it: the robot's pose in the scene frame, the current goal in the robot frame,
-    the key objects the split allows; see the README's privileged-information track),
+    the key objects the split allows; see docs/participant/privileged.md),
     ``randomise`` (apply the paper's randomisation, ``configs/episodes.toml`` ``[randomise]``, to
     each episode: with seed S the episode of an instruction is the one ``kitchen-r episodes
     generate --from-dataset --seed S`` writes for it; off by default, as ``kitchen-r eval`` runs

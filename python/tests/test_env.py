@@ -179,7 +179,7 @@ def test_the_package_leaves_the_contracts_protobuf_namespace_alone():
 
 
 def test_the_readme_snippet_steps_the_expert_to_success():
-    # The README's lines, as a newcomer types them.
+    # The lines of docs/participant/python.md (once the README's), as a newcomer types them.
     import gymnasium as gym, gym_kitchen_r  # noqa: E401,F401
     env = gym.make("KitchenR/Plan-v0", expert=True)
     obs, info = env.reset(seed=0, options={"instruction": "dev-0001"})

@@ -22,7 +22,7 @@
 //! Images and depth are chunked one frame per chunk (ACT samples single timesteps, so a read
 //! decompresses only the frame it needs) and compressed with shuffle + deflate, the filters
 //! libhdf5 and so h5py always have: no plugin is needed to read the file. Raw, an average dev
-//! episode was ~240 MB; compressed with millimetre depth it is a tenth of that (README).
+//! episode was ~240 MB; compressed with millimetre depth it is a tenth of that (docs/measured/performance.md).
 
 use std::path::Path;
 

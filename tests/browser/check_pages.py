@@ -33,7 +33,7 @@ the browser could not be started.
 
 `--save-submission-shot FILE` also saves the team's first dev submission page at desktop width,
 each video showing its middle frame: that is how `docs/img/submission-page.png` (the README's
-picture) is made, from a team's 3-episode dev run of the starter kit's policy.
+and docs/reference/pages.md's picture) is made, from a team's 3-episode dev run of the starter kit's policy.
 
 Chromium is the system's (`--chromium`, default /usr/bin/chromium: Debian's `chromium`
 package); Playwright downloads no browser of its own.

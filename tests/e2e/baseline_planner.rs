@@ -1,7 +1,7 @@
 //! The planning baseline (`starter-kit/baselines/planner`, Python standard library only) against
 //! a real server on the committed benchmark: it reads the dev and test splits, briefs and
 //! top-down images over the public API, its plan files go through `kitchen-r submit plans`, the
-//! EM it scores is the figure the README reports (the parser is deterministic, so any change to
+//! EM it scores is the figure docs/measured/baseline-planning.md reports (the parser is deterministic, so any change to
 //! it or to what the server publishes shows here), and its row is on the planning leaderboard.
 //! Its LLM path runs against a fake OpenAI-compatible endpoint; its unit tests run too.
 
@@ -13,7 +13,7 @@ use std::process::{Command, Output};
 use serde_json::Value;
 use support::*;
 
-/// The README's figures (Baselines, Planning baseline): dev split and the public test sample.
+/// The figures of docs/measured/baseline-planning.md: dev split and the public test sample.
 const DEV_EM: f64 = 0.9973707274320772;
 /// The public sample is built from the public templates, like dev: it cannot rank planners.
 const TEST_SAMPLE_EM: f64 = 1.0;
@@ -107,7 +107,7 @@ fn the_parser_reproduces_its_em_through_the_server_and_shows_on_the_leaderboard(
         ));
         assert!(
             (em - expected).abs() < 1e-12,
-            "{split}: EM {em}, the README says {expected}"
+            "{split}: EM {em}, docs/measured/baseline-planning.md says {expected}"
         );
     }
     // The dev estimate the planner prints is the server's EM.

@@ -1,6 +1,6 @@
 //! `kitchen-r bench load` end to end with tiny parameters: it starts its own server, seeds,
 //! loads and checks it. A behaviour test (nothing fails, nothing is lost, something was
-//! measured), never a timing assertion: the figures belong to the README, not to CI.
+//! measured), never a timing assertion: the figures belong to docs/measured/load-benchmark.md, not to CI.
 
 use std::process::Command;
 

@@ -4,7 +4,7 @@
 //! [`PrivilegedObservation::from_world`], so the runner, offline MSE episodes and every
 //! transport show exactly the same thing.
 //!
-//! Policy (what each split shows; the same rule is written in `policy.proto` and the README):
+//! Policy (what each split shows; the same rule is written in `policy.proto` and docs/participant/privileged.md):
 //! a privileged observation describes the current episode only, so it tells nothing about any
 //! other instruction. It always carries the robot's pose in the scene frame and the current
 //! task's goal in the robot (base) frame: the approach pose of the zone a `move to` names, the

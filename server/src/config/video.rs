@@ -41,7 +41,7 @@ impl Default for VideoConfig {
             test_split: false,
             retention_days: 30,
             max_bytes: 64 << 20,
-            // A failing policy's dev episode makes 1–6.5 MB of video (README "Episode video"):
+            // A failing policy's dev episode makes 1–6.5 MB of video (docs/contest/video.md):
             // 2 GiB keeps a team's last two full dev runs of the worst such policy.
             team_max_bytes: 2 << 30,
             total_max_bytes: 64 << 30,

@@ -1,7 +1,7 @@
 """The plan grammar and a symbolic check of a plan against a scene.
 
 A step is exactly `move to the <colour> zone`, `pick the <object>` or `place the <object>`
-(README, planning track; `core/src/plan.rs`), with the scene's zone colours and object names.
+(docs/participant/planning.md; `core/src/plan.rs`), with the scene's zone colours and object names.
 `check` also acts the plan out: a pick needs the robot at the object's zone with an empty
 gripper, a place needs something held (it lands in the zone the robot is at). The server scores
 any well-formed plan; this check is what keeps a language model's answer sensible.

@@ -180,7 +180,7 @@ def main():
                     help="goal kinds whose policy-driven decisions the expert labels (comma-separated: move, pick, "
                     "place). Navigation only by default: the expert's pick-and-place phases are timed from the "
                     "task's start, so its labels of states a lagging policy reaches pull the arm ahead, and "
-                    "adding them measurably lowered pick and place SR (README)")
+                    "adding them measurably lowered pick and place SR (docs/measured/baseline-gates.md)")
     ap.add_argument("--beta", type=float, default=0.0, help="chance the expert drives a decision in round 1 (halves each round)")
     ap.add_argument("--envs", type=int, default=os.cpu_count(), help="environments (threads) in DAgger rounds")
     ap.add_argument("--batch", type=int, default=1024)

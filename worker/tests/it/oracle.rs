@@ -2,7 +2,7 @@
 //! instruction is executable by the oracle): it completes every task of every instruction of the
 //! committed dev split through the same evaluation code path as `kitchen-r eval --policy
 //! builtin:oracle` and the runner participants are scored by. The whole check over all 563
-//! committed instructions is that command over both splits (see the README).
+//! committed instructions is that command over both splits (see docs/twin/scenes.md, Feasibility).
 
 use kitchen_r_core::dataset::Split;
 use kitchen_r_episode::eval::{EvalOptions, EvalReport, episode_configs, evaluate, instructions};

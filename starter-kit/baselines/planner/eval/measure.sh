@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The planning baseline's EM through a real server, as the README reports it:
+# The planning baseline's EM through a real server, as docs/measured/baseline-planning.md reports it:
 #   bash starter-kit/baselines/planner/eval/measure.sh                      # dev + the public test sample
 #   bash starter-kit/baselines/planner/eval/measure.sh --test-set DIR       # dev + a generated (private-phrasing) test set
 #   bash starter-kit/baselines/planner/eval/measure.sh -- --llm URL --model M   # planner options after --
