@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
 """Checks the relative links of README.md and of every page of the book in docs/ (CI runs it from
-.ci/run, after `mdbook build docs`). Standard library only.
+.ci/run, after `mdbook build docs`), and of the other READMEs that link into the book (the starter
+kit's, the Python packages', deploy/README.md, which the book includes). Standard library only.
 
 A link is checked when its target has no scheme (http:, mailto:, ...): the path, taken relative to
 the page that holds the link, must name a file or folder that exists in the repository, and an
@@ -17,6 +18,7 @@ Usage: python3 scripts/check-book-links.py [EXTRA.md ...]   (extra Markdown file
 Exit 0 when every link resolves; 1 with the list of broken links otherwise.
 """
 
+import glob
 import os
 import re
 import sys
@@ -25,6 +27,15 @@ from urllib.parse import unquote
 ROOT = os.path.normpath(os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 BOOK = os.path.join(ROOT, "docs")
 BUILD = os.path.join(BOOK, "book")
+
+# READMEs outside docs/ that link into the book: a renamed page or heading breaks them too.
+OTHER_READMES = [
+    "starter-kit/README.md",
+    "starter-kit/baselines/*/README.md",
+    "python/README.md",
+    "python/*/README.md",
+    "deploy/README.md",
+]
 
 FENCE = re.compile(r"^\s{0,3}(`{3,}|~{3,})")
 HEADING = re.compile(r"^\s{0,3}(#{1,6})\s+(.*?)\s*#*\s*$")
@@ -174,6 +185,8 @@ def summary_targets():
 
 def main(argv):
     files = [os.path.join(ROOT, "README.md")] + book_pages()
+    for pattern in OTHER_READMES:
+        files += sorted(glob.glob(os.path.join(ROOT, pattern)))
     files += [os.path.abspath(a) for a in argv]
     problems = []
     for path in files:
