@@ -14,6 +14,9 @@ mod dataset_cmd;
 mod episodes_cmd;
 mod eval_cmd;
 mod eval_record;
+#[cfg(test)]
+#[path = "../../tests/import_circles.rs"]
+mod import_circles;
 mod leaderboard_table;
 mod load_bench;
 mod policy_cmd;

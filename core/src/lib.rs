@@ -14,6 +14,9 @@ pub mod catalogue;
 pub mod dataset;
 pub mod describe;
 pub mod error;
+#[cfg(test)]
+#[path = "../../tests/import_circles.rs"]
+mod import_circles;
 pub mod layout;
 pub mod metrics;
 pub mod observations;

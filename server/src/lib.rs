@@ -18,7 +18,9 @@
 //! imports the service or an adapter (tests aside), and nothing outside an adapter imports one:
 //! schema stand-ins the OpenAPI document needs live with the domain types ([`scores`],
 //! [`schema`]), never as an import of [`http`] from the domain (issue #29).
-//! `layering_tests` checks this on the source text.
+//! `layering_tests` checks this on the source text, and `import_circles` (the workspace's
+//! `tests/import_circles.rs`, shared with cli, core and record) that no two files import each
+//! other round a circle, which states when a parent module and its children count.
 
 mod clock;
 mod config;
@@ -28,6 +30,9 @@ mod error;
 mod grpc;
 mod grpc_worker;
 mod http;
+#[cfg(test)]
+#[path = "../../tests/import_circles.rs"]
+mod import_circles;
 #[cfg(test)]
 mod layering_tests;
 mod leaderboard;
@@ -43,7 +48,6 @@ mod states;
 mod store;
 #[cfg(test)]
 pub(crate) mod testutil;
-mod videos;
 
 use std::future::Future;
 use std::net::SocketAddr;
@@ -104,7 +108,7 @@ pub async fn build_with(config: Config, probe: Arc<dyn PolicyProbe>) -> anyhow::
     let state = AppState::new(pool, config, content, tokens, probe);
     state.seal_stored_tokens().await?;
     // Before anything listens, so no upload of this process is in `tmp/` yet.
-    videos::clear_partial_uploads(&state).await?;
+    service::videos::clear_partial_uploads(&state).await?;
     Ok(Server {
         state,
         generated_admin_token,
@@ -173,7 +177,7 @@ impl Server {
             let _ = rx.wait_for(|stop| *stop).await;
         };
         tokio::spawn(reaper(self.state.clone(), rx.clone()));
-        tokio::spawn(videos::sweeper(self.state.clone(), rx.clone()));
+        tokio::spawn(service::videos::sweeper(self.state.clone(), rx.clone()));
         let app = http::router(self.state.clone());
         // The peer's address reaches handlers (the login throttle counts failures per address).
         let app = app.into_make_service_with_connect_info::<std::net::SocketAddr>();

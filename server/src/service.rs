@@ -17,7 +17,8 @@
 //! - [`rescore`]: the organiser's rescoring of every stored submission;
 //! - [`secrets`]: endpoint tokens sealed at rest, opened for workers, sealed at start-up;
 //! - [`admin`]: the organiser's console (queue, workers, runs; cancel, requeue, backup);
-//! - [`video_budget`]: the video storage budgets and the files nothing links any more.
+//! - [`video_budget`]: the video storage budgets and the files nothing links any more;
+//! - [`videos`]: episode videos and traces stored by content, served, swept after retention.
 //!
 //! This file holds only the shared state and its accessors.
 
@@ -40,6 +41,7 @@ pub(crate) mod sessions;
 mod submissions;
 mod teams;
 mod video_budget;
+pub(crate) mod videos;
 
 use std::sync::Arc;
 

@@ -9,8 +9,8 @@ use kitchen_r_proto::worker::v1 as pb;
 use tonic::{Status, Streaming};
 
 use crate::service::AppState;
+use crate::service::videos::{Complete, Incoming, UploadError};
 use crate::store;
-use crate::videos::{Complete, Incoming, UploadError};
 
 /// Read the stream to its end, store the file and link it; returns its sha256 and size.
 pub(super) async fn receive(

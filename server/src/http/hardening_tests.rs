@@ -180,7 +180,7 @@ async fn a_video_answers_304_to_a_matching_if_none_match_or_if_modified_since() 
     .await
     .unwrap();
     let dir = f.state.video_dir().unwrap();
-    let sha = crate::videos::tests::store_file(&dir, b"mp4!!").await;
+    let sha = crate::service::videos::tests::store_file(&dir, b"mp4!!").await;
     let team = f.team_of(&alpha).await.id;
     let row = crate::store::videos::Row {
         run,

@@ -12,7 +12,7 @@
 //! `{"status": "failed", "error": why, "code": "video_render_failed"}`. The trace itself is
 //! served gzipped at `.../trace` to the same callers ([`api_trace`]).
 //!
-//! Who may see which video is `AppState::media_run`'s (see `crate::videos`). Range support:
+//! Who may see which video is `AppState::media_run`'s (see `crate::service::videos`). Range support:
 //! one `bytes=` range (`a-b`, `a-`, `-n`) is answered 206 with `Content-Range`; a range past the
 //! end is 416 with `Content-Range: bytes */<size>`; several ranges, a malformed header, or an
 //! `If-Range` that does not match the ETag get the whole file (200), as RFC 9110 allows. Every
@@ -33,8 +33,8 @@ use super::extract::PathArg;
 use super::viewer::session_caller;
 use crate::error::ServiceError;
 use crate::service::renders::VideoState;
+use crate::service::videos::StoredVideo;
 use crate::service::{AppState, Caller};
-use crate::videos::StoredVideo;
 use serde_json::json;
 
 /// Bytes read from the file per body chunk.

@@ -106,11 +106,27 @@ pub(crate) struct EpisodeView {
     /// The episode video's state: ready, available (rendered when asked for), queued,
     /// rendering (with progress) or failed (with why).
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub video: Option<super::renders::VideoView>,
+    pub video: Option<VideoView>,
     /// Why the episode has no video any more, where `video_url` would be: removed to keep a
     /// storage budget (`[video] team_max_bytes` or `total_max_bytes`), or not stored.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub video_note: Option<String>,
+}
+
+/// An episode's video as the API shows it (`EpisodeView.video`).
+#[derive(Debug, Clone, PartialEq, Serialize, utoipa::ToSchema)]
+pub(crate) struct VideoView {
+    /// `ready` (stored: `url` plays it), `available` (a trace is stored: asking for `url` renders
+    /// the video), `queued` or `rendering` (asked for; poll `url` or this view), `failed`
+    /// (`error` says why: the replay disagreed with the stored result, say).
+    pub status: String,
+    /// Share of the render done, 0 to 1 (`rendering`; 1 when `ready`).
+    pub progress: f64,
+    /// Where the video is served (202 while it renders).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub url: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
 }
 
 impl AppState {

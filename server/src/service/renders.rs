@@ -18,14 +18,13 @@
 use std::collections::HashMap;
 use std::path::Path;
 
-use serde::Serialize;
-
 use super::lease::HeartbeatOutcome;
+pub(crate) use super::progress::VideoView;
+use super::videos::{StoredVideo, trace_path};
 use super::{AppState, Caller, WorkerCred, now_ms};
 use crate::episodes::TaskOutcome;
 use crate::error::ServiceError;
 use crate::store::{self, renders as store_renders};
-use crate::videos::{StoredVideo, trace_path};
 
 /// Longest failure text kept for a render.
 const MAX_ERROR_CHARS: usize = 2000;
@@ -52,22 +51,6 @@ pub(crate) struct LeasedRender {
     pub episode_key: String,
     pub trace_gz: Vec<u8>,
     pub expected: Vec<TaskOutcome>,
-}
-
-/// An episode's video as the API shows it (`EpisodeView.video`).
-#[derive(Debug, Clone, PartialEq, Serialize, utoipa::ToSchema)]
-pub(crate) struct VideoView {
-    /// `ready` (stored: `url` plays it), `available` (a trace is stored: asking for `url` renders
-    /// the video), `queued` or `rendering` (asked for; poll `url` or this view), `failed`
-    /// (`error` says why: the replay disagreed with the stored result, say).
-    pub status: String,
-    /// Share of the render done, 0 to 1 (`rendering`; 1 when `ready`).
-    pub progress: f64,
-    /// Where the video is served (202 while it renders).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub url: Option<String>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub error: Option<String>,
 }
 
 impl AppState {

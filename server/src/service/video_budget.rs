@@ -19,11 +19,11 @@ use std::collections::HashMap;
 use std::path::Path;
 use std::sync::{Mutex, PoisonError};
 
+use super::videos::{Complete, UploadError, file_path};
 use super::{AppState, now_ms};
 use crate::error::ServiceError;
 use crate::metrics as m;
 use crate::store::videos::{self as store, Budget, Row};
-use crate::videos::{Complete, UploadError, file_path};
 
 /// Uploads in flight and the lock that orders file decisions; one per server.
 #[derive(Default)]

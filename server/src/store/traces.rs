@@ -1,5 +1,6 @@
 //! Episode traces' rows (`episode_traces`, issue #26): which stored trace file (by sha256) is
-//! which (run, episode)'s, and the retention sweep's deletes. The files are `crate::videos`'.
+//! which (run, episode)'s, and the retention sweep's deletes. The files are
+//! `crate::service::videos`'.
 
 use sqlx::sqlite::SqlitePool;
 

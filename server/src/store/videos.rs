@@ -1,6 +1,6 @@
 //! Episode videos' rows (`episode_videos`): which stored file (by sha256) shows which
 //! (run, episode), the budgets' evictions and the retention sweep's deletes. The files are
-//! `crate::videos`'.
+//! `crate::service::videos`'.
 //!
 //! A row with a `note` is a video removed to keep a budget: it has no file any more and says
 //! why. Everything that counts, serves or keeps files reads only rows without one ("stored").

@@ -28,8 +28,8 @@ use std::time::Duration;
 use anyhow::Context;
 use kitchen_r_core::dataset::Split;
 
+use super::{AppState, Caller, now_ms};
 use crate::error::ServiceError;
-use crate::service::{AppState, Caller, now_ms};
 use crate::states::SubmissionKind;
 use crate::store;
 
