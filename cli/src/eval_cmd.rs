@@ -68,7 +68,7 @@ pub(crate) struct EvalArgs {
     #[arg(long, value_name = "FILE")]
     config: Option<PathBuf>,
     /// Write each online episode's video to DIR/<episode key>.mp4, as the server's workers
-    /// record it (both cameras at the control rate with the caption bar; AV1 MP4). The built-in
+    /// record it (both cameras at the control rate with the caption bar; H.264 MP4). The built-in
     /// oracle is then served on a loopback port and run through the workers' path.
     #[arg(long, value_name = "DIR")]
     record: Option<PathBuf>,

@@ -31,7 +31,7 @@ pub(crate) struct ReplayArgs {
     #[arg(value_name = "TRACE")]
     trace: PathBuf,
     /// Where to write the episode video (the cameras at the control rate with the caption
-    /// bar; AV1 MP4, as `eval --record` writes it) [default, when neither `--mcap` nor
+    /// bar; H.264 MP4, as `eval --record` writes it) [default, when neither `--mcap` nor
     /// `--frames` is given: the trace's path with `.trace.json` or `.trace.json.gz` replaced by
     /// `.mp4`].
     #[arg(long, value_name = "OUT.mp4", conflicts_with = "check_only")]

@@ -4,8 +4,9 @@
 //! - [`mcap_ros2`]: MCAP with ROS 2 message encodings (`ros2msg` schemas, CDR payloads), the
 //!   format `ros2 bag` uses, so ROS 2 tools and Foxglove open it.
 //! - [`hdf5_aloha`]: one HDF5 file per episode in the layout ALOHA/ACT tooling reads.
-//! - [`lerobot`]: a LeRobotDataset v3.0 (Parquet + AV1 video), what LeRobot trains from.
-//! - [`video`]: RGB frames to an AV1 MP4 in pure Rust (LeRobot's videos; episode videos).
+//! - [`lerobot`]: a LeRobotDataset v3.0 (Parquet + H.264 or AV1 video), what LeRobot trains from.
+//! - [`video`]: RGB frames to an H.264 (OpenH264) or AV1 (rav1e) MP4 (LeRobot's videos; episode
+//!   videos).
 //! - [`rate`]: the Monitoring Module's recording-rate check.
 //! - [`bench`](mod@bench): oracle-episode and collection throughput figures (it needs both local evaluation
 //!   and collection, so it lives with collection).

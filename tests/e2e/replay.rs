@@ -70,7 +70,7 @@ fn an_eval_trace_replays_bit_identically_into_a_playable_video_and_a_tampered_on
     let b = std::fs::read(&mp4).unwrap();
     assert!(b.len() > 1000, "{} bytes", b.len());
     assert_eq!(&b[4..8], b"ftyp");
-    assert!(b.windows(4).any(|w| w == b"av1C"), "an AV1 track");
+    assert!(b.windows(4).any(|w| w == b"avcC"), "an H.264 track");
 
     // The MCAP `collect` would write, and the gripper camera alone at 64x48 as PNG files.
     let mcap = dir.path().join("episode.mcap");

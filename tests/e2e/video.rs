@@ -27,7 +27,7 @@ async fn get(server: &Server, path: &str, token: &str, range: Option<&str>) -> r
     req.send().await.unwrap()
 }
 
-/// Decode `mp4` with PyAV (FFmpeg's dav1d or libaom): the track's sample entry (`av01` for AV1)
+/// Decode `mp4` with PyAV (FFmpeg's decoders): the track's sample entry (`avc1` for H.264)
 /// and how many frames decode.
 fn decode(mp4: &[u8]) -> (String, i64) {
     let dir = tempfile::tempdir().unwrap();
@@ -260,7 +260,7 @@ fn a_dev_episode_video_is_rendered_on_demand_served_with_ranges_to_its_team_only
         let past = get(&server, &url, &alpha, Some(&format!("bytes={}-", mp4.len()))).await;
         assert_eq!(past.status(), 416);
         let (codec, frames) = decode(&mp4);
-        assert_eq!(codec, "av01");
+        assert_eq!(codec, "avc1");
         assert!(
             (frames - FRAMES).abs() <= 1,
             "{frames} frames for {FRAMES} control steps"

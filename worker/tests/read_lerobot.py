@@ -38,8 +38,16 @@ def concat(paths):
     return pd.concat([pd.read_parquet(p) for p in paths], ignore_index=True)
 
 
-def mp4_boxes(path):
-    """Top-level boxes and the sample count of the first track (stsz)."""
+# The decoder configuration box and the PyAV decoder names of each `video.codec` we write.
+CODECS = {
+    "h264": (b"avcC", ("h264",)),
+    "av1": (b"av1C", ("libdav1d", "av1", "libaom-av1")),
+}
+
+
+def mp4_boxes(path, config_box):
+    """Top-level boxes, the sample count of the first track (stsz), and whether the decoder
+    configuration box is there."""
     b = path.read_bytes()
     top, at = [], 0
     while at + 8 <= len(b):
@@ -49,7 +57,7 @@ def mp4_boxes(path):
         at += size
     i = b.find(b"stsz")
     count = struct.unpack(">I", b[i + 12:i + 16])[0]
-    return top, count, b.find(b"av1C") > 0
+    return top, count, b.find(config_box) > 0
 
 
 def main(root):
@@ -69,7 +77,7 @@ def main(root):
     for k in video_keys:
         f = feats[k]
         check(f["names"] == ["height", "width", "channels"] and f["shape"][2] == 3, f"{k} shape")
-        check(f["info"]["video.codec"] == "av1" and f["info"]["video.fps"] == fps, f"{k} info")
+        check(f["info"]["video.codec"] in CODECS and f["info"]["video.fps"] == fps, f"{k} info")
 
     tasks = pd.read_parquet(root / "meta/tasks.parquet")
     check(tasks.index.name == "task", "tasks.parquet is indexed by task")
@@ -146,13 +154,14 @@ def main(root):
             frames = int(group["length"].sum())
             end = float(group[f"videos/{k}/to_timestamp"].max())
             check(abs(end - frames / fps) < 1e-6, f"{path}: episodes span {end} s")
-            top, count, av1c = mp4_boxes(path)
-            check(top == ["ftyp", "moov", "mdat"] and av1c and count == frames, f"{path}: {top}")
+            config_box, decoders = CODECS[feats[k]["info"]["video.codec"]]
+            top, count, has_config = mp4_boxes(path, config_box)
+            check(top == ["ftyp", "moov", "mdat"] and has_config and count == frames, f"{path}: {top}")
             decoded = None
             if av is not None:
                 with av.open(str(path)) as container:
                     stream = container.streams.video[0]
-                    check(stream.codec_context.name in ("libdav1d", "av1", "libaom-av1"), "codec")
+                    check(stream.codec_context.name in decoders, f"codec {stream.codec_context.name}")
                     times, shape = [], None
                     for frame in container.decode(stream):
                         times.append(frame.time)

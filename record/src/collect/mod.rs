@@ -118,6 +118,8 @@ pub struct CollectOptions {
     pub batch: Option<Vec<kitchen_r_sim::EpisodeConfig>>,
     /// Episodes per LeRobotDataset data/video file ([`crate::lerobot::EPISODES_PER_FILE`]).
     pub lerobot_episodes_per_file: usize,
+    /// The LeRobotDataset's video codec; `None`: the dataset's own when appending, else H.264.
+    pub video_codec: Option<crate::video::Codec>,
     /// Draw an indicatif progress bar on stderr (hidden anyway when stderr is not a terminal).
     pub progress: bool,
 }
@@ -142,6 +144,7 @@ impl CollectOptions {
             depth: Some(DepthUnit::default()),
             batch: None,
             lerobot_episodes_per_file: crate::lerobot::EPISODES_PER_FILE,
+            video_codec: None,
             progress: false,
         }
     }

@@ -68,7 +68,8 @@ fn partial(p: &Path) -> PathBuf {
 }
 
 /// Run, record and judge episode `index`; returns its manifest entry. A kept episode is staged
-/// for the LeRobotDataset under `staging` (when that format is on).
+/// for the LeRobotDataset under `staging`, encoding its videos with the given settings (when
+/// that format is on).
 #[allow(clippy::too_many_arguments)]
 fn one(
     assets: &Assets,
@@ -78,7 +79,7 @@ fn one(
     instruction: &str,
     opts: &CollectOptions,
     index: usize,
-    staging: Option<&Path>,
+    staging: Option<(&Path, VideoSettings)>,
 ) -> Result<ManifestEntry, CollectError> {
     let started = Instant::now();
     let finals = final_paths(opts, index);
@@ -138,11 +139,11 @@ fn one(
         .hdf5
         .then(|| Hdf5Recorder::new(meta.clone(), hdf5_options));
     let lerobot = match staging {
-        Some(_) => Some(EpisodeRecorder::new(
+        Some((_, video)) => Some(EpisodeRecorder::new(
             index,
             meta.clone(),
             &camera_specs(&sensors(opts)?),
-            VideoSettings::default(),
+            video,
         )?),
         None => None,
     };
@@ -168,7 +169,7 @@ fn one(
         })
     });
     let mut written = finish(&mut rec, opts, &finals, mcap_path.as_deref());
-    if let (None, Ok(()), Some(l), Some(dir)) = (&trip, &written, rec.lerobot.take(), staging) {
+    if let (None, Ok(()), Some(l), Some(dir)) = (&trip, &written, rec.lerobot.take(), staging.map(|s| s.0)) {
         written = l.finish(dir).map_err(|e| Trip::new("write_error", e.to_string()));
     }
     match (trip, written) {
@@ -252,8 +253,10 @@ pub fn collect(opts: &CollectOptions) -> Result<CollectSummary, CollectError> {
         ),
         false => None,
     };
+    let mut video = VideoSettings::default();
     if let Some(d) = &dataset {
         d.check_cameras(&camera_specs(&sensors(opts)?))?;
+        video = video.with_codec(d.resolve_codec(opts.video_codec)?);
     }
     let staging = dataset.as_ref().map(LeRobotDataset::staging_dir);
     let todo: Vec<usize> = (0..count)
@@ -275,7 +278,7 @@ pub fn collect(opts: &CollectOptions) -> Result<CollectSummary, CollectError> {
     std::thread::scope(|scope| -> Result<(), CollectError> {
         for _ in 0..opts.jobs.clamp(1, todo.len().max(1)) {
             let (tx, next, todo, assets, params, ins) = (tx.clone(), &next, &todo, &assets, &params, &ins);
-            let staging = staging.as_deref();
+            let staging = staging.as_deref().map(|s| (s, video));
             scope.spawn(move || {
                 let mut oracle = OraclePolicy::new(assets);
                 let mut sim = None;

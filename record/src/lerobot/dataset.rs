@@ -13,7 +13,7 @@ use super::ledger::{EpisodeRecord, Spec, chunk_file};
 use super::meta;
 use super::tables::{self, DataRows, EpisodeRow};
 use super::{CameraSpec, EPISODES_PER_FILE, FPS, LeRobotError, io_err, write_atomic};
-use crate::video::EncodedVideo;
+use crate::video::{Codec, EncodedVideo};
 
 /// A LeRobotDataset being collected into.
 #[derive(Debug)]
@@ -79,6 +79,25 @@ impl LeRobotDataset {
                 cameras
             ))),
             _ => Ok(()),
+        }
+    }
+
+    /// The codec of the dataset's videos, once it has any.
+    pub fn codec(&self) -> Option<Codec> {
+        self.spec.as_ref().map(|s| s.codec)
+    }
+
+    /// The codec a run appends with: `asked` if given, else the dataset's, else H.264; a run
+    /// asking for another codec than the dataset's is refused (one file joins clips of one
+    /// codec, and LeRobot reads one `video.codec` per feature).
+    pub fn resolve_codec(&self, asked: Option<Codec>) -> Result<Codec, LeRobotError> {
+        match (asked, self.codec()) {
+            (Some(a), Some(d)) if a != d => Err(LeRobotError::Mismatch(format!(
+                "the dataset at {} holds {d} videos, this run asks for {a}; pass --video-codec {d} \
+                 or collect into another --out",
+                self.root.display()
+            ))),
+            (a, d) => Ok(a.or(d).unwrap_or_default()),
         }
     }
 
@@ -336,4 +355,35 @@ fn json_err(path: &Path, e: serde_json::Error) -> LeRobotError {
 fn write_json(path: &Path, v: &Value) -> Result<(), LeRobotError> {
     let text = serde_json::to_string_pretty(v).map_err(|e| json_err(path, e))?;
     write_atomic(path, |p| std::fs::write(p, text).map_err(io_err(p)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_run_appends_with_the_datasets_codec_and_refuses_another() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut ds = LeRobotDataset::open(dir.path()).unwrap();
+        assert_eq!(
+            ds.resolve_codec(None).unwrap(),
+            Codec::H264,
+            "a new dataset: H.264"
+        );
+        assert_eq!(ds.resolve_codec(Some(Codec::Av1)).unwrap(), Codec::Av1);
+        ds.spec = Some(Spec {
+            columns: vec![],
+            cameras: vec![],
+            codec: Codec::Av1,
+        });
+        assert_eq!(ds.resolve_codec(None).unwrap(), Codec::Av1, "appending keeps AV1");
+        let e = ds.resolve_codec(Some(Codec::H264)).unwrap_err().to_string();
+        assert!(
+            e.contains("holds av1 videos") && e.contains("--video-codec av1"),
+            "{e}"
+        );
+        // A dataset collected before H.264 existed has no codec in its spec: AV1.
+        let old: Spec = serde_json::from_str(r#"{"columns": [], "cameras": []}"#).unwrap();
+        assert_eq!(old.codec, Codec::Av1);
+    }
 }

@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use super::stats::FeatureStats;
 use super::{CameraSpec, LeRobotError, io_err, write_atomic};
-use crate::video::{VideoEncoder, VideoSettings};
+use crate::video::{Codec, VideoEncoder, VideoSettings};
 use crate::{EpisodeMeta, Frame};
 
 /// The 10 values of the action and of `observation.state`, named alike: the state is the
@@ -40,6 +40,14 @@ pub(crate) struct StagedEpisode {
     pub cameras: Vec<CameraSpec>,
     /// Per-camera image statistics, in `cameras` order.
     pub image_stats: Vec<FeatureStats>,
+    /// The codec of the staged clips (episodes staged before H.264 existed are AV1).
+    #[serde(default = "codec_before_h264")]
+    pub codec: Codec,
+}
+
+/// What a staged episode or dataset without a `codec` field was encoded with.
+pub(crate) fn codec_before_h264() -> Codec {
+    Codec::Av1
 }
 
 impl StagedEpisode {
@@ -78,6 +86,7 @@ pub struct EpisodeRecorder {
     columns: Vec<Column>,
     plan_step: Vec<usize>,
     tracks: Vec<Track>,
+    codec: Codec,
 }
 
 impl std::fmt::Debug for EpisodeRecorder {
@@ -113,6 +122,7 @@ impl EpisodeRecorder {
             columns: Vec::new(),
             plan_step: Vec::new(),
             tracks,
+            codec: video.codec,
         })
     }
 
@@ -217,6 +227,7 @@ impl EpisodeRecorder {
             columns: self.columns,
             cameras,
             image_stats,
+            codec: self.codec,
         };
         let path = StagedEpisode::json_path(staging, i);
         let text = serde_json::to_string(&staged).map_err(|e| LeRobotError::Json {

@@ -5,9 +5,10 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::episode::StagedEpisode;
+use super::episode::{StagedEpisode, codec_before_h264};
 use super::stats::FeatureStats;
 use super::{CHUNKS_SIZE, CameraSpec};
+use crate::video::Codec;
 
 /// One ledger line: an episode in the dataset and everything the metadata is rebuilt from.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -32,6 +33,9 @@ pub(super) struct Spec {
     /// Numeric features: key and per-dimension names.
     pub columns: Vec<(String, Vec<String>)>,
     pub cameras: Vec<CameraSpec>,
+    /// The videos' codec (a dataset collected before H.264 existed is AV1).
+    #[serde(default = "codec_before_h264")]
+    pub codec: Codec,
 }
 
 impl Spec {
@@ -43,6 +47,7 @@ impl Spec {
                 .map(|c| (c.key.clone(), c.names.clone()))
                 .collect(),
             cameras: e.cameras.clone(),
+            codec: e.codec,
         }
     }
 }

@@ -29,7 +29,7 @@ pub(super) fn info(spec: Option<&Spec>, records: &[EpisodeRecord], total_tasks: 
                     "info": {
                         "video.height": c.height,
                         "video.width": c.width,
-                        "video.codec": "av1",
+                        "video.codec": spec.codec.name(),
                         "video.pix_fmt": "yuv420p",
                         "video.is_depth_map": false,
                         "is_depth_map": false,

@@ -12,7 +12,7 @@
 //!   data/chunk-000/file-000.parquet             observation.state, observation.joints,
 //!                                               observation.base_pose, action, timestamp,
 //!                                               frame_index, episode_index, index, task_index
-//!   videos/observation.images.<cam>/chunk-000/file-000.mp4   AV1, the file's episodes back to back
+//!   videos/observation.images.<cam>/chunk-000/file-000.mp4   H.264 (or AV1), the file's episodes back to back
 //!   .collect/                                   ours: staged episodes and the resume ledger
 //! ```
 //!

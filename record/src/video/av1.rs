@@ -11,14 +11,15 @@ use rav1e::data::{FrameType, Rational};
 use rav1e::prelude::{SceneDetectionSpeed, Tune};
 use rav1e::{Config, Context, EncoderConfig, EncoderStatus};
 
-use super::{EncodedVideo, Sample, VideoError, VideoSettings};
+use super::yuv::{chroma_size, rgb_to_yuv420};
+use super::{Codec, EncodedVideo, Sample, VideoError, VideoSettings};
 
 /// OBU types we look for in rav1e's packets (AV1 spec 5.3.1).
 const OBU_SEQUENCE_HEADER: u8 = 1;
 const OBU_TEMPORAL_DELIMITER: u8 = 2;
 
-/// Encodes RGB8 frames of one size at one frame rate into an [`EncodedVideo`].
-pub struct VideoEncoder {
+/// Encodes RGB8 frames of one size at one frame rate into an AV1 [`EncodedVideo`].
+pub(super) struct Av1Encoder {
     ctx: Context<u8>,
     width: u32,
     height: u32,
@@ -30,9 +31,9 @@ pub struct VideoEncoder {
     yuv: [Vec<u8>; 3],
 }
 
-impl std::fmt::Debug for VideoEncoder {
+impl std::fmt::Debug for Av1Encoder {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("VideoEncoder")
+        f.debug_struct("Av1Encoder")
             .field("width", &self.width)
             .field("height", &self.height)
             .field("fps", &self.fps)
@@ -41,9 +42,9 @@ impl std::fmt::Debug for VideoEncoder {
     }
 }
 
-impl VideoEncoder {
+impl Av1Encoder {
     /// An encoder for `width`×`height` frames (each at least 16, rav1e's minimum) at `fps`.
-    pub fn new(width: u32, height: u32, fps: u32, s: VideoSettings) -> Result<Self, VideoError> {
+    pub(super) fn new(width: u32, height: u32, fps: u32, s: VideoSettings) -> Result<Self, VideoError> {
         if width < 16 || height < 16 || fps == 0 {
             return Err(VideoError::Config(format!(
                 "{width}x{height} at {fps} fps: frames must be at least 16x16 and fps positive"
@@ -74,7 +75,7 @@ impl VideoEncoder {
         let ctx: Context<u8> = cfg.new_context().map_err(|e| VideoError::Config(e.to_string()))?;
         let header = ctx.container_sequence_header();
         let (cw, ch) = chroma_size(width, height);
-        Ok(VideoEncoder {
+        Ok(Av1Encoder {
             ctx,
             width,
             height,
@@ -92,7 +93,7 @@ impl VideoEncoder {
     }
 
     /// Add a frame: `rgb` is `width * height * 3` bytes, row-major.
-    pub fn push_rgb(&mut self, rgb: &[u8]) -> Result<(), VideoError> {
+    pub(super) fn push_rgb(&mut self, rgb: &[u8]) -> Result<(), VideoError> {
         let n = (self.width * self.height) as usize;
         if rgb.len() != 3 * n {
             return Err(VideoError::Frame {
@@ -121,7 +122,7 @@ impl VideoEncoder {
     }
 
     /// Flush the encoder and return the clip.
-    pub fn finish(mut self) -> Result<EncodedVideo, VideoError> {
+    pub(super) fn finish(mut self) -> Result<EncodedVideo, VideoError> {
         self.ctx.flush();
         self.drain()?;
         if self.samples.len() != self.pushed {
@@ -134,6 +135,7 @@ impl VideoEncoder {
         let mut config = self.header;
         config.extend(self.sequence_header.unwrap_or_default());
         Ok(EncodedVideo {
+            codec: Codec::Av1,
             width: self.width,
             height: self.height,
             fps: self.fps,
@@ -170,10 +172,6 @@ fn speed_settings(speed: u8) -> SpeedSettings {
     s.scene_detection_mode = SceneDetectionSpeed::None;
     s.cdef = false;
     s
-}
-
-fn chroma_size(width: u32, height: u32) -> (usize, usize) {
-    (width.div_ceil(2) as usize, height.div_ceil(2) as usize)
 }
 
 /// The packet without temporal delimiters (ISO-BMFF samples carry none), and its sequence
@@ -225,48 +223,9 @@ fn obu_len(b: &[u8]) -> Option<usize> {
     None
 }
 
-/// BT.601 limited-range RGB → Y, and 2×2-averaged Cb, Cr (integer arithmetic, as swscale).
-fn rgb_to_yuv420(rgb: &[u8], w: usize, h: usize, yuv: &mut [Vec<u8>; 3]) {
-    let px = |x: usize, y: usize| {
-        let i = 3 * (y * w + x);
-        (i32::from(rgb[i]), i32::from(rgb[i + 1]), i32::from(rgb[i + 2]))
-    };
-    for y in 0..h {
-        for x in 0..w {
-            let (r, g, b) = px(x, y);
-            yuv[0][y * w + x] = (((66 * r + 129 * g + 25 * b + 128) >> 8) + 16) as u8;
-        }
-    }
-    let cw = w.div_ceil(2);
-    for cy in 0..h.div_ceil(2) {
-        for cx in 0..cw {
-            let (mut r, mut g, mut b, mut n) = (0, 0, 0, 0);
-            for (x, y) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
-                let (px_x, px_y) = (2 * cx + x, 2 * cy + y);
-                if px_x < w && px_y < h {
-                    let p = px(px_x, px_y);
-                    (r, g, b, n) = (r + p.0, g + p.1, b + p.2, n + 1);
-                }
-            }
-            let (r, g, b) = (r / n, g / n, b / n);
-            yuv[1][cy * cw + cx] = (((-38 * r - 74 * g + 112 * b + 128) >> 8) + 128) as u8;
-            yuv[2][cy * cw + cx] = (((112 * r - 94 * g - 18 * b + 128) >> 8) + 128) as u8;
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn grey_white_and_black_map_to_bt601_limited_range() {
-        let rgb = [0, 0, 0, 255, 255, 255, 128, 128, 128, 255, 255, 255];
-        let mut yuv = [vec![0; 4], vec![0; 1], vec![0; 1]];
-        rgb_to_yuv420(&rgb, 2, 2, &mut yuv);
-        assert_eq!(yuv[0], vec![16, 235, 126, 235]);
-        assert_eq!((yuv[1][0], yuv[2][0]), (128, 128));
-    }
 
     #[test]
     fn temporal_delimiters_are_dropped_and_the_sequence_header_kept() {
@@ -284,11 +243,11 @@ mod tests {
             ..VideoSettings::default()
         };
         assert!(
-            VideoEncoder::new(18, 14, 10, settings).is_err(),
+            Av1Encoder::new(18, 14, 10, settings).is_err(),
             "rav1e's minimum is 16"
         );
         // Odd sizes: chroma planes round up.
-        let mut enc = VideoEncoder::new(17, 19, 10, settings).unwrap();
+        let mut enc = Av1Encoder::new(17, 19, 10, settings).unwrap();
         for i in 0..9u8 {
             let rgb: Vec<u8> = (0..17 * 19 * 3).map(|k| (k as u8).wrapping_mul(i)).collect();
             enc.push_rgb(&rgb).unwrap();

@@ -1,11 +1,12 @@
-//! A minimal ISO-BMFF (MP4) writer for one AV1 video track ("AV1 Codec ISO Media File Format
-//! Binding" v1.2.0): `ftyp`, `moov` before `mdat` ("fast start"), all samples in one chunk.
+//! A minimal ISO-BMFF (MP4) writer for one video track, AV1 ("AV1 Codec ISO Media File Format
+//! Binding" v1.2.0: `av01` with `av1C`) or H.264 (ISO/IEC 14496-15: `avc1` with `avcC`):
+//! `ftyp`, `moov` before `mdat` ("fast start"), all samples in one chunk.
 //!
 //! The media timescale is `fps * 512` with every sample lasting 512 ticks (ffmpeg's choice for
 //! constant-rate video), so frame `k` starts at exactly `k / fps` seconds: LeRobot looks frames
 //! up by timestamp.
 
-use super::EncodedVideo;
+use super::{Codec, EncodedVideo};
 
 /// Ticks per frame; see the module doc.
 const TICKS_PER_FRAME: u32 = 512;
@@ -15,7 +16,7 @@ const TICKS_PER_FRAME: u32 = 512;
 const NCLX_BT601: u16 = 6;
 
 pub(super) fn mux(v: &EncodedVideo) -> Vec<u8> {
-    let ftyp = ftyp();
+    let ftyp = ftyp(v.codec);
     let payload: usize = v.samples.iter().map(|s| s.data.len()).sum();
     // The chunk offset depends on moov's size, which depends on whether offsets need 64 bits.
     let wide = ftyp.len() + payload + 4096 + 64 * v.samples.len() > u32::MAX as usize;
@@ -99,13 +100,17 @@ impl Body {
     }
 }
 
-fn ftyp() -> Vec<u8> {
+fn ftyp(codec: Codec) -> Vec<u8> {
+    let brand = match codec {
+        Codec::Av1 => b"av01",
+        Codec::H264 => b"avc1",
+    };
     let body = Body::default()
         .bytes(b"isom")
         .u32(0x200)
         .bytes(b"isom")
         .bytes(b"iso6")
-        .bytes(b"av01")
+        .bytes(brand)
         .bytes(b"mp41");
     bx(b"ftyp", &body.0)
 }
@@ -175,7 +180,10 @@ fn moov(v: &EncodedVideo, offset: u64, wide: bool) -> Vec<u8> {
 fn stbl(v: &EncodedVideo, offset: u64, wide: bool) -> Vec<u8> {
     let n = v.samples.len() as u32;
     let mut compressor = [0u8; 32];
-    let name = b"AOM Coding (rav1e)";
+    let (entry, config, name): (&[u8; 4], &[u8; 4], &[u8]) = match v.codec {
+        Codec::Av1 => (b"av01", b"av1C", b"AOM Coding (rav1e)"),
+        Codec::H264 => (b"avc1", b"avcC", b"AVC Coding (OpenH264)"),
+    };
     compressor[0] = name.len() as u8;
     compressor[1..=name.len()].copy_from_slice(name);
     let colr = Body::default()
@@ -184,7 +192,7 @@ fn stbl(v: &EncodedVideo, offset: u64, wide: bool) -> Vec<u8> {
         .u16(NCLX_BT601)
         .u16(NCLX_BT601)
         .u8(0); // limited range
-    let av01 = Body::default()
+    let sample_entry = Body::default()
         .zeros(6)
         .u16(1) // data reference index
         .zeros(16)
@@ -197,9 +205,9 @@ fn stbl(v: &EncodedVideo, offset: u64, wide: bool) -> Vec<u8> {
         .bytes(&compressor)
         .u16(0x0018) // depth
         .u16(0xffff) // pre_defined = -1
-        .bytes(&bx(b"av1C", &v.config))
+        .bytes(&bx(config, &v.config))
         .bytes(&bx(b"colr", &colr.0));
-    let stsd = Body::default().u32(1).bytes(&bx(b"av01", &av01.0));
+    let stsd = Body::default().u32(1).bytes(&bx(entry, &sample_entry.0));
     let stts = if n == 0 {
         Body::default().u32(0)
     } else {
@@ -259,6 +267,7 @@ mod tests {
     #[test]
     fn moov_comes_first_and_the_chunk_offset_points_at_the_samples() {
         let v = EncodedVideo {
+            codec: Codec::Av1,
             width: 4,
             height: 2,
             fps: 10,

@@ -1,17 +1,26 @@
 //! Our own container for an encoded clip between episode end and the MP4 that joins a batch of
-//! episodes: a header, the `av1C` payload, then `(key, length, bytes)` per sample. Little
-//! endian; not meant for other tools.
+//! episodes: a magic naming the codec, a header, the decoder configuration (`av1C` or `avcC`
+//! payload), then `(key, length, bytes)` per sample. Little endian; not meant for other tools.
 
 use std::path::Path;
 
-use super::{EncodedVideo, Sample, VideoError};
+use super::{Codec, EncodedVideo, Sample, VideoError};
 
-const MAGIC: &[u8; 8] = b"KRAV1\0\0\x01";
+/// One magic per codec (AV1's is the format's first one, so older staged clips still load).
+const MAGIC_AV1: &[u8; 8] = b"KRAV1\0\0\x01";
+const MAGIC_H264: &[u8; 8] = b"KRH264\0\x01";
+
+fn magic(codec: Codec) -> &'static [u8; 8] {
+    match codec {
+        Codec::Av1 => MAGIC_AV1,
+        Codec::H264 => MAGIC_H264,
+    }
+}
 
 pub(super) fn save(v: &EncodedVideo, path: &Path) -> Result<(), VideoError> {
     let payload: usize = v.samples.iter().map(|s| s.data.len() + 5).sum();
     let mut out = Vec::with_capacity(payload + v.config.len() + 32);
-    out.extend(MAGIC);
+    out.extend(magic(v.codec));
     for x in [
         v.width,
         v.height,
@@ -51,9 +60,10 @@ fn parse(b: &[u8]) -> Option<EncodedVideo> {
         at += n;
         Some(s)
     };
-    if take(8)? != MAGIC {
-        return None;
-    }
+    let head = take(8)?;
+    let codec = [Codec::Av1, Codec::H264]
+        .into_iter()
+        .find(|c| head == magic(*c))?;
     let mut word = || -> Option<u32> { Some(u32::from_le_bytes(take(4)?.try_into().ok()?)) };
     let (width, height, fps, config_len, n) = (word()?, word()?, word()?, word()?, word()?);
     let config = take(config_len as usize)?.to_vec();
@@ -67,6 +77,7 @@ fn parse(b: &[u8]) -> Option<EncodedVideo> {
         });
     }
     (at == b.len()).then_some(EncodedVideo {
+        codec,
         width,
         height,
         fps,
@@ -81,7 +92,14 @@ mod tests {
 
     #[test]
     fn a_saved_clip_loads_back_equal_and_a_truncated_one_is_refused() {
+        for codec in [Codec::Av1, Codec::H264] {
+            saved_clip_round_trips(codec);
+        }
+    }
+
+    fn saved_clip_round_trips(codec: Codec) {
         let v = EncodedVideo {
+            codec,
             width: 6,
             height: 4,
             fps: 10,

@@ -23,7 +23,7 @@ pub(super) fn video_item() -> utoipa::openapi::PathItem {
     let item = serde_json::json!({
         "get": {
             "tags": ["submissions"],
-            "summary": "One episode's video (AV1 in MP4), with byte ranges; rendered on first request",
+            "summary": "One episode's video (H.264 in MP4), with byte ranges; rendered on first request",
             "description": "Both cameras side by side with a caption bar. The team sees its dev episodes; the organiser dev and test. One `bytes=` range is answered 206; several ranges, a malformed `Range` or an `If-Range` that does not match the ETag get the whole file. Videos are rendered on demand from the episode's trace: the first request queues a render and is answered 202 (with `Retry-After`) until the video is stored; a render whose replay disagrees with the stored result is refused (409, `video_render_failed`).",
             "operationId": "api_video",
             "parameters": [
