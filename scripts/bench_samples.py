@@ -7,7 +7,7 @@
    both 128x128 cameras, the robot state and the expert's 16x10 chunk), each sample's arrays
    read once as a trainer would; episodes and samples per minute.
 2. With ``--collect M``: ``kitchen-r collect --format lerobot --episodes M --jobs W`` (the same
-   episodes' first M, AV1 video), then, when PyAV and pyarrow are importable, decoding the export
+   episodes' first M, H.264 video), then, when PyAV and pyarrow are importable, decoding the export
    into memory with the diffusion-policy baseline's loader (starter-kit/baselines/diffusion_policy/
    dataset.py, a process per core); episodes per minute of each and of both together.
 

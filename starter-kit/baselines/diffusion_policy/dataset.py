@@ -4,7 +4,7 @@ Layout read (see record/src/lerobot/mod.rs): `meta/info.json` (fps, features), `
 (task sentence -> task_index), `meta/episodes/chunk-*/file-*.parquet` (per episode: its rows
 `dataset_from_index..dataset_to_index` and, per camera, the video file and the episode's
 `from_timestamp`/`to_timestamp` in it), `meta/stats.json` (normalisation), `data/chunk-*/file-*.parquet`
-(`observation.state`, `action`, `task_index`, `episode_index`, `index`) and AV1 videos
+(`observation.state`, `action`, `task_index`, `episode_index`, `index`) and H.264 or AV1 videos
 `videos/observation.images.<cam>/chunk-*/file-*.mp4` (decoded with PyAV, in a process pool).
 
 A training sample at row k of a task (see features.py for the timing): observation rows
