@@ -41,8 +41,8 @@ pub(crate) struct CollectArgs {
     /// HDF5 depth unit: `mm` (uint16 millimetres) or `m` (float32 metres).
     #[arg(long, value_enum, default_value = "mm", value_name = "UNIT")]
     depth_unit: DepthArg,
-    /// The LeRobotDataset's video codec: `h264` (OpenH264, about twelve times faster to encode)
-    /// or `av1` (rav1e: smaller files, royalty-free, LeRobot's own default) [default: the
+    /// The LeRobotDataset's video codec: `h264` (OpenH264, about four times the episodes a
+    /// minute here) or `av1` (rav1e: royalty-free, LeRobot's own default) [default: the
     /// dataset's codec when appending to one, else h264].
     #[arg(long, value_name = "CODEC")]
     video_codec: Option<Codec>,

@@ -6,7 +6,7 @@
 //!   Safari play it inline; LeRobot (PyAV/torchcodec) decodes it. Note its patents: OpenH264
 //!   built from source is not covered by Cisco's licence for its own binaries.
 //! - **AV1** ([`av1`], `rav1e`, with its assembly when the `asm` feature finds nasm):
-//!   royalty-free and smaller, what LeRobot writes by default, but slow to encode.
+//!   royalty-free and what LeRobot writes by default, but slow to encode.
 //!
 //! [`mp4`] writes the container by hand: `ftyp`, then `moov` (one `avc1`/`avcC` or `av01`/`av1C`
 //! track with `colr`) before `mdat`, so a browser can start playing before the whole file has
