@@ -7,13 +7,16 @@
 //! - [`lerobot`]: a LeRobotDataset v3.0 (Parquet + H.264 or AV1 video), what LeRobot trains from.
 //! - [`video`]: RGB frames to an H.264 (OpenH264) or AV1 (rav1e) MP4 (LeRobot's videos; episode
 //!   videos).
+//! - [`live`], [`live_hook`]: the same ROS 2 messages published live while an episode runs,
+//!   through a bounded queue that drops rather than waits (the transports, Foxglove WebSocket,
+//!   are in kitchen-r-live).
 //! - [`rate`]: the Monitoring Module's recording-rate check.
 //! - [`bench`](mod@bench): oracle-episode and collection throughput figures (it needs both local evaluation
 //!   and collection, so it lives with collection).
 //!
 //! The recorder knows nothing about physics: the collector converts simulator observations into
-//! [`Frame`]s. This crate writes files only: it must not score submissions (the episode outcome
-//! comes from kitchen-r-episode) and must not touch the network or a database.
+//! [`Frame`]s. This crate writes files and fills the live queue only: it must not score submissions (the
+//! episode outcome comes from kitchen-r-episode) and must not touch the network or a database.
 
 pub mod bench;
 mod cdr;
@@ -25,10 +28,13 @@ pub mod hdf5_aloha;
 #[path = "../../tests/import_circles.rs"]
 mod import_circles;
 pub mod lerobot;
+pub mod live;
+pub mod live_hook;
 pub mod mcap_ros2;
 pub mod rate;
 pub mod replay;
-mod ros2_msgs;
+pub mod ros2_frame;
+pub mod ros2_msgs;
 pub mod video;
 
 use serde::{Deserialize, Serialize};

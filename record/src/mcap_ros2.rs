@@ -22,6 +22,7 @@ use std::path::{Path, PathBuf};
 use mcap::records::MessageHeader;
 
 use crate::rate::RateMonitor;
+use crate::ros2_frame::{self, ImuMemory};
 use crate::ros2_msgs as msg;
 use crate::{EpisodeMeta, Frame, RecordError, TaskSpan, nanos};
 
@@ -31,7 +32,7 @@ pub struct McapRecorder {
     channels: BTreeMap<String, u16>,
     sequence: u32,
     /// The previous frame's time and base twist, for the IMU's acceleration.
-    previous: Option<(f64, [f64; 2])>,
+    previous: ImuMemory,
     /// Messages written per topic, for summaries and tests.
     pub counts: BTreeMap<String, u64>,
 }
@@ -68,13 +69,8 @@ impl McapRecorder {
             name: "episode".into(),
             metadata: md,
         })?;
-        let mounts: Vec<msg::Tf<'_>> = meta
-            .sensor_mounts
-            .iter()
-            .map(|m| (m.parent.as_str(), m.child.as_str(), m.translation, m.rotation))
-            .collect();
-        let data = msg::tf_message(0.0, &mounts);
-        rec.publish("/tf_static", "tf2_msgs/TFMessage", 0.0, &data, None)?;
+        let tf = ros2_frame::static_transforms(meta);
+        rec.publish(&tf.topic, tf.ty, tf.stamp, &tf.data, None)?;
         Ok(rec)
     }
 
@@ -116,80 +112,9 @@ impl McapRecorder {
 
     /// Write every message of one frame; each publication is reported to `rate`.
     pub fn write_frame(&mut self, f: &Frame, mut rate: Option<&mut RateMonitor>) -> Result<(), RecordError> {
-        let t = f.time;
-        for cam in &f.cameras {
-            let frame_id = format!("{}_optical_frame", cam.name);
-            let rgb = msg::image(
-                t,
-                &frame_id,
-                cam.width,
-                cam.height,
-                "rgb8",
-                cam.width * 3,
-                &cam.rgb,
-            );
-            self.publish(
-                &format!("/camera/{}/image_raw", cam.name),
-                "sensor_msgs/Image",
-                t,
-                &rgb,
-                rate.as_deref_mut(),
-            )?;
-            if cam.depth.is_empty() {
-                continue;
-            }
-            let depth_bytes: Vec<u8> = cam.depth.iter().flat_map(|d| d.to_le_bytes()).collect();
-            let depth = msg::image(
-                t,
-                &frame_id,
-                cam.width,
-                cam.height,
-                "32FC1",
-                cam.width * 4,
-                &depth_bytes,
-            );
-            self.publish(
-                &format!("/camera/{}/depth", cam.name),
-                "sensor_msgs/Image",
-                t,
-                &depth,
-                rate.as_deref_mut(),
-            )?;
+        for m in ros2_frame::frame_messages(f, &mut self.previous) {
+            self.publish(&m.topic, m.ty, m.stamp, &m.data, rate.as_deref_mut())?;
         }
-        if let Some(points) = &f.lidar {
-            let pc = msg::point_cloud(t, "lidar", points);
-            self.publish(
-                "/lidar/points",
-                "sensor_msgs/PointCloud2",
-                t,
-                &pc,
-                rate.as_deref_mut(),
-            )?;
-        }
-        let odom = msg::odometry(t, f.base_pose, f.base_twist);
-        self.publish("/odom", "nav_msgs/Odometry", t, &odom, rate.as_deref_mut())?;
-        let imu = msg::imu(t, f.base_pose[2], f.base_twist, self.previous);
-        self.previous = Some((t, f.base_twist));
-        self.publish("/imu", "sensor_msgs/Imu", t, &imu, rate.as_deref_mut())?;
-        let (bt, br) = msg::base_tf(f.base_pose);
-        let e = f.ee_pose;
-        let tf = msg::tf_message(
-            t,
-            &[
-                ("odom", "base_link", bt, br),
-                (
-                    "base_link",
-                    "ee_link",
-                    [e[0], e[1], e[2]],
-                    [e[3], e[4], e[5], e[6]],
-                ),
-            ],
-        );
-        self.publish("/tf", "tf2_msgs/TFMessage", t, &tf, rate.as_deref_mut())?;
-        let cmd = msg::twist(f.action[0], f.action[1]);
-        self.publish("/cmd_vel", "geometry_msgs/Twist", t, &cmd, rate.as_deref_mut())?;
-        let action = msg::float64_array("v,w,x,y,z,qw,qx,qy,qz,g", &f.action);
-        self.publish("/action", "std_msgs/Float64MultiArray", t, &action, rate)?;
         Ok(())
     }
 

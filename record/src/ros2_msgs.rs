@@ -1,5 +1,7 @@
-//! The ROS 2 message types we record: their `ros2msg` schema texts (with every dependency, in
-//! the concatenated form rosbag2 writes) and their CDR serializers.
+//! The ROS 2 message types we record and publish live: their `ros2msg` schema texts (with every
+//! dependency, in the concatenated form rosbag2 writes) and their CDR serializers. The MCAP
+//! writer and the live publishers take the same bytes from here ([`crate::ros2_frame`] puts a
+//! frame's messages together), so a live subscriber sees exactly what a recording holds.
 
 use crate::cdr::CdrWriter;
 
@@ -84,7 +86,20 @@ const DEFS: &[(&str, &str)] = &[
         "std_msgs/Float64MultiArray",
         "std_msgs/MultiArrayLayout layout\nfloat64[] data\n",
     ),
+    ("std_msgs/String", "string data\n"),
 ];
+
+/// One ROS 2 message ready to write or publish.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Ros2Message {
+    pub topic: String,
+    /// The message type, `pkg/Name` (see [`schema_name`] for the `pkg/msg/Name` form).
+    pub ty: &'static str,
+    /// Sim seconds since the episode's start: the header stamp and the log time.
+    pub stamp: f64,
+    /// CDR (little-endian XCDR1) with its 4-byte encapsulation header.
+    pub data: Vec<u8>,
+}
 
 fn def(ty: &str) -> &'static str {
     DEFS.iter().find(|(t, _)| *t == ty).map(|(_, d)| *d).unwrap_or("")
@@ -101,7 +116,7 @@ fn deps(ty: &str) -> impl Iterator<Item = &'static str> {
 }
 
 /// The schema text of `ty` (`pkg/Name`) followed by all its dependencies, each once.
-pub(crate) fn schema(ty: &str) -> String {
+pub fn schema(ty: &str) -> String {
     let mut order: Vec<&str> = Vec::new();
     let mut stack: Vec<&str> = deps(ty).collect();
     stack.reverse();
@@ -124,7 +139,7 @@ pub(crate) fn schema(ty: &str) -> String {
 }
 
 /// The MCAP schema name ROS 2 uses: `pkg/msg/Name`.
-pub(crate) fn schema_name(ty: &str) -> String {
+pub fn schema_name(ty: &str) -> String {
     ty.replacen('/', "/msg/", 1)
 }
 
@@ -261,6 +276,12 @@ pub(crate) fn twist(v: f64, omega: f64) -> Vec<u8> {
     let mut w = CdrWriter::with_capacity(56);
     vec3(&mut w, [v, 0.0, 0.0]);
     vec3(&mut w, [0.0, 0.0, omega]);
+    w.finish()
+}
+
+pub(crate) fn string(s: &str) -> Vec<u8> {
+    let mut w = CdrWriter::with_capacity(s.len() + 8);
+    w.string(s);
     w.finish()
 }
 
