@@ -38,6 +38,16 @@ pub(crate) enum SimCommand {
         #[arg(long, default_value_t = 8)]
         count: usize,
     },
+    /// Write a scene as USD ASCII (furniture, key objects at their starts, zones as guide
+    /// markers, the robot base) so Isaac Sim and other USD tools can open it.
+    Export {
+        /// Scene id (file stem under assets/scenes).
+        #[arg(long)]
+        scene: String,
+        /// The `.usda` file to write.
+        #[arg(long, value_name = "OUT.usda")]
+        usd: PathBuf,
+    },
 }
 
 #[derive(Args, Debug)]
@@ -68,6 +78,11 @@ pub(crate) enum BenchCommand {
 
 pub(crate) fn sim(args: SimArgs) -> anyhow::Result<()> {
     match args.command {
+        SimCommand::Export { scene, usd } => {
+            kitchen_r_sim::usd_export::export_scene(&scene, &usd)?;
+            println!("{}", usd.display());
+            Ok(())
+        }
         SimCommand::Render {
             scene,
             out,

@@ -28,6 +28,7 @@ pub mod sim;
 pub mod snapshot;
 pub mod task;
 pub mod types;
+pub mod usd_export;
 pub mod world;
 
 pub use config::{SensorsConfig, SimConfig};

@@ -85,11 +85,33 @@ fn add_box(
     world.insert_collider(co, Some(body));
 }
 
+/// The floor slab under the room and its walls: pose and half extents (shared with the USD
+/// export, so both describe the same boxes).
+pub fn floor_box(scene: &Scene) -> (Isometry3<f64>, [f64; 3]) {
+    let [rx, ry] = scene.room.size;
+    let t = scene.room.wall_thickness;
+    (
+        planar(rx / 2.0, ry / 2.0, -0.05, 0.0),
+        [rx / 2.0 + t, ry / 2.0 + t, 0.05],
+    )
+}
+
+/// The four walls (south, north, west, east): pose and half extents.
+pub fn wall_boxes(scene: &Scene) -> [(Isometry3<f64>, [f64; 3]); 4] {
+    let [rx, ry] = scene.room.size;
+    let (t, wh) = (scene.room.wall_thickness, scene.room.wall_height);
+    [
+        ([rx / 2.0, -t / 2.0], [rx / 2.0 + t, t / 2.0]),
+        ([rx / 2.0, ry + t / 2.0], [rx / 2.0 + t, t / 2.0]),
+        ([-t / 2.0, ry / 2.0], [t / 2.0, ry / 2.0 + t]),
+        ([rx + t / 2.0, ry / 2.0], [t / 2.0, ry / 2.0 + t]),
+    ]
+    .map(|(c, h)| (planar(c[0], c[1], wh / 2.0, 0.0), [h[0], h[1], wh / 2.0]))
+}
+
 /// Floor, walls and furniture as one fixed body.
 pub fn build_static(world: &mut PhysicsWorld, mats: &mut Materials, scene: &Scene, style: &Style) {
     let body = world.insert_body(RigidBodyBuilder::fixed());
-    let [rx, ry] = scene.room.size;
-    let (t, wh) = (scene.room.wall_thickness, scene.room.wall_height);
     let floor = mats.add(Material {
         color: style.floor_color,
         pattern: style.floor_pattern.unwrap_or(Pattern::Tiles {
@@ -97,15 +119,8 @@ pub fn build_static(world: &mut PhysicsWorld, mats: &mut Materials, scene: &Scen
             contrast: 0.12,
         }),
     });
-    let floor_pose = planar(rx / 2.0, ry / 2.0, -0.05, 0.0);
-    add_box(
-        world,
-        body,
-        floor_pose,
-        [rx / 2.0 + t, ry / 2.0 + t, 0.05],
-        floor,
-        Owner::Static,
-    );
+    let (floor_pose, floor_half) = floor_box(scene);
+    add_box(world, body, floor_pose, floor_half, floor, Owner::Static);
     let wall = mats.add(Material {
         color: style.wall_color,
         pattern: style.wall_pattern.unwrap_or(Pattern::Stripes {
@@ -113,21 +128,8 @@ pub fn build_static(world: &mut PhysicsWorld, mats: &mut Materials, scene: &Scen
             contrast: 0.06,
         }),
     });
-    let walls = [
-        ([rx / 2.0, -t / 2.0], [rx / 2.0 + t, t / 2.0]),
-        ([rx / 2.0, ry + t / 2.0], [rx / 2.0 + t, t / 2.0]),
-        ([-t / 2.0, ry / 2.0], [t / 2.0, ry / 2.0 + t]),
-        ([rx + t / 2.0, ry / 2.0], [t / 2.0, ry / 2.0 + t]),
-    ];
-    for (c, h) in walls {
-        add_box(
-            world,
-            body,
-            planar(c[0], c[1], wh / 2.0, 0.0),
-            [h[0], h[1], wh / 2.0],
-            wall,
-            Owner::Static,
-        );
+    for (pose, half) in wall_boxes(scene) {
+        add_box(world, body, pose, half, wall, Owner::Static);
     }
     for f in &scene.furniture {
         let base = planar(f.pose[0], f.pose[1], 0.0, f.pose[2]);

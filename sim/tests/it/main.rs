@@ -7,3 +7,4 @@ mod arm_grasp;
 mod episodes;
 mod randomise;
 mod twin;
+mod usd;
