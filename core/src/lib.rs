@@ -23,8 +23,11 @@ pub mod observations;
 pub mod plan;
 pub mod reach;
 pub mod scene;
+mod scene_load;
 pub mod scoring;
 pub mod topdown;
+pub mod usd_scene;
+pub mod usda;
 
 pub use error::ContentError;
 

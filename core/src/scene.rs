@@ -5,12 +5,9 @@
 //! `[0, 1]`. Furniture is described by its outer box; how a kind is built out of parts (legs,
 //! shelf boards) is the simulator's business. Adding a scene is adding a file here.
 
-use std::collections::{BTreeMap, BTreeSet};
-use std::path::{Path, PathBuf};
-
 use serde::{Deserialize, Serialize};
+use std::collections::{BTreeMap, BTreeSet};
 
-use crate::ContentError;
 use crate::catalogue::{Catalogue, Role};
 // Defined beside the catalogue's colour variants (so the catalogue need not import the scene,
 // issue #29) and still named here, where scene files use it.
@@ -80,6 +77,24 @@ pub struct Furniture {
     /// Shelves only: heights above the floor of the boards objects stand on.
     #[serde(default)]
     pub levels: Vec<f64>,
+    /// The item's own boxes, replacing those the simulator derives from `kind`: how furniture
+    /// read from USD keeps the geometry of its file. Empty (the usual case) for authored items.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub parts: Vec<BoxPart>,
+}
+
+/// One box of a furniture item, in the item's frame (origin at the footprint centre on the
+/// floor, x along `size[0]`), already scaled.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BoxPart {
+    pub center: [f64; 3],
+    /// Full size along the item's x, y, z.
+    pub size: [f64; 3],
+    pub color: Rgb,
+    /// Seen by cameras, never collides (door seams, handles).
+    #[serde(default)]
+    pub decoration: bool,
 }
 
 /// A coloured area objects are taken from or put on.
@@ -180,45 +195,6 @@ impl Furniture {
 }
 
 impl Scene {
-    /// Read and validate one scene file against the catalogue.
-    pub fn load(path: &Path, catalogue: &Catalogue) -> Result<Scene, ContentError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ContentError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        let scene: Scene = toml::from_str(&text).map_err(|e| ContentError::Parse {
-            path: path.to_path_buf(),
-            message: e.to_string(),
-        })?;
-        scene
-            .validate(catalogue)
-            .map_err(|message| ContentError::Invalid {
-                path: path.to_path_buf(),
-                message,
-            })?;
-        Ok(scene)
-    }
-
-    /// Every `*.toml` in `dir`, sorted by id.
-    pub fn load_all(dir: &Path, catalogue: &Catalogue) -> Result<Vec<Scene>, ContentError> {
-        let io = |source| ContentError::Io {
-            path: dir.to_path_buf(),
-            source,
-        };
-        let mut paths: Vec<PathBuf> = std::fs::read_dir(dir)
-            .map_err(io)?
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.extension().is_some_and(|x| x == "toml"))
-            .collect();
-        paths.sort();
-        let mut scenes = paths
-            .iter()
-            .map(|p| Scene::load(p, catalogue))
-            .collect::<Result<Vec<_>, _>>()?;
-        scenes.sort_by(|a, b| a.id.cmp(&b.id));
-        Ok(scenes)
-    }
-
     pub fn zone(&self, color: &str) -> Option<&Zone> {
         self.zones.iter().find(|z| z.color == color)
     }

@@ -19,3 +19,5 @@ pub mod runner;
 pub mod samples;
 pub mod teleport;
 pub mod trace;
+#[cfg(test)]
+mod usd_scene_tests;

@@ -1,6 +1,7 @@
 //! How each furniture kind is built out of boxes. The scene file gives only the outer box, pose,
 //! scale and colour; the parts (counter top, legs, shelf boards, sink basin, door seams and
-//! handles) are derived here so the cameras see recognisable furniture.
+//! handles) are derived here so the cameras see recognisable furniture. Furniture read from USD
+//! brings its own boxes, which are used as they are.
 
 use kitchen_r_core::scene::{Furniture, FurnitureKind, Scene};
 
@@ -81,8 +82,21 @@ impl FrontFrame {
     }
 }
 
-/// All parts of one item.
+/// All parts of one item: its own boxes when it has them (furniture read from USD), else those
+/// derived from its kind.
 pub fn parts(scene: &Scene, f: &Furniture) -> Vec<Part> {
+    if !f.parts.is_empty() {
+        return f
+            .parts
+            .iter()
+            .map(|b| Part {
+                center: b.center,
+                half: b.size.map(|s| s / 2.0),
+                color: b.color,
+                decoration: b.decoration,
+            })
+            .collect();
+    }
     let [sx, sy, h] = f.scaled_size();
     let fr = front(scene, f);
     let (width, depth) = if fr[0] != 0.0 { (sy, sx) } else { (sx, sy) };
