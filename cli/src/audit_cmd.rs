@@ -110,6 +110,7 @@ fn run_oracle(args: &AuditArgs) -> anyhow::Result<OracleCheck> {
         ground_truth: Some(ground_truth),
         run: config.run_options(),
         trace: None,
+        watch: None,
     };
     let mut done = 0;
     eprintln!("oracle: running every test instruction ({} jobs)", opts.jobs);

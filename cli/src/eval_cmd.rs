@@ -77,6 +77,8 @@ pub(crate) struct EvalArgs {
     /// `kitchen-r replay` reproduces the episode bit for bit (and renders its video) later.
     #[arg(long, value_name = "DIR")]
     trace: Option<PathBuf>,
+    #[command(flatten)]
+    live: crate::live_view::LiveArgs,
 }
 
 pub(crate) fn eval(args: EvalArgs) -> anyhow::Result<()> {
@@ -91,7 +93,15 @@ pub(crate) fn eval(args: EvalArgs) -> anyhow::Result<()> {
         ),
         None => None,
     };
-    if args.policy.starts_with("http://") || args.policy.starts_with("https://") {
+    let endpoint = args.policy.starts_with("http://") || args.policy.starts_with("https://");
+    if args.live.foxglove.is_some() && (endpoint || args.record.is_some()) {
+        anyhow::bail!(
+            "--foxglove shows episodes of the built-in oracle as they run; to watch a policy \
+             endpoint's episode, write its trace (--trace DIR) and replay it live: \
+             kitchen-r replay DIR/<episode>.trace.json --foxglove"
+        );
+    }
+    if endpoint {
         return eval_endpoint(args, &config, batch);
     }
     let policy: PolicyChoice = args.policy.parse()?;
@@ -116,6 +126,12 @@ pub(crate) fn eval(args: EvalArgs) -> anyhow::Result<()> {
         ground_truth: args.ground_truth,
         run: config.run_options(),
         trace: args.trace,
+        watch: None,
+    };
+    let view = crate::live_view::LiveView::start(&args.live, &crate::live_view::default_sensors()?)?;
+    let opts = EvalOptions {
+        watch: view.as_ref().map(|v| v.wrap()),
+        ..opts
     };
     let mut done = 0;
     let mut progress = |_, o: &kitchen_r_episode::runner::EpisodeOutcome| {
@@ -138,6 +154,9 @@ pub(crate) fn eval(args: EvalArgs) -> anyhow::Result<()> {
         Some(b) => evaluate_batch(&opts, b, &mut progress)?,
         None => evaluate(&opts, &mut progress)?,
     };
+    if let Some(v) = view {
+        v.finish()?;
+    }
     if args.json {
         println!("{}", serde_json::to_string(&report)?);
     } else {

@@ -18,6 +18,7 @@ mod eval_record;
 #[path = "../../tests/import_circles.rs"]
 mod import_circles;
 mod leaderboard_table;
+mod live_view;
 mod load_bench;
 mod policy_cmd;
 mod policy_submit;

@@ -17,12 +17,15 @@ use std::time::Instant;
 use anyhow::Context;
 use clap::Args;
 use kitchen_r_episode::eval::summarize;
-use kitchen_r_episode::runner::EpisodeOutcome;
+use kitchen_r_episode::runner::{EpisodeOutcome, StepHook};
 use kitchen_r_episode::trace::{Trace, replay_with};
 use kitchen_r_record::keep_cameras;
+use kitchen_r_record::live_hook::LiveHook;
 use kitchen_r_record::replay::{FramesOut, ReplayRecorder, episode_meta};
 use kitchen_r_record::video::episode::{EpisodeVideo, VideoHook};
 use kitchen_r_sim::{Assets, SensorsConfig, SimConfig};
+
+use crate::live_view::LiveView;
 
 #[derive(Args, Debug)]
 pub(crate) struct ReplayArgs {
@@ -62,8 +65,14 @@ pub(crate) struct ReplayArgs {
     size: Option<(u32, u32)>,
     /// Only check that the replay reproduces the recorded outcome bit for bit; render and
     /// write nothing (no camera frame is rendered, so this is the cheapest check).
-    #[arg(long)]
+    #[arg(long, conflicts_with_all = ["foxglove", "foxglove_wait"])]
     check_only: bool,
+    #[command(flatten)]
+    live: crate::live_view::LiveArgs,
+    /// With --foxglove: sim seconds replayed per wall second (1: real time; 0: as fast as it
+    /// runs). The outcome does not depend on it.
+    #[arg(long, value_name = "X", default_value_t = 1.0, requires = "foxglove")]
+    speed: f64,
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {
@@ -106,9 +115,10 @@ pub(crate) fn replay(args: ReplayArgs) -> anyhow::Result<()> {
         print(&trace, &out, started);
         return Ok(());
     }
-    let video_path = match (&args.video, &args.mcap, &args.frames) {
-        (Some(v), _, _) => Some(v.clone()),
-        (None, None, None) => Some(default_video(&args.trace)),
+    // Watching it live is a reason to replay of its own: no video unless asked for then.
+    let video_path = match (&args.video, &args.mcap, &args.frames, &args.live.foxglove) {
+        (Some(v), _, _, _) => Some(v.clone()),
+        (None, None, None, None) => Some(default_video(&args.trace)),
         _ => None,
     };
     let staged = Staged::new(args.mcap.as_deref(), args.frames.as_deref())?;
@@ -124,18 +134,33 @@ pub(crate) fn replay(args: ReplayArgs) -> anyhow::Result<()> {
         .run
         .max_tasks
         .map_or(trace.episode.plan.len(), |m| m.min(trace.episode.plan.len()));
-    let (replayed, video) = match video_path.is_some() {
+    let view = LiveView::start(&args.live, &sensors)?;
+    // The live view, when watched, wraps whatever else records the replay.
+    let live = |inner: &mut dyn StepHook, replay: &mut dyn FnMut(&mut dyn StepHook)| match &view {
+        Some(v) => replay(&mut LiveHook::new(inner, v.queue(), v.sensors()).paced(args.speed)),
+        None => replay(inner),
+    };
+    let mut replayed = None;
+    let video = match video_path.is_some() {
         true => {
             let video = EpisodeVideo::new(&trace.episode.plan, n_tasks, 0);
             let mut hook = VideoHook::new(&mut recorder, video);
-            let replayed = replay_with(&trace, &assets, &sim_cfg, &sensors, &mut hook);
-            (replayed, Some(hook.into_video()))
+            live(&mut hook, &mut |h| {
+                replayed = Some(replay_with(&trace, &assets, &sim_cfg, &sensors, h))
+            });
+            Some(hook.into_video())
         }
-        false => (
-            replay_with(&trace, &assets, &sim_cfg, &sensors, &mut recorder),
-            None,
-        ),
+        false => {
+            live(&mut recorder, &mut |h| {
+                replayed = Some(replay_with(&trace, &assets, &sim_cfg, &sensors, h))
+            });
+            None
+        }
     };
+    if let Some(v) = view {
+        v.finish()?;
+    }
+    let replayed = replayed.expect("the replay ran");
     let out = match replayed {
         Ok(out) => out,
         Err(e) => {

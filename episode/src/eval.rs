@@ -10,7 +10,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::mpsc;
+use std::sync::{Arc, mpsc};
 use std::time::Instant;
 
 use kitchen_r_core::dataset::{Instruction, Split, read_jsonl};
@@ -19,7 +19,7 @@ use kitchen_r_sim::{Assets, EpisodeConfig, EpisodeParams, SensorsConfig, Sim, Si
 use serde::{Deserialize, Serialize};
 
 use crate::oracle::{ORACLE_NAME, OraclePolicy};
-use crate::runner::{EpisodeOutcome, RunError, RunOptions, run_episode};
+use crate::runner::{EpisodeOutcome, RunError, RunOptions, StepHook, run_episode};
 use crate::trace::{self, TracingPolicy};
 
 /// The policies `eval` can run in this build.
@@ -84,6 +84,29 @@ pub struct EvalOptions {
     /// `eval --trace DIR`: write each episode's trace ([`crate::trace`]) to
     /// `DIR/<episode key>.trace.json`.
     pub trace: Option<PathBuf>,
+    /// `eval --foxglove`: the hook each episode also runs with (a live view).
+    pub watch: Option<WrapHook>,
+}
+
+/// A hook to run each episode with, made per episode around the episode's own hook: a live
+/// view (`kitchen-r eval --foxglove`) publishes through it. Like every hook it must not change
+/// an episode (the runner leaves its reported overhead out of the wall-clock budget).
+#[derive(Clone)]
+pub struct WrapHook(pub Arc<WrapFn>);
+
+/// What a [`WrapHook`] calls: the episode's hook in, the hook to run the episode with out.
+pub type WrapFn = dyn for<'a> Fn(&'a mut dyn StepHook) -> Box<dyn StepHook + 'a> + Send + Sync;
+
+impl std::fmt::Debug for WrapHook {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("WrapHook")
+    }
+}
+
+impl PartialEq for WrapHook {
+    fn eq(&self, other: &Self) -> bool {
+        Arc::ptr_eq(&self.0, &other.0)
+    }
 }
 
 impl Default for EvalOptions {
@@ -97,6 +120,7 @@ impl Default for EvalOptions {
             ground_truth: None,
             run: RunOptions::default(),
             trace: None,
+            watch: None,
         }
     }
 }
@@ -284,7 +308,7 @@ pub(crate) fn run_all(
     policy: PolicyChoice,
     run: &RunOptions,
     jobs: usize,
-    trace: Option<&Path>,
+    (trace, watch): (Option<&Path>, Option<&WrapHook>),
     progress: &mut dyn FnMut(usize, &EpisodeOutcome),
 ) -> Result<Vec<EpisodeOutcome>, EvalError> {
     let next = AtomicUsize::new(0);
@@ -304,7 +328,7 @@ pub(crate) fn run_all(
                     let i = next.fetch_add(1, Ordering::SeqCst);
                     let Some(cfg) = configs.get(i) else { break };
                     let world = (assets, &sim_cfg, &sensors);
-                    let r = one(world, &mut sim, cfg, &mut oracle, run, trace);
+                    let r = one(world, &mut sim, cfg, &mut oracle, run, (trace, watch));
                     if tx.send((i, r)).is_err() {
                         break;
                     }
@@ -348,15 +372,24 @@ fn one(
     cfg: &EpisodeConfig,
     policy: &mut OraclePolicy,
     run: &RunOptions,
-    trace: Option<&Path>,
+    (trace, watch): (Option<&Path>, Option<&WrapHook>),
 ) -> Result<EpisodeOutcome, EvalError> {
     let started = Instant::now();
     let s = load(sim, assets, sim_cfg, sensors, cfg)?;
+    let mut base = ();
+    let mut wrapped;
+    let hook: &mut dyn StepHook = match watch {
+        Some(w) => {
+            wrapped = (w.0)(&mut base);
+            wrapped.as_mut()
+        }
+        None => &mut base,
+    };
     let mut o = match trace {
-        None => run_episode(s, policy, run, None, &mut ())?,
+        None => run_episode(s, policy, run, None, hook)?,
         Some(dir) => {
             let mut tracing = TracingPolicy::new(policy);
-            let o = run_episode(s, &mut tracing, run, None, &mut ())?;
+            let o = run_episode(s, &mut tracing, run, None, hook)?;
             let path = dir.join(trace::file_name(&cfg.id));
             tracing
                 .into_trace(cfg.clone(), run, false, &o)
@@ -435,7 +468,7 @@ fn evaluate_configs(
         opts.policy,
         &opts.run,
         opts.jobs,
-        trace,
+        (trace, opts.watch.as_ref()),
         progress,
     )?;
     let (overall, by_kind) = summarize(&episodes);

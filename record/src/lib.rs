@@ -83,7 +83,7 @@ pub struct StaticTransform {
 }
 
 /// What an episode is, written once per file.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct EpisodeMeta {
     pub episode_id: String,
     pub scene: String,

@@ -3,8 +3,10 @@
 //! ([`crate::mcap_ros2`], whose module doc lists them) and the live publishers
 //! ([`crate::live`]) alike.
 
+use kitchen_r_sim::SensorsConfig;
+
 use crate::ros2_msgs::{self as msg, Ros2Message};
-use crate::{EpisodeMeta, Frame};
+use crate::{CameraFrame, EpisodeMeta, Frame};
 
 /// The base's time and twist at the previous frame: the IMU's acceleration is the change of
 /// the base speed since then.
@@ -94,4 +96,63 @@ pub fn frame_messages(f: &Frame, imu: &mut ImuMemory) -> Vec<Ros2Message> {
     let action = msg::float64_array("v,w,x,y,z,qw,qx,qy,qz,g", &f.action);
     out.push(message("/action", "std_msgs/Float64MultiArray", t, action));
     out
+}
+
+/// Every `(topic, type)` an episode with `sensors` publishes, in the order a frame writes
+/// them after `/tf_static` and `/sub_task`: what a live view advertises before the first frame.
+pub fn topics(sensors: &SensorsConfig) -> Vec<(String, &'static str)> {
+    // A frame of the configured sensors with empty readings: its messages name every topic.
+    let probe = Frame {
+        time: 0.0,
+        cameras: (sensors.cameras.iter())
+            .map(|c| CameraFrame {
+                name: c.name.clone(),
+                width: c.width,
+                height: c.height,
+                rgb: Vec::new(),
+                depth: vec![0.0],
+            })
+            .collect(),
+        lidar: sensors.lidar.as_ref().map(|_| Vec::new()),
+        base_pose: [0.0; 3],
+        base_twist: [0.0; 2],
+        action: [0.0; 10],
+        qpos: Vec::new(),
+        qvel: Vec::new(),
+        ee_pose: [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0],
+        task: 0,
+    };
+    let fixed = [static_transforms(&EpisodeMeta::default()), sub_task(0.0, "")];
+    (fixed.into_iter())
+        .chain(frame_messages(&probe, &mut None))
+        .map(|m| (m.topic, m.ty))
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_configured_sensors_name_every_topic_once() {
+        let t = topics(&SensorsConfig::load_default().unwrap());
+        let names: Vec<&str> = t.iter().map(|(n, _)| n.as_str()).collect();
+        for want in [
+            "/tf_static",
+            "/sub_task",
+            "/camera/base/image_raw",
+            "/camera/gripper/depth",
+            "/odom",
+            "/imu",
+            "/tf",
+            "/cmd_vel",
+            "/action",
+        ] {
+            assert_eq!(
+                names.iter().filter(|n| **n == want).count(),
+                1,
+                "{want} in {names:?}"
+            );
+        }
+    }
 }

@@ -20,6 +20,7 @@ mod control;
 mod episodes;
 mod grpc;
 mod integrity;
+mod live;
 mod load_bench;
 mod metrics;
 mod openapi;
