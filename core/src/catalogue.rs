@@ -70,6 +70,21 @@ pub enum Shape {
         height: f64,
         thickness: f64,
     },
+    /// A triangle mesh from a glTF 2.0 file (`.gltf` with its `.bin`, or `.glb`), relative to the
+    /// catalogue file; y-up as glTF has it, turned z-up, multiplied by `scale` and centred on
+    /// its bounding box. `size` is that bounding box, which the rules here (resting height,
+    /// footprint) use; the simulator checks it against the file. Collides and renders as the
+    /// mesh's convex hull.
+    Mesh {
+        file: String,
+        #[serde(default = "one")]
+        scale: f64,
+        size: [f64; 3],
+    },
+}
+
+fn one() -> f64 {
+    1.0
 }
 
 impl Shape {
@@ -78,7 +93,7 @@ impl Shape {
         match self {
             Shape::Sphere { radius } => *radius,
             Shape::Cylinder { height, .. } | Shape::Bowl { height, .. } => height / 2.0,
-            Shape::Cuboid { size } => size[2] / 2.0,
+            Shape::Cuboid { size } | Shape::Mesh { size, .. } => size[2] / 2.0,
         }
     }
 
@@ -86,7 +101,9 @@ impl Shape {
     pub fn footprint_radius(&self) -> f64 {
         match self {
             Shape::Sphere { radius } | Shape::Cylinder { radius, .. } | Shape::Bowl { radius, .. } => *radius,
-            Shape::Cuboid { size } => (size[0] * size[0] + size[1] * size[1]).sqrt() / 2.0,
+            Shape::Cuboid { size } | Shape::Mesh { size, .. } => {
+                (size[0] * size[0] + size[1] * size[1]).sqrt() / 2.0
+            }
         }
     }
 }
@@ -97,10 +114,17 @@ impl Catalogue {
             path: path.to_path_buf(),
             source,
         })?;
-        let cat: Catalogue = toml::from_str(&text).map_err(|e| ContentError::Parse {
+        let mut cat: Catalogue = toml::from_str(&text).map_err(|e| ContentError::Parse {
             path: path.to_path_buf(),
             message: e.to_string(),
         })?;
+        // Mesh files are named relative to the catalogue; from here on they are full paths.
+        let dir = path.parent().unwrap_or(Path::new("."));
+        for m in &mut cat.objects {
+            if let Shape::Mesh { file, .. } = &mut m.shape {
+                *file = dir.join(&*file).to_string_lossy().into_owned();
+            }
+        }
         let mut seen = std::collections::BTreeSet::new();
         for m in &cat.objects {
             if !seen.insert(&m.id) {

@@ -12,6 +12,8 @@
 
 pub mod driven;
 pub mod eval;
+#[cfg(test)]
+mod mesh_object_tests;
 pub mod offline;
 pub mod oracle;
 pub mod policy;

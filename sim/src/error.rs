@@ -27,6 +27,8 @@ pub enum SimError {
     Preflight(String),
     #[error("bad action: {0}")]
     BadAction(String),
+    #[error("mesh {path}: {message}")]
+    Mesh { path: PathBuf, message: String },
     #[error("cannot write image {path}: {message}")]
     Image { path: PathBuf, message: String },
 }

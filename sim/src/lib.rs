@@ -17,6 +17,7 @@ pub mod furniture;
 pub mod generator;
 pub mod grasp;
 pub mod material;
+pub mod mesh;
 pub mod oracle;
 pub mod preflight;
 pub mod randomise;

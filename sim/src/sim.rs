@@ -35,6 +35,7 @@ impl Assets {
     /// Everything under `dir`: `objects.toml`, `scenes/`, `robot.toml`.
     pub fn load(dir: &std::path::Path) -> Result<Assets, SimError> {
         let catalogue = Catalogue::load(&dir.join("objects.toml"))?;
+        crate::mesh::load_catalogue(&catalogue)?;
         let scenes = Scene::load_all(&dir.join("scenes"), &catalogue)?;
         let robot = RobotDesc::load(&dir.join("robot.toml"))?;
         Ok(Assets {

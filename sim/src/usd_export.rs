@@ -115,8 +115,23 @@ impl Usda {
             self.line("uniform token axis = \"Y\"");
             self.line(&format!("double height = {}", 2.0 * cy.half_height));
             self.line(&format!("double radius = {}", cy.radius));
+        } else if let Some(hull) = shape.as_convex_polyhedron() {
+            // A mesh object's convex hull, as it collides and renders.
+            let (points, triangles) = hull.to_trimesh();
+            self.open("Mesh", name, COLLIDES);
+            let p: Vec<String> = points
+                .iter()
+                .map(|v| format!("({}, {}, {})", v.x, v.y, v.z))
+                .collect();
+            self.line(&format!("point3f[] points = [{}]", p.join(", ")));
+            self.line(&format!(
+                "int[] faceVertexCounts = [{}]",
+                vec!["3"; triangles.len()].join(", ")
+            ));
+            let idx: Vec<String> = triangles.iter().flatten().map(u32::to_string).collect();
+            self.line(&format!("int[] faceVertexIndices = [{}]", idx.join(", ")));
         } else {
-            // object_shapes makes only the three above; a new kind must be taught here.
+            // object_shapes makes only the kinds above; a new kind must be taught here.
             self.open("Xform", name, &[]);
         }
         self.pose(pose, None);

@@ -197,6 +197,10 @@ pub fn object_shapes(shape: &Shape) -> Vec<(Isometry3<f64>, SharedShape)> {
             }
             v
         }
+        // Loaded with the assets (`Assets::load`), so the cache holds it.
+        Shape::Mesh { ref file, scale, .. } => crate::mesh::cached(file, scale)
+            .map(|m| vec![(Isometry3::identity(), m.hull.clone())])
+            .unwrap_or_default(),
     }
 }
 

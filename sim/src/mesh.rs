@@ -1,0 +1,194 @@
+//! Object meshes from glTF 2.0 (`Shape::Mesh` in the catalogue): read once when the assets load,
+//! kept in a process-wide cache by file and scale, and turned into the convex hull the object
+//! collides and renders with (the ray caster casts against any parry shape, so the hull's
+//! triangles render without a renderer change).
+//!
+//! The reader takes the default scene's mesh nodes with their transforms, positions and
+//! triangle indices of every `TRIANGLES` primitive, from a `.glb`'s binary chunk or `.bin` files
+//! beside a `.gltf` (no embedded `data:` URIs, no images: materials and textures are not read;
+//! the object's colour is the catalogue's). glTF is y-up: the mesh is turned z-up (x stays, glTF
+//! y becomes our z, glTF z becomes our -y), multiplied by the scale and centred on its bounding
+//! box, which is the catalogue's model origin.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::sync::{Arc, Mutex, OnceLock};
+
+use kitchen_r_core::catalogue::{Catalogue, Shape};
+use rapier3d::math::Vector;
+use rapier3d::prelude::SharedShape;
+
+use crate::error::SimError;
+
+/// A mesh as the twin uses it.
+#[derive(Debug)]
+pub struct MeshData {
+    /// Vertices, z-up, scaled, centred on the bounding box (m).
+    pub vertices: Vec<[f64; 3]>,
+    pub triangles: Vec<[u32; 3]>,
+    /// Bounding box size (m).
+    pub size: [f64; 3],
+    /// The convex hull it collides and renders as.
+    pub hull: SharedShape,
+}
+
+type Cache = Mutex<BTreeMap<(String, u64), Arc<MeshData>>>;
+
+fn cache() -> &'static Cache {
+    static CACHE: OnceLock<Cache> = OnceLock::new();
+    CACHE.get_or_init(|| Mutex::new(BTreeMap::new()))
+}
+
+/// The mesh of `file` at `scale`, read on first use.
+pub fn load(file: &str, scale: f64) -> Result<Arc<MeshData>, SimError> {
+    let key = (file.to_string(), scale.to_bits());
+    if let Some(m) = cache().lock().ok().and_then(|c| c.get(&key).cloned()) {
+        return Ok(m);
+    }
+    let mesh = Arc::new(read(Path::new(file), scale)?);
+    if let Ok(mut c) = cache().lock() {
+        c.insert(key, mesh.clone());
+    }
+    Ok(mesh)
+}
+
+/// A mesh already loaded (every catalogue mesh is, by [`crate::sim::Assets::load`]).
+pub fn cached(file: &str, scale: f64) -> Option<Arc<MeshData>> {
+    cache()
+        .lock()
+        .ok()?
+        .get(&(file.to_string(), scale.to_bits()))
+        .cloned()
+}
+
+/// Read every mesh of the catalogue and check each against its stated `size` (1 mm), so a
+/// wrong size is reported when the assets load, not as a misplaced object later.
+pub fn load_catalogue(catalogue: &Catalogue) -> Result<(), SimError> {
+    for m in &catalogue.objects {
+        if let Shape::Mesh { file, scale, size } = &m.shape {
+            let mesh = load(file, *scale)?;
+            if (0..3).any(|k| (mesh.size[k] - size[k]).abs() > 1e-3) {
+                return Err(SimError::Mesh {
+                    path: file.into(),
+                    message: format!(
+                        "object {:?}: size {size:?} in the catalogue, but the mesh measures {:?} (z-up, scaled by {scale}); write that size",
+                        m.id,
+                        mesh.size.map(|v| (v * 1e4).round() / 1e4)
+                    ),
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
+fn read(path: &Path, scale: f64) -> Result<MeshData, SimError> {
+    let bad = |message: String| SimError::Mesh {
+        path: path.to_path_buf(),
+        message,
+    };
+    let bytes = std::fs::read(path).map_err(|source| SimError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let gltf = gltf::Gltf::from_slice(&bytes).map_err(|e| bad(format!("not glTF 2.0: {e}")))?;
+    let dir = path.parent().unwrap_or(Path::new("."));
+    let mut buffers = Vec::new();
+    for b in gltf.buffers() {
+        let data = match b.source() {
+            gltf::buffer::Source::Bin => gltf
+                .blob
+                .clone()
+                .ok_or_else(|| bad("the .glb has no binary chunk".into()))?,
+            gltf::buffer::Source::Uri(uri) if uri.starts_with("data:") => {
+                return Err(bad(
+                    "embedded data: URIs are not read; write a .glb or a .bin beside the .gltf".into(),
+                ));
+            }
+            gltf::buffer::Source::Uri(uri) => {
+                std::fs::read(dir.join(uri)).map_err(|source| SimError::Io {
+                    path: dir.join(uri),
+                    source,
+                })?
+            }
+        };
+        buffers.push(data);
+    }
+    let scene = gltf
+        .default_scene()
+        .or_else(|| gltf.scenes().next())
+        .ok_or_else(|| bad("no scene".into()))?;
+    let mut vertices = Vec::new();
+    let mut triangles = Vec::new();
+    let mut stack: Vec<(gltf::Node, [[f64; 4]; 4])> = scene.nodes().map(|n| (n, IDENTITY)).collect();
+    while let Some((node, parent)) = stack.pop() {
+        let m = mul(&parent, &node.transform().matrix().map(|c| c.map(f64::from)));
+        stack.extend(node.children().map(|c| (c, m)));
+        let Some(mesh) = node.mesh() else { continue };
+        for prim in mesh.primitives() {
+            if prim.mode() != gltf::mesh::Mode::Triangles {
+                return Err(bad(format!(
+                    "mesh {}: only TRIANGLES primitives are read",
+                    mesh.index()
+                )));
+            }
+            let reader = prim.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
+            let base = vertices.len() as u32;
+            let positions = reader
+                .read_positions()
+                .ok_or_else(|| bad(format!("mesh {} has no POSITION", mesh.index())))?;
+            for p in positions {
+                let p = p.map(f64::from);
+                let w = [0, 1, 2].map(|r| m[0][r] * p[0] + m[1][r] * p[1] + m[2][r] * p[2] + m[3][r]);
+                // glTF y-up to our z-up.
+                vertices.push([w[0] * scale, -w[2] * scale, w[1] * scale]);
+            }
+            let count = vertices.len() as u32 - base;
+            let idx: Vec<u32> = match reader.read_indices() {
+                Some(i) => i.into_u32().collect(),
+                None => (0..count).collect(),
+            };
+            if !idx.len().is_multiple_of(3) || idx.iter().any(|i| *i >= count) {
+                return Err(bad(format!(
+                    "mesh {}: indices out of range or not triangles",
+                    mesh.index()
+                )));
+            }
+            triangles.extend(idx.chunks(3).map(|t| [base + t[0], base + t[1], base + t[2]]));
+        }
+    }
+    if triangles.is_empty() {
+        return Err(bad("no triangles in the default scene".into()));
+    }
+    let lo = (0..3).map(|k| vertices.iter().map(|v| v[k]).fold(f64::INFINITY, f64::min));
+    let hi = (0..3).map(|k| vertices.iter().map(|v| v[k]).fold(f64::NEG_INFINITY, f64::max));
+    let (lo, hi): (Vec<f64>, Vec<f64>) = (lo.collect(), hi.collect());
+    let center = [0, 1, 2].map(|k| (lo[k] + hi[k]) / 2.0);
+    for v in &mut vertices {
+        *v = [0, 1, 2].map(|k| v[k] - center[k]);
+    }
+    let points: Vec<Vector> = vertices
+        .iter()
+        .map(|v| Vector::new(v[0] as f32, v[1] as f32, v[2] as f32))
+        .collect();
+    let hull = SharedShape::convex_hull(&points)
+        .ok_or_else(|| bad("the mesh is flat: it has no convex hull".into()))?;
+    Ok(MeshData {
+        size: [0, 1, 2].map(|k| hi[k] - lo[k]),
+        vertices,
+        triangles,
+        hull,
+    })
+}
+
+const IDENTITY: [[f64; 4]; 4] = [
+    [1.0, 0.0, 0.0, 0.0],
+    [0.0, 1.0, 0.0, 0.0],
+    [0.0, 0.0, 1.0, 0.0],
+    [0.0, 0.0, 0.0, 1.0],
+];
+
+/// Column-major 4×4 product `a · b`, as glTF stores matrices.
+fn mul(a: &[[f64; 4]; 4], b: &[[f64; 4]; 4]) -> [[f64; 4]; 4] {
+    std::array::from_fn(|c| std::array::from_fn(|r| (0..4).map(|k| a[k][r] * b[c][k]).sum()))
+}
