@@ -16,7 +16,7 @@ mod sessions;
 mod video;
 pub(crate) use secrets::SecretsConfig;
 pub(crate) use sessions::SessionConfig;
-pub(crate) use video::VideoConfig;
+pub(crate) use video::{Prerender, VideoConfig};
 
 /// The directory holding the SQLite database file of URL `db`, where files kept beside it
 /// (videos, the secret key) go; `None` for an in-memory database, which has no directory.

@@ -14,9 +14,10 @@ use kitchen_r_contract::server::ServeOptions;
 use serde_json::{Value, json};
 use support::*;
 
-/// One-task episodes of 3 s of sim time: 30 control steps, so 30 frames.
+/// One-task episodes of 3 s of sim time: 30 control steps, so 30 frames. Nothing is
+/// pre-rendered: this file's first test asks for every video itself.
 const CONFIG: &str = "[control]\noffline_mse = false\nmax_plan_steps = 1\ntask_time_limit_s = 3.0\n\
-                      [quota]\nconcurrent_runs = 0\n[video]\ntest_split = true\n";
+                      [quota]\nconcurrent_runs = 0\n[video]\ntest_split = true\nprerender = \"none\"\n";
 const FRAMES: i64 = 30;
 
 async fn get(server: &Server, path: &str, token: &str, range: Option<&str>) -> reqwest::Response {
@@ -325,6 +326,53 @@ fn a_dev_episode_video_is_rendered_on_demand_served_with_ranges_to_its_team_only
 }
 
 /// A page as the team's browser gets it (session cookie).
+/// Pre-rendering (issue #26, `[video] prerender = "failed"`, the default): a dev episode that
+/// failed its task has its video rendered once no evaluation job waits, before anyone asks;
+/// the first request gets the MP4 at once, and it plays.
+#[test]
+fn a_failed_dev_episodes_video_is_rendered_before_anyone_asks() {
+    use kitchen_r_episode::policy::HORIZON as H;
+    use remote_support::{STILL, TestServer, factory};
+    let policy = TestServer::start(
+        factory(H, Arc::new(|_| Ok(vec![STILL; H]))),
+        ServeOptions::default(),
+    );
+    let fx = ControlFixture::new(
+        "[control]\noffline_mse = false\nmax_plan_steps = 1\ntask_time_limit_s = 3.0\n\
+         [quota]\nconcurrent_runs = 0\n",
+    );
+    let server = fx.serve(1);
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    rt.block_on(async {
+        let alpha = team(&server, "alpha").await;
+        let (status, reg) = register_policy(
+            &server,
+            &alpha,
+            json!({"endpoint": policy.url(), "split": "dev", "episodes": 1}),
+        )
+        .await;
+        assert_eq!(status, 201, "{reg}");
+        let dev = reg["id"].as_i64().unwrap();
+        wait_for(&server, dev, &alpha, "the dev run", finished).await;
+        // Nobody asks: the video becomes ready by itself.
+        let mut eps = Vec::new();
+        for _ in 0..300 {
+            eps = episodes(&server, dev, &alpha).await;
+            if eps.len() == 1 && eps[0]["video"]["status"] == "ready" {
+                break;
+            }
+            tokio::time::sleep(std::time::Duration::from_millis(200)).await;
+        }
+        assert_eq!(eps[0]["video"]["status"], "ready", "{eps:#?}");
+        let url = eps[0]["video_url"].as_str().unwrap().to_string();
+        let r = get(&server, &url, &alpha, None).await;
+        assert_eq!(r.status(), 200, "the first request gets the pre-rendered video");
+        let (codec, frames) = decode(&r.bytes().await.unwrap());
+        assert_eq!(codec, "avc1");
+        assert!((frames - FRAMES).abs() <= 1, "{frames} frames");
+    });
+}
+
 async fn page_html(server: &Server, path: &str, token: &str) -> String {
     let r = client()
         .get(server.url(path))

@@ -74,6 +74,11 @@ impl H264Encoder {
                 0 => RateControlMode::Off,
                 _ => RateControlMode::Bitrate,
             })
+            // With frame skipping off, OpenH264 warns once on stderr at start that it cannot
+            // hold the bit rate exactly; it holds it within a few percent through the QP
+            // (59 kbit/s measured for 60), and skipping frames would break one sample a frame.
+            // The warning comes before the crate applies `debug(false)`, and silencing it
+            // would take the raw API's `unsafe`, which the workspace forbids.
             .bitrate(BitRate::from_bps(s.h264_kbps.saturating_mul(1000).max(1000)))
             .skip_frames(false)
             .max_frame_rate(FrameRate::from_hz(fps as f32))

@@ -29,9 +29,22 @@ pub struct VideoConfig {
     /// Most bytes of stored video of all teams together; past it the oldest videos of any
     /// team are removed, after the uploading team's own budget was applied.
     pub total_max_bytes: u64,
+    /// Which videos workers render before anyone asks, whenever no evaluation job and no
+    /// asked-for render waits: `failed` (episodes with a failed task: the ones people open, and
+    /// the longest to render), `all`, or `none` (only on request).
+    pub prerender: Prerender,
     /// Where the files are stored (`<aa>/<sha256>.mp4`); empty means `videos/` beside the
     /// database file (no videos with an in-memory database).
     pub dir: PathBuf,
+}
+
+/// `[video] prerender`: see [`VideoConfig::prerender`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Prerender {
+    None,
+    Failed,
+    All,
 }
 
 impl Default for VideoConfig {
@@ -45,6 +58,7 @@ impl Default for VideoConfig {
             // 2 GiB keeps a team's last two full dev runs of the worst such policy.
             team_max_bytes: 2 << 30,
             total_max_bytes: 64 << 30,
+            prerender: Prerender::Failed,
             dir: PathBuf::new(),
         }
     }

@@ -22,6 +22,7 @@ use super::lease::HeartbeatOutcome;
 pub(crate) use super::progress::VideoView;
 use super::videos::{StoredVideo, trace_path};
 use super::{AppState, Caller, WorkerCred, now_ms};
+use crate::config::Prerender;
 use crate::episodes::TaskOutcome;
 use crate::error::ServiceError;
 use crate::store::{self, renders as store_renders};
@@ -76,6 +77,37 @@ impl AppState {
         run: i64,
         key: &str,
     ) -> Result<Option<VideoState>, ServiceError> {
+        self.queue_render(dir, run, key, false).await
+    }
+
+    /// A trace of `(run, key)` was just stored: with `[video] prerender`, queue its video's
+    /// render behind every asked-for one (`failed`: only when the stored result failed a task).
+    pub(crate) async fn prerender(&self, dir: &Path, run: i64, key: &str) -> Result<(), ServiceError> {
+        match self.config().video.prerender {
+            Prerender::None => return Ok(()),
+            Prerender::All => {}
+            Prerender::Failed => {
+                let tasks = store_renders::stored_tasks(self.read_pool(), run, key).await?;
+                if tasks.is_none_or(|t| t.iter().all(|t| t.success)) {
+                    return Ok(());
+                }
+            }
+        }
+        if store_renders::render(self.read_pool(), run, key).await?.is_some() {
+            return Ok(());
+        }
+        self.queue_render(dir, run, key, true).await?;
+        Ok(())
+    }
+
+    /// [`Self::ask_video`], or a pre-render's queuing (`prerender`: behind asked-for renders).
+    async fn queue_render(
+        &self,
+        dir: &Path,
+        run: i64,
+        key: &str,
+        prerender: bool,
+    ) -> Result<Option<VideoState>, ServiceError> {
         if let Some(v) = self.stored_video(dir, run, key).await? {
             return Ok(Some(VideoState::Ready(v)));
         }
@@ -87,6 +119,9 @@ impl AppState {
         {
             match r.state.as_str() {
                 "queued" | "leased" => {
+                    if !prerender && r.state == "queued" {
+                        store_renders::promote(self.pool(), run, key).await?;
+                    }
                     return Ok(Some(VideoState::Rendering {
                         leased: r.state == "leased",
                         progress: r.progress,
@@ -98,7 +133,7 @@ impl AppState {
             }
         }
         let now = now_ms();
-        store_renders::request(self.pool(), run, key, &trace, now).await?;
+        store_renders::request(self.pool(), run, key, &trace, now, prerender).await?;
         // The same trace rendered before: its video is this episode's too.
         if let Some(video) = store_renders::rendered(self.read_pool(), &trace).await?
             && self.link_stored_video(dir, run, key, &video).await?
@@ -108,8 +143,8 @@ impl AppState {
             tracing::info!(run, episode = %key, sha256 = %video, "video of the same trace reused");
             return Ok(self.stored_video(dir, run, key).await?.map(VideoState::Ready));
         }
-        rendered_metric("queued", 1);
-        tracing::info!(run, episode = %key, "video render queued");
+        rendered_metric(if prerender { "prerender_queued" } else { "queued" }, 1);
+        tracing::info!(run, episode = %key, prerender, "video render queued");
         self.wake_leases();
         Ok(Some(VideoState::Rendering {
             leased: false,

@@ -40,26 +40,41 @@ pub(crate) async fn of_run(pool: &SqlitePool, run: i64) -> sqlx::Result<Vec<Rend
 
 /// Queue a render of `(run, key)` from the trace `trace`: a new row, or an old one (done but its
 /// video gone since, or of another trace) queued again. A queued or leased render stays as it
-/// is, and so does a failed one of the same trace (its replay would disagree again).
+/// is ([`promote`] moves a queued pre-render someone asks for ahead), and so does a failed one
+/// of the same trace (its replay would disagree again).
 pub(crate) async fn request(
     pool: &SqlitePool,
     run: i64,
     key: &str,
     trace: &str,
     now: i64,
+    prerender: bool,
 ) -> sqlx::Result<()> {
     sqlx::query(
-        "INSERT INTO video_renders (run_id, episode_key, trace_sha256, created_at, updated_at)
-         VALUES (?1, ?2, ?3, ?4, ?4)
+        "INSERT INTO video_renders (run_id, episode_key, trace_sha256, created_at, updated_at, prerender)
+         VALUES (?1, ?2, ?3, ?4, ?4, ?5)
          ON CONFLICT (run_id, episode_key) DO UPDATE SET state = 'queued', progress = 0,
              error = NULL, video_sha256 = NULL, trace_sha256 = excluded.trace_sha256,
-             attempt = 0, updated_at = excluded.updated_at
+             attempt = 0, updated_at = excluded.updated_at, prerender = excluded.prerender
          WHERE state = 'done' OR (state = 'failed' AND trace_sha256 <> excluded.trace_sha256)",
     )
     .bind(run)
     .bind(key)
     .bind(trace)
     .bind(now)
+    .bind(prerender)
+    .execute(pool)
+    .await?;
+    Ok(())
+}
+
+/// Someone asked for the video of `(run, key)`: a pre-render of it is now an asked-for render.
+pub(crate) async fn promote(pool: &SqlitePool, run: i64, key: &str) -> sqlx::Result<()> {
+    sqlx::query(
+        "UPDATE video_renders SET prerender = 0 WHERE run_id = ? AND episode_key = ? AND prerender = 1",
+    )
+    .bind(run)
+    .bind(key)
     .execute(pool)
     .await?;
     Ok(())
@@ -94,8 +109,9 @@ pub(crate) struct Claimed {
     pub lease_expires_at: i64,
 }
 
-/// Lease the oldest queued render to `owner` until `until`, unless an evaluation job is queued
-/// (checked in the same statement, so a job queued meanwhile wins).
+/// Lease the oldest queued render someone asked for, else the oldest pre-render, to `owner`
+/// until `until`, unless an evaluation job is queued (checked in the same statement, so a job
+/// queued meanwhile wins).
 pub(crate) async fn claim(
     pool: &SqlitePool,
     owner: &str,
@@ -105,7 +121,7 @@ pub(crate) async fn claim(
     sqlx::query_as(
         "UPDATE video_renders SET state = 'leased', lease_owner = ?1, lease_expires_at = ?2,
                 attempt = attempt + 1, updated_at = ?3
-         WHERE id = (SELECT id FROM video_renders WHERE state = 'queued' ORDER BY id LIMIT 1)
+         WHERE id = (SELECT id FROM video_renders WHERE state = 'queued' ORDER BY prerender, id LIMIT 1)
            AND NOT EXISTS (SELECT 1 FROM jobs WHERE state = 'queued')
          RETURNING id, attempt, run_id, episode_key, trace_sha256, lease_expires_at",
     )

@@ -160,3 +160,121 @@ async fn a_second_episode_with_the_same_trace_reuses_the_rendered_video() {
     }
     assert!(f.state.claim_render("w1").await.unwrap().is_none());
 }
+
+#[tokio::test]
+async fn a_failed_episodes_video_is_prerendered_behind_every_asked_for_render() {
+    let f = render_fixture().await;
+    let token = f.team("alpha").await;
+    let caller = f.caller(&token).await;
+    let id = (f.state.register_policy(&caller, f.request(Split::Dev)).await)
+        .unwrap()
+        .id;
+    let worker = f.worker().await;
+    let dir = f.state.video_dir().unwrap();
+    let jobs = f.lease("w1", 4).await;
+    let (failed, passed) = (&jobs[0], &jobs[1]);
+    for (job, success, trace) in [
+        (failed, false, &b"failed trace"[..]),
+        (passed, true, b"passed trace"),
+    ] {
+        let report = f.report("w1", job, |_| success, 0.0);
+        f.state.report_result(worker, report).await.unwrap();
+        store_trace(&f, job.run_id, &job.episode_key, trace).await;
+        // What the trace upload does once the trace is stored (`[video] prerender = "failed"`).
+        f.state
+            .prerender(&dir, job.run_id, &job.episode_key)
+            .await
+            .unwrap();
+    }
+    // Only the failed episode's render is queued, and nobody asked for it yet.
+    let rows = crate::store::renders::of_run(f.state.read_pool(), failed.run_id)
+        .await
+        .unwrap();
+    assert_eq!(rows.len(), 1, "{rows:?}");
+    assert_eq!(rows[0].episode_key, failed.episode_key);
+    // Someone asks for the passed episode's video: its render goes first.
+    f.state
+        .video_or_render(&caller, id, &passed.episode_key)
+        .await
+        .unwrap();
+    let first = f.state.claim_render("w1").await.unwrap().unwrap();
+    assert_eq!(
+        first.episode_key, passed.episode_key,
+        "the asked-for render first"
+    );
+    let second = f.state.claim_render("w2").await.unwrap().unwrap();
+    assert_eq!(second.episode_key, failed.episode_key, "then the pre-render");
+    // Storing the same trace again queues nothing new: the render exists.
+    f.state
+        .prerender(&dir, failed.run_id, &failed.episode_key)
+        .await
+        .unwrap();
+    assert!(f.state.claim_render("w3").await.unwrap().is_none());
+}
+
+#[tokio::test]
+async fn asking_for_a_queued_prerender_moves_it_ahead_and_none_prerenders_nothing() {
+    let f = fixture(FakeProbe::ok(8), |c| {
+        c.control.offline_mse = false;
+        c.control.dev_episodes = 3;
+        c.quota.concurrent_runs = 0;
+        c.video.prerender = crate::config::Prerender::All;
+    })
+    .await;
+    let token = f.team("alpha").await;
+    let caller = f.caller(&token).await;
+    let id = (f.state.register_policy(&caller, f.request(Split::Dev)).await)
+        .unwrap()
+        .id;
+    let worker = f.worker().await;
+    let dir = f.state.video_dir().unwrap();
+    let jobs = f.lease("w1", 4).await;
+    for (i, job) in jobs.iter().enumerate() {
+        let report = f.report("w1", job, |_| true, 0.0);
+        f.state.report_result(worker, report).await.unwrap();
+        store_trace(&f, job.run_id, &job.episode_key, format!("trace {i}").as_bytes()).await;
+        f.state
+            .prerender(&dir, job.run_id, &job.episode_key)
+            .await
+            .unwrap();
+    }
+    // `all`: every episode is pre-rendered, oldest first; asking for the last moves it ahead.
+    let last = &jobs[2].episode_key;
+    match f.state.video_or_render(&caller, id, last).await.unwrap() {
+        VideoState::Rendering { leased: false, .. } => {}
+        other => panic!("{other:?}"),
+    }
+    let first = f.state.claim_render("w1").await.unwrap().unwrap();
+    assert_eq!(&first.episode_key, last);
+    assert_eq!(
+        f.state.claim_render("w1").await.unwrap().unwrap().episode_key,
+        jobs[0].episode_key
+    );
+
+    let none = fixture(FakeProbe::ok(8), |c| {
+        c.control.offline_mse = false;
+        c.control.dev_episodes = 1;
+        c.quota.concurrent_runs = 0;
+        c.video.prerender = crate::config::Prerender::None;
+    })
+    .await;
+    let caller = none.caller(&none.team("alpha").await).await;
+    none.state
+        .register_policy(&caller, none.request(Split::Dev))
+        .await
+        .unwrap();
+    let worker = none.worker().await;
+    let job = none.lease("w1", 1).await.remove(0);
+    let report = none.report("w1", &job, |_| false, 0.0);
+    none.state.report_result(worker, report).await.unwrap();
+    store_trace(&none, job.run_id, &job.episode_key, b"trace").await;
+    let dir = none.state.video_dir().unwrap();
+    none.state
+        .prerender(&dir, job.run_id, &job.episode_key)
+        .await
+        .unwrap();
+    assert!(
+        none.state.claim_render("w1").await.unwrap().is_none(),
+        "none: only on request"
+    );
+}
