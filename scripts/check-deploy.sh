@@ -28,7 +28,7 @@ if [[ ! -x "$VENV/bin/python" ]]; then
   if ! python3 -m venv "$VENV"; then
     # Debian's python3 without ensurepip: install python3-venv (root, as on CI machines).
     rm -rf "$VENV"
-    apt-get install -y -qq python3-venv >/dev/null || fail "python3 -m venv failed; install python3-venv"
+    apt-get -o DPkg::Lock::Timeout=600 install -y -qq python3-venv >/dev/null || fail "python3 -m venv failed; install python3-venv"
     python3 -m venv "$VENV"
   fi
 fi
