@@ -115,6 +115,37 @@ fn a_mesh_cup_from_gltf_is_picked_and_placed_by_the_oracle() {
     )
     .unwrap();
     assert!(!obs.images.is_empty());
+    // From above, the cup's top is where the mesh says (its hull is cast against), not the
+    // counter under it.
+    let view = Sim::new(
+        assets.clone(),
+        SimConfig::load_default().unwrap(),
+        SensorsConfig::load_default().unwrap(),
+        cfg,
+    )
+    .unwrap()
+    .0;
+    let scene = assets.scene("kitchen_a").unwrap();
+    let img = kitchen_r_sim::render::topdown(&view, scene);
+    let (w, h) = (f64::from(img.width), f64::from(img.height));
+    let t = scene.room.wall_thickness;
+    let [rx, ry] = scene.room.size;
+    let scale = (rx + 2.0 * t) / w;
+    let top = scene.room.wall_height + 1.0;
+    let cups: Vec<_> = cfg.objects.iter().filter(|o| o.model == "cup").collect();
+    assert!(!cups.is_empty());
+    for cup in cups {
+        let [x, y, z] = cup.position;
+        let u = ((x - rx / 2.0) / scale + w / 2.0 - 0.5).round() as u32;
+        let v = ((ry / 2.0 - y) / scale + h / 2.0 - 0.5).round() as u32;
+        let seen = top - f64::from(img.depth[(v * img.width + u) as usize]);
+        assert!(
+            (seen - (z + 0.05)).abs() < 0.005,
+            "{}: top seen at {seen}, cup top at {}",
+            cup.name,
+            z + 0.05
+        );
+    }
     let usda = scene_usda(
         assets.scene("kitchen_a").unwrap(),
         &assets.catalogue,
