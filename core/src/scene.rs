@@ -3,7 +3,8 @@
 //! Coordinates: a right-handed world frame, z up, metres, origin at the south-west floor corner
 //! of the room, x east, y north; yaw in radians counter-clockwise from +x. Colours are sRGB in
 //! `[0, 1]`. Furniture is described by its outer box; how a kind is built out of parts (legs,
-//! shelf boards) is the simulator's business. Adding a scene is adding a file here.
+//! shelf boards) is the simulator's business, unless the item brings its own boxes (read from
+//! USD) or a glTF mesh. Adding a scene is adding a file here.
 
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, BTreeSet};
@@ -81,6 +82,21 @@ pub struct Furniture {
     /// read from USD keeps the geometry of its file. Empty (the usual case) for authored items.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub parts: Vec<BoxPart>,
+    /// A glTF 2.0 mesh the item is made of instead (see [`MeshRef`]); `size` must be its
+    /// bounding box, which the rules here (footprint, surfaces) use.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mesh: Option<MeshRef>,
+}
+
+/// A furniture mesh: `file` relative to the scene file (a full path once loaded), y-up as glTF
+/// has it and turned z-up, multiplied by `scale`, its footprint centred on the item's pose and
+/// its lowest point on the floor.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MeshRef {
+    pub file: String,
+    #[serde(default = "one")]
+    pub scale: f64,
 }
 
 /// One box of a furniture item, in the item's frame (origin at the footprint centre on the

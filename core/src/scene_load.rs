@@ -18,13 +18,20 @@ impl Scene {
             path: path.to_path_buf(),
             source,
         })?;
-        let scene: Scene = match UsdSource::from_toml(path, &text)? {
+        let mut scene: Scene = match UsdSource::from_toml(path, &text)? {
             Some(source) => source.read(path)?,
             None => toml::from_str(&text).map_err(|e| ContentError::Parse {
                 path: path.to_path_buf(),
                 message: e.to_string(),
             })?,
         };
+        // Mesh files are named relative to the scene file; from here on they are full paths.
+        let dir = path.parent().unwrap_or(Path::new("."));
+        for f in &mut scene.furniture {
+            if let Some(m) = &mut f.mesh {
+                m.file = dir.join(&m.file).to_string_lossy().into_owned();
+            }
+        }
         scene
             .validate(catalogue)
             .map_err(|message| ContentError::Invalid {

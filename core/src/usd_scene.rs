@@ -217,6 +217,7 @@ fn furniture(p: &Prim, k: f64) -> Result<Furniture, String> {
         },
         levels: opt_list(p, "kitchenr:levels")?.iter().map(|l| l * k).collect(),
         parts,
+        mesh: None,
     })
 }
 

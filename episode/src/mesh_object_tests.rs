@@ -15,9 +15,9 @@ use crate::runner::{RunOptions, run_episode};
 
 const CUP: &str = "shape = { kind = \"cylinder\", radius = 0.04, height = 0.10 }";
 
-/// A closed cylinder of radius `r` and height `h` as glTF (y-up, as glTF has it): `name.gltf`
-/// with its `name.bin`, `n` segments, a vertex at angle 0 so the bounding box is exact.
-fn write_cylinder(dir: &Path, name: &str, r: f32, h: f32, n: u32) {
+/// A closed cylinder of radius `r` and height `h` (glTF's y-up), `n` segments, a vertex at angle
+/// 0 so the bounding box is exact.
+fn cylinder(r: f32, h: f32, n: u32) -> (Vec<[f32; 3]>, Vec<u32>) {
     let mut pos: Vec<[f32; 3]> = Vec::new();
     for y in [-h / 2.0, h / 2.0] {
         for i in 0..n {
@@ -32,6 +32,35 @@ fn write_cylinder(dir: &Path, name: &str, r: f32, h: f32, n: u32) {
         let j = (i + 1) % n;
         idx.extend([i, j, n + j, i, n + j, n + i, 2 * n, j, i, 2 * n + 1, n + i, n + j]);
     }
+    (pos, idx)
+}
+
+/// Boxes given in our z-up frame as (centre, size), written in glTF's y-up frame.
+fn boxes(list: &[([f32; 3], [f32; 3])]) -> (Vec<[f32; 3]>, Vec<u32>) {
+    let (mut pos, mut idx) = (Vec::new(), Vec::new());
+    for (c, s) in list {
+        let base = pos.len() as u32;
+        for k in 0..8 {
+            let d = [k & 1, (k >> 1) & 1, (k >> 2) & 1].map(|b| if b == 1 { 0.5 } else { -0.5 });
+            let p = [c[0] + d[0] * s[0], c[1] + d[1] * s[1], c[2] + d[2] * s[2]];
+            pos.push([p[0], p[2], -p[1]]);
+        }
+        for q in [
+            [0, 1, 3, 2],
+            [4, 5, 7, 6],
+            [0, 1, 5, 4],
+            [2, 3, 7, 6],
+            [0, 2, 6, 4],
+            [1, 3, 7, 5],
+        ] {
+            idx.extend([q[0], q[1], q[2], q[0], q[2], q[3]].map(|i| base + i));
+        }
+    }
+    (pos, idx)
+}
+
+/// `name.gltf` with its `name.bin` in `dir`.
+fn write_gltf(dir: &Path, name: &str, (pos, idx): (Vec<[f32; 3]>, Vec<u32>)) {
     let mut bin: Vec<u8> = pos.iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
     let p_len = bin.len();
     bin.extend(idx.iter().flat_map(|i| i.to_le_bytes()));
@@ -72,7 +101,7 @@ fn assets_dir(tag: &str, shape: &str) -> PathBuf {
         "the cup's shape line changed: update this test"
     );
     std::fs::write(dir.join("objects.toml"), objects.replacen(CUP, shape, 1)).unwrap();
-    write_cylinder(&dir.join("meshes"), "cup", 0.04, 0.10, 24);
+    write_gltf(&dir.join("meshes"), "cup", cylinder(0.04, 0.10, 24));
     dir
 }
 
@@ -168,6 +197,91 @@ fn a_mesh_whose_catalogue_size_is_wrong_is_refused_with_the_measured_size() {
             && err.contains("object \"cup\"")
             && err.contains("measures [0.08, 0.08, 0.1]"),
         "{err}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn a_mesh_table_from_gltf_passes_the_content_checks_and_the_oracle_works_at_it() {
+    let dir = assets_dir("table", CUP);
+    // kitchen_a's table (1.2 x 0.8 x 0.75) as a glTF mesh: a top and four legs.
+    let (top, leg) = (0.04f32, 0.05f32);
+    let mut parts = vec![([0.0, 0.0, 0.75 - top / 2.0], [1.2, 0.8, top])];
+    for (a, b) in [(-1.0f32, -1.0f32), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)] {
+        parts.push((
+            [a * (0.6 - leg), b * (0.4 - leg), (0.75 - top) / 2.0],
+            [leg, leg, 0.75 - top],
+        ));
+    }
+    write_gltf(&dir.join("meshes"), "table", boxes(&parts));
+    let scene = std::fs::read_to_string(dir.join("scenes/kitchen_a.toml")).unwrap();
+    let table = "kind = \"table\"\npose = [2.5, 1.6, 0.0]\nsize = [1.2, 0.8, 0.75]\n";
+    assert!(
+        scene.contains(table),
+        "kitchen_a's table changed: update this test"
+    );
+    let meshed = scene.replacen(
+        table,
+        &format!("{table}mesh = {{ file = \"../meshes/table.gltf\" }}\n"),
+        1,
+    );
+    std::fs::write(dir.join("scenes/kitchen_a.toml"), meshed).unwrap();
+    let assets = Assets::load(&dir).unwrap();
+    let scene = assets.scene("kitchen_a").unwrap();
+    assert!(scene.furniture("table").unwrap().mesh.is_some());
+    scene.check_layout().unwrap();
+    scene.check_contents(&assets.catalogue).unwrap();
+    let at_table: Vec<String> = scene
+        .zones
+        .iter()
+        .filter(|z| z.furniture == "table")
+        .map(|z| format!("move to the {} zone", z.color))
+        .collect();
+    let dev = instructions(Split::Dev, None).unwrap();
+    let ins = dev
+        .iter()
+        .filter(|i| i.scene == "kitchen_a" && i.plan.iter().any(|s| at_table.contains(s)))
+        .max_by_key(|i| i.plan.len())
+        .unwrap();
+    let cfg = &episode_configs(&assets, std::slice::from_ref(ins), 0, None).unwrap()[0];
+    let blind = SensorsConfig {
+        cameras: Vec::new(),
+        lidar: None,
+        ..SensorsConfig::default()
+    };
+    let (mut sim, _) = Sim::new(assets.clone(), SimConfig::load_default().unwrap(), blind, cfg).unwrap();
+    let run = RunOptions {
+        privileged: true,
+        ..RunOptions::default()
+    };
+    let out = run_episode(&mut sim, &mut OraclePolicy::new(&assets), &run, None, &mut ()).unwrap();
+    assert_eq!(out.tasks.len(), ins.plan.len());
+    assert!(out.tasks.iter().all(|t| t.success), "{}: {:?}", ins.id, out.tasks);
+    // The table top renders where the mesh puts it.
+    let view = Sim::new(
+        assets.clone(),
+        SimConfig::load_default().unwrap(),
+        SensorsConfig::load_default().unwrap(),
+        cfg,
+    )
+    .unwrap()
+    .0;
+    let img = kitchen_r_sim::render::topdown(&view, scene);
+    let [rx, ry] = scene.room.size;
+    let scale = (rx + 2.0 * scene.room.wall_thickness) / f64::from(img.width);
+    // Near the top's four corners (a background object may stand on one).
+    let seen: Vec<f64> = [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)]
+        .iter()
+        .map(|(a, b)| {
+            let (x, y) = (2.5 + a * 0.55, 1.6 + b * 0.35);
+            let u = ((x - rx / 2.0) / scale + f64::from(img.width) / 2.0 - 0.5).round() as u32;
+            let v = ((ry / 2.0 - y) / scale + f64::from(img.height) / 2.0 - 0.5).round() as u32;
+            scene.room.wall_height + 1.0 - f64::from(img.depth[(v * img.width + u) as usize])
+        })
+        .collect();
+    assert!(
+        seen.iter().filter(|z| (*z - 0.75).abs() < 0.005).count() >= 2,
+        "table top seen at {seen:?}"
     );
     std::fs::remove_dir_all(&dir).ok();
 }

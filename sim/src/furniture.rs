@@ -85,6 +85,10 @@ impl FrontFrame {
 /// All parts of one item: its own boxes when it has them (furniture read from USD), else those
 /// derived from its kind.
 pub fn parts(scene: &Scene, f: &Furniture) -> Vec<Part> {
+    // A mesh item is its mesh (`world::build_static`), nothing derived.
+    if f.mesh.is_some() {
+        return Vec::new();
+    }
     if !f.parts.is_empty() {
         return f
             .parts

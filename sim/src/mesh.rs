@@ -1,7 +1,8 @@
-//! Object meshes from glTF 2.0 (`Shape::Mesh` in the catalogue): read once when the assets load,
-//! kept in a process-wide cache by file and scale, and turned into the convex hull the object
-//! collides and renders with (the ray caster casts against any parry shape, so the hull's
-//! triangles render without a renderer change).
+//! Meshes from glTF 2.0, for objects (`Shape::Mesh` in the catalogue) and furniture (`mesh` in a
+//! scene file): read once when the assets load, kept in a process-wide cache by file and scale.
+//! A dynamic object collides and renders as the mesh's convex hull; static furniture as its
+//! triangles (a parry `TriMesh`). The ray caster casts against any parry shape, so both render
+//! without a renderer change.
 //!
 //! The reader takes the default scene's mesh nodes with their transforms, positions and
 //! triangle indices of every `TRIANGLES` primitive, from a `.glb`'s binary chunk or `.bin` files
@@ -15,6 +16,7 @@ use std::path::Path;
 use std::sync::{Arc, Mutex, OnceLock};
 
 use kitchen_r_core::catalogue::{Catalogue, Shape};
+use kitchen_r_core::scene::Scene;
 use rapier3d::math::Vector;
 use rapier3d::prelude::SharedShape;
 
@@ -74,6 +76,43 @@ pub fn load_catalogue(catalogue: &Catalogue) -> Result<(), SimError> {
                         "object {:?}: size {size:?} in the catalogue, but the mesh measures {:?} (z-up, scaled by {scale}); write that size",
                         m.id,
                         mesh.size.map(|v| (v * 1e4).round() / 1e4)
+                    ),
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
+impl MeshData {
+    /// The mesh as a triangle mesh shape (static furniture), if parry accepts it.
+    pub fn trimesh(&self) -> Option<SharedShape> {
+        let v: Vec<Vector> = self
+            .vertices
+            .iter()
+            .map(|p| Vector::new(p[0] as f32, p[1] as f32, p[2] as f32))
+            .collect();
+        SharedShape::trimesh(v, self.triangles.clone()).ok()
+    }
+}
+
+/// Read every furniture mesh of the scenes and check each against the item's outer box
+/// (`size` × `scale`, 1 mm).
+pub fn load_scenes(scenes: &[Scene]) -> Result<(), SimError> {
+    for s in scenes {
+        for f in &s.furniture {
+            let Some(m) = &f.mesh else { continue };
+            let mesh = load(&m.file, m.scale)?;
+            let want = f.scaled_size();
+            if (0..3).any(|k| (mesh.size[k] - want[k]).abs() > 1e-3) {
+                return Err(SimError::Mesh {
+                    path: m.file.clone().into(),
+                    message: format!(
+                        "scene {:?}, furniture {:?}: outer box {want:?}, but the mesh measures {:?} (z-up, scaled by {}); write that size",
+                        s.id,
+                        f.id,
+                        mesh.size.map(|v| (v * 1e4).round() / 1e4),
+                        m.scale
                     ),
                 });
             }

@@ -37,6 +37,7 @@ impl Assets {
         let catalogue = Catalogue::load(&dir.join("objects.toml"))?;
         crate::mesh::load_catalogue(&catalogue)?;
         let scenes = Scene::load_all(&dir.join("scenes"), &catalogue)?;
+        crate::mesh::load_scenes(&scenes)?;
         let robot = RobotDesc::load(&dir.join("robot.toml"))?;
         Ok(Assets {
             scenes,

@@ -193,6 +193,23 @@ pub fn scene_usda(scene: &Scene, catalogue: &Catalogue, robot: &RobotDesc) -> Re
         u.line(&format!("custom color3f kitchenr:color = {}", color(f.color)));
         u.line(&format!("custom double[] kitchenr:levels = {}", list(&f.levels)));
         u.pose(&planar(f.pose[0], f.pose[1], 0.0, f.pose[2]), None);
+        if let Some(m) = &f.mesh
+            && let Some(mesh) = crate::mesh::cached(&m.file, m.scale)
+        {
+            // The item's own mesh, standing on the floor as the twin places it.
+            u.open("Mesh", "mesh", COLLIDES);
+            let p: Vec<String> = mesh.vertices.iter().map(|v| tuple(v)).collect();
+            u.line(&format!("point3f[] points = [{}]", p.join(", ")));
+            u.line(&format!(
+                "int[] faceVertexCounts = [{}]",
+                vec!["3"; mesh.triangles.len()].join(", ")
+            ));
+            let idx: Vec<String> = mesh.triangles.iter().flatten().map(u32::to_string).collect();
+            u.line(&format!("int[] faceVertexIndices = [{}]", idx.join(", ")));
+            u.pose(&planar(0.0, 0.0, mesh.size[2] / 2.0, 0.0), None);
+            u.color(f.color);
+            u.close();
+        }
         for (i, p) in furniture::parts(scene, f).iter().enumerate() {
             let pose = Isometry3::from_parts(
                 Translation3::from(Vector3::from(p.center)),

@@ -154,7 +154,46 @@ pub fn build_static(world: &mut PhysicsWorld, mats: &mut Materials, scene: &Scen
             });
             add_box(world, body, pose, p.half, material, owner);
         }
+        if let Some(m) = &f.mesh {
+            add_mesh(world, mats, body, base, &f, m, style);
+        }
     }
+}
+
+/// A mesh furniture item as one static triangle-mesh collider, collided with and ray cast
+/// exactly (loaded and size-checked with the assets, so the cache holds it).
+fn add_mesh(
+    world: &mut PhysicsWorld,
+    mats: &mut Materials,
+    body: RigidBodyHandle,
+    base: Isometry3<f64>,
+    f: &kitchen_r_core::scene::Furniture,
+    m: &kitchen_r_core::scene::MeshRef,
+    style: &Style,
+) {
+    let Some(mesh) = crate::mesh::cached(&m.file, m.scale) else {
+        return;
+    };
+    let Some(shape) = mesh.trimesh() else { return };
+    let material = mats.add(Material {
+        color: f.color,
+        pattern: style.furniture_pattern.unwrap_or(Pattern::Plain),
+    });
+    // The mesh is centred on its bounding box; the item stands on the floor.
+    let pose = base * Translation3::new(0.0, 0.0, mesh.size[2] / 2.0);
+    let co = ColliderBuilder::new(shape)
+        .position(iso_to_pose(&pose))
+        .friction(STATIC_FRICTION)
+        .collision_groups(Owner::Static.groups(false))
+        .user_data(
+            Tag {
+                material,
+                owner: Owner::Static,
+                index: 0,
+            }
+            .pack(),
+        );
+    world.insert_collider(co, Some(body));
 }
 
 /// Collision/render pieces of an object model relative to its centre (bounding-box centre).
