@@ -6,6 +6,11 @@
 //! (it renders itself when someone watches the cameras: rendering reads the world without
 //! changing it), and reports all the time it spends, pacing included, as the hook's overhead,
 //! which the runner leaves out of the policy's wall-clock budget.
+//!
+//! Rendering is the one cost publishing puts on the episode's thread (a two-camera RGB-D frame
+//! takes a few milliseconds, several times a control step's physics), so camera and LiDAR
+//! readings go out at most [`IMAGE_RATE_HZ`] times a wall-clock second, what a screen shows;
+//! the state topics (`/odom`, `/tf`, `/imu`, the action) go out at every control step.
 
 use std::time::{Duration, Instant};
 
@@ -15,6 +20,9 @@ use kitchen_r_sim::{Action, Observation, SensorsConfig, Sim, StepInfo};
 use crate::frame::frame_of;
 use crate::live::{Item, LiveQueue};
 use crate::replay::episode_meta;
+
+/// Camera frames a viewer is sent per wall-clock second, at most.
+pub const IMAGE_RATE_HZ: f64 = 30.0;
 
 pub struct LiveHook<'a> {
     inner: &'a mut dyn StepHook,
@@ -28,6 +36,8 @@ pub struct LiveHook<'a> {
     speed: Option<f64>,
     /// Wall time and sim time when pacing started.
     paced_from: Option<(Instant, f64)>,
+    /// When the last images were sent.
+    last_images: Option<Instant>,
     busy: Duration,
 }
 
@@ -43,6 +53,7 @@ impl<'a> LiveHook<'a> {
             latest: None,
             speed: None,
             paced_from: None,
+            last_images: None,
             busy: Duration::ZERO,
         }
     }
@@ -63,12 +74,22 @@ impl<'a> LiveHook<'a> {
         }
     }
 
+    /// Whether this step's frame carries images: someone watches them, and the last were sent
+    /// at least 1/[`IMAGE_RATE_HZ`] s ago.
+    fn images_due(&self) -> bool {
+        let every = Duration::from_secs_f64(1.0 / IMAGE_RATE_HZ);
+        self.queue.sensors_watched() && self.last_images.is_none_or(|t| t.elapsed() >= every)
+    }
+
     fn publish(&mut self, sim: &Sim, action: &Action, info: &StepInfo) {
-        let obs = match self.latest.take() {
-            Some(o) => o,
-            None if self.queue.sensors_watched() => sim.observe(),
-            None => sim.observe_state(),
+        let obs = match (self.images_due(), self.latest.take()) {
+            (true, Some(o)) => o,
+            (true, None) => sim.observe(),
+            (false, _) => sim.observe_state(),
         };
+        if !obs.images.is_empty() {
+            self.last_images = Some(Instant::now());
+        }
         let task = info.task.as_ref().map_or(0, |t| t.index);
         let frame = frame_of(sim, obs, action, info, task, true);
         self.queue.offer(Item::Frame(Box::new(frame)));
@@ -98,7 +119,7 @@ impl StepHook for LiveHook<'_> {
     }
 
     fn observation(&mut self, obs: &Observation) {
-        if self.holds && self.queue.sensors_watched() {
+        if self.holds && self.images_due() {
             let started = Instant::now();
             self.latest = Some(obs.clone());
             self.busy += started.elapsed();
