@@ -3,6 +3,7 @@
 //! render of a trace rendered before reuses its video.
 
 use super::*;
+use crate::service::WorkerCred;
 use crate::service::renders::VideoState;
 
 async fn render_fixture() -> Fixture {
@@ -24,15 +25,35 @@ async fn store_trace(f: &Fixture, run: i64, key: &str, bytes: &[u8]) {
     f.state.store_trace(&dir, run, key, done).await.unwrap();
 }
 
-#[tokio::test]
-async fn a_render_waits_for_evaluation_and_a_lost_render_lease_is_queued_again() {
-    let f = render_fixture().await;
+/// Team alpha's dev policy run, registered, and a worker's credentials.
+struct DevRun {
+    token: String,
+    caller: Caller,
+    id: i64,
+    worker: WorkerCred,
+}
+
+async fn dev_run(f: &Fixture) -> DevRun {
     let token = f.team("alpha").await;
     let caller = f.caller(&token).await;
     let id = (f.state.register_policy(&caller, f.request(Split::Dev)).await)
         .unwrap()
         .id;
     let worker = f.worker().await;
+    DevRun {
+        token,
+        caller,
+        id,
+        worker,
+    }
+}
+
+#[tokio::test]
+async fn a_render_waits_for_evaluation_and_a_lost_render_lease_is_queued_again() {
+    let f = render_fixture().await;
+    let DevRun {
+        caller, id, worker, ..
+    } = dev_run(&f).await;
     // One of the two episodes is evaluated and reported; the other stays queued.
     let job = f.lease("w1", 1).await.remove(0);
     let report = f.report("w1", &job, |_| false, 0.0);
@@ -112,12 +133,12 @@ async fn a_render_waits_for_evaluation_and_a_lost_render_lease_is_queued_again()
 #[tokio::test]
 async fn a_second_episode_with_the_same_trace_reuses_the_rendered_video() {
     let f = render_fixture().await;
-    let token = f.team("alpha").await;
-    let caller = f.caller(&token).await;
-    let id = (f.state.register_policy(&caller, f.request(Split::Dev)).await)
-        .unwrap()
-        .id;
-    let worker = f.worker().await;
+    let DevRun {
+        token,
+        caller,
+        id,
+        worker,
+    } = dev_run(&f).await;
     let jobs = f.lease("w1", 4).await;
     for job in &jobs {
         let report = f.report("w1", job, |_| false, 0.0);
@@ -164,12 +185,9 @@ async fn a_second_episode_with_the_same_trace_reuses_the_rendered_video() {
 #[tokio::test]
 async fn a_failed_episodes_video_is_prerendered_behind_every_asked_for_render() {
     let f = render_fixture().await;
-    let token = f.team("alpha").await;
-    let caller = f.caller(&token).await;
-    let id = (f.state.register_policy(&caller, f.request(Split::Dev)).await)
-        .unwrap()
-        .id;
-    let worker = f.worker().await;
+    let DevRun {
+        caller, id, worker, ..
+    } = dev_run(&f).await;
     let dir = f.state.video_dir().unwrap();
     let jobs = f.lease("w1", 4).await;
     let (failed, passed) = (&jobs[0], &jobs[1]);
@@ -221,12 +239,9 @@ async fn asking_for_a_queued_prerender_moves_it_ahead_and_none_prerenders_nothin
         c.video.prerender = crate::config::Prerender::All;
     })
     .await;
-    let token = f.team("alpha").await;
-    let caller = f.caller(&token).await;
-    let id = (f.state.register_policy(&caller, f.request(Split::Dev)).await)
-        .unwrap()
-        .id;
-    let worker = f.worker().await;
+    let DevRun {
+        caller, id, worker, ..
+    } = dev_run(&f).await;
     let dir = f.state.video_dir().unwrap();
     let jobs = f.lease("w1", 4).await;
     for (i, job) in jobs.iter().enumerate() {
