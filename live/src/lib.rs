@@ -2,7 +2,7 @@
 //! live publisher produces (`kitchen_r_record::live`) to the tools robotics people use.
 //!
 //! - [`foxglove`]: a WebSocket server speaking the Foxglove WebSocket protocol (v1), so the
-//!   Foxglove app or Lichtblick connects to a running `eval`, `collect` or `replay` and shows
+//!   Foxglove app or Lichtblick connects to a running `eval` or `replay` and shows
 //!   the cameras, the robot's path and TF as the episode runs. It listens on loopback unless
 //!   told otherwise.
 //!
