@@ -93,15 +93,7 @@ pub(crate) fn eval(args: EvalArgs) -> anyhow::Result<()> {
         ),
         None => None,
     };
-    let endpoint = args.policy.starts_with("http://") || args.policy.starts_with("https://");
-    if args.live.foxglove.is_some() && (endpoint || args.record.is_some()) {
-        anyhow::bail!(
-            "--foxglove shows episodes of the built-in oracle as they run; to watch a policy \
-             endpoint's episode, write its trace (--trace DIR) and replay it live: \
-             kitchen-r replay DIR/<episode>.trace.json --foxglove"
-        );
-    }
-    if endpoint {
+    if args.policy.starts_with("http://") || args.policy.starts_with("https://") {
         return eval_endpoint(args, &config, batch);
     }
     let policy: PolicyChoice = args.policy.parse()?;
@@ -222,6 +214,12 @@ fn eval_endpoint(
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
         record: args.record.clone(),
         trace: args.trace.clone(),
+        watch: None,
+    };
+    let view = crate::live_view::LiveView::start(&args.live, &crate::live_view::default_sensors()?)?;
+    let settings = LocalSettings {
+        watch: view.as_ref().map(|v| v.wrap()),
+        ..settings
     };
     for dir in [&args.record, &args.trace].into_iter().flatten() {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
@@ -267,6 +265,9 @@ fn eval_endpoint(
             &mut progress,
         )?,
     };
+    if let Some(v) = view {
+        v.finish()?;
+    }
     if args.json {
         println!("{}", serde_json::to_string(&report)?);
     } else {

@@ -24,7 +24,7 @@ const WAIT: Duration = Duration::from_secs(600);
 
 #[derive(Args, Debug, Clone)]
 pub(crate) struct LiveArgs {
-    /// Serve the episodes live to Foxglove or Lichtblick (Foxglove WebSocket protocol) on ADDR
+    /// Serve the (online) episodes live to Foxglove or Lichtblick (Foxglove WebSocket protocol) on ADDR
     /// [default ADDR: 127.0.0.1:8765]; open a connection to the printed ws:// URL. Publishing is
     /// best effort: a slow viewer misses messages, the episode never waits and its results do
     /// not change. Loopback unless you give another address.

@@ -13,7 +13,7 @@ use serde_json::{Value, json};
 use tokio_tungstenite::tungstenite::Message;
 use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 
-use crate::support::{Proc, bin};
+use crate::support::{Proc, bin, oracle_policy};
 
 fn eval_args(cfg: &str) -> Vec<String> {
     let args = [
@@ -29,13 +29,21 @@ fn eval_args(cfg: &str) -> Vec<String> {
     args.iter().map(|s| s.to_string()).collect()
 }
 
-/// What an episode's result is, less its wall time.
+/// A report (`eval --json`) less its wall times: what must not change with a viewer.
 fn results(report: &str) -> Value {
-    let r: Value = serde_json::from_str(report).unwrap_or_else(|e| panic!("{e}: {report}"));
-    let episodes: Vec<Value> = (r["episodes"].as_array().unwrap().iter())
-        .map(|e| json!([e["episode_id"], e["tasks"], e["sim_time"], e["policy_calls"]]))
-        .collect();
-    json!([episodes, r["overall"], r["by_kind"]])
+    fn strip(v: &mut Value) {
+        match v {
+            Value::Object(m) => {
+                m.retain(|k, _| !k.contains("wall"));
+                m.values_mut().for_each(strip);
+            }
+            Value::Array(a) => a.iter_mut().for_each(strip),
+            _ => {}
+        }
+    }
+    let mut r: Value = serde_json::from_str(report).unwrap_or_else(|e| panic!("{e}: {report}"));
+    strip(&mut r);
+    r
 }
 
 /// A `std_msgs/Header` at the start of a CDR payload: (stamp in ns, frame_id, bytes read).
@@ -51,11 +59,28 @@ fn header(cdr: &[u8]) -> (u64, String, usize) {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn eval_foxglove_serves_the_episode_live_to_a_protocol_client_and_changes_no_result() {
+    watched_eval(&[]).await;
+}
+
+/// A policy endpoint's episodes, run as the workers run them, are watched alike.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_endpoint_policys_episode_is_watched_live_with_its_results_unchanged() {
+    let (_oracle, url) = oracle_policy();
+    watched_eval(&["--policy", &url, "--privileged"]).await;
+}
+
+/// `eval --episodes 1 … EXTRA` without and with `--foxglove`: a viewer connects, checks the
+/// channels and decodes messages of three topics; the two runs' results must be equal.
+async fn watched_eval(extra: &[&str]) {
     let dir = tempfile::tempdir().unwrap();
     let cfg = dir.path().join("eval.toml");
     std::fs::write(&cfg, "max_plan_steps = 2\n").unwrap();
     let cfg = cfg.to_string_lossy().into_owned();
-    let plain = Command::new(bin()).args(eval_args(&cfg)).output().unwrap();
+    let plain = Command::new(bin())
+        .args(eval_args(&cfg))
+        .args(extra)
+        .output()
+        .unwrap();
     assert!(
         plain.status.success(),
         "{}",
@@ -64,6 +89,7 @@ async fn eval_foxglove_serves_the_episode_live_to_a_protocol_client_and_changes_
 
     let mut cmd = Command::new(bin());
     cmd.args(eval_args(&cfg))
+        .args(extra)
         .args(["--foxglove", "127.0.0.1:0", "--foxglove-wait"])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());

@@ -325,10 +325,14 @@ fn run(
     let (out, recording) = if spec.record_video && !on_demand {
         let video = EpisodeVideo::new(&cfg.plan, n_tasks, spec.video_max_bytes as usize);
         let mut recorder = VideoHook::new(&mut hook, video);
-        let out = run_episode(&mut sim, policy, &run, starts.as_deref(), &mut recorder)?;
+        let out = watched(ctx, &mut recorder, &mut |h| {
+            run_episode(&mut sim, policy, &run, starts.as_deref(), h)
+        })?;
         (out, Some(recorder.into_video()))
     } else {
-        let out = run_episode(&mut sim, policy, &run, starts.as_deref(), &mut hook)?;
+        let out = watched(ctx, &mut hook, &mut |h| {
+            run_episode(&mut sim, policy, &run, starts.as_deref(), h)
+        })?;
         (out, None)
     };
     let trace = tracing.map(|t| t.into_trace(cfg, &run, starts.is_some(), &out));
@@ -343,6 +347,14 @@ fn run(
         video,
         trace,
     })
+}
+
+/// `run` with `hook`, wrapped in the context's live view when it has one (`eval --foxglove`).
+fn watched<T>(ctx: &JobContext, hook: &mut dyn StepHook, run: &mut dyn FnMut(&mut dyn StepHook) -> T) -> T {
+    match &ctx.watch {
+        Some(w) => run((w.0)(hook).as_mut()),
+        None => run(hook),
+    }
 }
 
 /// The episode's MP4, its cost logged; a failed recording is logged and dropped.

@@ -60,6 +60,9 @@ pub struct LocalSettings {
     /// video, `kitchen_r_episode::trace`) to `DIR/<episode key>.trace.json`.
     #[serde(default)]
     pub trace: Option<PathBuf>,
+    /// `eval --foxglove`: the live view each online episode also runs with.
+    #[serde(skip)]
+    pub watch: Option<kitchen_r_episode::eval::WrapHook>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -242,6 +245,7 @@ fn evaluate_endpoint_with(
     };
     let mut ctx = JobContext::load(remote.clone(), AllowedNetworks::ALL, 1)?;
     ctx.params.batch = batch;
+    ctx.watch = s.watch.clone();
     let jobs: Vec<pb::Job> = instructions
         .iter()
         .map(|i| local_job(i, url, s, &remote))
@@ -421,6 +425,7 @@ mod tests {
             jobs: 1,
             record: None,
             trace: None,
+            watch: None,
         }
     }
 

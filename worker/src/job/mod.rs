@@ -240,6 +240,8 @@ pub struct JobContext {
     pub remote: RemoteConfig,
     /// Offline mode: query the policy at every N-th decision point.
     pub sample_every: usize,
+    /// A live view online episodes also run with (`eval --foxglove`); the workers have none.
+    pub watch: Option<kitchen_r_episode::eval::WrapHook>,
 }
 
 impl JobContext {
@@ -260,6 +262,7 @@ impl JobContext {
                 ..remote
             },
             sample_every: sample_every.max(1),
+            watch: None,
         })
     }
 
@@ -276,6 +279,7 @@ impl JobContext {
             params: EpisodeParams::load_default().map_err(JobError::from)?,
             remote: cfg.remote()?,
             sample_every: cfg.sample_every.max(1),
+            watch: None,
         })
     }
 }

@@ -221,6 +221,7 @@ fn local_eval_of_an_endpoint_gives_the_workers_numbers() {
         jobs: 4,
         record: None,
         trace: None,
+        watch: None,
     };
     let local = evaluate_endpoint(
         &server.url(),
