@@ -15,6 +15,8 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::{Arc, Mutex, OnceLock};
 
+use nalgebra::{Matrix4, Point3};
+
 use kitchen_r_core::catalogue::{Catalogue, Shape};
 use kitchen_r_core::scene::Scene;
 use rapier3d::math::Vector;
@@ -32,6 +34,9 @@ pub struct MeshData {
     pub size: [f64; 3],
     /// The convex hull it collides and renders as.
     pub hull: SharedShape,
+    /// The triangle mesh static furniture collides and renders as, built on first use (its BVH
+    /// once per process, not at every world build).
+    trimesh: OnceLock<Option<SharedShape>>,
 }
 
 type Cache = Mutex<BTreeMap<(String, u64), Arc<MeshData>>>;
@@ -63,22 +68,40 @@ pub fn cached(file: &str, scale: f64) -> Option<Arc<MeshData>> {
         .cloned()
 }
 
-/// Read every mesh of the catalogue and check each against its stated `size` (1 mm), so a
-/// wrong size is reported when the assets load, not as a misplaced object later.
+/// Load the mesh of `file` at `scale` and check it measures `want` (1 mm), so a wrong size is
+/// reported when the assets load, not as a misplaced body later; `what` names the size's owner.
+fn load_sized(file: &str, scale: f64, want: [f64; 3], what: &str) -> Result<(), SimError> {
+    let mesh = load(file, scale)?;
+    if (0..3).any(|k| (mesh.size[k] - want[k]).abs() > 1e-3) {
+        return Err(SimError::Mesh {
+            path: file.into(),
+            message: format!(
+                "{what} {want:?}, but the mesh measures {:?} (z-up, scaled by {scale}); write that size",
+                mesh.size.map(|v| (v * 1e4).round() / 1e4)
+            ),
+        });
+    }
+    Ok(())
+}
+
+/// Read every mesh of the catalogue and check each against its stated `size`.
 pub fn load_catalogue(catalogue: &Catalogue) -> Result<(), SimError> {
     for m in &catalogue.objects {
         if let Shape::Mesh { file, scale, size } = &m.shape {
-            let mesh = load(file, *scale)?;
-            if (0..3).any(|k| (mesh.size[k] - size[k]).abs() > 1e-3) {
-                return Err(SimError::Mesh {
-                    path: file.into(),
-                    message: format!(
-                        "object {:?}: size {size:?} in the catalogue, but the mesh measures {:?} (z-up, scaled by {scale}); write that size",
-                        m.id,
-                        mesh.size.map(|v| (v * 1e4).round() / 1e4)
-                    ),
-                });
-            }
+            load_sized(file, *scale, *size, &format!("object {:?}: size in the catalogue", m.id))?;
+        }
+    }
+    Ok(())
+}
+
+/// Read every furniture mesh of the scenes and check each against the item's outer box
+/// (`size` × `scale`).
+pub fn load_scenes(scenes: &[Scene]) -> Result<(), SimError> {
+    for s in scenes {
+        for f in &s.furniture {
+            let Some(m) = &f.mesh else { continue };
+            let what = format!("scene {:?}, furniture {:?}: outer box", s.id, f.id);
+            load_sized(&m.file, m.scale, f.scaled_size(), &what)?;
         }
     }
     Ok(())
@@ -87,38 +110,18 @@ pub fn load_catalogue(catalogue: &Catalogue) -> Result<(), SimError> {
 impl MeshData {
     /// The mesh as a triangle mesh shape (static furniture), if parry accepts it.
     pub fn trimesh(&self) -> Option<SharedShape> {
-        let v: Vec<Vector> = self
-            .vertices
-            .iter()
-            .map(|p| Vector::new(p[0] as f32, p[1] as f32, p[2] as f32))
-            .collect();
-        SharedShape::trimesh(v, self.triangles.clone()).ok()
+        self.trimesh
+            .get_or_init(|| SharedShape::trimesh(points(&self.vertices), self.triangles.clone()).ok())
+            .clone()
     }
 }
 
-/// Read every furniture mesh of the scenes and check each against the item's outer box
-/// (`size` × `scale`, 1 mm).
-pub fn load_scenes(scenes: &[Scene]) -> Result<(), SimError> {
-    for s in scenes {
-        for f in &s.furniture {
-            let Some(m) = &f.mesh else { continue };
-            let mesh = load(&m.file, m.scale)?;
-            let want = f.scaled_size();
-            if (0..3).any(|k| (mesh.size[k] - want[k]).abs() > 1e-3) {
-                return Err(SimError::Mesh {
-                    path: m.file.clone().into(),
-                    message: format!(
-                        "scene {:?}, furniture {:?}: outer box {want:?}, but the mesh measures {:?} (z-up, scaled by {}); write that size",
-                        s.id,
-                        f.id,
-                        mesh.size.map(|v| (v * 1e4).round() / 1e4),
-                        m.scale
-                    ),
-                });
-            }
-        }
-    }
-    Ok(())
+/// Vertices as parry's single-precision points.
+fn points(vertices: &[[f64; 3]]) -> Vec<Vector> {
+    vertices
+        .iter()
+        .map(|v| Vector::new(v[0] as f32, v[1] as f32, v[2] as f32))
+        .collect()
 }
 
 fn read(path: &Path, scale: f64) -> Result<MeshData, SimError> {
@@ -159,9 +162,10 @@ fn read(path: &Path, scale: f64) -> Result<MeshData, SimError> {
         .ok_or_else(|| bad("no scene".into()))?;
     let mut vertices = Vec::new();
     let mut triangles = Vec::new();
-    let mut stack: Vec<(gltf::Node, [[f64; 4]; 4])> = scene.nodes().map(|n| (n, IDENTITY)).collect();
+    let mut stack: Vec<(gltf::Node, Matrix4<f64>)> = scene.nodes().map(|n| (n, Matrix4::identity())).collect();
     while let Some((node, parent)) = stack.pop() {
-        let m = mul(&parent, &node.transform().matrix().map(|c| c.map(f64::from)));
+        // glTF stores matrices column-major, as nalgebra reads nested arrays.
+        let m = parent * Matrix4::from(node.transform().matrix()).cast::<f64>();
         stack.extend(node.children().map(|c| (c, m)));
         let Some(mesh) = node.mesh() else { continue };
         for prim in mesh.primitives() {
@@ -177,8 +181,7 @@ fn read(path: &Path, scale: f64) -> Result<MeshData, SimError> {
                 .read_positions()
                 .ok_or_else(|| bad(format!("mesh {} has no POSITION", mesh.index())))?;
             for p in positions {
-                let p = p.map(f64::from);
-                let w = [0, 1, 2].map(|r| m[0][r] * p[0] + m[1][r] * p[1] + m[2][r] * p[2] + m[3][r]);
+                let w = m.transform_point(&Point3::from(p.map(f64::from)));
                 // glTF y-up to our z-up.
                 vertices.push([w[0] * scale, -w[2] * scale, w[1] * scale]);
             }
@@ -206,28 +209,13 @@ fn read(path: &Path, scale: f64) -> Result<MeshData, SimError> {
     for v in &mut vertices {
         *v = [0, 1, 2].map(|k| v[k] - center[k]);
     }
-    let points: Vec<Vector> = vertices
-        .iter()
-        .map(|v| Vector::new(v[0] as f32, v[1] as f32, v[2] as f32))
-        .collect();
-    let hull = SharedShape::convex_hull(&points)
+    let hull = SharedShape::convex_hull(&points(&vertices))
         .ok_or_else(|| bad("the mesh is flat: it has no convex hull".into()))?;
     Ok(MeshData {
         size: [0, 1, 2].map(|k| hi[k] - lo[k]),
         vertices,
         triangles,
         hull,
+        trimesh: OnceLock::new(),
     })
-}
-
-const IDENTITY: [[f64; 4]; 4] = [
-    [1.0, 0.0, 0.0, 0.0],
-    [0.0, 1.0, 0.0, 0.0],
-    [0.0, 0.0, 1.0, 0.0],
-    [0.0, 0.0, 0.0, 1.0],
-];
-
-/// Column-major 4×4 product `a · b`, as glTF stores matrices.
-fn mul(a: &[[f64; 4]; 4], b: &[[f64; 4]; 4]) -> [[f64; 4]; 4] {
-    std::array::from_fn(|c| std::array::from_fn(|r| (0..4).map(|k| a[k][r] * b[c][k]).sum()))
 }
