@@ -384,16 +384,17 @@ fn flat(v: &Value, out: &mut Vec<f64>, line: usize) -> Result<(), String> {
     Ok(())
 }
 
+/// The attribute's value, or an error naming its line.
+fn value(a: &Attr) -> Result<&Value, String> {
+    a.value
+        .as_ref()
+        .ok_or_else(|| format!("line {}: attribute has no value", a.line))
+}
+
 /// Exactly `n` numbers (a scalar, a tuple or a one-element array of a tuple).
 fn numbers_of(a: &Attr, n: usize) -> Result<Vec<f64>, String> {
     let mut v = Vec::new();
-    flat(
-        a.value
-            .as_ref()
-            .ok_or(format!("line {}: attribute has no value", a.line))?,
-        &mut v,
-        a.line,
-    )?;
+    flat(value(a)?, &mut v, a.line)?;
     if v.len() != n {
         return Err(format!(
             "line {}: expected {n} numbers, found {}",
@@ -449,12 +450,7 @@ fn text_value(v: &Value, line: usize) -> Result<String, String> {
 }
 
 fn text(a: &Attr) -> Result<String, String> {
-    text_value(
-        a.value
-            .as_ref()
-            .ok_or(format!("line {}: attribute has no value", a.line))?,
-        a.line,
-    )
+    text_value(value(a)?, a.line)
 }
 
 fn opt_string(p: &Prim, name: &str) -> Result<Option<String>, String> {
@@ -472,13 +468,7 @@ fn display_color(p: &Prim) -> Result<Option<Rgb>, String> {
         return Ok(None);
     };
     let mut v = Vec::new();
-    flat(
-        a.value
-            .as_ref()
-            .ok_or(format!("line {}: attribute has no value", a.line))?,
-        &mut v,
-        a.line,
-    )?;
+    flat(value(a)?, &mut v, a.line)?;
     if v.len() < 3 {
         return Err(format!(
             "line {}: primvars:displayColor needs three numbers",
