@@ -35,6 +35,8 @@ pub mod rate;
 pub mod replay;
 pub mod ros2_frame;
 pub mod ros2_msgs;
+#[cfg(test)]
+mod test_sim;
 pub mod video;
 
 use serde::{Deserialize, Serialize};

@@ -164,11 +164,8 @@ mod tests {
     use super::*;
     use crate::live::{LivePublisher, LiveSink};
     use crate::ros2_msgs::Ros2Message;
-    use kitchen_r_core::dataset::Split;
-    use kitchen_r_episode::eval::{episode_configs, instructions};
     use kitchen_r_episode::oracle::OraclePolicy;
     use kitchen_r_episode::runner::{EpisodeOutcome, RunOptions, run_episode};
-    use kitchen_r_sim::{Assets, SimConfig};
 
     /// A subscriber far slower than the simulation: every message takes it 5 ms.
     struct Stuck(Arc<Mutex<BTreeSet<(String, &'static str)>>>);
@@ -181,12 +178,7 @@ mod tests {
     }
 
     fn episode(hook: &mut dyn StepHook) -> EpisodeOutcome {
-        let assets = Assets::load_default().unwrap();
-        let dev = instructions(Split::Dev, None).unwrap();
-        let cfg = &episode_configs(&assets, &dev[..1], 0, None).unwrap()[0];
-        let sensors = SensorsConfig::load_default().unwrap();
-        let (mut sim, _) =
-            Sim::new(assets.clone(), SimConfig::load_default().unwrap(), sensors, cfg).unwrap();
+        let (assets, mut sim) = crate::test_sim::first_dev_sim();
         let run = RunOptions {
             privileged: true,
             max_tasks: Some(2),

@@ -232,11 +232,8 @@ impl StepHook for VideoHook<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use kitchen_r_core::dataset::Split;
-    use kitchen_r_episode::eval::{episode_configs, instructions};
     use kitchen_r_episode::oracle::OraclePolicy;
     use kitchen_r_episode::runner::{RunOptions, run_episode};
-    use kitchen_r_sim::{Assets, SensorsConfig, SimConfig};
 
     /// Counts the steps the runner executed, beside the recorder.
     struct Steps(usize);
@@ -250,19 +247,14 @@ mod tests {
 
     #[test]
     fn an_oracle_episode_records_one_frame_per_control_step_into_a_fast_start_mp4() {
-        let assets = Assets::load_default().unwrap();
-        let dev = instructions(Split::Dev, None).unwrap();
-        let cfg = &episode_configs(&assets, &dev[..1], 0, None).unwrap()[0];
-        let sensors = SensorsConfig::load_default().unwrap();
-        let (mut sim, _) =
-            Sim::new(assets.clone(), SimConfig::load_default().unwrap(), sensors, cfg).unwrap();
+        let (assets, mut sim) = crate::test_sim::first_dev_sim();
         let run = RunOptions {
             privileged: true,
             max_tasks: Some(1),
             ..RunOptions::default()
         };
         let mut steps = Steps(0);
-        let mut hook = VideoHook::new(&mut steps, EpisodeVideo::new(&cfg.plan, 1, 0));
+        let mut hook = VideoHook::new(&mut steps, EpisodeVideo::new(&sim.episode().plan, 1, 0));
         let out = run_episode(&mut sim, &mut OraclePolicy::new(&assets), &run, None, &mut hook).unwrap();
         assert!(out.tasks[0].success, "{:?}", out.tasks);
         // The encoding time is reported, so the episode's wall budget can leave it out.
