@@ -97,6 +97,21 @@ pub struct WrapHook(pub Arc<WrapFn>);
 /// What a [`WrapHook`] calls: the episode's hook in, the hook to run the episode with out.
 pub type WrapFn = dyn for<'a> Fn(&'a mut dyn StepHook) -> Box<dyn StepHook + 'a> + Send + Sync;
 
+impl WrapHook {
+    /// `run` with `hook`, wrapped in `watch` when there is one: how `eval` and the workers run
+    /// an episode that may be watched live.
+    pub fn around<T>(
+        watch: Option<&WrapHook>,
+        hook: &mut dyn StepHook,
+        run: impl FnOnce(&mut dyn StepHook) -> T,
+    ) -> T {
+        match watch {
+            Some(w) => run((w.0)(hook).as_mut()),
+            None => run(hook),
+        }
+    }
+}
+
 impl std::fmt::Debug for WrapHook {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str("WrapHook")
@@ -376,20 +391,11 @@ fn one(
 ) -> Result<EpisodeOutcome, EvalError> {
     let started = Instant::now();
     let s = load(sim, assets, sim_cfg, sensors, cfg)?;
-    let mut base = ();
-    let mut wrapped;
-    let hook: &mut dyn StepHook = match watch {
-        Some(w) => {
-            wrapped = (w.0)(&mut base);
-            wrapped.as_mut()
-        }
-        None => &mut base,
-    };
     let mut o = match trace {
-        None => run_episode(s, policy, run, None, hook)?,
+        None => WrapHook::around(watch, &mut (), |h| run_episode(s, policy, run, None, h))?,
         Some(dir) => {
             let mut tracing = TracingPolicy::new(policy);
-            let o = run_episode(s, &mut tracing, run, None, hook)?;
+            let o = WrapHook::around(watch, &mut (), |h| run_episode(s, &mut tracing, run, None, h))?;
             let path = dir.join(trace::file_name(&cfg.id));
             tracing
                 .into_trace(cfg.clone(), run, false, &o)

@@ -88,7 +88,12 @@ fn load_sized(file: &str, scale: f64, want: [f64; 3], what: &str) -> Result<(), 
 pub fn load_catalogue(catalogue: &Catalogue) -> Result<(), SimError> {
     for m in &catalogue.objects {
         if let Shape::Mesh { file, scale, size } = &m.shape {
-            load_sized(file, *scale, *size, &format!("object {:?}: size in the catalogue", m.id))?;
+            load_sized(
+                file,
+                *scale,
+                *size,
+                &format!("object {:?}: size in the catalogue", m.id),
+            )?;
         }
     }
     Ok(())
@@ -162,7 +167,8 @@ fn read(path: &Path, scale: f64) -> Result<MeshData, SimError> {
         .ok_or_else(|| bad("no scene".into()))?;
     let mut vertices = Vec::new();
     let mut triangles = Vec::new();
-    let mut stack: Vec<(gltf::Node, Matrix4<f64>)> = scene.nodes().map(|n| (n, Matrix4::identity())).collect();
+    let mut stack: Vec<(gltf::Node, Matrix4<f64>)> =
+        scene.nodes().map(|n| (n, Matrix4::identity())).collect();
     while let Some((node, parent)) = stack.pop() {
         // glTF stores matrices column-major, as nalgebra reads nested arrays.
         let m = parent * Matrix4::from(node.transform().matrix()).cast::<f64>();

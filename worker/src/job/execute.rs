@@ -19,6 +19,7 @@ use super::path::PathHook;
 use super::spec;
 use super::{JobContext, JobError};
 use kitchen_r_contract::{Credentials, RemotePolicy, SimCamera};
+use kitchen_r_episode::eval::WrapHook;
 use kitchen_r_episode::offline::{OfflineOutcome, run_offline};
 use kitchen_r_episode::oracle::OraclePolicy;
 use kitchen_r_episode::policy::{Corrections, Policy, Unreachable};
@@ -325,12 +326,12 @@ fn run(
     let (out, recording) = if spec.record_video && !on_demand {
         let video = EpisodeVideo::new(&cfg.plan, n_tasks, spec.video_max_bytes as usize);
         let mut recorder = VideoHook::new(&mut hook, video);
-        let out = watched(ctx, &mut recorder, &mut |h| {
+        let out = WrapHook::around(ctx.watch.as_ref(), &mut recorder, |h| {
             run_episode(&mut sim, policy, &run, starts.as_deref(), h)
         })?;
         (out, Some(recorder.into_video()))
     } else {
-        let out = watched(ctx, &mut hook, &mut |h| {
+        let out = WrapHook::around(ctx.watch.as_ref(), &mut hook, |h| {
             run_episode(&mut sim, policy, &run, starts.as_deref(), h)
         })?;
         (out, None)
@@ -347,14 +348,6 @@ fn run(
         video,
         trace,
     })
-}
-
-/// `run` with `hook`, wrapped in the context's live view when it has one (`eval --foxglove`).
-fn watched<T>(ctx: &JobContext, hook: &mut dyn StepHook, run: &mut dyn FnMut(&mut dyn StepHook) -> T) -> T {
-    match &ctx.watch {
-        Some(w) => run((w.0)(hook).as_mut()),
-        None => run(hook),
-    }
 }
 
 /// The episode's MP4, its cost logged; a failed recording is logged and dropped.
