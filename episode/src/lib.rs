@@ -20,6 +20,8 @@ pub mod policy;
 pub mod runner;
 pub mod samples;
 pub mod teleport;
+#[cfg(test)]
+mod test_oracle;
 pub mod trace;
 #[cfg(test)]
 mod usd_scene_tests;

@@ -10,8 +10,6 @@ use kitchen_r_sim::usd_export::scene_usda;
 use kitchen_r_sim::{Assets, SensorsConfig, Sim, SimConfig};
 
 use crate::eval::{episode_configs, instructions};
-use crate::oracle::OraclePolicy;
-use crate::runner::{RunOptions, run_episode};
 
 const CUP: &str = "shape = { kind = \"cylinder\", radius = 0.04, height = 0.10 }";
 
@@ -121,19 +119,7 @@ fn a_mesh_cup_from_gltf_is_picked_and_placed_by_the_oracle() {
         .max_by_key(|i| i.plan.len())
         .unwrap();
     let cfg = &episode_configs(&assets, std::slice::from_ref(ins), 0, None).unwrap()[0];
-    let blind = SensorsConfig {
-        cameras: Vec::new(),
-        lidar: None,
-        ..SensorsConfig::default()
-    };
-    let (mut sim, _) = Sim::new(assets.clone(), SimConfig::load_default().unwrap(), blind, cfg).unwrap();
-    let run = RunOptions {
-        privileged: true,
-        ..RunOptions::default()
-    };
-    let out = run_episode(&mut sim, &mut OraclePolicy::new(&assets), &run, None, &mut ()).unwrap();
-    assert_eq!(out.tasks.len(), ins.plan.len());
-    assert!(out.tasks.iter().all(|t| t.success), "{}: {:?}", ins.id, out.tasks);
+    crate::test_oracle::assert_oracle_completes(&assets, cfg, ins);
     // The cameras see it (the hull renders through the ray caster's generic shape path) and
     // the USD export writes it as a Mesh prim.
     let (_, obs) = Sim::new(
@@ -244,19 +230,7 @@ fn a_mesh_table_from_gltf_passes_the_content_checks_and_the_oracle_works_at_it()
         .max_by_key(|i| i.plan.len())
         .unwrap();
     let cfg = &episode_configs(&assets, std::slice::from_ref(ins), 0, None).unwrap()[0];
-    let blind = SensorsConfig {
-        cameras: Vec::new(),
-        lidar: None,
-        ..SensorsConfig::default()
-    };
-    let (mut sim, _) = Sim::new(assets.clone(), SimConfig::load_default().unwrap(), blind, cfg).unwrap();
-    let run = RunOptions {
-        privileged: true,
-        ..RunOptions::default()
-    };
-    let out = run_episode(&mut sim, &mut OraclePolicy::new(&assets), &run, None, &mut ()).unwrap();
-    assert_eq!(out.tasks.len(), ins.plan.len());
-    assert!(out.tasks.iter().all(|t| t.success), "{}: {:?}", ins.id, out.tasks);
+    crate::test_oracle::assert_oracle_completes(&assets, cfg, ins);
     // The table top renders where the mesh puts it.
     let view = Sim::new(
         assets.clone(),

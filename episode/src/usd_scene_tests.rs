@@ -7,12 +7,10 @@ use std::path::PathBuf;
 
 use kitchen_r_core::dataset::Split;
 use kitchen_r_core::scene::{BoxPart, Scene};
+use kitchen_r_sim::Assets;
 use kitchen_r_sim::usd_export::scene_usda;
-use kitchen_r_sim::{Assets, SensorsConfig, Sim, SimConfig};
 
 use crate::eval::{episode_configs, instructions};
-use crate::oracle::OraclePolicy;
-use crate::runner::{RunOptions, run_episode};
 
 /// A fresh assets directory: the committed catalogue and robot, and scene files written by
 /// `scenes` as (file name, contents).
@@ -104,19 +102,7 @@ fn a_usd_scene_reads_back_passes_the_content_checks_and_the_oracle_completes_an_
         .unwrap();
     ins.scene = "kitchen_usd".into();
     let cfg = &episode_configs(&assets, std::slice::from_ref(&ins), 0, None).unwrap()[0];
-    let blind = SensorsConfig {
-        cameras: Vec::new(),
-        lidar: None,
-        ..SensorsConfig::default()
-    };
-    let (mut sim, _) = Sim::new(assets.clone(), SimConfig::load_default().unwrap(), blind, cfg).unwrap();
-    let run = RunOptions {
-        privileged: true,
-        ..RunOptions::default()
-    };
-    let out = run_episode(&mut sim, &mut OraclePolicy::new(&assets), &run, None, &mut ()).unwrap();
-    assert_eq!(out.tasks.len(), ins.plan.len());
-    assert!(out.tasks.iter().all(|t| t.success), "{}: {:?}", ins.id, out.tasks);
+    crate::test_oracle::assert_oracle_completes(&assets, cfg, &ins);
     std::fs::remove_dir_all(&dir).ok();
 }
 

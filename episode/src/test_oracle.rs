@@ -1,0 +1,25 @@
+//! Tests' shared check: the oracle, blind (no cameras or LiDAR: it needs none), completes every
+//! task of an episode.
+
+use kitchen_r_core::dataset::Instruction;
+use kitchen_r_sim::{Assets, EpisodeConfig, SensorsConfig, Sim, SimConfig};
+
+use crate::oracle::OraclePolicy;
+use crate::runner::{RunOptions, run_episode};
+
+/// Run `cfg` (the episode of `ins`) with the privileged oracle and assert every task succeeds.
+pub(crate) fn assert_oracle_completes(assets: &Assets, cfg: &EpisodeConfig, ins: &Instruction) {
+    let blind = SensorsConfig {
+        cameras: Vec::new(),
+        lidar: None,
+        ..SensorsConfig::default()
+    };
+    let (mut sim, _) = Sim::new(assets.clone(), SimConfig::load_default().unwrap(), blind, cfg).unwrap();
+    let run = RunOptions {
+        privileged: true,
+        ..RunOptions::default()
+    };
+    let out = run_episode(&mut sim, &mut OraclePolicy::new(assets), &run, None, &mut ()).unwrap();
+    assert_eq!(out.tasks.len(), ins.plan.len());
+    assert!(out.tasks.iter().all(|t| t.success), "{}: {:?}", ins.id, out.tasks);
+}
