@@ -90,12 +90,11 @@ pub(super) async fn receive_trace(
         .await
         .map_err(refused)?;
     let file = write_all(file, &first.data, &mut stream, |c: &pb::TraceChunk| &c.data).await?;
-    let (sha, bytes) = state.store_trace(&dir, run, key, file).await.map_err(refused)?;
+    let (sha, bytes) = state
+        .trace_uploaded(&dir, run, key, file)
+        .await
+        .map_err(refused)?;
     tracing::info!(run, episode = %key, bytes, sha256 = %sha, "episode trace stored");
-    // Best effort: the trace is stored whatever happens to its pre-render.
-    if let Err(e) = state.prerender(&dir, run, key).await {
-        tracing::warn!(run, episode = %key, error = %e, "cannot queue the video's pre-render");
-    }
     Ok((sha, bytes))
 }
 

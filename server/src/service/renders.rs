@@ -20,7 +20,7 @@ use std::path::Path;
 
 use super::lease::HeartbeatOutcome;
 pub(crate) use super::progress::VideoView;
-use super::videos::{StoredVideo, trace_path};
+use super::videos::{Complete, StoredVideo, UploadError, trace_path};
 use super::{AppState, Caller, WorkerCred, now_ms};
 use crate::config::Prerender;
 use crate::episodes::TaskOutcome;
@@ -78,6 +78,23 @@ impl AppState {
         key: &str,
     ) -> Result<Option<VideoState>, ServiceError> {
         self.queue_render(dir, run, key, false).await
+    }
+
+    /// A worker's finished trace upload: stored as `(run, key)`'s trace, then its video queued
+    /// for pre-rendering as `[video] prerender` says. Returns the trace's sha256 and size.
+    pub(crate) async fn trace_uploaded(
+        &self,
+        dir: &Path,
+        run: i64,
+        key: &str,
+        file: Complete,
+    ) -> Result<(String, u64), UploadError> {
+        let stored = self.store_trace(dir, run, key, file).await?;
+        // Best effort: the trace is stored whatever happens to its pre-render.
+        if let Err(e) = self.prerender(dir, run, key).await {
+            tracing::warn!(run, episode = %key, error = %e, "cannot queue the video's pre-render");
+        }
+        Ok(stored)
     }
 
     /// A trace of `(run, key)` was just stored: with `[video] prerender`, queue its video's
