@@ -14,6 +14,7 @@ pub mod catalogue;
 pub mod dataset;
 pub mod describe;
 pub mod error;
+pub mod grasp_mode;
 #[cfg(test)]
 #[path = "../../tests/import_circles.rs"]
 mod import_circles;
@@ -30,6 +31,7 @@ pub mod usd_scene;
 pub mod usda;
 
 pub use error::ContentError;
+pub use grasp_mode::GraspMode;
 
 #[cfg(test)]
 mod asset_tests {

@@ -7,6 +7,8 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use kitchen_r_core::GraspMode;
+
 use crate::error::{SimError, read_toml};
 use crate::robot::rmp::RmpParams;
 
@@ -33,6 +35,15 @@ pub struct SimConfig {
     pub rmp: RmpParams,
     pub success: SuccessConfig,
     pub monitors: MonitorConfig,
+    pub grasp: GraspConfig,
+}
+
+/// `[grasp]`: how the gripper holds objects (issue #27). The organiser's contest setting, when
+/// a job carries one, overrides this file's.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(default, deny_unknown_fields)]
+pub struct GraspConfig {
+    pub mode: GraspMode,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
