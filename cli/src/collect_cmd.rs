@@ -58,6 +58,8 @@ pub(crate) struct CollectArgs {
     /// Print the summary as one JSON object.
     #[arg(long)]
     json: bool,
+    #[command(flatten)]
+    live: crate::live_view::LiveArgs,
 }
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
@@ -99,7 +101,17 @@ pub(crate) fn collect_cmd(args: CollectArgs) -> anyhow::Result<()> {
         progress: !args.json,
         ..CollectOptions::new(args.out, args.episodes.unwrap_or(0))
     };
-    let s = collect(&opts)?;
+    let view =
+        crate::live_view::LiveView::start(&args.live, &kitchen_r_record::collect::live_sensors(&opts)?)?;
+    let opts = CollectOptions {
+        live: view.as_ref().map(|v| v.queue()),
+        ..opts
+    };
+    let s = collect(&opts);
+    if let Some(v) = view {
+        v.finish()?;
+    }
+    let s = s?;
     if args.json {
         println!("{}", serde_json::to_string(&s)?);
         return Ok(());

@@ -65,13 +65,13 @@ pub(crate) struct ReplayArgs {
     size: Option<(u32, u32)>,
     /// Only check that the replay reproduces the recorded outcome bit for bit; render and
     /// write nothing (no camera frame is rendered, so this is the cheapest check).
-    #[arg(long, conflicts_with_all = ["foxglove", "foxglove_wait"])]
+    #[arg(long, conflicts_with_all = ["foxglove", "foxglove_wait", "ros2", "ros2_wait"])]
     check_only: bool,
     #[command(flatten)]
     live: crate::live_view::LiveArgs,
-    /// With --foxglove: sim seconds replayed per wall second (1: real time; 0: as fast as it
-    /// runs). The outcome does not depend on it.
-    #[arg(long, value_name = "X", default_value_t = 1.0, requires = "foxglove")]
+    /// With --foxglove or --ros2: sim seconds replayed per wall second (1: real time; 0: as
+    /// fast as it runs). The outcome does not depend on it.
+    #[arg(long, value_name = "X", default_value_t = 1.0)]
     speed: f64,
 }
 
@@ -116,9 +116,9 @@ pub(crate) fn replay(args: ReplayArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     // Watching it live is a reason to replay of its own: no video unless asked for then.
-    let video_path = match (&args.video, &args.mcap, &args.frames, &args.live.foxglove) {
+    let video_path = match (&args.video, &args.mcap, &args.frames, args.live.any()) {
         (Some(v), _, _, _) => Some(v.clone()),
-        (None, None, None, None) => Some(default_video(&args.trace)),
+        (None, None, None, false) => Some(default_video(&args.trace)),
         _ => None,
     };
     let staged = Staged::new(args.mcap.as_deref(), args.frames.as_deref())?;

@@ -5,6 +5,9 @@
 //!   Foxglove app or Lichtblick connects to a running `eval` or `replay` and shows
 //!   the cameras, the robot's path and TF as the episode runs. It listens on loopback unless
 //!   told otherwise.
+//! - [`ros2`]: the same messages as live ROS 2 topics over DDS (RustDDS), named and typed as a
+//!   ROS 2 node names them, so a stock node, `ros2 topic echo` or `ros2 bag record` subscribes
+//!   with no bridge. Discovery stays on loopback unless `configs/live.toml` says otherwise.
 //!
 //! It owns the network side of live publishing only: which messages exist and how they are
 //! encoded is kitchen-r-record's (the MCAP recordings hold the same bytes), and the episode is
@@ -19,3 +22,4 @@ pub mod foxglove;
 #[cfg(test)]
 #[path = "../../tests/import_circles.rs"]
 mod import_circles;
+pub mod ros2;

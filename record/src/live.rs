@@ -27,6 +27,17 @@ pub trait LiveSink: Send {
     fn publish(&mut self, msg: &Ros2Message);
 }
 
+/// Several transports at once (`--foxglove` with `--ros2`): each gets every message, in turn.
+pub struct Fanout(pub Vec<Box<dyn LiveSink>>);
+
+impl LiveSink for Fanout {
+    fn publish(&mut self, msg: &Ros2Message) {
+        for sink in &mut self.0 {
+            sink.publish(msg);
+        }
+    }
+}
+
 /// What the queue carries from the episode thread to the publisher thread.
 pub(crate) enum Item {
     /// An episode took the publisher: its static transforms.
@@ -49,8 +60,9 @@ struct Shared {
     offered: AtomicU64,
     dropped: AtomicU64,
     published: AtomicU64,
-    /// Whether anyone watches camera or LiDAR topics: frames carry rendered images only then.
-    sensors_watched: Arc<AtomicBool>,
+    /// Each transport's word on whether anyone watches camera or LiDAR topics: frames carry
+    /// rendered images only when one says so.
+    sensors_watched: Vec<Arc<AtomicBool>>,
 }
 
 /// The episode side of the queue; cheap to clone, one per hook.
@@ -83,7 +95,7 @@ impl LiveQueue {
     }
 
     pub(crate) fn sensors_watched(&self) -> bool {
-        self.shared.sensors_watched.load(Ordering::Relaxed)
+        (self.shared.sensors_watched.iter()).any(|w| w.load(Ordering::Relaxed))
     }
 
     /// Offer `item` without waiting: a full queue drops it.
@@ -117,12 +129,13 @@ pub struct LivePublisher {
 
 impl LivePublisher {
     /// Start the publisher thread with a queue of `capacity` items (a frame of two 128×128
-    /// RGB-D cameras is about 230 kB). `sensors_watched` is the sink's word on whether camera or
-    /// LiDAR topics have subscribers: images are copied out of the simulator only then.
+    /// RGB-D cameras is about 230 kB). `sensors_watched` are the transports' words on whether
+    /// camera or LiDAR topics have subscribers: images are copied out of the simulator only
+    /// while one says so.
     pub fn start(
         capacity: usize,
         sink: Box<dyn LiveSink>,
-        sensors_watched: Arc<AtomicBool>,
+        sensors_watched: Vec<Arc<AtomicBool>>,
     ) -> LivePublisher {
         let (tx, rx) = sync_channel(capacity.max(1));
         let shared = Arc::new(Shared {

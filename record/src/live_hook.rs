@@ -193,8 +193,11 @@ mod tests {
     fn publishing_live_behind_a_stuck_subscriber_drops_messages_and_never_changes_the_episode() {
         let plain = episode(&mut ());
         let seen = Arc::new(Mutex::new(BTreeSet::new()));
-        let publisher =
-            LivePublisher::start(2, Box::new(Stuck(seen.clone())), Arc::new(AtomicBool::new(true)));
+        let publisher = LivePublisher::start(
+            2,
+            Box::new(Stuck(seen.clone())),
+            vec![Arc::new(AtomicBool::new(true))],
+        );
         let sensors = SensorsConfig::load_default().unwrap();
         let mut inner = ();
         let mut hook = LiveHook::new(&mut inner, publisher.queue(), &sensors);
@@ -222,7 +225,7 @@ mod tests {
 
     #[test]
     fn only_one_episode_holds_the_publisher_at_a_time() {
-        let publisher = LivePublisher::start(4, Box::new(Stuck(Default::default())), Default::default());
+        let publisher = LivePublisher::start(4, Box::new(Stuck(Default::default())), Vec::new());
         let (a, b) = (publisher.queue(), publisher.queue());
         let (ida, idb) = (a.new_id(), b.new_id());
         assert!(a.claim(ida) && a.claim(ida));

@@ -34,6 +34,12 @@ pub use crate::hdf5_aloha::DepthUnit;
 pub use config::{CollectConfig, RateConfig};
 pub use run::collect;
 
+/// The sensors a run with `opts` simulates (the configured ones, less the cameras `--cameras`
+/// leaves out): the topics its live view advertises.
+pub fn live_sensors(opts: &CollectOptions) -> Result<kitchen_r_sim::SensorsConfig, CollectError> {
+    sensors::sensors(opts)
+}
+
 #[derive(Debug, thiserror::Error)]
 pub enum CollectError {
     #[error("collect config: {0}")]
@@ -122,6 +128,9 @@ pub struct CollectOptions {
     pub video_codec: Option<crate::video::Codec>,
     /// Draw an indicatif progress bar on stderr (hidden anyway when stderr is not a terminal).
     pub progress: bool,
+    /// Publish the episodes live (`collect --foxglove`/`--ros2`, [`crate::live`]): one at a
+    /// time, best effort, never changing what is recorded.
+    pub live: Option<crate::live::LiveQueue>,
 }
 
 impl CollectOptions {
@@ -146,6 +155,7 @@ impl CollectOptions {
             lerobot_episodes_per_file: crate::lerobot::EPISODES_PER_FILE,
             video_codec: None,
             progress: false,
+            live: None,
         }
     }
 

@@ -18,6 +18,7 @@ use crate::EpisodeMeta;
 use crate::frame::mounts;
 use crate::hdf5_aloha::{Hdf5Options, Hdf5Recorder};
 use crate::lerobot::{EpisodeRecorder, LeRobotDataset};
+use crate::live_hook::LiveHook;
 use crate::mcap_ros2::McapRecorder;
 use crate::video::VideoSettings;
 use kitchen_r_episode::oracle::{OraclePolicy, expert_options};
@@ -155,8 +156,14 @@ fn one(
         opts.config.monitors.clone(),
     );
     rec.depth = opts.depth.is_some();
-    let outcome = run_episode(s, oracle, &expert_options(), None, &mut rec)
-        .map_err(|e| CollectError::Config(e.to_string()))?;
+    let outcome = match &opts.live {
+        Some(queue) => {
+            let mut live = LiveHook::new(&mut rec, queue.clone(), &sensors(opts)?);
+            run_episode(s, oracle, &expert_options(), None, &mut live)
+        }
+        None => run_episode(s, oracle, &expert_options(), None, &mut rec),
+    }
+    .map_err(|e| CollectError::Config(e.to_string()))?;
     entry.frames = rec.frames;
     entry.sim_time = outcome.sim_time;
     let failed = outcome.tasks.iter().find(|t| !t.success);
