@@ -18,6 +18,7 @@ mod browser;
 mod cli;
 mod control;
 mod episodes;
+mod grasp;
 mod grpc;
 mod integrity;
 mod live;
