@@ -111,6 +111,7 @@ fn run_oracle(args: &AuditArgs) -> anyhow::Result<OracleCheck> {
         run: config.run_options(),
         trace: None,
         watch: None,
+        grasp: None,
     };
     let mut done = 0;
     eprintln!("oracle: running every test instruction ({} jobs)", opts.jobs);

@@ -102,6 +102,10 @@ pub(crate) struct LeaderboardArgs {
     /// policy received privileged observations (ranked apart).
     #[arg(long, default_value = "standard", value_parser = ["standard", "privileged"])]
     observations: String,
+    /// Control and integrated: the board of runs evaluated in this grasp mode (ranked apart)
+    /// [default: the contest's, the server's `[control] grasp`].
+    #[arg(long, value_parser = ["abstract", "physical"])]
+    grasp_mode: Option<String>,
     /// Output format.
     #[arg(long, value_enum, default_value_t = OutputFormat::Table)]
     format: OutputFormat,
@@ -225,8 +229,9 @@ pub(crate) fn leaderboard(args: LeaderboardArgs) -> anyhow::Result<()> {
         "standard" => String::new(),
         o => format!("&observations={o}"),
     };
+    let grasp = (args.grasp_mode.as_deref()).map_or(String::new(), |g| format!("&grasp_mode={g}"));
     let path = format!(
-        "/api/v1/leaderboard?track={}&split={}{observations}&format={format}",
+        "/api/v1/leaderboard?track={}&split={}{observations}{grasp}&format={format}",
         args.track, args.split
     );
     runtime()?.block_on(async {

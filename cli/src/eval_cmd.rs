@@ -7,6 +7,7 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::Args;
+use kitchen_r_core::GraspMode;
 use kitchen_r_core::dataset::Split;
 use kitchen_r_episode::eval::{
     EvalConfig, EvalOptions, EvalReport, PolicyChoice, Sr, evaluate, evaluate_batch, instructions,
@@ -77,6 +78,10 @@ pub(crate) struct EvalArgs {
     /// `kitchen-r replay` reproduces the episode bit for bit (and renders its video) later.
     #[arg(long, value_name = "DIR")]
     trace: Option<PathBuf>,
+    /// Grasp mode of every episode: abstract or physical, as a server's `[control] grasp` sets it
+    /// for its jobs [default: configs/sim.toml's `[grasp] mode`]. Named in the report.
+    #[arg(long, value_name = "MODE")]
+    grasp: Option<GraspMode>,
     #[command(flatten)]
     live: crate::live_view::LiveArgs,
 }
@@ -119,6 +124,7 @@ pub(crate) fn eval(args: EvalArgs) -> anyhow::Result<()> {
         run: config.run_options(),
         trace: args.trace,
         watch: None,
+        grasp: args.grasp,
     };
     let view = crate::live_view::LiveView::start(&args.live, &crate::live_view::default_sensors()?)?;
     let opts = EvalOptions {
@@ -159,12 +165,13 @@ pub(crate) fn eval(args: EvalArgs) -> anyhow::Result<()> {
 
 fn print_table(r: &EvalReport) {
     println!(
-        "policy {}  split {}  episodes {}  seed {}  jobs {}",
+        "policy {}  split {}  episodes {}  seed {}  jobs {}  grasp {}",
         r.policy,
         r.split,
         r.episodes.len(),
         r.seed,
-        r.jobs
+        r.jobs,
+        r.grasp_mode
     );
     print_kinds(&r.by_kind, &r.overall);
     println!(
@@ -215,6 +222,7 @@ fn eval_endpoint(
         record: args.record.clone(),
         trace: args.trace.clone(),
         watch: None,
+        grasp: args.grasp,
     };
     let view = crate::live_view::LiveView::start(&args.live, &crate::live_view::default_sensors()?)?;
     let settings = LocalSettings {
@@ -288,6 +296,7 @@ fn print_local(r: &LocalReport) {
     );
     println!("spec {}", r.spec);
     println!("observations {}", r.observations);
+    println!("grasp {}", r.grasp_mode);
     if let Some(o) = &r.overall {
         for (k, s) in r
             .by_kind

@@ -1,6 +1,6 @@
 //! The leaderboard as a terminal table: the columns of each track (planning: EM; control: SR
 //! then MSE; integrated: M then P), baseline rows marked; a policy board's heading names its
-//! observation track (standard or privileged).
+//! observation track (standard or privileged) and grasp mode (abstract or physical).
 
 use serde_json::Value;
 
@@ -28,8 +28,12 @@ pub(crate) fn print_table(board: &Value) {
         Some(o) => format!(", {o} observations"),
         None => String::new(),
     };
+    let grasp = match board["grasp_mode"].as_str() {
+        Some(g) => format!(", {g} grasp"),
+        None => String::new(),
+    };
     println!(
-        "{track} track{observations}, {} split",
+        "{track} track{observations}{grasp}, {} split",
         board["split"].as_str().unwrap_or("?")
     );
     let rows = board["rows"].as_array().cloned().unwrap_or_default();

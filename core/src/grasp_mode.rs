@@ -43,6 +43,15 @@ impl std::str::FromStr for GraspMode {
     }
 }
 
+/// For stores that read the mode back from a TEXT column (`#[sqlx(try_from = "String")]`).
+impl TryFrom<String> for GraspMode {
+    type Error = String;
+
+    fn try_from(s: String) -> Result<GraspMode, String> {
+        s.parse()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::GraspMode;

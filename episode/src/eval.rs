@@ -13,6 +13,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, mpsc};
 use std::time::Instant;
 
+use kitchen_r_core::GraspMode;
 use kitchen_r_core::dataset::{Instruction, Split, read_jsonl};
 use kitchen_r_sim::generator::splitmix;
 use kitchen_r_sim::{Assets, EpisodeConfig, EpisodeParams, SensorsConfig, Sim, SimConfig, SimError};
@@ -86,6 +87,8 @@ pub struct EvalOptions {
     pub trace: Option<PathBuf>,
     /// `eval --foxglove`: the hook each episode also runs with (a live view).
     pub watch: Option<WrapHook>,
+    /// `eval --grasp`: the simulator's grasp mode; `None` = configs/sim.toml's `[grasp] mode`.
+    pub grasp: Option<GraspMode>,
 }
 
 /// A hook to run each episode with, made per episode around the episode's own hook: a live
@@ -136,6 +139,7 @@ impl Default for EvalOptions {
             run: RunOptions::default(),
             trace: None,
             watch: None,
+            grasp: None,
         }
     }
 }
@@ -257,6 +261,10 @@ pub struct EvalReport {
     pub mean_episode_wall_s: f64,
     pub total_wall_s: f64,
     pub jobs: usize,
+    /// The grasp mode the episodes ran in (`abstract` or `physical`): part of what SR means.
+    /// Absent from reports written before it existed (abstract).
+    #[serde(default)]
+    pub grasp_mode: GraspMode,
     pub episodes: Vec<EpisodeOutcome>,
 }
 
@@ -317,12 +325,14 @@ pub fn episode_configs(
 
 /// Run `configs` over `jobs` threads; `progress(index, outcome)` is called on the calling
 /// thread as each episode finishes. Outcomes come back in config order.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn run_all(
     assets: &Assets,
     configs: &[EpisodeConfig],
     policy: PolicyChoice,
     run: &RunOptions,
     jobs: usize,
+    sim_cfg: &SimConfig,
     (trace, watch): (Option<&Path>, Option<&WrapHook>),
     progress: &mut dyn FnMut(usize, &EpisodeOutcome),
 ) -> Result<Vec<EpisodeOutcome>, EvalError> {
@@ -330,7 +340,7 @@ pub(crate) fn run_all(
     let (tx, rx) = mpsc::channel::<(usize, Result<EpisodeOutcome, EvalError>)>();
     let mut run = run.clone();
     run.privileged = policy == PolicyChoice::Oracle;
-    let (sim_cfg, sensors) = (SimConfig::load_default()?, SensorsConfig::load_default()?);
+    let sensors = SensorsConfig::load_default()?;
     let mut out: Vec<Option<EpisodeOutcome>> = vec![None; configs.len()];
     std::thread::scope(|scope| -> Result<(), EvalError> {
         for _ in 0..jobs.clamp(1, configs.len().max(1)) {
@@ -398,7 +408,7 @@ fn one(
             let o = WrapHook::around(watch, &mut (), |h| run_episode(s, &mut tracing, run, None, h))?;
             let path = dir.join(trace::file_name(&cfg.id));
             tracing
-                .into_trace(cfg.clone(), run, false, &o)
+                .into_trace(cfg.clone(), run, sim_cfg.grasp.mode, false, &o)
                 .save(&path)
                 .map_err(EvalError::Trace)?;
             o
@@ -468,12 +478,17 @@ fn evaluate_configs(
             .map_err(|e| EvalError::Trace(format!("creating {}: {e}", dir.display())))?;
     }
     let trace = opts.trace.as_deref();
+    let mut sim_cfg = SimConfig::load_default()?;
+    if let Some(g) = opts.grasp {
+        sim_cfg.grasp.mode = g;
+    }
     let episodes = run_all(
         assets,
         configs,
         opts.policy,
         &opts.run,
         opts.jobs,
+        &sim_cfg,
         (trace, opts.watch.as_ref()),
         progress,
     )?;
@@ -488,6 +503,7 @@ fn evaluate_configs(
         mean_episode_wall_s: episodes.iter().map(|e| e.wall_time_s).sum::<f64>() / n,
         total_wall_s: started.elapsed().as_secs_f64(),
         jobs: opts.jobs,
+        grasp_mode: sim_cfg.grasp.mode,
         episodes,
     })
 }

@@ -17,6 +17,7 @@
 
 use std::path::Path;
 
+use kitchen_r_core::GraspMode;
 use kitchen_r_sim::EpisodeConfig;
 use serde::{Deserialize, Serialize};
 
@@ -29,7 +30,7 @@ pub mod gzip;
 mod number;
 mod replay;
 
-pub use replay::{ReplayError, ReplayPolicy, replay, replay_with};
+pub use replay::{ReplayError, ReplayPolicy, replay, replay_config, replay_with};
 
 /// The `format` tag every trace file carries.
 pub const FORMAT: &str = "kitchen-r-trace";
@@ -78,11 +79,23 @@ pub struct TraceRun {
     pub privileged_observations: Option<PrivilegedScope>,
     pub chunk_tolerance: ChunkTolerance,
     pub max_consecutive_timeouts: u32,
+    /// The simulator's grasp mode (issue #27): a replay runs in it whatever its own
+    /// `[grasp] mode` says. Absent from traces recorded before it existed, which ran the
+    /// abstract grasp, and left out of abstract traces so older builds still replay them (a
+    /// physical trace is refused by a build that does not know the field, never replayed in the
+    /// wrong mode).
+    #[serde(default, skip_serializing_if = "is_abstract")]
+    pub grasp: GraspMode,
+}
+
+fn is_abstract(m: &GraspMode) -> bool {
+    *m == GraspMode::Abstract
 }
 
 impl TraceRun {
-    pub fn new(run: &RunOptions, expert_starts: bool) -> TraceRun {
+    pub fn new(run: &RunOptions, grasp: GraspMode, expert_starts: bool) -> TraceRun {
         TraceRun {
+            grasp,
             task_time_limit: run.task_time_limit,
             execute: run.execute,
             max_tasks: run.max_tasks,
@@ -280,11 +293,13 @@ impl<P: Policy> TracingPolicy<P> {
     }
 
     /// The trace of the episode this policy was run in: `episode` as loaded, `run` as given to
-    /// the runner, `expert_starts` whether it had teleport starts, `outcome` what it returned.
+    /// the runner, `grasp` the simulator's grasp mode, `expert_starts` whether it had teleport
+    /// starts, `outcome` what it returned.
     pub fn into_trace(
         self,
         episode: EpisodeConfig,
         run: &RunOptions,
+        grasp: GraspMode,
         expert_starts: bool,
         outcome: &EpisodeOutcome,
     ) -> Trace {
@@ -300,7 +315,7 @@ impl<P: Policy> TracingPolicy<P> {
             format: FORMAT.to_string(),
             version: VERSION,
             episode,
-            run: TraceRun::new(run, expert_starts),
+            run: TraceRun::new(run, grasp, expert_starts),
             policy: TracePolicy::of(&self.inner),
             calls: self.calls,
             budget_abort_at,

@@ -1,6 +1,7 @@
 //! Wire ↔ domain conversions, in one place: the worker protocol's task results and evaluation
-//! mode against `kitchen_r_core::scoring`.
+//! mode against `kitchen_r_core::scoring`, and the grasp mode against `kitchen_r_core::GraspMode`.
 
+use kitchen_r_core::GraspMode;
 use kitchen_r_core::scoring::{Mode, TaskOutcome};
 
 use crate::worker::v1 as pb;
@@ -61,6 +62,40 @@ impl pb::EvalMode {
     }
 }
 
+impl From<GraspMode> for pb::GraspMode {
+    fn from(m: GraspMode) -> Self {
+        match m {
+            GraspMode::Abstract => pb::GraspMode::Abstract,
+            GraspMode::Physical => pb::GraspMode::Physical,
+        }
+    }
+}
+
+impl From<pb::GraspMode> for GraspMode {
+    fn from(m: pb::GraspMode) -> Self {
+        match m {
+            pb::GraspMode::Abstract => GraspMode::Abstract,
+            pb::GraspMode::Physical => GraspMode::Physical,
+        }
+    }
+}
+
+impl pb::EpisodeSpec {
+    /// The episode's grasp mode; an absent field (an older server) is abstract, a value this
+    /// build does not know is `Err` with it: running such an episode in another mode would score
+    /// it under rules it was not asked for.
+    pub fn grasp(&self) -> Result<GraspMode, String> {
+        pb::GraspMode::try_from(self.grasp_mode)
+            .map(GraspMode::from)
+            .map_err(|_| {
+                format!(
+                    "unknown grasp mode {} in the job (a newer server?)",
+                    self.grasp_mode
+                )
+            })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -89,5 +124,22 @@ mod tests {
             assert_eq!(pb::EvalMode::from(m).mode(), Some(m));
         }
         assert_eq!(pb::EvalMode::Unspecified.mode(), None);
+    }
+
+    #[test]
+    fn grasp_modes_round_trip_and_an_old_spec_is_abstract() {
+        for m in GraspMode::ALL {
+            let spec = pb::EpisodeSpec {
+                grasp_mode: pb::GraspMode::from(m) as i32,
+                ..Default::default()
+            };
+            assert_eq!(spec.grasp(), Ok(m));
+        }
+        assert_eq!(pb::EpisodeSpec::default().grasp(), Ok(GraspMode::Abstract));
+        let future = pb::EpisodeSpec {
+            grasp_mode: 7,
+            ..Default::default()
+        };
+        assert!(future.grasp().unwrap_err().contains("unknown grasp mode 7"));
     }
 }

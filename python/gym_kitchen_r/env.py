@@ -90,7 +90,10 @@ class KitchenREnv(gym.Env):
     ``randomise`` (apply the paper's randomisation, ``configs/episodes.toml`` ``[randomise]``, to
     each episode: with seed S the episode of an instruction is the one ``kitchen-r episodes
     generate --from-dataset --seed S`` writes for it; off by default, as ``kitchen-r eval`` runs
-    the split), ``task_time_limit`` (sim seconds per task, 120), ``max_tasks`` (run only the first N plan
+    the split), ``grasp_mode`` (``"abstract"`` or ``"physical"``, how the gripper holds objects,
+    as a server's ``[control] grasp`` sets it; ``None`` keeps ``configs/sim.toml``'s
+    ``[grasp] mode``; any other value is a ``ValueError`` naming the two),
+    ``task_time_limit`` (sim seconds per task, 120), ``max_tasks`` (run only the first N plan
     steps; 0 = all), ``instruction`` (always this instruction id; otherwise ``reset`` picks
     one, or takes ``options={"instruction": id}``).
     """
@@ -109,6 +112,7 @@ class KitchenREnv(gym.Env):
         privileged: bool = False,
         privileged_observation: bool = False,
         randomise: bool = False,
+        grasp_mode: str | None = None,
         task_time_limit: float = 120.0,
         max_tasks: int = 0,
         instruction: str | None = None,
@@ -131,6 +135,7 @@ class KitchenREnv(gym.Env):
             privileged=privileged,
             privileged_observation=privileged_observation,
             randomise=randomise,
+            grasp_mode=grasp_mode,
         )
         self.render_mode = render_mode
         self._images, self._depth, self._history = images, depth, history

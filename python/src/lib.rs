@@ -257,7 +257,7 @@ impl NativeEnv {
     /// `split`: `dev` (the public split with plans) or `test` with `ground_truth` (a JSON Lines
     /// file of instructions with plans, the organiser's). See `gym_kitchen_r.KitchenREnv`.
     #[new]
-    #[pyo3(signature = (split="dev", ground_truth=None, images=true, depth=false, teleport_on_failure=true, history=1, task_time_limit=120.0, max_tasks=0, expert=true, expert_inline=false, privileged=false, privileged_observation=false, randomise=false))]
+    #[pyo3(signature = (split="dev", ground_truth=None, images=true, depth=false, teleport_on_failure=true, history=1, task_time_limit=120.0, max_tasks=0, expert=true, expert_inline=false, privileged=false, privileged_observation=false, randomise=false, grasp_mode=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         split: &str,
@@ -273,6 +273,7 @@ impl NativeEnv {
         privileged: bool,
         privileged_observation: bool,
         randomise: bool,
+        grasp_mode: Option<&str>,
     ) -> PyResult<NativeEnv> {
         if !(1..=8).contains(&history) {
             return Err(PyValueError::new_err("history must be 1 to 8 control steps"));
@@ -280,7 +281,11 @@ impl NativeEnv {
         let (split, instructions) = split_instructions(split, ground_truth.as_ref(), task_time_limit)?;
         let assets = Assets::load_default().map_err(setup("assets"))?;
         let params = EpisodeParams::load_default().map_err(setup("episode parameters"))?;
-        let sim_cfg = SimConfig::load_default().map_err(setup("configs/sim.toml"))?;
+        let mut sim_cfg = SimConfig::load_default().map_err(setup("configs/sim.toml"))?;
+        // The grasp mode as a server's `[control] grasp` sets it; None keeps sim.toml's.
+        if let Some(mode) = grasp_mode {
+            sim_cfg.grasp.mode = mode.parse().map_err(PyValueError::new_err)?;
+        }
         let sensors = SensorsConfig::load_default().map_err(setup("configs/sensors.toml"))?;
         let opts = DriveOptions {
             run: RunOptions {

@@ -9,6 +9,7 @@ use std::time::Duration;
 
 use figment::Figment;
 use figment::providers::{Env, Format, Serialized, Toml};
+use kitchen_r_core::GraspMode;
 use serde::{Deserialize, Serialize};
 
 mod secrets;
@@ -192,6 +193,10 @@ pub struct ControlConfig {
     /// split only what the sub-task names) and is then ranked on the privileged boards. Off, a
     /// registration that asks is refused, naming this key.
     pub privileged_track: bool,
+    /// The grasp mode every policy episode runs in (issue #27): `abstract` (the default) or
+    /// `physical`. Sent with every job (it overrides the workers' `[grasp] mode`), stored with
+    /// each run and shown with every control score; boards rank the runs of one mode together.
+    pub grasp: GraspMode,
 }
 
 /// Calling participants' policies (`[policy]`): deadlines and chunk check tolerances sent to
@@ -291,6 +296,7 @@ impl Default for ControlConfig {
             drain_grace_s: 30,
             max_episodes: 0,
             privileged_track: false,
+            grasp: GraspMode::Abstract,
         }
     }
 }
@@ -532,6 +538,19 @@ mod tests {
             ..Config::default()
         };
         assert!(c.validate().is_err());
+    }
+
+    #[test]
+    fn the_grasp_mode_is_read_and_an_unknown_one_is_refused_naming_the_choices() {
+        let dir = tempfile::tempdir().unwrap();
+        let f = dir.path().join("s.toml");
+        std::fs::write(&f, "[control]\ngrasp = \"physical\"\n").unwrap();
+        assert_eq!(Config::load(Some(&f)).unwrap().control.grasp, GraspMode::Physical);
+        std::fs::write(&f, "[control]\ngrasp = \"magic\"\n").unwrap();
+        let err = Config::load(Some(&f)).unwrap_err().to_string();
+        for needed in ["control.grasp", "magic", "abstract", "physical"] {
+            assert!(err.contains(needed), "{needed:?} missing from: {err}");
+        }
     }
 
     #[test]

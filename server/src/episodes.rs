@@ -6,6 +6,7 @@
 
 use std::collections::HashMap;
 
+use kitchen_r_core::GraspMode;
 use kitchen_r_core::observations::PrivilegedScope;
 use kitchen_r_core::scoring;
 use kitchen_r_proto::worker::v1 as pb;
@@ -65,6 +66,10 @@ pub(crate) struct JobSpec {
     /// from the content at lease time).
     #[serde(default)]
     pub place_targets: Vec<[f64; 3]>,
+    /// The grasp mode the episode runs in (`control.grasp` when the run was queued); absent in
+    /// specs stored before it existed, which ran the abstract grasp.
+    #[serde(default)]
+    pub grasp: GraspMode,
 }
 
 impl JobSpec {
@@ -103,6 +108,7 @@ impl JobSpec {
                 Some(PrivilegedScope::Episode) => pb::PrivilegedScope::Episode,
                 Some(PrivilegedScope::SubTask) => pb::PrivilegedScope::SubTask,
             }) as i32,
+            grasp_mode: pb::GraspMode::from(self.grasp) as i32,
         }
     }
 

@@ -99,6 +99,9 @@ fn submission(v: SubmissionView) -> pb::Submission {
                 instructions_total: r.instructions_total.unwrap_or(0) as u32,
                 instructions_present: r.instructions_present.unwrap_or(0) as u32,
                 state: eval.as_ref().map_or_else(String::new, |e| e.state.to_string()),
+                grasp_mode: eval
+                    .as_ref()
+                    .map_or_else(String::new, |e| e.grasp_mode.to_string()),
                 episodes_total: eval.as_ref().map_or(0, |e| e.episodes_total as u32),
                 episodes_done: eval.as_ref().map_or(0, |e| e.episodes_done as u32),
                 episodes_running: eval.as_ref().map_or(0, |e| e.episodes_running as u32),
@@ -185,12 +188,18 @@ impl Submissions for SubmissionsService {
         let split = split(&msg.split, Some(Split::Test))?;
         let observations: ObservationTrack =
             (msg.observations.parse()).map_err(|e: String| Status::invalid_argument(e))?;
-        let board = self.state.board(track, observations, split).await?;
+        let grasp = match msg.grasp_mode.as_str() {
+            "" => None,
+            m => Some(m.parse().map_err(|e: String| Status::invalid_argument(e))?),
+        };
+        let board = self.state.board(track, observations, grasp, split).await?;
         let label = |o: Option<ObservationTrack>| o.map_or_else(String::new, |o| o.to_string());
+        let mode = |g: Option<kitchen_r_core::GraspMode>| g.map_or_else(String::new, |g| g.to_string());
         Ok(Response::new(pb::Leaderboard {
             track: track.as_str().into(),
             split: split.to_string(),
             observations: label(board.observations),
+            grasp_mode: mode(board.grasp_mode),
             rows: board
                 .rows
                 .into_iter()
@@ -202,6 +211,7 @@ impl Submissions for SubmissionsService {
                     submitted_at: r.submitted_at,
                     baseline: r.baseline,
                     observations: label(r.observations),
+                    grasp_mode: mode(r.grasp_mode),
                 })
                 .collect(),
         }))

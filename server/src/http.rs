@@ -18,6 +18,7 @@ use axum::http::{HeaderValue, Method, StatusCode, header};
 use axum::response::{Html, IntoResponse, Response};
 use axum::routing::{get, post};
 use bytes::Bytes;
+use kitchen_r_core::GraspMode;
 use kitchen_r_core::dataset::Split;
 use kitchen_r_core::observations::ObservationTrack;
 use tokio_stream::StreamExt;
@@ -520,6 +521,7 @@ async fn episode_plot(
         ("track" = Option<openapi::TrackParam>, Query, description = "`planning` (default), `control` or `integrated`"),
         ("split" = Option<openapi::SplitParam>, Query, description = "`test` (default) or `dev`"),
         ("observations" = Option<String>, Query, description = "Control and integrated: `standard` (default) or `privileged`, the board of runs whose policy received privileged observations (ranked apart)"),
+        ("grasp_mode" = Option<crate::schema::GraspModeName>, Query, description = "Control and integrated: `abstract` or `physical`, the board of runs evaluated in that grasp mode (ranked apart); default the contest's mode (`[control] grasp`). The answer names it in `grasp_mode`"),
         ("format" = Option<openapi::FormatParam>, Query, description = "`json` (default), `csv` or `html`"),
     ),
     responses(
@@ -528,7 +530,7 @@ async fn episode_plot(
             (String = "text/csv; charset=utf-8"),
             (String = "text/html; charset=utf-8"),
         )),
-        (status = 400, description = "An unknown track, split, observations or format", body = openapi::ErrorBody),
+        (status = 400, description = "An unknown track, split, observations, grasp mode or format, or a grasp mode for the planning track", body = openapi::ErrorBody),
     )
 )]
 async fn leaderboard(State(s): State<AppState>, QueryArgs(q): Params) -> Result<Response, ServiceError> {
@@ -537,6 +539,10 @@ async fn leaderboard(State(s): State<AppState>, QueryArgs(q): Params) -> Result<
     let observations: ObservationTrack = (q.get("observations").map_or("", String::as_str))
         .parse()
         .map_err(ServiceError::BadRequest)?;
+    let grasp = match q.get("grasp_mode").map(String::as_str) {
+        None | Some("") => None,
+        Some(m) => Some(m.parse::<GraspMode>().map_err(ServiceError::BadRequest)?),
+    };
     let (format, content_type) = match q.get("format").map(String::as_str) {
         None | Some("" | "json") => (Format::Json, "application/json"),
         Some("csv") => (Format::Csv, "text/csv; charset=utf-8"),
@@ -547,7 +553,9 @@ async fn leaderboard(State(s): State<AppState>, QueryArgs(q): Params) -> Result<
             )));
         }
     };
-    let body = s.leaderboard_rendered(track, observations, split, format).await?;
+    let body = s
+        .leaderboard_rendered(track, observations, grasp, split, format)
+        .await?;
     Ok(typed(content_type, body))
 }
 

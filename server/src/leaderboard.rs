@@ -10,6 +10,12 @@
 //! whose policy received privileged observations are ranked only among themselves, and every
 //! rendering names the board (`observations` in JSON, a CSV column, the page's headings).
 //!
+//! Those two boards exist once per grasp mode (issue #27): a run is ranked only among runs of
+//! the grasp mode it ran in, and every policy rendering names the mode (`grasp_mode` in JSON, the
+//! CSV's last column, the page's headings). The contest's mode (`[control] grasp`) is the board
+//! answered by default and shown first; the other mode's boards appear only when they hold runs
+//! (made before the organiser changed the setting), each row labelled.
+//!
 //! Below the service: this module holds the ranking types, the renderings and the cache; the
 //! service (`service/board.rs`) reads the store and fills them.
 //!
@@ -25,6 +31,7 @@ use std::sync::RwLock;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use bytes::Bytes;
+use kitchen_r_core::GraspMode;
 use kitchen_r_core::dataset::Split;
 use kitchen_r_core::observations::ObservationTrack;
 use serde::Serialize;
@@ -82,6 +89,12 @@ pub(crate) struct Leaderboard {
     #[serde(skip_serializing_if = "Option::is_none")]
     #[schema(value_type = Option<String>, example = "standard")]
     pub observations: Option<ObservationTrack>,
+    /// Control and integrated: the grasp mode of every run on this board, `abstract` or
+    /// `physical` (runs of one mode are ranked together; the default board is the contest's
+    /// mode); absent for planning.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[schema(value_type = Option<crate::schema::GraspModeName>, example = "abstract")]
+    pub grasp_mode: Option<GraspMode>,
     #[schema(value_type = crate::schema::SplitName)]
     pub split: Split,
     pub rows: Vec<Row>,
@@ -105,10 +118,14 @@ pub(crate) struct Row {
     #[serde(skip_serializing_if = "Option::is_none")]
     #[schema(value_type = Option<String>)]
     pub observations: Option<ObservationTrack>,
+    /// Policy tracks: the grasp mode the row's run ran in (`abstract` or `physical`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[schema(value_type = Option<crate::schema::GraspModeName>)]
+    pub grasp_mode: Option<GraspMode>,
 }
 
 /// Key of a cached body: `None` track is the all-tracks page at `/`.
-pub(crate) type CacheKey = (Option<Track>, ObservationTrack, Split, Format);
+pub(crate) type CacheKey = (Option<Track>, ObservationTrack, GraspMode, Split, Format);
 
 #[derive(Debug, Default)]
 pub(crate) struct LeaderboardCache {

@@ -24,3 +24,12 @@ pub(crate) enum ObservationsName {
     Standard,
     Privileged,
 }
+
+/// The grasp mode a policy run's episodes ran in (`kitchen_r_core::GraspMode`, issue #27):
+/// part of what a control score means.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub(crate) enum GraspModeName {
+    Abstract,
+    Physical,
+}

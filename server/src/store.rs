@@ -345,6 +345,9 @@ pub(crate) struct RunRow {
     /// The ground truth changed under this policy run's episodes: only a new simulation can
     /// score it again.
     pub needs_resimulation: bool,
+    /// Policy runs: the grasp mode its episodes ran in (plan runs carry the default).
+    #[sqlx(try_from = "String")]
+    pub grasp_mode: kitchen_r_core::GraspMode,
 }
 
 /// The score columns of `scoring_runs`, as [`RunRow`] reads them into its [`Scores`].
@@ -374,7 +377,7 @@ impl RunRow {
 pub(crate) async fn latest_run(pool: &SqlitePool, submission: i64) -> sqlx::Result<Option<RunRow>> {
     sqlx::query_as(
         "SELECT id, scorer_version, created_at, em, sr, mse, m, p, state, episodes_total, finished_at,
-                source_run_id, needs_resimulation
+                source_run_id, needs_resimulation, grasp_mode
          FROM scoring_runs WHERE submission_id = ? ORDER BY id DESC LIMIT 1",
     )
     .bind(submission)

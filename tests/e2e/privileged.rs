@@ -287,11 +287,11 @@ fn privileged_runs_get_what_their_split_allows_and_are_ranked_apart() {
         let mut lines = csv.lines();
         assert_eq!(
             lines.next(),
-            Some("rank,team,submission_id,sr,mse,state,baseline,submitted_at,observations")
+            Some("rank,team,submission_id,sr,mse,state,baseline,submitted_at,observations,grasp_mode")
         );
         let row = lines.next().unwrap();
         assert!(
-            row.starts_with("1,Privileged,") && row.ends_with(",privileged"),
+            row.starts_with("1,Privileged,") && row.ends_with(",privileged,abstract"),
             "{csv}"
         );
         assert_eq!(lines.next(), None, "{csv}");
@@ -299,7 +299,7 @@ fn privileged_runs_get_what_their_split_allows_and_are_ranked_apart() {
         assert!(
             csv.lines()
                 .skip(1)
-                .all(|l| l.ends_with(",standard") && l.contains(",Standard,")),
+                .all(|l| l.ends_with(",standard,abstract") && l.contains(",Standard,")),
             "{csv}"
         );
 

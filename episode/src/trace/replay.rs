@@ -144,7 +144,8 @@ pub fn replay(trace: &Trace, hook: &mut dyn StepHook) -> Result<EpisodeOutcome, 
 
 /// Run `trace`'s episode again, built as `eval` and the workers build it, with `hook` watching
 /// (a video recorder), and check it reproduces the recorded outcome bit for bit. On
-/// [`ReplayError::Disagrees`] whatever `hook` recorded must not be shown.
+/// [`ReplayError::Disagrees`] whatever `hook` recorded must not be shown. The trace's grasp mode
+/// overrides `sim_cfg`'s: an episode replays in the mode it ran in.
 pub fn replay_with(
     trace: &Trace,
     assets: &Assets,
@@ -152,6 +153,7 @@ pub fn replay_with(
     sensors: &SensorsConfig,
     hook: &mut dyn StepHook,
 ) -> Result<EpisodeOutcome, ReplayError> {
+    let sim_cfg = &replay_config(trace, sim_cfg);
     let mut slot: Option<Sim> = None;
     let sim = load(&mut slot, assets, sim_cfg, sensors, &trace.episode)?;
     let starts = match trace.run.expert_starts {
@@ -164,6 +166,13 @@ pub fn replay_with(
     policy.finish().map_err(|what| ReplayError::Disagrees { what })?;
     agrees(&trace.outcome, &out).map_err(|what| ReplayError::Disagrees { what })?;
     Ok(out)
+}
+
+/// The simulator configuration a trace replays with: `base` in the trace's grasp mode.
+pub fn replay_config(trace: &Trace, base: &SimConfig) -> SimConfig {
+    let mut cfg = base.clone();
+    cfg.grasp.mode = trace.run.grasp;
+    cfg
 }
 
 /// The first difference between the recorded outcome and the replayed one.

@@ -1,5 +1,6 @@
 use std::time::Duration;
 
+use kitchen_r_core::GraspMode;
 use kitchen_r_core::dataset::Split;
 use kitchen_r_sim::{Assets, EpisodeConfig};
 
@@ -23,16 +24,31 @@ fn traced<P: Policy>(
     run: &RunOptions,
     teleport: bool,
 ) -> Trace {
-    let (sim_cfg, sensors) = (
+    traced_in(None, assets, cfg, policy, run, teleport)
+}
+
+/// [`traced`] with the simulator in grasp mode `grasp` (`None`: sim.toml's).
+fn traced_in<P: Policy>(
+    grasp: Option<GraspMode>,
+    assets: &Assets,
+    cfg: &EpisodeConfig,
+    policy: P,
+    run: &RunOptions,
+    teleport: bool,
+) -> Trace {
+    let (mut sim_cfg, sensors) = (
         kitchen_r_sim::SimConfig::load_default().unwrap(),
         kitchen_r_sim::SensorsConfig::load_default().unwrap(),
     );
+    if let Some(g) = grasp {
+        sim_cfg.grasp.mode = g;
+    }
     let mut slot = None;
     let sim = crate::eval::load(&mut slot, assets, &sim_cfg, &sensors, cfg).unwrap();
     let starts = teleport.then(|| expert_starts(sim, cfg, assets).unwrap());
     let mut tracing = TracingPolicy::new(policy);
     let out = run_episode(sim, &mut tracing, run, starts.as_deref(), &mut ()).unwrap();
-    let trace = tracing.into_trace(cfg.clone(), run, teleport, &out);
+    let trace = tracing.into_trace(cfg.clone(), run, sim_cfg.grasp.mode, teleport, &out);
     Trace::from_json(&trace.to_json()).unwrap()
 }
 
@@ -110,6 +126,42 @@ fn an_oracle_episode_replays_bit_identically_and_a_tampered_action_is_refused() 
         Err(ReplayError::Disagrees { what }) => assert!(what.contains("the replay asked"), "{what}"),
         other => panic!("a tampered trace replayed: {other:?}"),
     }
+}
+
+#[test]
+fn a_trace_records_its_grasp_mode_and_replays_in_it_whatever_the_replaying_config_says() {
+    let assets = Assets::load_default().unwrap();
+    let cfg = first_dev_episode(&assets);
+    let run = oracle_run(1);
+    let trace = traced_in(
+        Some(GraspMode::Physical),
+        &assets,
+        &cfg,
+        OraclePolicy::new(&assets),
+        &run,
+        false,
+    );
+    assert_eq!(trace.run.grasp, GraspMode::Physical);
+    let json = String::from_utf8(trace.to_json()).unwrap();
+    assert!(json.contains(r#""grasp":"physical""#), "{json:.300}");
+    // The replaying side's own config says abstract; the trace's mode wins.
+    let mut abstract_cfg = kitchen_r_sim::SimConfig::load_default().unwrap();
+    abstract_cfg.grasp.mode = GraspMode::Abstract;
+    assert_eq!(
+        replay_config(&trace, &abstract_cfg).grasp.mode,
+        GraspMode::Physical
+    );
+    let sensors = kitchen_r_sim::SensorsConfig::load_default().unwrap();
+    let replayed = replay_with(&trace, &assets, &abstract_cfg, &sensors, &mut ()).unwrap();
+    assert_eq!(TraceOutcome::of(&replayed), trace.outcome);
+
+    // An abstract trace does not name its mode (older builds replay it); one recorded before
+    // the field existed reads as abstract.
+    let mut old = trace.clone();
+    old.run.grasp = GraspMode::Abstract;
+    let json = old.to_json();
+    assert!(!String::from_utf8_lossy(&json).contains("grasp"));
+    assert_eq!(Trace::from_json(&json).unwrap().run.grasp, GraspMode::Abstract);
 }
 
 /// The oracle, except that some answers are what participants' policies get wrong: a failed

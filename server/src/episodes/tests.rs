@@ -27,6 +27,7 @@ fn spec(mode: Mode, id: &str, plan: &[&str]) -> JobSpec {
             gripper_margin: None,
         },
         place_targets: Vec::new(),
+        grasp: kitchen_r_core::GraspMode::Abstract,
     }
 }
 

@@ -36,6 +36,7 @@ use crate::error::ServiceError;
 use crate::leaderboard::Track;
 use crate::service::sessions::{Login, Role};
 use crate::service::{AppState, Caller};
+use kitchen_r_core::GraspMode;
 use kitchen_r_core::observations::ObservationTrack;
 use layout::Viewer;
 
@@ -318,16 +319,23 @@ async fn entry_page(
     let (Some(track), Some(split), Some(id)) = parsed else {
         return Ok(not_found(&headers, &who, "such leaderboard entry"));
     };
-    // A submission is on one observation track's board only; planning has just the standard.
+    // A submission is on one observation track's and one grasp mode's board only; planning has
+    // just the standard board and no grasp mode.
     let mut found = None;
-    for observations in ObservationTrack::ALL {
+    let modes: &[Option<GraspMode>] = match track {
+        Track::Planning => &[None],
+        _ => &[Some(GraspMode::Abstract), Some(GraspMode::Physical)],
+    };
+    'boards: for observations in ObservationTrack::ALL {
         if track == Track::Planning && observations == ObservationTrack::Privileged {
             break;
         }
-        let board = s.board(track, observations, split).await?;
-        found = board.rows.into_iter().find(|r| r.submission_id == id);
-        if found.is_some() {
-            break;
+        for &grasp in modes {
+            let board = s.board(track, observations, grasp, split).await?;
+            found = board.rows.into_iter().find(|r| r.submission_id == id);
+            if found.is_some() {
+                break 'boards;
+            }
         }
     }
     let Some(row) = found.as_ref() else {

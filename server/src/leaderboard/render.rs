@@ -9,6 +9,7 @@
 
 use std::fmt::Write as _;
 
+use kitchen_r_core::GraspMode;
 use kitchen_r_core::dataset::Split;
 use kitchen_r_core::observations::ObservationTrack;
 
@@ -55,8 +56,9 @@ fn rank(r: &Row) -> String {
 }
 
 /// Planning: `rank,team,submission_id,em,submitted_at`. Policy tracks add their scores, the
-/// run state and the baseline flag, and last the board every row is ranked on (`standard` or
-/// `privileged`): `rank,team,submission_id,sr,mse,state,baseline,submitted_at,observations`.
+/// run state and the baseline flag, then the board every row is ranked on (`standard` or
+/// `privileged`) and last the grasp mode its run ran in (`abstract` or `physical`):
+/// `rank,team,submission_id,sr,mse,state,baseline,submitted_at,observations,grasp_mode`.
 pub(crate) fn csv(board: &Leaderboard) -> String {
     let cols = columns(board.track);
     let policy = board.track != Track::Planning;
@@ -65,7 +67,7 @@ pub(crate) fn csv(board: &Leaderboard) -> String {
         let _ = write!(out, ",{name}");
     }
     out.push_str(if policy {
-        ",state,baseline,submitted_at,observations\n"
+        ",state,baseline,submitted_at,observations,grasp_mode\n"
     } else {
         ",submitted_at\n"
     });
@@ -81,7 +83,8 @@ pub(crate) fn csv(board: &Leaderboard) -> String {
         let _ = write!(out, ",{}", text_cell(&r.submitted_at));
         if policy {
             let observations = r.observations.or(board.observations).unwrap_or_default();
-            let _ = write!(out, ",{observations}");
+            let grasp = r.grasp_mode.or(board.grasp_mode).unwrap_or_default();
+            let _ = write!(out, ",{observations},{grasp}");
         }
         out.push('\n');
     }
@@ -127,7 +130,34 @@ names), so they are ranked apart from standard runs."
     }
 }
 
-fn table(board: &Leaderboard) -> String {
+/// How a policy board's heading, anchor and note name its grasp mode; planning has none. The
+/// contest's mode gets no anchor suffix, so links to `#control` keep working whatever it is.
+fn grasp_label(board: &Leaderboard, contest: GraspMode) -> (String, String, String) {
+    let Some(mode) = board.grasp_mode else {
+        return (String::new(), String::new(), String::new());
+    };
+    let rule = match mode {
+        GraspMode::Abstract => {
+            "the <b>abstract grasp</b>: an object whose grasp point lies between the closing fingers is carried at its offset from the gripper"
+        }
+        GraspMode::Physical => {
+            "the <b>physical grasp</b>: force-limited finger joints, only friction contacts hold an object"
+        }
+    };
+    let note = match mode == contest {
+        true => format!(" Episodes ran with {rule} (this contest's grasp mode)."),
+        false => format!(
+            " Episodes ran with {rule}, not this contest's {contest} grasp: these runs were evaluated before the organiser changed the mode and are ranked only among themselves."
+        ),
+    };
+    let anchor = match mode == contest {
+        true => String::new(),
+        false => format!("-{mode}"),
+    };
+    (format!(" — {mode} grasp"), anchor, note)
+}
+
+fn table(board: &Leaderboard, contest: GraspMode) -> String {
     let cols = columns(board.track);
     let policy = board.track != Track::Planning;
     let mut head = String::from("<tr><th>Rank</th><th>Team</th>");
@@ -157,7 +187,7 @@ fn table(board: &Leaderboard) -> String {
         // The entry's public summary: what this row shows, on a page of its own.
         let _ = write!(
             rows,
-            "<td class=n><a href=\"/leaderboard/{}/{}/{id}\">{id}</a>{state}{privileged}</td><td>{}</td></tr>",
+            "<td class=n><a href=\"/leaderboard/{}/{}/{id}\">{id}</a>{state}{privileged}{grasp}</td><td>{}</td></tr>",
             board.track.as_str(),
             board.split,
             escape(&r.submitted_at),
@@ -167,6 +197,9 @@ fn table(board: &Leaderboard) -> String {
             } else {
                 ""
             },
+            // A run of another grasp mode than the contest's says so on its row.
+            grasp =
+                (r.grasp_mode.filter(|m| *m != contest)).map_or(String::new(), |m| format!(" ({m} grasp)")),
         );
     }
     if board.rows.is_empty() {
@@ -178,12 +211,16 @@ fn table(board: &Leaderboard) -> String {
     }
     let track = board.track.as_str();
     let (heading, anchor, note) = board_label(board);
-    let query = match board.observations {
-        Some(ObservationTrack::Privileged) => "&amp;observations=privileged",
-        _ => "",
+    let (grasp_heading, grasp_anchor, grasp_note) = grasp_label(board, contest);
+    let mut query = match board.observations {
+        Some(ObservationTrack::Privileged) => "&amp;observations=privileged".to_string(),
+        _ => String::new(),
     };
+    if let Some(mode) = board.grasp_mode.filter(|m| *m != contest) {
+        query.push_str(&format!("&amp;grasp_mode={mode}"));
+    }
     format!(
-        "<h2 id={track}{anchor}>{title} track{heading}</h2><p>{what} (ties: earlier submission first).{note} \
+        "<h2 id={track}{anchor}{grasp_anchor}>{title} track{heading}{grasp_heading}</h2><p>{what} (ties: earlier submission first).{note}{grasp_note} \
 <a href=\"/api/v1/leaderboard?track={track}&amp;split={split}{query}&amp;format=csv\">CSV</a> · \
 <a href=\"/api/v1/leaderboard?track={track}&amp;split={split}{query}\">JSON</a></p>\
 <table><thead>{head}</thead><tbody>{rows}</tbody></table>",
@@ -206,13 +243,14 @@ test run must link a plan file created before that run.</li>\
 <li>A policy that refuses or fails its offline (MSE) episodes is charged the failure penalty at \
 every decision point, as if it had answered badly.</li></ul>";
 
-/// The public page: one table per board, all of one split.
-pub(crate) fn page(split: Split, boards: &[Leaderboard], public_sample: bool) -> String {
+/// The public page: one table per board, all of one split; `contest` is the organiser's grasp
+/// mode (`[control] grasp`), named at the top, and boards of the other mode are labelled as such.
+pub(crate) fn page(split: Split, boards: &[Leaderboard], public_sample: bool, contest: GraspMode) -> String {
     let other = match split {
         Split::Dev => Split::Test,
         Split::Test => Split::Dev,
     };
-    let tables: String = boards.iter().map(table).collect();
+    let tables: String = boards.iter().map(|b| table(b, contest)).collect();
     let banner = match (split, public_sample) {
         (Split::Test, true) => format!(
             "<p class=banner><b>{}</b>: this server scores the repository's public test \
@@ -233,7 +271,10 @@ td.n{{text-align:right;font-variant-numeric:tabular-nums}}th{{background:#f4f4f4
 <h1>Kitchen-R leaderboard</h1>{banner}<p><a href=\"/contest\">The contest: tracks, metrics, \
 how to take part, data and rules</a> · <a href=\"/team\">Team page</a></p><p><b>{split}</b> split. <a href=\"/?split={other}\">Show the {other} split</a>. \
 Baseline rows are organiser reference runs and take no rank. Policies that received \
-privileged observations are ranked on boards of their own, labelled privileged.</p>{tables}\
+privileged observations are ranked on boards of their own, labelled privileged.</p>\
+<p class=grasp>Grasp mode of this contest: <b>{contest}</b> (policy episodes' control and \
+integrated scores are from it; runs of another grasp mode are ranked on boards of their own, \
+labelled).</p>{tables}\
 <h2>Rules that keep the test split honest</h2>{INTEGRITY_RULES}</body></html>"
     )
 }

@@ -1,3 +1,4 @@
+use kitchen_r_core::GraspMode;
 use kitchen_r_core::observations::ObservationTrack;
 
 use super::render::{csv, page};
@@ -8,6 +9,7 @@ fn board(team: &str) -> Leaderboard {
     Leaderboard {
         track: Track::Planning,
         observations: None,
+        grasp_mode: None,
         split: Split::Test,
         rows: vec![Row {
             rank: Some(1),
@@ -18,6 +20,7 @@ fn board(team: &str) -> Leaderboard {
             state: None,
             baseline: false,
             observations: None,
+            grasp_mode: None,
         }],
     }
 }
@@ -58,7 +61,7 @@ fn csv_neutralises_cells_a_spreadsheet_would_evaluate() {
 
 #[test]
 fn html_escapes_team_names() {
-    let page = page(Split::Test, &[board("<script>")], true);
+    let page = page(Split::Test, &[board("<script>")], true, GraspMode::Abstract);
     assert!(page.contains("public sample"), "{page}");
     assert!(page.contains("&lt;script&gt;") && !page.contains("<script>"));
 }
@@ -77,6 +80,8 @@ fn control_board(observations: ObservationTrack) -> Leaderboard {
     };
     b.rows[0].state = Some("finished".into());
     b.rows[0].observations = Some(observations);
+    b.grasp_mode = Some(GraspMode::Abstract);
+    b.rows[0].grasp_mode = Some(GraspMode::Abstract);
     b
 }
 
@@ -86,21 +91,24 @@ fn policy_boards_name_their_observation_track_in_csv_and_html() {
     let privileged = control_board(ObservationTrack::Privileged);
     assert_eq!(
         csv(&privileged),
-        "rank,team,submission_id,sr,mse,state,baseline,submitted_at,observations\n\
-         1,team,7,0.250000,0.500000,finished,false,2026-01-01T00:00:00Z,privileged\n"
+        "rank,team,submission_id,sr,mse,state,baseline,submitted_at,observations,grasp_mode\n\
+         1,team,7,0.250000,0.500000,finished,false,2026-01-01T00:00:00Z,privileged,abstract\n"
     );
-    assert!(csv(&control_board(ObservationTrack::Standard)).ends_with(",standard\n"));
+    assert!(csv(&control_board(ObservationTrack::Standard)).ends_with(",standard,abstract\n"));
     let html = page(
         Split::Dev,
         &[control_board(ObservationTrack::Standard), privileged],
         false,
+        GraspMode::Abstract,
     );
     assert!(
-        html.contains("<h2 id=control>Control track — standard observations</h2>"),
+        html.contains("<h2 id=control>Control track — standard observations — abstract grasp</h2>"),
         "{html}"
     );
     assert!(
-        html.contains("<h2 id=control-privileged>Control track — privileged observations</h2>"),
+        html.contains(
+            "<h2 id=control-privileged>Control track — privileged observations — abstract grasp</h2>"
+        ),
         "{html}"
     );
     assert!(
@@ -110,6 +118,39 @@ fn policy_boards_name_their_observation_track_in_csv_and_html() {
     assert!(html.contains("(privileged)</td>"), "{html}");
     // Planning keeps its CSV exactly.
     assert!(!csv(&board("a")).contains("observations"));
+    assert!(!csv(&board("a")).contains("grasp"));
+}
+
+/// Issue 27: every policy rendering names the grasp mode; a board of another mode than the
+/// contest's is labelled as such, row by row, and its links ask for its mode.
+#[test]
+fn policy_boards_name_their_grasp_mode_and_another_mode_than_the_contests_is_labelled() {
+    let mut physical = control_board(ObservationTrack::Standard);
+    physical.grasp_mode = Some(GraspMode::Physical);
+    physical.rows[0].grasp_mode = Some(GraspMode::Physical);
+    assert!(
+        csv(&physical).ends_with(",standard,physical\n"),
+        "{}",
+        csv(&physical)
+    );
+    let boards = [control_board(ObservationTrack::Standard), physical];
+    let html = page(Split::Dev, &boards, false, GraspMode::Physical);
+    assert!(
+        html.contains("Grasp mode of this contest: <b>physical</b>"),
+        "{html}"
+    );
+    assert!(
+        html.contains("<h2 id=control>Control track — standard observations — physical grasp</h2>"),
+        "{html}"
+    );
+    // The abstract board is the other mode here: its own anchor, its rows and links say so.
+    assert!(
+        html.contains("<h2 id=control-abstract>Control track — standard observations — abstract grasp</h2>"),
+        "{html}"
+    );
+    assert!(html.contains("(abstract grasp)</td>"), "{html}");
+    assert!(html.contains("&amp;grasp_mode=abstract&amp;format=csv"), "{html}");
+    assert!(!html.contains("(physical grasp)</td>"), "{html}");
 }
 
 #[test]
@@ -275,6 +316,7 @@ async fn control_and_integrated_order_with_baselines_and_infinite_p() {
             .leaderboard_rendered(
                 Track::Integrated,
                 ObservationTrack::Standard,
+                None,
                 Split::Dev,
                 Format::Json,
             )
@@ -292,6 +334,7 @@ async fn control_and_integrated_order_with_baselines_and_infinite_p() {
             .leaderboard_rendered(
                 Track::Integrated,
                 ObservationTrack::Standard,
+                None,
                 Split::Dev,
                 Format::Csv,
             )
@@ -303,7 +346,7 @@ async fn control_and_integrated_order_with_baselines_and_infinite_p() {
     let mut lines = text.lines();
     assert_eq!(
         lines.next(),
-        Some("rank,team,submission_id,m,p,sr,mse,state,baseline,submitted_at,observations")
+        Some("rank,team,submission_id,m,p,sr,mse,state,baseline,submitted_at,observations,grasp_mode")
     );
     let a_line = lines.nth(2).unwrap();
     assert!(
@@ -342,6 +385,7 @@ async fn the_cache_is_dropped_when_a_run_finishes() {
         .leaderboard_rendered(
             Track::Control,
             ObservationTrack::Standard,
+            None,
             Split::Dev,
             Format::Csv,
         )
@@ -361,6 +405,7 @@ async fn the_cache_is_dropped_when_a_run_finishes() {
         .leaderboard_rendered(
             Track::Control,
             ObservationTrack::Standard,
+            None,
             Split::Dev,
             Format::Csv,
         )
@@ -515,6 +560,133 @@ async fn maintained_boards_equal_a_rebuild_after_every_kind_of_write() {
     assert!(planning.rows.iter().all(|r| r.submission_id < late_id));
     f.state.rescore_all(f.admin().await).await.unwrap();
     check("a rescore").await;
+}
+
+/// Issue 27: a contest run in the physical grasp mode sends it with every job, ranks its runs on
+/// the physical board (the default one), and ranks a run of the abstract mode (from before the
+/// organiser changed the setting) apart, on a board the page labels; planning is unaffected.
+#[tokio::test]
+async fn runs_are_ranked_with_their_own_grasp_mode_and_the_contests_is_the_default_board() {
+    let f = fixture(FakeProbe::ok(1), |c| {
+        c.control.dev_episodes = 1;
+        c.control.offline_mse = false;
+        c.control.grasp = GraspMode::Physical;
+    })
+    .await;
+    let token = f.team("alpha").await;
+    let team = f.team_of(&token).await;
+    let gt = f.state.content().ground_truth(Split::Dev)[0].clone();
+    let plan = serde_json::json!({"id": gt.id, "plan": gt.plan}).to_string() + "\n";
+    f.state
+        .submit_plans(&team, Split::Dev, plan.as_bytes())
+        .await
+        .unwrap();
+    let run = (f
+        .state
+        .register_policy(&f.caller(&token).await, f.request(Split::Dev)))
+    .await
+    .unwrap();
+    let job = f.lease("w", 1).await.remove(0);
+    assert_eq!(job.spec.grasp, GraspMode::Physical);
+    assert_eq!(
+        job.spec.episode_proto("ep").grasp_mode,
+        kitchen_r_proto::worker::v1::GraspMode::Physical as i32
+    );
+    f.state
+        .report_result(f.worker().await, f.report("w", &job, |_| true, 0.0))
+        .await
+        .unwrap();
+    // A rescore keeps the run's mode.
+    f.state.rescore_all(f.admin().await).await.unwrap();
+    // A run of the abstract mode, from before the organiser chose the physical one (written by
+    // hand, so the maintained boards are rebuilt).
+    let old = policy(
+        f.state.pool(),
+        team.id,
+        1,
+        false,
+        false,
+        "finished",
+        Some(0.5),
+        None,
+        None,
+        None,
+    )
+    .await;
+    crate::store::board::rebuild(f.state.pool()).await.unwrap();
+
+    let contest = f.state.leaderboard(Track::Control, Split::Dev).await.unwrap();
+    assert_eq!(contest.grasp_mode, Some(GraspMode::Physical));
+    let ids: Vec<(i64, Option<GraspMode>)> = contest
+        .rows
+        .iter()
+        .map(|r| (r.submission_id, r.grasp_mode))
+        .collect();
+    assert_eq!(ids, [(run.id, Some(GraspMode::Physical))]);
+    let earlier = (f.state)
+        .board(
+            Track::Control,
+            ObservationTrack::Standard,
+            Some(GraspMode::Abstract),
+            Split::Dev,
+        )
+        .await
+        .unwrap();
+    assert_eq!(earlier.rows[0].submission_id, old);
+    assert_eq!(earlier.rows[0].grasp_mode, Some(GraspMode::Abstract));
+    // Planning has no grasp mode: its board is the same whatever the contest's mode.
+    let planning = f.state.leaderboard(Track::Planning, Split::Dev).await.unwrap();
+    assert_eq!((planning.rows.len(), planning.grasp_mode), (1, None));
+    assert!(
+        (f.state)
+            .board(
+                Track::Planning,
+                ObservationTrack::Standard,
+                Some(GraspMode::Physical),
+                Split::Dev
+            )
+            .await
+            .is_err()
+    );
+    let view = f
+        .state
+        .get_submission(&f.caller(&token).await, run.id)
+        .await
+        .unwrap();
+    let evaluation = view.latest_run.unwrap().evaluation.unwrap();
+    assert_eq!(evaluation.grasp_mode, GraspMode::Physical);
+
+    let page = String::from_utf8(f.state.leaderboard_page(Split::Dev).await.unwrap().to_vec()).unwrap();
+    assert!(
+        page.contains("Grasp mode of this contest: <b>physical</b>"),
+        "{page}"
+    );
+    assert!(
+        page.contains("<h2 id=control>Control track — standard observations — physical grasp</h2>"),
+        "{page}"
+    );
+    assert!(page.contains("<h2 id=control-abstract>"), "{page}");
+    assert!(
+        page.contains(&format!(">{old}</a> (abstract grasp)</td>")),
+        "{page}"
+    );
+    let csv = String::from_utf8(
+        (f.state.leaderboard_rendered(
+            Track::Control,
+            ObservationTrack::Standard,
+            None,
+            Split::Dev,
+            Format::Csv,
+        ))
+        .await
+        .unwrap()
+        .to_vec(),
+    )
+    .unwrap();
+    assert!(
+        csv.lines().nth(1).unwrap().ends_with(",standard,physical"),
+        "{csv}"
+    );
 }
 
 #[tokio::test]

@@ -2,6 +2,7 @@
 //! ([`crate::leaderboard`] holds the types, renderings and cache).
 
 use bytes::Bytes;
+use kitchen_r_core::GraspMode;
 use kitchen_r_core::dataset::Split;
 use kitchen_r_core::observations::ObservationTrack;
 
@@ -12,17 +13,24 @@ use crate::scores::Scores;
 use crate::store::board;
 
 impl AppState {
-    /// The standard ranking of one track and split.
+    /// The standard ranking of one track and split, in the contest's grasp mode.
     pub(crate) async fn leaderboard(&self, track: Track, split: Split) -> Result<Leaderboard, ServiceError> {
-        self.board(track, ObservationTrack::Standard, split).await
+        self.board(track, ObservationTrack::Standard, None, split).await
     }
 
-    /// The ranking of one track, observation track and split, read from the maintained entries.
-    /// Planning has no privileged board: plan files receive no observations.
+    /// The contest's grasp mode (`[control] grasp`): the boards answered by default.
+    pub(crate) fn contest_grasp(&self) -> GraspMode {
+        self.config().control.grasp
+    }
+
+    /// The ranking of one track, observation track, grasp mode (`None`: the contest's) and
+    /// split, read from the maintained entries. Planning has no privileged board and no grasp
+    /// mode: plan files receive no observations and grasp nothing.
     pub(crate) async fn board(
         &self,
         track: Track,
         observations: ObservationTrack,
+        grasp: Option<GraspMode>,
         split: Split,
     ) -> Result<Leaderboard, ServiceError> {
         let policy = track != Track::Planning;
@@ -33,9 +41,23 @@ impl AppState {
                     .into(),
             ));
         }
-        let stored = board::read_observed(self.read_pool(), track.as_str(), observations, split).await?;
+        if !policy && grasp.is_some() {
+            return Err(ServiceError::BadRequest(
+                "the planning track has no grasp mode: `grasp_mode` applies to the control and \
+                 integrated tracks"
+                    .into(),
+            ));
+        }
+        // Plan runs carry the default mode in the store.
+        let mode = match policy {
+            true => grasp.unwrap_or_else(|| self.contest_grasp()),
+            false => GraspMode::default(),
+        };
+        let stored =
+            board::read_observed(self.read_pool(), track.as_str(), observations, mode, split).await?;
         let integrated = track == Track::Integrated;
         let label = policy.then_some(observations);
+        let grasp_label = policy.then_some(mode);
         let rows = stored.into_iter().map(|r| Row {
             rank: None,
             team: r.team,
@@ -54,10 +76,12 @@ impl AppState {
             state: r.state.map(|s| s.as_str().to_string()),
             baseline: r.baseline,
             observations: label,
+            grasp_mode: policy.then_some(r.grasp_mode),
         });
         Ok(Leaderboard {
             track,
             observations: label,
+            grasp_mode: grasp_label,
             split,
             rows: ranked(rows),
         })
@@ -68,20 +92,22 @@ impl AppState {
         &self,
         track: Track,
         observations: ObservationTrack,
+        grasp: Option<GraspMode>,
         split: Split,
         format: Format,
     ) -> Result<Bytes, ServiceError> {
-        let key = (Some(track), observations, split, format);
+        let contest = self.contest_grasp();
+        let key = (Some(track), observations, grasp.unwrap_or(contest), split, format);
         let cache = self.leaderboard_cache();
         let (generation, hit) = cache.get(key);
         if let Some(body) = hit {
             return Ok(body);
         }
-        let board = self.board(track, observations, split).await?;
+        let board = self.board(track, observations, grasp, split).await?;
         let body: Bytes = match format {
             Format::Json => serde_json::to_vec(&board).map_err(anyhow::Error::from)?.into(),
             Format::Csv => render::csv(&board).into(),
-            Format::Html => render::page(split, &[board], self.public_sample()).into(),
+            Format::Html => render::page(split, &[board], self.public_sample(), contest).into(),
         };
         cache.put(key, generation, &body);
         Ok(body)
@@ -93,9 +119,11 @@ impl AppState {
 
     /// The public page at `/`: all three tracks of `split`, and the privileged boards of the
     /// policy tracks when this server runs the privileged track or they hold entries (from a
-    /// time it did).
+    /// time it did), all in the contest's grasp mode; then the policy boards of any other grasp
+    /// mode that hold entries (runs made before the organiser changed `[control] grasp`).
     pub(crate) async fn leaderboard_page(&self, split: Split) -> Result<Bytes, ServiceError> {
-        let key = (None, ObservationTrack::Standard, split, Format::Html);
+        let contest = self.contest_grasp();
+        let key = (None, ObservationTrack::Standard, contest, split, Format::Html);
         let cache = self.leaderboard_cache();
         let (generation, hit) = cache.get(key);
         if let Some(body) = hit {
@@ -107,12 +135,24 @@ impl AppState {
         }
         let running = self.config().control.privileged_track;
         for track in [Track::Control, Track::Integrated] {
-            let board = self.board(track, ObservationTrack::Privileged, split).await?;
+            let board = self
+                .board(track, ObservationTrack::Privileged, None, split)
+                .await?;
             if running || !board.rows.is_empty() {
                 boards.push(board);
             }
         }
-        let body: Bytes = render::page(split, &boards, self.public_sample()).into();
+        for other in GraspMode::ALL.into_iter().filter(|m| *m != contest) {
+            for observations in ObservationTrack::ALL {
+                for track in [Track::Control, Track::Integrated] {
+                    let board = self.board(track, observations, Some(other), split).await?;
+                    if !board.rows.is_empty() {
+                        boards.push(board);
+                    }
+                }
+            }
+        }
+        let body: Bytes = render::page(split, &boards, self.public_sample(), contest).into();
         cache.put(key, generation, &body);
         Ok(body)
     }

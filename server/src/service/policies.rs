@@ -16,6 +16,7 @@
 //! privileged, so the boards rank it apart from standard runs. The track is fixed at
 //! registration: a re-simulation keeps it.
 
+use kitchen_r_core::GraspMode;
 use kitchen_r_core::dataset::{Instruction, Split};
 use kitchen_r_core::observations::{ObservationTrack, PrivilegedScope};
 use serde::{Deserialize, Serialize};
@@ -74,6 +75,9 @@ pub(crate) struct Registered {
     /// boards rank it apart.
     #[schema(value_type = String)]
     pub observations: ObservationTrack,
+    /// The grasp mode the run's episodes run in (the organiser's `[control] grasp`).
+    #[schema(value_type = crate::schema::GraspModeName)]
+    pub grasp_mode: GraspMode,
     pub state: &'static str,
 }
 
@@ -199,6 +203,7 @@ impl AppState {
             scorer_version: &scorer,
             max_concurrency,
             max_attempts: cfg.control.max_attempts,
+            grasp: cfg.control.grasp,
             jobs: &jobs,
         };
         let (id, run_id) = {
@@ -221,6 +226,7 @@ impl AppState {
             max_concurrency,
             policy: probed.summary,
             observations: track,
+            grasp_mode: cfg.control.grasp,
             state: "queued",
         })
     }
@@ -258,6 +264,7 @@ impl AppState {
             scorer_version: &scorer,
             max_concurrency: body.max_concurrency,
             max_attempts: cfg.control.max_attempts,
+            grasp: cfg.control.grasp,
             jobs: &jobs,
         };
         let run_id = run_store::insert_policy_run(self.pool(), id, &new, now_ms()).await?;
@@ -278,6 +285,7 @@ impl AppState {
             max_concurrency: body.max_concurrency,
             policy: body.spec,
             observations: ObservationTrack::of(body.privileged_observations),
+            grasp_mode: cfg.control.grasp,
             state: "queued",
         })
     }
@@ -353,6 +361,7 @@ impl AppState {
                     privileged_observations: scope,
                     endpoint: endpoint.clone(),
                     place_targets: inst.place_targets.clone(),
+                    grasp: c.grasp,
                 };
                 let json = serde_json::to_string(&spec).map_err(anyhow::Error::from)?;
                 jobs.push((mode.episode_key(&inst.id), json));

@@ -11,6 +11,7 @@
 //! 0.25 s and differenced 134 of 151 increments to single episodes). Dev runs show everything,
 //! live: per-episode, per-task results and logs.
 
+use kitchen_r_core::GraspMode;
 use serde::Serialize;
 
 use super::AppState;
@@ -25,6 +26,10 @@ pub(crate) struct PolicyRunView {
     /// `queued` (no episode started), `running`, `finished`, `platform_failed` or `cancelled`
     /// (stopped by the organiser).
     pub state: &'static str,
+    /// The grasp mode the run's episodes ran in (`abstract` or `physical`, the organiser's
+    /// `[control] grasp` when it was queued): part of what its scores mean.
+    #[schema(value_type = crate::schema::GraspModeName)]
+    pub grasp_mode: GraspMode,
     pub episodes_total: i64,
     /// Episodes with a recorded result (including ones the platform gave up on).
     pub episodes_done: i64,
@@ -206,6 +211,7 @@ impl AppState {
             retrying: if hidden { Vec::new() } else { retrying },
             episodes_retrying,
             state,
+            grasp_mode: run.grasp_mode,
             episodes_total: run.episodes_total,
             episodes_done,
             episodes_running: counts.leased,

@@ -13,7 +13,13 @@
 //! privileged observations (`privileged_observations` in the submission's body) are ranked only
 //! among themselves (`observations = 'privileged'`, a team's best with `entry` = -1), never
 //! against standard runs; every older body has no such field and is standard.
+//!
+//! Likewise per grasp mode (issue #27): a policy run's mode is its latest scoring run's
+//! `grasp_mode`, and runs of one mode are ranked only among themselves (`grasp_mode` column; a
+//! team's best physical entries take `entry` -2 standard, -3 privileged). The organiser's contest
+//! mode (`[control] grasp`) picks the board shown first; the store itself has no favourite.
 
+use kitchen_r_core::GraspMode;
 use kitchen_r_core::dataset::Split;
 use kitchen_r_core::observations::ObservationTrack;
 use sqlx::sqlite::SqlitePool;
@@ -40,32 +46,45 @@ pub(crate) struct BoardRow {
     pub m: Option<f64>,
     pub p: Option<f64>,
     pub baseline: bool,
+    /// The grasp mode of the ranked run (planning rows carry the default).
+    #[sqlx(try_from = "String")]
+    pub grasp_mode: GraspMode,
 }
 
-/// The standard board of `track` (one of the constants above) on `split`, in rank order.
+/// The standard abstract-grasp board of `track` (one of the constants above) on `split`, in
+/// rank order.
 #[cfg(test)]
 pub(crate) async fn read(pool: &SqlitePool, track: &str, split: Split) -> sqlx::Result<Vec<BoardRow>> {
-    read_observed(pool, track, ObservationTrack::Standard, split).await
+    read_observed(
+        pool,
+        track,
+        ObservationTrack::Standard,
+        GraspMode::Abstract,
+        split,
+    )
+    .await
 }
 
-/// The board of `track` and observation track on `split`, in rank order (planning has only
-/// the standard board).
+/// The board of `track`, observation track and grasp mode on `split`, in rank order (planning
+/// has only the standard board, whose rows all carry the default mode).
 pub(crate) async fn read_observed(
     pool: &SqlitePool,
     track: &str,
     observations: ObservationTrack,
+    grasp: GraspMode,
     split: Split,
 ) -> sqlx::Result<Vec<BoardRow>> {
     sqlx::query_as(
         "SELECT t.name AS team, b.submission_id, b.created_at AS submitted_at, b.state,
-                b.em, b.sr, b.mse, b.m, b.p, b.baseline
+                b.em, b.sr, b.mse, b.m, b.p, b.baseline, b.grasp_mode
          FROM leaderboard_entries b JOIN teams t ON t.id = b.team_id
-         WHERE b.track = ? AND b.split = ? AND b.observations = ?
+         WHERE b.track = ? AND b.split = ? AND b.observations = ? AND b.grasp_mode = ?
          ORDER BY b.k1 IS NULL, b.k1 DESC, b.k2 IS NULL, b.k2, b.created_at, b.submission_id",
     )
     .bind(track)
     .bind(split.as_str())
     .bind(observations.as_str())
+    .bind(grasp.as_str())
     .fetch_all(pool)
     .await
 }
@@ -145,15 +164,19 @@ async fn refresh_track(conn: &mut SqliteConnection, track: &str, team: i64, spli
         _ => policy_best("m", "p", "AND json_extract(s.body, '$.plans') IS NOT NULL"),
     };
     for observations in ObservationTrack::ALL {
-        // Column names and filters come from the constants above, never from input.
-        sqlx::query(sqlx::AssertSqlSafe(sql.clone()))
-            .bind(track)
-            .bind(split)
-            .bind(team)
-            .bind(observations == ObservationTrack::Privileged)
-            .bind(observations.as_str())
-            .execute(&mut *conn)
-            .await?;
+        for grasp in GraspMode::ALL {
+            // Column names and filters come from the constants above, never from input.
+            sqlx::query(sqlx::AssertSqlSafe(sql.clone()))
+                .bind(track)
+                .bind(split)
+                .bind(team)
+                .bind(observations == ObservationTrack::Privileged)
+                .bind(observations.as_str())
+                .bind(grasp == GraspMode::Physical)
+                .bind(grasp.as_str())
+                .execute(&mut *conn)
+                .await?;
+        }
     }
     Ok(())
 }
@@ -175,8 +198,9 @@ const PLANNING_BEST: &str = "
     LIMIT 1";
 
 /// Policy tracks: the team's best run on `(primary DESC, secondary ASC)` among finished runs,
-/// plus every organiser reference submission as its own entry, of one observation track
-/// (binds: track, split, team, privileged as 0/1, the observation track's name).
+/// plus every organiser reference submission as its own entry, of one observation track and
+/// grasp mode (binds: track, split, team, privileged as 0/1, the observation track's name,
+/// physical as 0/1, the grasp mode's name). A submission's mode is its latest run's.
 fn policy_best(primary: &str, secondary: &str, linked: &str) -> String {
     format!(
         "WITH latest AS (
@@ -189,15 +213,16 @@ fn policy_best(primary: &str, secondary: &str, linked: &str) -> String {
                    ON r.id = (SELECT MAX(id) FROM scoring_runs WHERE submission_id = s.id)
             WHERE s.split = ?2 AND s.team_id = ?3 AND s.kind = 'policy' {linked}
               AND COALESCE(json_extract(s.body, '$.privileged_observations'), 0) = ?4
+              AND COALESCE(r.grasp_mode, 'abstract') = ?7
          ), best AS (
             SELECT * FROM latest WHERE NOT baseline
             ORDER BY k1 IS NULL, k1 DESC, k2 IS NULL, k2, created_at, id LIMIT 1
          )
          INSERT INTO leaderboard_entries
              (track, split, team_id, entry, submission_id, k1, k2, created_at, state,
-              em, sr, mse, m, p, baseline, observations)
-         SELECT ?1, split, team_id, CASE WHEN baseline THEN id WHEN ?4 THEN -1 ELSE 0 END, id,
-                k1, k2, created_at, state, em, sr, mse, m, p, baseline, ?5
+              em, sr, mse, m, p, baseline, observations, grasp_mode)
+         SELECT ?1, split, team_id, CASE WHEN baseline THEN id ELSE -(?4 + 2 * ?6) END, id,
+                k1, k2, created_at, state, em, sr, mse, m, p, baseline, ?5, ?7
          FROM (SELECT * FROM best UNION ALL SELECT * FROM latest WHERE baseline)"
     )
 }

@@ -21,6 +21,9 @@ pub(crate) struct TeamSubmission {
     pub episodes_total: Option<i64>,
     /// A policy run on the privileged track (its policy received privileged observations).
     pub privileged: bool,
+    /// The latest run's grasp mode (plan runs and submissions without a run: the default).
+    #[sqlx(try_from = "String")]
+    pub grasp_mode: kitchen_r_core::GraspMode,
 }
 
 /// A team's latest `limit` submissions, newest first.
@@ -35,7 +38,8 @@ pub(crate) async fn team_submissions(
                 -- Plan bodies are not JSON: CASE keeps json_extract to policy bodies.
                 CASE WHEN s.kind = 'policy'
                      THEN COALESCE(json_extract(s.body, '$.privileged_observations'), 0)
-                     ELSE 0 END AS privileged
+                     ELSE 0 END AS privileged,
+                COALESCE(r.grasp_mode, 'abstract') AS grasp_mode
          FROM submissions s
          LEFT JOIN scoring_runs r
            ON r.id = (SELECT MAX(r2.id) FROM scoring_runs r2 WHERE r2.submission_id = s.id)

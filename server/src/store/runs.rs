@@ -1,6 +1,7 @@
 //! Policy submissions and their scoring runs: inserting a submission with its run and every
 //! episode job in one transaction, finishing a run, and reading progress and results back.
 
+use kitchen_r_core::GraspMode;
 use kitchen_r_core::dataset::Split;
 use sqlx::sqlite::SqlitePool;
 use sqlx::{FromRow, QueryBuilder, Sqlite, SqliteConnection};
@@ -20,6 +21,8 @@ pub(crate) struct NewPolicyRun<'a> {
     pub scorer_version: &'a str,
     pub max_concurrency: u32,
     pub max_attempts: u32,
+    /// The grasp mode every job of the run carries (`control.grasp` when it was queued).
+    pub grasp: GraspMode,
     /// `(episode_key, spec JSON)` of every job.
     pub jobs: &'a [(String, String)],
 }
@@ -69,14 +72,15 @@ async fn insert_run_with_jobs(
     now: i64,
 ) -> sqlx::Result<i64> {
     let run: i64 = sqlx::query_scalar(
-        "INSERT INTO scoring_runs (submission_id, scorer_version, created_at, em, state, episodes_total, max_concurrency)
-         VALUES (?, ?, ?, NULL, 'active', ?, ?) RETURNING id",
+        "INSERT INTO scoring_runs (submission_id, scorer_version, created_at, em, state, episodes_total, max_concurrency, grasp_mode)
+         VALUES (?, ?, ?, NULL, 'active', ?, ?, ?) RETURNING id",
     )
     .bind(sub)
     .bind(new.scorer_version)
     .bind(now)
     .bind(new.jobs.len() as i64)
     .bind(i64::from(new.max_concurrency))
+    .bind(new.grasp.as_str())
     .fetch_one(&mut **tx)
     .await?;
     // 6 parameters a row; 100 rows stay far below SQLite's parameter limit.
@@ -168,7 +172,7 @@ pub(crate) async fn finish_run(
 }
 
 /// A rescore of a finished policy run: a new finished scoring run with `scores` recomputed from
-/// the episodes of `source` (which stay keyed by `source`).
+/// the episodes of `source` (which stay keyed by `source`), in the grasp mode they ran in.
 pub(crate) async fn insert_derived_run(
     pool: &SqlitePool,
     submission: i64,
@@ -180,8 +184,8 @@ pub(crate) async fn insert_derived_run(
     let mut tx = pool.begin_with("BEGIN IMMEDIATE").await?;
     let id = sqlx::query_scalar(
         "INSERT INTO scoring_runs (submission_id, scorer_version, created_at, em, state,
-             episodes_total, max_concurrency, sr, mse, m, p, finished_at, source_run_id)
-         SELECT ?, ?, ?, ?, 'finished', episodes_total, max_concurrency, ?, ?, ?, ?, ?, ?
+             episodes_total, max_concurrency, sr, mse, m, p, finished_at, source_run_id, grasp_mode)
+         SELECT ?, ?, ?, ?, 'finished', episodes_total, max_concurrency, ?, ?, ?, ?, ?, ?, grasp_mode
          FROM scoring_runs WHERE id = ? RETURNING id",
     )
     .bind(submission)

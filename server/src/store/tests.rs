@@ -34,6 +34,7 @@ fn spec() -> JobSpec {
             gripper_margin: None,
         },
         place_targets: vec![[0.5, -0.25, 0.9]],
+        grasp: kitchen_r_core::GraspMode::Physical,
     }
 }
 
@@ -67,6 +68,8 @@ async fn json_columns_round_trip_as_typed_values_in_the_stored_text() {
     // A spec written before `place_targets` existed still reads.
     let mut legacy = serde_json::to_value(&spec).unwrap();
     legacy.as_object_mut().unwrap().remove("place_targets");
+    // ... and one written before `grasp`: it ran the abstract grasp.
+    legacy.as_object_mut().unwrap().remove("grasp");
     let jobs = [
         ("dev-0001".to_string(), serde_json::to_string(&spec).unwrap()),
         ("dev-0002".to_string(), legacy.to_string()),
@@ -78,6 +81,7 @@ async fn json_columns_round_trip_as_typed_values_in_the_stored_text() {
         scorer_version: "v",
         max_concurrency: 0,
         max_attempts: 3,
+        grasp: kitchen_r_core::GraspMode::Physical,
         jobs: &jobs,
     };
     let (sub, run) = runs::insert_policy_submission(&pool, &new, 10).await.unwrap();
@@ -98,6 +102,7 @@ async fn json_columns_round_trip_as_typed_values_in_the_stored_text() {
     assert_eq!(claimed.len(), 2);
     assert_eq!(claimed[0].spec, spec);
     assert!(claimed[1].spec.place_targets.is_empty());
+    assert_eq!(claimed[1].spec.grasp, kitchen_r_core::GraspMode::Abstract);
     let counts = runs::job_counts(&pool, run).await.unwrap();
     assert_eq!((counts.queued, counts.leased, counts.started), (0, 2, 2));
 

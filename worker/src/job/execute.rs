@@ -250,11 +250,12 @@ fn run(
     let id = policy_episode_id(job);
     let cfg = spec::episode_config(spec, &ctx.assets, &ctx.params, &id)?;
     log.line(format!(
-        "episode {id} scene {} instruction {} seed {} mode {} tasks {} policy {}",
+        "episode {id} scene {} instruction {} seed {} mode {} grasp {} tasks {} policy {}",
         cfg.scene,
         spec.instruction_id,
         cfg.seed,
         mode.as_str_name(),
+        spec.grasp().map_err(JobError::Spec)?,
         run.max_tasks.map_or(cfg.plan.len(), |m| m.min(cfg.plan.len())),
         ep.url
     ));
@@ -262,7 +263,9 @@ fn run(
     // A core while simulating only: not for the handshake, not during policy calls.
     let mut core = control.cores.core();
     core.hold();
-    let mut sim = Sim::new(ctx.assets.clone(), ctx.sim.clone(), ctx.sensors.clone(), &cfg)?.0;
+    let sim_cfg = spec::sim_config(spec, &ctx.sim)?;
+    let grasp = sim_cfg.grasp.mode;
+    let mut sim = Sim::new(ctx.assets.clone(), sim_cfg, ctx.sensors.clone(), &cfg)?.0;
     let granted = run.privileged_observations.is_some();
     let remote_cfg = spec::remote_config(&ctx.remote, &ep, run.execute, granted);
     let creds = Credentials {
@@ -336,7 +339,7 @@ fn run(
         })?;
         (out, None)
     };
-    let trace = tracing.map(|t| t.into_trace(cfg, &run, starts.is_some(), &out));
+    let trace = tracing.map(|t| t.into_trace(cfg, &run, grasp, starts.is_some(), &out));
     // A cancelled episode is not scored, so its video is not worth the encoder's flush.
     let video = match control.is_cancelled() {
         true => None,

@@ -17,6 +17,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
+use kitchen_r_core::GraspMode;
 use kitchen_r_core::dataset::{Instruction, Split};
 pub use kitchen_r_core::scoring::Mode;
 use kitchen_r_core::scoring::{self, TaskOutcome};
@@ -63,6 +64,10 @@ pub struct LocalSettings {
     /// `eval --foxglove`: the live view each online episode also runs with.
     #[serde(skip)]
     pub watch: Option<kitchen_r_episode::eval::WrapHook>,
+    /// `eval --grasp`: the grasp mode every job carries, as a server's `[control] grasp` does;
+    /// `None` = configs/sim.toml's `[grasp] mode`.
+    #[serde(default)]
+    pub grasp: Option<GraspMode>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -121,6 +126,9 @@ pub struct LocalReport {
     pub mse_samples: u64,
     pub platform_errors: usize,
     pub jobs: usize,
+    /// The grasp mode the episodes ran in (`abstract` or `physical`): part of what SR means.
+    #[serde(default)]
+    pub grasp_mode: GraspMode,
     pub total_wall_s: f64,
     pub episodes: Vec<LocalEpisode>,
 }
@@ -164,6 +172,7 @@ pub(crate) fn local_job(ins: &Instruction, url: &str, s: &LocalSettings, remote:
             video_on_demand: false,
             video_max_bytes: 0,
             privileged_observations: super::spec::privileged_scope_to_wire(s.privileged_observations),
+            grasp_mode: pb::GraspMode::from(s.grasp.unwrap_or_default()) as i32,
         }),
         policy: Some(pb::PolicyEndpoint {
             url: url.to_string(),
@@ -237,13 +246,15 @@ fn evaluate_endpoint_with(
         &remote,
     ))?;
     drop(rt);
+    let mut ctx = JobContext::load(remote.clone(), AllowedNetworks::ALL, 1)?;
     let s = &LocalSettings {
         privileged_observations: (s.privileged_observations).or(probed
             .privileged_observations
             .then(|| PrivilegedScope::for_split(split))),
+        // The jobs carry the mode, as a server's do; sim.toml's unless asked for another.
+        grasp: Some(s.grasp.unwrap_or(ctx.sim.grasp.mode)),
         ..s.clone()
     };
-    let mut ctx = JobContext::load(remote.clone(), AllowedNetworks::ALL, 1)?;
     ctx.params.batch = batch;
     ctx.watch = s.watch.clone();
     let jobs: Vec<pb::Job> = instructions
@@ -388,6 +399,7 @@ fn report(
         mse_samples: scoring::mse_sample_count(&scoring),
         platform_errors: episodes.len() - scored.len(),
         jobs,
+        grasp_mode: s.grasp.unwrap_or_default(),
         total_wall_s: started.elapsed().as_secs_f64(),
         episodes,
     }
@@ -426,6 +438,7 @@ mod tests {
             record: None,
             trace: None,
             watch: None,
+            grasp: None,
         }
     }
 

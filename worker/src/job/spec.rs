@@ -13,7 +13,7 @@ use kitchen_r_contract::RemoteConfig;
 use kitchen_r_core::dataset::Instruction;
 use kitchen_r_core::plan::place_steps;
 use kitchen_r_proto::worker::v1 as pb;
-use kitchen_r_sim::{Assets, EpisodeConfig, EpisodeParams};
+use kitchen_r_sim::{Assets, EpisodeConfig, EpisodeParams, SimConfig};
 
 use super::JobError;
 use kitchen_r_episode::eval::instruction_seed;
@@ -69,6 +69,15 @@ pub(crate) fn episode_config(
     let mut cfg = EpisodeConfig::from_instruction(&ins, scene, &assets.catalogue, params, seed)
         .map_err(|e| JobError::Spec(format!("episode of {:?}: {e}", ins.id)))?;
     cfg.id = episode_id.to_string();
+    Ok(cfg)
+}
+
+/// The worker's simulator configuration with the job's grasp mode: the organiser's contest
+/// setting (server `[control] grasp`) overrides the worker's own `[grasp] mode` for its jobs. A
+/// mode this build does not know is a platform fault, never run in another mode.
+pub fn sim_config(spec: &pb::EpisodeSpec, base: &SimConfig) -> Result<SimConfig, JobError> {
+    let mut cfg = base.clone();
+    cfg.grasp.mode = spec.grasp().map_err(JobError::Spec)?;
     Ok(cfg)
 }
 

@@ -54,6 +54,7 @@ pub(crate) fn job(url: &str, mode: pb::EvalMode, steps: u32, privileged: bool) -
             video_on_demand: false,
             video_max_bytes: 0,
             privileged_observations: 0,
+            grasp_mode: 0,
         }),
         policy: Some(pb::PolicyEndpoint {
             url: url.to_string(),
@@ -106,6 +107,37 @@ fn a_privileged_online_job_with_the_oracle_succeeds() {
         }
     }
     assert!(path.base_xy.iter().all(|v| v.is_finite()));
+}
+
+/// Issue 27: the job's grasp mode (the server's `[control] grasp`) is the simulator's for the
+/// episode, whatever the worker's own sim.toml says, and the trace records it for the replay.
+#[test]
+fn the_jobs_grasp_mode_reaches_the_simulator_and_the_trace() {
+    use kitchen_r_core::GraspMode;
+    let server = oracle_server();
+    for mode in GraspMode::ALL {
+        let mut job = job(&server.url(), pb::EvalMode::Online, 1, true);
+        job.episode.as_mut().unwrap().grasp_mode = pb::GraspMode::from(mode) as i32;
+        let done = kitchen_r_worker::job::execute_job_traced(&job, ctx(), &JobControl::default(), true);
+        assert_eq!(done.result.platform_error, "", "{}", done.result.log_tail);
+        assert!(
+            done.result.log_tail.contains(&format!("grasp {mode}")),
+            "{}",
+            done.result.log_tail
+        );
+        assert_eq!(done.trace.expect("a trace").run.grasp, mode);
+    }
+    let spec = job(&server.url(), pb::EvalMode::Online, 1, true).episode.unwrap();
+    let mut physical_worker = ctx().sim.clone();
+    physical_worker.grasp.mode = GraspMode::Physical;
+    // A job from a server that sends no mode is abstract, the only mode such a server ran.
+    let cfg = kitchen_r_worker::job::spec::sim_config(&spec, &physical_worker).unwrap();
+    assert_eq!(cfg.grasp.mode, GraspMode::Abstract);
+    let future = pb::EpisodeSpec {
+        grasp_mode: 9,
+        ..spec
+    };
+    assert!(kitchen_r_worker::job::spec::sim_config(&future, &physical_worker).is_err());
 }
 
 #[test]
@@ -222,6 +254,7 @@ fn local_eval_of_an_endpoint_gives_the_workers_numbers() {
         record: None,
         trace: None,
         watch: None,
+        grasp: None,
     };
     let local = evaluate_endpoint(
         &server.url(),

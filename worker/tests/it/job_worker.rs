@@ -236,6 +236,7 @@ fn job(id: i64, policy: &str) -> pb::Job {
             video_on_demand: false,
             video_max_bytes: 0,
             privileged_observations: 0,
+            grasp_mode: 0,
         }),
         policy: Some(pb::PolicyEndpoint {
             url: policy.to_string(),

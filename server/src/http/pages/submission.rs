@@ -111,9 +111,13 @@ pub(super) fn body(v: &SubmissionView, eta: Option<&Eta>) -> String {
     if let Some(e) = &run.evaluation {
         out.push_str(&progress(e, eta));
     }
+    // A policy run's scores mean what its grasp mode made of the episodes (issue #27).
+    let grasp = (run.evaluation.as_ref()).map_or(String::new(), |e| {
+        format!(", episodes in the <b>{}</b> grasp mode", e.grasp_mode)
+    });
     let _ = write!(
         out,
-        "<h2>Scores</h2><p class=muted>Scoring run {} ({}), {}.</p>{}",
+        "<h2>Scores</h2><p class=muted>Scoring run {} ({}), {}{grasp}.</p>{}",
         run.id,
         escape(&run.scorer_version),
         escape(&run.created_at),

@@ -81,10 +81,11 @@ pub(super) fn body(quota: &QuotaView, subs: &[TeamSubmission]) -> String {
 <td data-label=MSE class=n>{}</td><td data-label=M class=n>{}</td><td data-label=P class=n>{}</td></tr>",
             escape(&crate::clock::rfc3339(s.created_at)),
             escape(&s.split),
+            // A policy run's scores mean what its grasp mode made of the episodes (issue #27).
             match (s.kind, s.privileged) {
-                (SubmissionKind::Policy, true) => "policy (privileged)",
-                (SubmissionKind::Policy, false) => "policy",
-                _ => "plans",
+                (SubmissionKind::Policy, true) => format!("policy (privileged, {} grasp)", s.grasp_mode),
+                (SubmissionKind::Policy, false) => format!("policy ({} grasp)", s.grasp_mode),
+                _ => "plans".into(),
             },
             state_words(s),
             score(s.scores.em),
@@ -141,6 +142,9 @@ pub(super) fn entry(track: Track, split: &str, row: &Row) -> String {
     );
     if let Some(o) = row.observations {
         let _ = write!(out, "<tr><th>Observations</th><td>{o}</td></tr>");
+    }
+    if let Some(g) = row.grasp_mode {
+        let _ = write!(out, "<tr><th>Grasp mode</th><td>{g}</td></tr>");
     }
     for (name, v) in scores {
         let _ = write!(out, "<tr><th>{name}</th><td class=n>{}</td></tr>", score(*v));
