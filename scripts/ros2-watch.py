@@ -127,6 +127,11 @@ class TFMessage(IdlStruct, typename="tf2_msgs::msg::dds_::TFMessage_"):
 
 
 @dataclass
+class Clock(IdlStruct, typename="rosgraph_msgs::msg::dds_::Clock_"):
+    clock: Time
+
+
+@dataclass
 class Image(IdlStruct, typename="sensor_msgs::msg::dds_::Image_"):
     header: Header
     height: uint32
@@ -142,6 +147,8 @@ def ns(h: Header) -> int:
 
 
 def describe(topic: str, m) -> dict:
+    if isinstance(m, Clock):
+        return {"stamp": m.clock.sec * 1_000_000_000 + m.clock.nanosec}
     if isinstance(m, TFMessage):
         t = m.transforms[0]
         return {"stamp": ns(t.header), "frame_id": t.header.frame_id, "child": t.child_frame_id,
@@ -161,6 +168,7 @@ TOPICS = [
     ("rt/odom", Odometry),
     ("rt/tf", TFMessage),
     ("rt/camera/base/image_raw", Image),
+    ("rt/clock", Clock),
 ]
 
 

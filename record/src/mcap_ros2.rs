@@ -1,6 +1,7 @@
 //! MCAP writer with ROS 2 encodings (`ros2msg` schemas, `cdr` messages, profile `ros2`).
 //!
 //! Topics (frame ids in brackets):
+//! - `/clock` `rosgraph_msgs/Clock`: the sim time of each control step
 //! - `/camera/<cam>/image_raw` `sensor_msgs/Image` rgb8 [`<cam>_optical_frame`]
 //! - `/camera/<cam>/depth` `sensor_msgs/Image` 32FC1, metres [`<cam>_optical_frame`]
 //! - `/lidar/points` `sensor_msgs/PointCloud2` xyz float32 [`lidar`]

@@ -44,7 +44,8 @@ pub fn sub_task(stamp: f64, step: &str) -> Ros2Message {
 /// Every message of frame `f`; `imu` is the previous frame's base motion and is updated.
 pub fn frame_messages(f: &Frame, imu: &mut ImuMemory) -> Vec<Ros2Message> {
     let t = f.time;
-    let mut out = Vec::with_capacity(2 * f.cameras.len() + 6);
+    let mut out = Vec::with_capacity(2 * f.cameras.len() + 7);
+    out.push(message("/clock", "rosgraph_msgs/Clock", t, msg::clock(t)));
     for cam in &f.cameras {
         let frame_id = format!("{}_optical_frame", cam.name);
         let (w, h) = (cam.width, cam.height);
@@ -140,6 +141,7 @@ mod tests {
         for want in [
             "/tf_static",
             "/sub_task",
+            "/clock",
             "/camera/base/image_raw",
             "/camera/gripper/depth",
             "/odom",

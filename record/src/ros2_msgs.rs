@@ -87,6 +87,7 @@ const DEFS: &[(&str, &str)] = &[
         "std_msgs/MultiArrayLayout layout\nfloat64[] data\n",
     ),
     ("std_msgs/String", "string data\n"),
+    ("rosgraph_msgs/Clock", "builtin_interfaces/Time clock\n"),
 ];
 
 /// One ROS 2 message ready to write or publish.
@@ -276,6 +277,15 @@ pub(crate) fn twist(v: f64, omega: f64) -> Vec<u8> {
     let mut w = CdrWriter::with_capacity(56);
     vec3(&mut w, [v, 0.0, 0.0]);
     vec3(&mut w, [0.0, 0.0, omega]);
+    w.finish()
+}
+
+/// `rosgraph_msgs/Clock`: sim time, for nodes that run with `use_sim_time`.
+pub(crate) fn clock(t: f64) -> Vec<u8> {
+    let ns = crate::nanos(t);
+    let mut w = CdrWriter::with_capacity(8);
+    w.i32((ns / 1_000_000_000) as i32);
+    w.u32((ns % 1_000_000_000) as u32);
     w.finish()
 }
 
