@@ -30,6 +30,7 @@ mod participant_client;
 mod planning;
 mod privileged;
 mod replay;
+mod ros2_live;
 mod secrets;
 mod submission;
 mod video;
