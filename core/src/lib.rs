@@ -23,6 +23,7 @@ pub mod metrics;
 pub mod observations;
 pub mod plan;
 pub mod reach;
+pub mod robot;
 pub mod scene;
 mod scene_load;
 pub mod scoring;

@@ -1,5 +1,5 @@
 //! The arm's reach for place targets: a conservative rule, computed from the robot description
-//! (`assets/robot.toml`), that the dataset generator applies to every place spot it draws and
+//! (`assets/robots/`, issue #27), that the dataset generator applies to every place spot it draws and
 //! that [`check_plan`](crate::dataset::symbolic::check_plan) applies to committed targets, so
 //! every generated instruction is executable by the oracle (DESIGN, Feasibility).
 //!
@@ -34,9 +34,8 @@
 use std::path::Path;
 use std::sync::OnceLock;
 
-use serde::Deserialize;
-
 use crate::ContentError;
+use crate::robot::RobotDesc;
 use crate::scene::Zone;
 
 /// Height above the target grasp point at which the oracle lets go, m (the `release_height`
@@ -53,30 +52,6 @@ pub const BASE_SLACK: f64 = 0.045;
 /// dataset's nine misses, 4–8 cm beyond the chain: the `tests` below refuse them).
 pub const ALLOWANCE: f64 = 0.04;
 
-/// The part of `assets/robot.toml` the rule needs.
-#[derive(Debug, Deserialize)]
-struct RobotFile {
-    arm: ArmFile,
-    gripper: GripperFile,
-}
-
-#[derive(Debug, Deserialize)]
-struct ArmFile {
-    mount: [f64; 3],
-    #[serde(rename = "joint")]
-    joints: Vec<JointFile>,
-}
-
-#[derive(Debug, Deserialize)]
-struct JointFile {
-    origin: [f64; 3],
-}
-
-#[derive(Debug, Deserialize)]
-struct GripperFile {
-    tcp_offset: f64,
-}
-
 /// The arm as the reach rule sees it: base frame, metres.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ArmReach {
@@ -91,11 +66,9 @@ pub struct ArmReach {
 }
 
 impl ArmReach {
-    /// From the text of a robot description (the six-joint ViperX-class arm of
-    /// `assets/robot.toml`: waist about z, shoulder straight above it, wrist-rotate along the
-    /// forearm).
-    pub fn parse(text: &str) -> Result<ArmReach, String> {
-        let r: RobotFile = toml::from_str(text).map_err(|e| e.to_string())?;
+    /// From a robot description (a six-joint ViperX-class arm like the shipped one: waist about
+    /// z, shoulder straight above it, wrist-rotate along the forearm).
+    pub fn from_desc(r: &RobotDesc) -> Result<ArmReach, String> {
         let j = &r.arm.joints;
         if j.len() != 6 {
             return Err(format!("{} arm joints, the reach rule knows six", j.len()));
@@ -114,23 +87,23 @@ impl ArmReach {
         })
     }
 
+    /// The arm of the robot description at `path` (URDF or MJCF, with its sidecar).
     pub fn load(path: &Path) -> Result<ArmReach, ContentError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ContentError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        ArmReach::parse(&text).map_err(|message| ContentError::Invalid {
+        let desc = RobotDesc::load(path)?;
+        ArmReach::from_desc(&desc).map_err(|message| ContentError::Invalid {
             path: path.to_path_buf(),
             message,
         })
     }
 
-    /// The committed robot (`robot.toml` in [`assets_dir`](crate::assets::assets_dir)), read
-    /// once per process.
+    /// The shipped robot ([`SHIPPED`](crate::robot::SHIPPED) in
+    /// [`assets_dir`](crate::assets::assets_dir)), read once per process: the committed
+    /// instructions are generated for it.
     pub fn committed() -> Result<&'static ArmReach, String> {
         static ARM: OnceLock<Result<ArmReach, String>> = OnceLock::new();
         ARM.get_or_init(|| {
-            ArmReach::load(&crate::assets::assets_dir().join("robot.toml")).map_err(|e| e.to_string())
+            ArmReach::load(&crate::assets::assets_dir().join(crate::robot::SHIPPED))
+                .map_err(|e| e.to_string())
         })
         .as_ref()
         .map_err(Clone::clone)

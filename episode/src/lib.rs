@@ -17,6 +17,8 @@ mod mesh_object_tests;
 pub mod offline;
 pub mod oracle;
 pub mod policy;
+#[cfg(test)]
+mod robot_file_tests;
 pub mod runner;
 pub mod samples;
 pub mod teleport;

@@ -87,7 +87,7 @@ fn assets_dir(tag: &str, shape: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("kitchen-r-mesh-{tag}-{}", std::process::id()));
     std::fs::create_dir_all(dir.join("scenes")).unwrap();
     std::fs::create_dir_all(dir.join("meshes")).unwrap();
-    std::fs::copy(src.join("robot.toml"), dir.join("robot.toml")).unwrap();
+    crate::test_oracle::copy_shipped_robot(&src, &dir);
     std::fs::copy(
         src.join("scenes/kitchen_a.toml"),
         dir.join("scenes/kitchen_a.toml"),

@@ -7,6 +7,16 @@ use kitchen_r_sim::{Assets, EpisodeConfig, SensorsConfig, Sim, SimConfig};
 use crate::oracle::OraclePolicy;
 use crate::runner::{RunOptions, run_episode};
 
+/// Copy the shipped robot (its description and sidecar) from the assets directory `src` into the
+/// assets directory `dir`.
+pub(crate) fn copy_shipped_robot(src: &std::path::Path, dir: &std::path::Path) {
+    let urdf = std::path::Path::new(kitchen_r_core::robot::SHIPPED);
+    std::fs::create_dir_all(dir.join(urdf.parent().unwrap())).unwrap();
+    for f in [urdf.to_path_buf(), urdf.with_extension("toml")] {
+        std::fs::copy(src.join(&f), dir.join(&f)).unwrap();
+    }
+}
+
 /// Run `cfg` (the episode of `ins`) with the privileged oracle and assert every task succeeds.
 pub(crate) fn assert_oracle_completes(assets: &Assets, cfg: &EpisodeConfig, ins: &Instruction) {
     let blind = SensorsConfig {

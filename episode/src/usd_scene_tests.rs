@@ -18,9 +18,8 @@ fn assets_dir(tag: &str, scenes: &[(&str, String)]) -> PathBuf {
     let src = kitchen_r_core::assets::assets_dir();
     let dir = std::env::temp_dir().join(format!("kitchen-r-usd-{tag}-{}", std::process::id()));
     std::fs::create_dir_all(dir.join("scenes")).unwrap();
-    for f in ["objects.toml", "robot.toml"] {
-        std::fs::copy(src.join(f), dir.join(f)).unwrap();
-    }
+    std::fs::copy(src.join("objects.toml"), dir.join("objects.toml")).unwrap();
+    crate::test_oracle::copy_shipped_robot(&src, &dir);
     for (name, text) in scenes {
         std::fs::write(dir.join("scenes").join(name), text).unwrap();
     }

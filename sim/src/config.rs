@@ -36,6 +36,32 @@ pub struct SimConfig {
     pub success: SuccessConfig,
     pub monitors: MonitorConfig,
     pub grasp: GraspConfig,
+    pub robot: RobotConfig,
+}
+
+/// `[robot]`: which robot the twin builds (issue #27). [`Assets::load`](crate::Assets::load)
+/// reads it from `configs/sim.toml`, so the spawner, the controller and the oracle all get it.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RobotConfig {
+    /// A URDF (`.urdf`) or MJCF (`.xml`) description with its sidecar TOML beside it, relative to
+    /// the assets directory or absolute.
+    pub file: PathBuf,
+}
+
+impl Default for RobotConfig {
+    fn default() -> Self {
+        RobotConfig {
+            file: PathBuf::from(kitchen_r_core::robot::SHIPPED),
+        }
+    }
+}
+
+impl RobotConfig {
+    /// The description's path, with the assets directory `assets`.
+    pub fn path(&self, assets: &Path) -> PathBuf {
+        kitchen_r_core::robot::resolve(assets, &self.file)
+    }
 }
 
 /// `[grasp]`: how the gripper holds objects (issue #27). The organiser's contest setting, when

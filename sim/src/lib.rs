@@ -6,7 +6,7 @@
 //! at the base's centre on the floor, x forward, y left, z up. An [`Action`] is
 //! `(v, ω, x, y, z, qw, qx, qy, qz, g)`: base velocities, the TCP target pose in the base frame and
 //! the gripper command (0 closed, 1 open), applied for one 0.1 s control step of fixed physics
-//! substeps. See `assets/robot.toml` for the arm and TCP frames.
+//! substeps. See `kitchen_r_core::robot` and docs/twin/robot.md for the arm and TCP frames.
 
 pub mod bench;
 pub mod config;
@@ -32,7 +32,7 @@ pub mod types;
 pub mod usd_export;
 pub mod world;
 
-pub use config::{SensorsConfig, SimConfig};
+pub use config::{RobotConfig, SensorsConfig, SimConfig};
 pub use episode::{EpisodeConfig, ObjectPlacement};
 pub use error::SimError;
 pub use generator::EpisodeParams;

@@ -7,7 +7,7 @@ use kitchen_r_core::scene::Scene;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use rapier3d::prelude::*;
 
-use crate::config::{SensorsConfig, SimConfig};
+use crate::config::{RobotConfig, SensorsConfig, SimConfig};
 use crate::convert::vec_to_glam;
 use crate::episode::EpisodeConfig;
 use crate::error::SimError;
@@ -32,13 +32,19 @@ impl Assets {
         Assets::load(&kitchen_r_core::assets::assets_dir())
     }
 
-    /// Everything under `dir`: `objects.toml`, `scenes/`, `robot.toml`.
+    /// Everything under `dir`: `objects.toml`, `scenes/`, and the robot that `[robot] file` of
+    /// `configs/sim.toml` names (the shipped `robots/kitchen_r_aloha.urdf` by default).
     pub fn load(dir: &std::path::Path) -> Result<Assets, SimError> {
+        Assets::load_with_robot(dir, &SimConfig::load_default()?.robot)
+    }
+
+    /// Everything under `dir`, with the robot `robot` names.
+    pub fn load_with_robot(dir: &std::path::Path, robot: &RobotConfig) -> Result<Assets, SimError> {
         let catalogue = Catalogue::load(&dir.join("objects.toml"))?;
         crate::mesh::load_catalogue(&catalogue)?;
         let scenes = Scene::load_all(&dir.join("scenes"), &catalogue)?;
         crate::mesh::load_scenes(&scenes)?;
-        let robot = RobotDesc::load(&dir.join("robot.toml"))?;
+        let robot = RobotDesc::load(&robot.path(dir))?;
         Ok(Assets {
             scenes,
             catalogue,

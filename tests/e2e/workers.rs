@@ -355,7 +355,7 @@ fn the_servers_assets_setting_reaches_its_in_process_simulators() {
     assert!(!status.success(), "{err}");
     let assets = fx.dir.path().join("assets");
     assert!(
-        err.contains(&assets.display().to_string()) && err.contains("robot.toml"),
+        err.contains(&assets.display().to_string()) && err.contains("kitchen_r_aloha.urdf"),
         "{err}"
     );
 }

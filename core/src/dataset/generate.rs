@@ -69,7 +69,7 @@ pub fn generate_with(options: &GenerateOptions, assets: &Path) -> Result<Dataset
     let templates_path = assets.join("templates.toml");
     let templates = load_templates(&templates_path)?;
     // Place targets must be reachable by this robot's arm from the zone's approach pose.
-    let arm = ArmReach::load(&assets.join("robot.toml"))?;
+    let arm = ArmReach::load(&assets.join(crate::robot::SHIPPED))?;
     if let Some(private) = &options.private
         && let Some(id) = private
             .template_ids()

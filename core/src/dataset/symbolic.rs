@@ -220,7 +220,7 @@ pub fn plan_targets(
     plan_targets_with(scene, catalogue, ArmReach::committed()?, plan, rng)
 }
 
-/// [`plan_targets`] for the arm `arm` (read from the `robot.toml` beside the scenes).
+/// [`plan_targets`] for the arm `arm` (the robot description in `assets/robots/`).
 pub fn plan_targets_with(
     scene: &Scene,
     catalogue: &Catalogue,

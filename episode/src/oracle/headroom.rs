@@ -10,7 +10,7 @@ use kitchen_r_core::scene::Scene;
 /// board whose underside is at `s − BOARD`.
 const BOARD: f64 = 0.02;
 /// Tool centre point to the top of the wrist link with the tool pointing down (0.07 + 0.10 m
-/// of `assets/robot.toml`, the link radius and a margin).
+/// of the robot description, the link radius and a margin).
 pub(super) const WRIST_CLEAR: f64 = 0.23;
 /// Slack around furniture footprints, m.
 const MARGIN: f64 = 0.1;

@@ -5,7 +5,7 @@
 //! It answers each query with a chunk of 16 actions that is a coherent plan, not one action
 //! repeated: the task controller (`task::TaskCtl`) is stepped along a base trajectory predicted
 //! with a unicycle model under the base's speed and acceleration limits from
-//! `assets/robot.toml`. The runner executes the first k of them; at the next query the oracle
+//! the robot description. The runner executes the first k of them; at the next query the oracle
 //! adopts the controller state it predicted for exactly the steps executed and re-anchors on the
 //! measured pose, so the chunks join up however many actions the runner executes.
 //!

@@ -1,4 +1,4 @@
-//! The oracle against the robot description (`assets/robot.toml`): every pick and place it plans
+//! The oracle against the robot description (`assets/robots/kitchen_r_aloha.urdf`): every pick and place it plans
 //! in the committed scenes (stow poses included) lies within the arm's reach from the zone's
 //! approach pose, and the path follower still arrives when the base only follows its commands
 //! within the description's speed and acceleration limits.

@@ -210,7 +210,7 @@ pub(crate) fn drive(
 }
 
 /// The checks every closed-loop run must pass: done within 120 s, within 0.10 m of the approach
-/// point, heading within 0.1 rad, and the base (body radius 0.30 m in assets/robot.toml) never
+/// point, heading within 0.1 rad, and the base (body radius 0.30 m in the shipped robot) never
 /// touching a footprint or wall although the follower cuts corners.
 pub(crate) fn check_arrival(what: &str, goal: Pose2, (pose, steps, clearance): (Pose2, usize, f64)) {
     assert!(steps < 1200, "{what}: not done in 120 s");

@@ -23,7 +23,7 @@
 //! of a box (the fork), the radial direction for a rim grasp (plate, bowl: a horizontal
 //! grasp offset), any direction for round objects (the one needing no wrist turn). Of the two
 //! opposite tool yaws that do this, the one nearer the base's forward one is used. End-effector
-//! frame as in `assets/robot.toml`: x approach, y closing axis, top-down = +π/2 about y.
+//! frame as in docs/twin/robot.md: x approach, y closing axis, top-down = +π/2 about y.
 
 use std::f64::consts::{FRAC_PI_2, PI};
 

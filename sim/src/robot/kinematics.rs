@@ -38,7 +38,7 @@ impl ArmModel {
         ArmModel {
             mount: Vector3::from(desc.arm.mount),
             origins: std::array::from_fn(|i| Vector3::from(j[i].origin)),
-            axes: std::array::from_fn(|i| j[i].axis.unit()),
+            axes: std::array::from_fn(|i| Vector3::from(j[i].axis.unit())),
             lower: JointVec::from_fn(|i, _| j[i].limits[0]),
             upper: JointVec::from_fn(|i, _| j[i].limits[1]),
             max_velocity: JointVec::from_fn(|i, _| j[i].max_velocity),

@@ -78,7 +78,7 @@ pub struct WorkerConfig {
     /// On shutdown: stop leasing, let running episodes finish for up to this many seconds, then
     /// release what is left (the server queues it again at once without using an attempt).
     pub drain_grace_s: u64,
-    /// Benchmark content (objects.toml, scenes/, robot.toml) the simulators load; empty = the
+    /// Benchmark content (objects.toml, scenes/, robots/) the simulators load; empty = the
     /// default lookup (`$KITCHEN_R_ASSETS`, `./assets`, the checkout's).
     pub assets: PathBuf,
     /// Transport limits towards policies; the job's deadlines override the deadlines here. Its

@@ -1,0 +1,86 @@
+//! Robots from description files (issue #27 item 1): a robot other than the shipped one, named by
+//! `[robot] file` alone, is what the twin builds and the oracle completes a dev instruction with.
+//! An MJCF robot (`tests/robots/long_arm.xml`: smaller base, arm mounted elsewhere, longer links)
+//! and a URDF variant of the shipped robot. Here rather than in `sim` because the oracle policy
+//! lives in this crate.
+
+use std::path::{Path, PathBuf};
+
+use kitchen_r_core::dataset::{Instruction, Split};
+use kitchen_r_sim::{Assets, RobotConfig};
+
+use crate::eval::{episode_configs, instructions};
+
+/// The committed assets with the robot `file` names, as `[robot] file = "…"` would load them.
+fn assets_with(file: PathBuf) -> Assets {
+    let dir = kitchen_r_core::assets::assets_dir();
+    Assets::load_with_robot(&dir, &RobotConfig { file }).unwrap()
+}
+
+/// The dev instruction with the longest plan in `scene` (moves, picks and places).
+fn longest(scene: &str) -> Instruction {
+    instructions(Split::Dev, None)
+        .unwrap()
+        .into_iter()
+        .filter(|i| i.scene == scene)
+        .max_by_key(|i| i.plan.len())
+        .unwrap()
+}
+
+fn assert_oracle_completes_with(assets: &Assets, scene: &str) {
+    let shipped = Assets::load_default().unwrap().robot;
+    assert_ne!(assets.robot, shipped, "the test must run another robot");
+    let ins = longest(scene);
+    let cfg = &episode_configs(assets, std::slice::from_ref(&ins), 0, None).unwrap()[0];
+    crate::test_oracle::assert_oracle_completes(assets, cfg, &ins);
+}
+
+#[test]
+fn an_mjcf_robot_from_the_config_alone_completes_a_dev_instruction() {
+    let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/robots/long_arm.xml");
+    let assets = assets_with(file);
+    assert_eq!(assets.robot.arm.mount, [0.15, -0.1, 0.73]);
+    assert_oracle_completes_with(&assets, "kitchen_a");
+}
+
+#[test]
+fn a_urdf_variant_of_the_shipped_robot_completes_a_dev_instruction() {
+    let src = kitchen_r_core::assets::assets_dir().join(kitchen_r_core::robot::SHIPPED);
+    let urdf = std::fs::read_to_string(&src).unwrap();
+    // A thinner, lower-mounted arm on a narrower base, with a longer upper arm.
+    let edits = [
+        (
+            "<cylinder radius=\"0.30\" length=\"0.30\"/>",
+            "<cylinder radius=\"0.27\" length=\"0.30\"/>",
+        ),
+        (
+            "<origin xyz=\"0.20 -0.12 0.78\"/>",
+            "<origin xyz=\"0.18 -0.12 0.76\"/>",
+        ),
+        (
+            "<origin xyz=\"0.16 -0.12 0.55\"/>",
+            "<origin xyz=\"0.14 -0.12 0.54\"/>",
+        ),
+        ("<box size=\"0.14 0.16 0.46\"/>", "<box size=\"0.14 0.16 0.44\"/>"),
+        ("<origin xyz=\"0.0 0.0 0.12\"/>", "<origin xyz=\"0.0 0.0 0.14\"/>"),
+        ("<capsule radius=\"0.035\"", "<capsule radius=\"0.03\""),
+    ];
+    let mut variant = urdf.clone();
+    for (from, to) in edits {
+        assert!(
+            variant.contains(from),
+            "the shipped URDF changed: update this test ({from})"
+        );
+        variant = variant.replace(from, to);
+    }
+    let dir = std::env::temp_dir().join(format!("kitchen-r-robot-variant-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("variant.urdf");
+    std::fs::write(&file, variant).unwrap();
+    std::fs::copy(src.with_extension("toml"), file.with_extension("toml")).unwrap();
+    let assets = assets_with(file);
+    assert_eq!(assets.robot.base.body_radius, 0.27);
+    assert_eq!(assets.robot.arm.joints[1].origin, [0.0, 0.0, 0.14]);
+    assert_oracle_completes_with(&assets, "kitchen_b");
+    std::fs::remove_dir_all(&dir).ok();
+}
