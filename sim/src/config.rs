@@ -37,6 +37,42 @@ pub struct SimConfig {
     pub monitors: MonitorConfig,
     pub grasp: GraspConfig,
     pub robot: RobotConfig,
+    pub articulation: ArticulationConfig,
+}
+
+/// `[articulation]`: the articulated arm and force-limited fingers of the physical grasp mode
+/// (`robot/articulated.rs`, docs/twin/robot.md); unused in the abstract mode.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ArticulationConfig {
+    /// Joint motors: stiffness (1/s², acceleration-based) and damping (1/s) of the servo to the
+    /// controller's position and velocity targets; the torque is capped by each joint's effort.
+    pub joint_stiffness: f64,
+    pub joint_damping: f64,
+    /// Finger motors: the largest squeezing force of each finger (N), and the servo's stiffness
+    /// (N/m) and damping (N·s/m) towards the commanded gap.
+    pub finger_force: f64,
+    pub finger_stiffness: f64,
+    pub finger_damping: f64,
+    /// Coulomb friction of the finger pads (combined with the object's by averaging).
+    pub finger_friction: f64,
+    /// Natural frequency of the contact softness (Hz; rapier's default is 30): stiffer contacts
+    /// keep squeezed light objects from sinking millimetres into the fingers.
+    pub contact_frequency: f64,
+}
+
+impl Default for ArticulationConfig {
+    fn default() -> Self {
+        ArticulationConfig {
+            joint_stiffness: 10000.0,
+            joint_damping: 400.0,
+            finger_force: 15.0,
+            finger_stiffness: 4000.0,
+            finger_damping: 40.0,
+            finger_friction: 1.0,
+            contact_frequency: 120.0,
+        }
+    }
 }
 
 /// `[robot]`: which robot the twin builds (issue #27). [`Assets::load`](crate::Assets::load)
@@ -176,6 +212,23 @@ impl SimConfig {
         if p.control_dt.is_nan() || p.control_dt <= 0.0 || p.substeps == 0 || p.solver_iterations == 0 {
             return Err(SimError::Config(
                 "physics: control_dt > 0, substeps >= 1, solver_iterations >= 1".into(),
+            ));
+        }
+        let a = &self.articulation;
+        let gains = [
+            a.joint_stiffness,
+            a.joint_damping,
+            a.finger_force,
+            a.finger_stiffness,
+            a.finger_damping,
+            a.contact_frequency,
+        ];
+        if gains.iter().any(|v| v.is_nan() || *v <= 0.0)
+            || a.finger_friction.is_nan()
+            || a.finger_friction < 0.0
+        {
+            return Err(SimError::Config(
+                "articulation: gains, force and contact frequency > 0, finger_friction >= 0".into(),
             ));
         }
         Ok(())

@@ -1,11 +1,14 @@
-//! Grasping: an object whose grasp point (or centre) lies between the closing fingers is
-//! carried rigidly at its grasp offset from the TCP; opening the gripper releases it to physics.
+//! Grasping. Abstract mode: an object whose grasp point (or centre) lies between the closing
+//! fingers is carried rigidly at its grasp offset from the TCP; opening the gripper releases it to
+//! physics. Physical mode: nothing is attached (friction between the force-limited fingers and the
+//! object holds it); an object counts as held when both fingers touch it and it touches nothing
+//! but the robot (docs/twin/robot.md).
 
 use nalgebra::{Isometry3, Point3, Vector3};
 use rapier3d::prelude::*;
 
 use crate::convert::{pose_to_iso, vec_to_glam};
-use crate::material::Owner;
+use crate::material::{Owner, Tag};
 use crate::sim::{Held, Sim};
 
 /// Speed limits of the grasp servo (m/s, rad/s): a snagged object is not flung.
@@ -34,7 +37,70 @@ fn set_carried(world: &mut PhysicsWorld, body: RigidBodyHandle, carried: bool) {
     }
 }
 
+/// Set the collision groups of every collider of `body`.
+pub(crate) fn set_groups(world: &mut PhysicsWorld, body: RigidBodyHandle, groups: InteractionGroups) {
+    let handles: Vec<ColliderHandle> = world.bodies[body].colliders().to_vec();
+    for c in handles {
+        if let Some(co) = world.colliders.get_mut(c) {
+            co.set_collision_groups(groups);
+        }
+    }
+}
+
+/// A contact this close (or deeper) counts as touching (m): rapier keeps contacts a little
+/// before they touch.
+const TOUCH_DISTANCE: f32 = 0.001;
+
+fn touching(pair: &ContactPair) -> bool {
+    pair.find_deepest_contact()
+        .is_some_and(|(_, c)| c.dist <= TOUCH_DISTANCE)
+}
+
 impl Sim {
+    /// Physical mode, after a substep: the held object is the one both fingers touch while it
+    /// touches nothing but the robot (lifted off its support).
+    pub(crate) fn update_physical_hold(&mut self) {
+        self.dynamic.held = self.physical_hold();
+    }
+
+    fn physical_hold(&self) -> Option<Held> {
+        let fingers = self.robot.bodies.fingers;
+        let found = self.objects.iter().position(|o| {
+            let mut touched = [false; 2];
+            let mut supported = false;
+            for c in self.world.bodies[o.body].colliders() {
+                for pair in self.world.contact_pairs_with(*c) {
+                    if !touching(pair) {
+                        continue;
+                    }
+                    let other = if pair.collider1 == *c {
+                        pair.collider2
+                    } else {
+                        pair.collider1
+                    };
+                    if let Some(k) = fingers.iter().position(|f| *f == other) {
+                        touched[k] = true;
+                    } else if self
+                        .world
+                        .colliders
+                        .get(other)
+                        .is_none_or(|co| Tag::unpack(co.user_data).owner != Owner::Robot)
+                    {
+                        supported = true;
+                    }
+                }
+            }
+            touched == [true, true] && !supported
+        })?;
+        let tcp = self.robot.tcp_world(&self.world, &self.dynamic.robot);
+        let pose = pose_to_iso(self.world.bodies[self.objects[found].body].position());
+        Some(Held {
+            object: found,
+            width: self.robot.measured_gap(&self.world).unwrap_or(0.0),
+            offset: tcp.inverse() * pose,
+        })
+    }
+
     /// Attach an object whose grasp point (or centre) is between the closing fingers; release on open.
     pub(crate) fn update_grasp(&mut self, g: f64) {
         let grip = &self.robot.desc.gripper;

@@ -166,6 +166,20 @@ impl Owner {
         InteractionGroups::new(member, filter, InteractionTestMode::And)
     }
 
+    /// The physical grasp mode's fingers also touch key objects: friction holds them.
+    pub fn physical_finger_groups(self) -> InteractionGroups {
+        InteractionGroups::new(FINGER, STATIC | KEY | BACKGROUND, InteractionTestMode::And)
+    }
+
+    /// A key object in the physical grasp mode: touched by the fingers as well.
+    pub fn physical_key_groups(self) -> InteractionGroups {
+        InteractionGroups::new(
+            KEY,
+            STATIC | KEY | BACKGROUND | ROBOT | FINGER,
+            InteractionTestMode::And,
+        )
+    }
+
     /// A held key object touches neither the robot's links nor its fingers (the grasp joint holds
     /// it), only the scene and other objects.
     pub fn held_groups(self) -> InteractionGroups {

@@ -2,6 +2,7 @@
 //! one 10-value action for one control step (fixed physics substeps in between), snapshots restore
 //! the whole state bit for bit.
 
+use kitchen_r_core::GraspMode;
 use kitchen_r_core::catalogue::Catalogue;
 use kitchen_r_core::scene::Scene;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
@@ -196,7 +197,25 @@ impl Sim {
         };
         let dt = self.config.physics.dt();
         let mut blocked = false;
+        let physical = self.robot.bodies.articulation.is_some();
         for _ in 0..self.config.physics.substeps {
+            if physical {
+                // Fingers close until the object stops them; friction alone holds it.
+                self.robot.command(
+                    &mut self.world,
+                    &mut self.dynamic.robot,
+                    &self.config.rmp,
+                    &cmd,
+                    dt,
+                );
+                self.world.step();
+                self.update_physical_hold();
+                self.dynamic.static_touches =
+                    self.robot.enforce_obstacles(&self.world, &mut self.dynamic.robot);
+                blocked |= self.dynamic.robot.arm_blocked;
+                self.dynamic.substeps += 1;
+                continue;
+            }
             cmd.min_opening = self.dynamic.held.map_or(0.0, |h| h.width);
             let next_base = self.robot.command(
                 &mut self.world,
@@ -257,7 +276,16 @@ fn build(assets: &Assets, config: &SimConfig, ep: &EpisodeConfig) -> Result<Buil
             }
         }
     }
-    let (robot, state) = Robot::spawn(&mut world, &mut materials, &assets.robot, ep.robot_start);
+    let (robot, state) = match config.grasp.mode {
+        GraspMode::Abstract => Robot::spawn(&mut world, &mut materials, &assets.robot, ep.robot_start),
+        GraspMode::Physical => {
+            for o in &objects {
+                crate::grasp::set_groups(&mut world, o.body, Owner::KeyObject.physical_key_groups());
+            }
+            let a = &config.articulation;
+            Robot::spawn_articulated(&mut world, &mut materials, &assets.robot, ep.robot_start, a)
+        }
+    };
     crate::preflight::check(&world, &objects)?;
     let dynamic = Dynamic {
         robot: state,

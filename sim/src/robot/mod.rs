@@ -10,6 +10,7 @@
 //! fixed furniture or a wall also reverts the joint targets to the last collision-free
 //! configuration, so the controller does not wind up against it.
 
+pub mod articulated;
 pub mod desc;
 pub mod kinematics;
 pub mod rmp;
@@ -57,6 +58,8 @@ pub struct RobotBodies {
     pub fingers: [ColliderHandle; 2],
     /// Every arm collider with the index of the link it belongs to.
     pub arm_colliders: Vec<(ColliderHandle, usize)>,
+    /// The motor-driven multibody of the physical grasp mode (`None`: the abstract mode's arm).
+    pub articulation: Option<articulated::Articulation>,
 }
 
 /// Controller state that is not in the physics world (part of snapshots and state hashes).
@@ -199,6 +202,7 @@ impl Robot {
                 links,
                 fingers,
                 arm_colliders,
+                articulation: None,
             },
         };
         robot.place_fingers(world, state.opening);
@@ -282,8 +286,13 @@ impl Robot {
             0.0,
             yaw + state.omega * dt,
         );
-        self.place_links(world, &next, &state.arm.q, dt);
-        self.place_fingers(world, state.opening);
+        match &self.bodies.articulation {
+            Some(art) => self.drive_joints(world, art, state),
+            None => {
+                self.place_links(world, &next, &state.arm.q, dt);
+                self.place_fingers(world, state.opening);
+            }
+        }
         next
     }
 
@@ -363,8 +372,12 @@ impl Robot {
         touches
     }
 
-    /// TCP pose in the world.
+    /// TCP pose in the world: where the joint targets put it, or in the physical grasp mode
+    /// where the articulated arm really holds it.
     pub fn tcp_world(&self, world: &PhysicsWorld, state: &RobotState) -> Isometry3<f64> {
+        if self.bodies.articulation.is_some() {
+            return self.measured_tcp(world);
+        }
         self.base_iso(world) * self.arm.forward(&state.arm.q).tcp
     }
 }

@@ -5,6 +5,7 @@ mod common;
 
 mod arm_grasp;
 mod episodes;
+mod physical;
 mod randomise;
 mod twin;
 mod usd;

@@ -1,0 +1,276 @@
+//! The physical grasp mode's arm (issue #27): the arm as a rapier multibody whose revolute joints
+//! are driven by motors from the RMP controller's integrated targets, and a parallel gripper whose
+//! fingers are prismatic joints with force-limited motors, so only friction holds an object.
+//!
+//! Like the paper's articulation controller: RMPflow's joint accelerations are integrated into
+//! position and velocity targets (`rmp.rs`, unchanged) and each joint's motor servos to them
+//! (stiffness, damping, the effort limit as its maximum torque). The links carry no gravity (an
+//! ideal gravity compensation, as an articulation controller applies), so the motors' torque goes
+//! to following the targets and carrying the load.
+//!
+//! The multibody's root is a weightless mount body fixed to the base by an impulse joint: the
+//! base stays the velocity-driven body it is in the abstract mode, and the arm moves with it at
+//! the base's velocity (contacts and friction in the hand see the motion, a kinematic root would
+//! teleport the hand under a held object).
+
+use nalgebra::{Isometry3, Vector3};
+use rapier3d::prelude::*;
+
+use super::desc::RobotDesc;
+use super::kinematics::DOF;
+use super::{FINGERS, PALM, Robot, RobotState, collider};
+use crate::config::ArticulationConfig;
+use crate::convert::{iso_to_pose, pose_to_iso, vec_to_glam};
+use crate::material::{Material, Materials, Owner};
+
+/// Link masses (kg), waist to wrist (the last one includes the palm): a ViperX-300-class arm.
+const LINK_MASS: [f32; DOF] = [0.9, 0.8, 0.6, 0.4, 0.3, 0.35];
+/// Joint effort limits (N·m), waist to wrist: the ViperX 300 s servos' (XM540/XM430 class).
+const EFFORT: [f32; DOF] = [10.0, 20.0, 15.0, 2.0, 5.0, 1.0];
+/// Mass of each finger (kg).
+const FINGER_MASS: f32 = 0.03;
+/// Mass of the mount body between the base and the waist (kg).
+const MOUNT_MASS: f32 = 0.5;
+
+/// Handles of the articulated arm.
+#[derive(Debug, Clone)]
+pub struct Articulation {
+    pub mount: RigidBodyHandle,
+    pub joints: [MultibodyJointHandle; DOF],
+    /// Finger bodies (left, right) and their prismatic joints.
+    pub finger_bodies: [RigidBodyHandle; 2],
+    pub finger_joints: [MultibodyJointHandle; 2],
+    pub config: ArticulationConfig,
+}
+
+/// Extra travel of each finger beyond the description's opening at the same command (m): the
+/// abstract gripper's opening is sized to a grasp volume; a physical descent also needs room
+/// around the object for the hand's tracking error.
+const OPEN_MARGIN: f64 = 0.01;
+
+fn finger_travel(desc: &RobotDesc, opening: f64) -> f32 {
+    let margin = OPEN_MARGIN * opening / desc.gripper.max_opening;
+    (opening / 2.0 + margin + desc.gripper.finger_thickness / 2.0) as f32
+}
+
+impl Robot {
+    /// The robot of the physical grasp mode: the base as in [`Robot::spawn`], the arm as a
+    /// motor-driven multibody at the home configuration, the fingers on prismatic joints.
+    pub fn spawn_articulated(
+        world: &mut PhysicsWorld,
+        mats: &mut Materials,
+        desc: &RobotDesc,
+        start: [f64; 3],
+        config: &ArticulationConfig,
+    ) -> (Robot, RobotState) {
+        let (mut robot, state) = Robot::spawn(world, mats, desc, start);
+        // The abstract arm's links and fingers make way for the articulated ones.
+        for h in robot.bodies.links {
+            world.remove_body(h);
+        }
+        let p = &mut world.integration_parameters;
+        p.contact_softness.natural_frequency = config.contact_frequency as f32;
+        p.static_contact_softness.natural_frequency = 2.0 * config.contact_frequency as f32;
+
+        let base_iso = robot.base_iso(world);
+        let fk = robot.arm.forward(&state.arm.q);
+        let mount = world.insert_body(
+            RigidBodyBuilder::dynamic()
+                .pose(iso_to_pose(&base_iso))
+                .additional_mass(MOUNT_MASS)
+                .gravity_scale(0.0)
+                .can_sleep(false),
+        );
+        world.insert_impulse_joint(robot.bodies.base, mount, FixedJointBuilder::new());
+        let arm_mat = mats.add(Material::plain(desc.arm.color));
+        let grip_mat = mats.add(Material::plain(desc.gripper.color));
+        let g = &desc.gripper;
+        let mut arm_colliders = Vec::new();
+        let mut parent = mount;
+        let mut joints = Vec::new();
+        let links: [RigidBodyHandle; DOF] = std::array::from_fn(|i| {
+            let h = world.insert_body(
+                RigidBodyBuilder::dynamic()
+                    .pose(iso_to_pose(&(base_iso * fk.joints[i])))
+                    .gravity_scale(0.0)
+                    .can_sleep(false),
+            );
+            let end = if i + 1 < DOF {
+                robot.arm.origins[i + 1]
+            } else {
+                Vector3::x() * (g.tcp_offset - g.palm_back)
+            };
+            let r = desc.arm.joints[i].link_radius as f32;
+            let shape = SharedShape::capsule(vec_to_glam(&Vector3::zeros()), vec_to_glam(&end), r);
+            let co = collider(shape, i as u32 + 1, arm_mat, false).mass(LINK_MASS[i]);
+            arm_colliders.push((world.insert_collider(co, Some(h)), i));
+            if i == DOF - 1 {
+                let ps = g.palm_size.map(|v| v as f32 / 2.0);
+                let palm = collider(SharedShape::cuboid(ps[0], ps[1], ps[2]), PALM, grip_mat, false)
+                    .translation(vec_to_glam(&Vector3::new(g.tcp_offset - g.palm_back, 0.0, 0.0)))
+                    .mass(0.1);
+                arm_colliders.push((world.insert_collider(palm, Some(h)), i));
+            }
+            let anchor = if i == 0 {
+                robot.arm.mount + robot.arm.origins[0]
+            } else {
+                robot.arm.origins[i]
+            };
+            let lim = [robot.arm.lower[i] as f32, robot.arm.upper[i] as f32];
+            let joint = RevoluteJointBuilder::new(vec_to_glam(&robot.arm.axes[i]))
+                .local_anchor1(vec_to_glam(&anchor))
+                .limits(lim)
+                .motor_position(
+                    state.arm.q[i] as f32,
+                    config.joint_stiffness as f32,
+                    config.joint_damping as f32,
+                )
+                .motor_max_force(EFFORT[i]);
+            let handle = world
+                .insert_multibody_joint(parent, h, joint)
+                .expect("a chain of new bodies is a valid multibody");
+            set_coordinate(world, handle, state.arm.q[i] as f32);
+            joints.push(handle);
+            parent = h;
+            h
+        });
+        let last = links[DOF - 1];
+        let tcp = Isometry3::translation(g.tcp_offset, 0.0, 0.0);
+        let travel = finger_travel(desc, state.opening);
+        let lim = [finger_travel(desc, 0.0), finger_travel(desc, g.max_opening)];
+        let mut finger_bodies = [last; 2];
+        let mut finger_joints = Vec::new();
+        for (k, s) in [1.0f64, -1.0].into_iter().enumerate() {
+            let axis = Vector3::y() * s;
+            let pose =
+                base_iso * fk.joints[DOF - 1] * tcp * nalgebra::Translation3::from(axis * f64::from(travel));
+            let body = world.insert_body(
+                RigidBodyBuilder::dynamic()
+                    .pose(iso_to_pose(&pose))
+                    .gravity_scale(0.0)
+                    .can_sleep(false),
+            );
+            let fs = [g.finger_length, g.finger_thickness, g.finger_height].map(|v| v as f32 / 2.0);
+            let co = collider(
+                SharedShape::cuboid(fs[0], fs[1], fs[2]),
+                FINGERS[k],
+                grip_mat,
+                true,
+            )
+            .collision_groups(Owner::Robot.physical_finger_groups())
+            .friction(config.finger_friction as f32)
+            .mass(FINGER_MASS);
+            robot.bodies.fingers[k] = world.insert_collider(co, Some(body));
+            let joint = PrismaticJointBuilder::new(vec_to_glam(&axis))
+                .local_anchor1(vec_to_glam(&tcp.translation.vector))
+                .limits(lim)
+                .motor_model(MotorModel::ForceBased)
+                .motor_position(
+                    travel,
+                    config.finger_stiffness as f32,
+                    config.finger_damping as f32,
+                )
+                .motor_max_force(config.finger_force as f32);
+            let handle = world
+                .insert_multibody_joint(last, body, joint)
+                .expect("a finger is a new body");
+            set_coordinate(world, handle, travel);
+            finger_bodies[k] = body;
+            finger_joints.push(handle);
+        }
+        couple_fingers(world, [finger_joints[0], finger_joints[1]]);
+        robot.bodies.links = links;
+        robot.bodies.arm_colliders = arm_colliders;
+        robot.bodies.articulation = Some(Articulation {
+            mount,
+            joints: joints.try_into().expect("one joint per link"),
+            finger_bodies,
+            finger_joints: finger_joints.try_into().expect("two fingers"),
+            config: config.clone(),
+        });
+        (robot, state)
+    }
+
+    /// Drive the joint motors to the controller's targets and the fingers to the commanded gap
+    /// (one substep; the motors' targets change every substep, so the multibody is woken).
+    pub(super) fn drive_joints(&self, world: &mut PhysicsWorld, art: &Articulation, state: &RobotState) {
+        let c = &art.config;
+        for (i, h) in art.joints.iter().enumerate() {
+            let (q, qd) = (state.arm.q[i] as f32, state.arm.qd[i] as f32);
+            if let Some((mb, link)) = world.multibody_joints.get_mut(*h)
+                && let Some(l) = mb.link_mut(link)
+            {
+                let (k, d) = (c.joint_stiffness as f32, c.joint_damping as f32);
+                l.joint.data.set_motor(JointAxis::AngX, q, qd, k, d);
+            }
+        }
+        let travel = finger_travel(&self.desc, state.opening);
+        for h in &art.finger_joints {
+            if let Some((mb, link)) = world.multibody_joints.get_mut(*h)
+                && let Some(l) = mb.link_mut(link)
+            {
+                let (k, d) = (c.finger_stiffness as f32, c.finger_damping as f32);
+                l.joint.data.set_motor(JointAxis::LinX, travel, 0.0, k, d);
+            }
+        }
+        world.wake_up(self.bodies.links[0], true);
+    }
+
+    /// The measured TCP in the world: the last link's pose (not the targets' forward kinematics).
+    pub(super) fn measured_tcp(&self, world: &PhysicsWorld) -> Isometry3<f64> {
+        let last = pose_to_iso(world.bodies[self.bodies.links[DOF - 1]].position());
+        last * nalgebra::Translation3::new(self.desc.gripper.tcp_offset, 0.0, 0.0)
+    }
+
+    /// The measured gap between the fingers' inner faces (m).
+    pub fn measured_gap(&self, world: &PhysicsWorld) -> Option<f64> {
+        let art = self.bodies.articulation.as_ref()?;
+        let tcp = self.measured_tcp(world);
+        let [l, r] = art.finger_bodies.map(|b| {
+            (tcp.inverse() * pose_to_iso(world.bodies[b].position()))
+                .translation
+                .vector
+        });
+        Some(l.y - r.y - self.desc.gripper.finger_thickness)
+    }
+}
+
+/// Make the fingers move as one, like a parallel gripper's rack and pinion: otherwise two equal
+/// force-limited motors squeezing an object leave their common motion free, and the pair drifts
+/// sideways until one finger stops at its limit.
+fn couple_fingers(world: &mut PhysicsWorld, joints: [MultibodyJointHandle; 2]) {
+    let Some([l, r]) = joints
+        .iter()
+        .map(|h| {
+            world
+                .multibody_joints
+                .get(*h)
+                .map(|(mb, id)| mb.link(id).map_or(id, |l| l.link_id()))
+        })
+        .collect::<Option<Vec<_>>>()
+        .and_then(|v| <[usize; 2]>::try_from(v).ok())
+    else {
+        return;
+    };
+    if let Some((mb, _)) = world.multibody_joints.get_mut(joints[0]) {
+        mb.add_dof_coupling(MultibodyDofCoupling {
+            link1: l,
+            dof1: 0,
+            axis1: 0,
+            link2: r,
+            dof2: 0,
+            axis2: 0,
+            coeff: 1.0,
+            offset: 0.0,
+        });
+    }
+}
+
+/// Set a one-degree-of-freedom joint's coordinate (at spawn: the multibody starts at zero).
+fn set_coordinate(world: &mut PhysicsWorld, h: MultibodyJointHandle, value: f32) {
+    if let Some((mb, link)) = world.multibody_joints.get_mut(h)
+        && let Some(l) = mb.link_mut(link)
+    {
+        l.joint.apply_displacement(&[value]);
+    }
+}
