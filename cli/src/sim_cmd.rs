@@ -128,6 +128,10 @@ pub(crate) fn bench(args: BenchArgs) -> anyhow::Result<()> {
                     "physics_step_us       {:.1} (median of 5 batches; fastest {:.1})",
                     r.physics_step_us, r.physics_step_us_min
                 );
+                println!(
+                    "physics_step_us (articulated arm, physical grasp) {:.1} (fastest {:.1})",
+                    r.physics_step_us_articulated, r.physics_step_us_articulated_min
+                );
                 println!("control_step_us       {:.1}", r.control_step_us);
                 println!(
                     "observation_ms        {:.2} ({} cameras, {} px; median of 5 batches; fastest {:.2})",

@@ -31,6 +31,8 @@ impl Clock {
 
 use serde::Serialize;
 
+use kitchen_r_core::GraspMode;
+
 use crate::config::{SensorsConfig, SimConfig};
 use crate::error::SimError;
 use crate::generator::{EpisodeParams, generate};
@@ -48,6 +50,10 @@ pub struct BenchReport {
     pub physics_step_us: f64,
     /// The fastest batch's physics substep (µs): the figure with the least interference.
     pub physics_step_us_min: f64,
+    /// The same substep in the physical grasp mode (the arm a motor-driven multibody, the
+    /// fingers force-limited joints), median and fastest batch (µs).
+    pub physics_step_us_articulated: f64,
+    pub physics_step_us_articulated_min: f64,
     /// One control step without rendering (µs), median batch.
     pub control_step_us: f64,
     /// One observation: every configured camera plus LiDAR (ms), median over `BATCHES` batches.
@@ -99,6 +105,19 @@ pub fn wobble_action(k: u32) -> Action {
     )
 }
 
+/// Median and fastest of `BATCHES` batches of `per_batch` unrendered control steps (µs each).
+fn control_steps(sim: &mut Sim, per_batch: u32) -> Result<(f64, f64), SimError> {
+    let mut control = Vec::new();
+    for b in 0..BATCHES {
+        let t0 = Clock::start();
+        for k in b * per_batch..(b + 1) * per_batch {
+            sim.step(&wobble_action(k), false)?;
+        }
+        control.push(t0.secs() * 1e6 / f64::from(per_batch));
+    }
+    Ok(median_min(control))
+}
+
 /// Run the benchmark on the first scene for `steps` control steps.
 pub fn run(steps: u32, query_every: u32) -> Result<BenchReport, SimError> {
     let assets = Assets::load_default()?;
@@ -111,19 +130,20 @@ pub fn run(steps: u32, query_every: u32) -> Result<BenchReport, SimError> {
         .ok_or_else(|| SimError::Config("no scenes".into()))?
         .clone();
     let ep = generate(&scene, &assets.catalogue, &params, 7, 0)?;
+    let mut physical = config.clone();
+    physical.grasp.mode = GraspMode::Physical;
+    let blind = SensorsConfig {
+        cameras: Vec::new(),
+        lidar: None,
+        ..sensors.clone()
+    };
+    let (mut articulated, _) = Sim::new(assets.clone(), physical, blind, &ep)?;
     let (mut sim, _) = Sim::new(assets, config, sensors, &ep)?;
     let substeps = sim.config().physics.substeps;
 
     let per_batch = (steps / BATCHES).max(1);
-    let mut control = Vec::new();
-    for b in 0..BATCHES {
-        let t0 = Clock::start();
-        for k in b * per_batch..(b + 1) * per_batch {
-            sim.step(&wobble_action(k), false)?;
-        }
-        control.push(t0.secs() * 1e6 / f64::from(per_batch));
-    }
-    let (control_step_us, control_min) = median_min(control);
+    let (control_step_us, control_min) = control_steps(&mut sim, per_batch)?;
+    let (articulated_us, articulated_min) = control_steps(&mut articulated, per_batch)?;
 
     let n_obs = 30;
     let mut observe = Vec::new();
@@ -168,6 +188,8 @@ pub fn run(steps: u32, query_every: u32) -> Result<BenchReport, SimError> {
         },
         physics_step_us: control_step_us / f64::from(substeps),
         physics_step_us_min: control_min / f64::from(substeps),
+        physics_step_us_articulated: articulated_us / f64::from(substeps),
+        physics_step_us_articulated_min: articulated_min / f64::from(substeps),
         control_step_us,
         observation_ms,
         observation_ms_min,

@@ -19,14 +19,15 @@ mod task;
 use std::collections::HashMap;
 use std::sync::Arc;
 
+use kitchen_r_core::GraspMode;
 use kitchen_r_core::catalogue::Catalogue;
 use kitchen_r_core::scene::Scene;
-use kitchen_r_sim::Assets;
 use kitchen_r_sim::oracle::follow::{FollowParams, PathFollower};
 use kitchen_r_sim::oracle::grid::{GridParams, OccupancyGrid};
 use kitchen_r_sim::oracle::theta_star::{PlannerParams, theta_star};
 use kitchen_r_sim::robot::desc::BaseDesc;
 use kitchen_r_sim::task::TaskTarget;
+use kitchen_r_sim::{Assets, SimConfig};
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 
 use crate::policy::{ACTION_DIM, HORIZON, Policy, PolicyError, PolicyInput, PolicySpec, Privileged};
@@ -71,6 +72,9 @@ pub struct OraclePolicy {
     /// Whether to have the runner render for each query; the oracle itself reads only
     /// privileged state, but reference runs and the benchmark render as for any policy.
     images: bool,
+    /// The twin's grasp mode: in the physical one the oracle gives the fingers time to squeeze
+    /// before it lifts.
+    grasp: GraspMode,
 }
 
 impl OraclePolicy {
@@ -88,7 +92,14 @@ impl OraclePolicy {
             last_goal: None,
             episode: String::new(),
             images: true,
+            grasp: SimConfig::load_default().map_or(GraspMode::Abstract, |c| c.grasp.mode),
         }
+    }
+
+    /// Drive a twin of this grasp mode (default: `configs/sim.toml`'s `[grasp] mode`).
+    pub fn with_grasp_mode(mut self, mode: GraspMode) -> OraclePolicy {
+        self.grasp = mode;
+        self
     }
 
     /// The oracle as an expert nobody watches: no rendering for its queries (offline
@@ -161,7 +172,10 @@ impl OraclePolicy {
             TaskTarget::Base { .. } => None,
         };
         let target_max = work.and_then(|w| headroom::max_tool_z(scene, [w[0], w[1]], w[2]));
-        Ok(TaskCtl::new(goal, tool, holding, approach, here_max, target_max))
+        let physical = self.grasp == GraspMode::Physical;
+        Ok(TaskCtl::new(
+            goal, tool, holding, approach, here_max, target_max, physical,
+        ))
     }
 
     fn world(&self, p: &Privileged) -> World {

@@ -16,10 +16,14 @@ use std::f64::consts::{FRAC_PI_2, PI};
 use kitchen_r_core::catalogue::ObjectModel;
 use kitchen_r_sim::oracle::action::action;
 use kitchen_r_sim::oracle::follow::{PathFollower, wrap};
-use kitchen_r_sim::oracle::manip::{ManipParams, PhasePlan, PickPlan, PlacePlan, base_isometry};
+use kitchen_r_sim::oracle::manip::{ManipParams, Phase, PhasePlan, PickPlan, PlacePlan, base_isometry};
 use nalgebra::{Isometry3, Vector3};
 
 use super::arm::ArmPath;
+
+/// Physical grasp mode: the grasp and lift phases' durations, s (abstract: 1 and 2).
+const PHYSICAL_GRASP_S: f64 = 2.0;
+const PHYSICAL_LIFT_S: f64 = 3.0;
 
 /// Control period, s (the paper's 10 Hz).
 pub(super) const DT: f64 = 0.1;
@@ -91,8 +95,15 @@ impl TaskCtl {
         approach: Option<[f64; 3]>,
         here_max: Option<f64>,
         target_max: Option<f64>,
+        physical: bool,
     ) -> TaskCtl {
-        let params = ManipParams::default();
+        let mut params = ManipParams::default();
+        if physical {
+            // Friction holds the object: the fingers close fully and build up their squeeze
+            // before the lift, and the lift starts gently.
+            params.durations[Phase::Grasp as usize] = PHYSICAL_GRASP_S;
+            params.durations[Phase::Lift as usize] = PHYSICAL_LIFT_S;
+        }
         let stow = if holding { params.carry } else { params.home };
         let is_move = matches!(goal, Goal::Move { .. });
         let arm = ArmPath::prelude(tool, stow, here_max, target_max, is_move);
