@@ -7,7 +7,7 @@
 use std::path::{Path, PathBuf};
 
 use kitchen_r_core::dataset::{Instruction, Split};
-use kitchen_r_sim::{Assets, RobotConfig};
+use kitchen_r_sim::{Assets, RobotConfig, SimConfig};
 
 use crate::eval::{episode_configs, instructions};
 
@@ -38,7 +38,11 @@ fn assert_oracle_completes_with(assets: &Assets, scene: &str) {
 #[test]
 fn an_mjcf_robot_from_the_config_alone_completes_a_dev_instruction() {
     let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/robots/long_arm.xml");
-    let assets = assets_with(file);
+    // The one line a user adds to configs/sim.toml.
+    let config: SimConfig =
+        toml::from_str(&format!("[robot]\nfile = {:?}\n", file.display().to_string())).unwrap();
+    assert_eq!(config.robot.file, file);
+    let assets = assets_with(config.robot.file);
     assert_eq!(assets.robot.arm.mount, [0.15, -0.1, 0.73]);
     assert_oracle_completes_with(&assets, "kitchen_a");
 }
