@@ -128,6 +128,10 @@ pub(crate) fn print(snap: &Snapshot, server: &ServerArgs) {
     }
     println!("run {}: {}", run["id"], progress_line(snap));
     println!("scores: {}", scores(&run["scores"]));
+    // A policy run's scores mean what its grasp mode made of the episodes (issue #27).
+    if let Some(g) = run["evaluation"]["grasp_mode"].as_str() {
+        println!("grasp mode: {g}");
+    }
     if v["ranked"] == false {
         println!("not ranked: {}", s(&v["unranked_reason"]));
     }

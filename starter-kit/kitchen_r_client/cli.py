@@ -7,7 +7,7 @@
     kitchen-r-client submission show ID [--json]
     kitchen-r-client submission wait ID [--timeout S] [--json]
     kitchen-r-client leaderboard [--track T] [--split S] [--observations standard|privileged]
-                                 [--format table|json|csv | --json]
+                                 [--grasp-mode abstract|physical] [--format table|json|csv | --json]
 
 Every command takes --server (KITCHEN_R_SERVER, default http://127.0.0.1:8080) and --token
 (KITCHEN_R_TOKEN; `team create` reads --admin-token / KITCHEN_R_ADMIN_TOKEN). Exit codes: 0
@@ -120,6 +120,9 @@ def build_parser():
     lb.add_argument("--observations", default="standard", choices=["standard", "privileged"],
                     help="control and integrated: the board of runs whose policy received "
                          "privileged observations (ranked apart), or the standard one")
+    lb.add_argument("--grasp-mode", default=None, choices=["abstract", "physical"],
+                    help="control and integrated: the board of runs evaluated in this grasp mode "
+                         "(ranked apart); default: the contest's")
     lb.add_argument("--format", default="table", choices=["table", "json", "csv"])
     lb.add_argument("--json", action="store_true", help="same as --format json")
     _server(lb)
@@ -251,6 +254,8 @@ def wait_for(client, sid, timeout=None):
 def cmd_leaderboard(a):
     fmt = "json" if a.json else a.format
     observations = "" if a.observations == "standard" else "&observations=%s" % a.observations
+    if a.grasp_mode:
+        observations += "&grasp_mode=%s" % a.grasp_mode
     path = "/api/v1/leaderboard?track=%s&split=%s%s&format=%s" % (
         a.track, a.split, observations, "csv" if fmt == "csv" else "json")
     text = Client(a.server).request("GET", path).text()

@@ -150,6 +150,10 @@ def print_submission(view, server, server_now_ms=None, out=print):
         return
     out("run %s: %s" % (_j(run.get("id")), progress_line(view, server_now_ms)))
     out("scores: " + scores(run.get("scores")))
+    # A policy run's scores mean what its grasp mode made of the episodes (issue #27).
+    evaluation = run.get("evaluation")
+    if isinstance(evaluation, dict) and isinstance(evaluation.get("grasp_mode"), str):
+        out("grasp mode: " + evaluation["grasp_mode"])
     if view.get("ranked") is False:
         out("not ranked: " + _s(view.get("unranked_reason")))
     if isinstance(run.get("evaluation"), dict):
@@ -255,6 +259,8 @@ def print_leaderboard(board, out=print):
     track = board.get("track") if isinstance(board.get("track"), str) else "planning"
     observations = board.get("observations")
     label = ", %s observations" % observations if isinstance(observations, str) else ""
+    grasp = board.get("grasp_mode")
+    label += ", %s grasp" % grasp if isinstance(grasp, str) else ""
     out("%s track%s, %s split" % (track, label, _s(board.get("split"))))
     rows = board.get("rows") or []
     if not rows:
