@@ -6,6 +6,7 @@ and prints one JSON line per message: topic, stamp (ns), frame_id and a few fiel
 loopback test (tests/e2e/ros2_live.rs) and to check a run by hand (docs/twin/live.md).
 
     python3 scripts/ros2-watch.py [--domain N] [--seconds S] [--count N] [--qos reliable|best_effort]
+                                  [--no-read]
 
 Discovery stays on loopback unless CYCLONEDDS_URI is set: the interface `lo`, no multicast, and
 unicast discovery to this host's participants (Peers 127.0.0.1), as `configs/live.toml`'s
@@ -178,6 +179,8 @@ def main() -> int:
     ap.add_argument("--seconds", type=float, default=120.0, help="give up after this long")
     ap.add_argument("--count", type=int, default=3, help="messages wanted of every topic")
     ap.add_argument("--qos", choices=["reliable", "best_effort"], default="reliable")
+    ap.add_argument("--no-read", action="store_true",
+                    help="subscribe, then never take a message (a stalled subscriber), for --seconds")
     args = ap.parse_args()
     rel = (Policy.Reliability.Reliable(duration(seconds=1)) if args.qos == "reliable"
            else Policy.Reliability.BestEffort)
@@ -185,6 +188,9 @@ def main() -> int:
     dp = DomainParticipant(args.domain)
     readers = [(name, DataReader(dp, Topic(dp, name, ty), qos=qos)) for name, ty in TOPICS]
     print("ready", file=sys.stderr, flush=True)
+    if args.no_read:
+        time.sleep(args.seconds)
+        return 0
     seen = {name: 0 for name, _ in TOPICS}
     until = time.monotonic() + args.seconds
     while time.monotonic() < until and min(seen.values()) < args.count:
