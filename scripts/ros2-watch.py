@@ -11,7 +11,8 @@ loopback test (tests/e2e/ros2_live.rs) and to check a run by hand (docs/twin/liv
 Discovery stays on loopback unless CYCLONEDDS_URI is set: the interface `lo`, no multicast, and
 unicast discovery to this host's participants (Peers 127.0.0.1), as `configs/live.toml`'s
 `network = "loopback"` does on the publishing side. It prints `ready` on stderr once its
-readers exist, and exits 0 when every topic got `--count` messages, 1 on timeout.
+readers exist, and exits 0 when every topic got `--count` messages (the camera `--images`), 1 on
+timeout.
 """
 
 import argparse
@@ -178,6 +179,8 @@ def main() -> int:
     ap.add_argument("--domain", type=int, default=int(os.environ.get("ROS_DOMAIN_ID", "0") or 0))
     ap.add_argument("--seconds", type=float, default=120.0, help="give up after this long")
     ap.add_argument("--count", type=int, default=3, help="messages wanted of every topic")
+    ap.add_argument("--images", type=int, default=1,
+                    help="messages wanted of the camera topic (sent at most 30 a wall second)")
     ap.add_argument("--qos", choices=["reliable", "best_effort"], default="reliable")
     ap.add_argument("--no-read", action="store_true",
                     help="subscribe, then never take a message (a stalled subscriber), for --seconds")
@@ -192,8 +195,10 @@ def main() -> int:
         time.sleep(args.seconds)
         return 0
     seen = {name: 0 for name, _ in TOPICS}
+    want = {name: args.images if ty is Image else args.count for name, ty in TOPICS}
+    done = lambda: all(seen[n] >= want[n] for n in seen)  # noqa: E731
     until = time.monotonic() + args.seconds
-    while time.monotonic() < until and min(seen.values()) < args.count:
+    while time.monotonic() < until and not done():
         got = False
         for name, r in readers:
             for m in r.take(N=64):
@@ -203,7 +208,7 @@ def main() -> int:
         if not got:
             time.sleep(0.01)
     print(json.dumps({"seen": seen}), file=sys.stderr, flush=True)
-    return 0 if min(seen.values()) >= args.count else 1
+    return 0 if done() else 1
 
 
 if __name__ == "__main__":
