@@ -15,7 +15,8 @@ use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 
 use crate::support::{Proc, bin, oracle_policy};
 
-fn eval_args(cfg: &str) -> Vec<String> {
+/// `eval` of one episode with a `--json` report (the Foxglove and ROS 2 tests add their flags).
+pub(crate) fn eval_args(cfg: &str) -> Vec<String> {
     let args = [
         "eval",
         "--episodes",
@@ -29,8 +30,9 @@ fn eval_args(cfg: &str) -> Vec<String> {
     args.iter().map(|s| s.to_string()).collect()
 }
 
-/// A report (`eval --json`) less its wall times: what must not change with a viewer.
-fn results(report: &str) -> Value {
+/// A report (`eval --json`) less its wall times: what must not change with a viewer (Foxglove
+/// here, ROS 2 in `ros2_live`).
+pub(crate) fn results(report: &str) -> Value {
     fn strip(v: &mut Value) {
         match v {
             Value::Object(m) => {

@@ -22,6 +22,7 @@ use std::time::Duration;
 
 use serde_json::Value;
 
+use crate::live::{eval_args, results};
 use crate::support::{Proc, bin};
 
 fn cyclonedds_ready() -> bool {
@@ -70,23 +71,6 @@ fn subscriber(domain: &str) -> (Proc, mpsc::Receiver<String>) {
         let _ = tx.send(s);
     });
     (Proc(child), rx)
-}
-
-/// A report (`eval --json`) less its wall times.
-fn results(report: &str) -> Value {
-    fn strip(v: &mut Value) {
-        match v {
-            Value::Object(m) => {
-                m.retain(|k, _| !k.contains("wall"));
-                m.values_mut().for_each(strip);
-            }
-            Value::Array(a) => a.iter_mut().for_each(strip),
-            _ => {}
-        }
-    }
-    let mut r: Value = serde_json::from_str(report).unwrap_or_else(|e| panic!("{e}: {report}"));
-    strip(&mut r);
-    r
 }
 
 /// Check what the subscriber printed: every topic with the frames and fields a ROS 2 node
@@ -156,7 +140,7 @@ fn check_messages(printed: &str) {
 
 /// Run `kitchen-r ARGS` publishing in `domain` while the subscriber reads; its stdout, after
 /// checking the subscriber got every topic and the run's summary.
-fn published_run(args: &[&str], domain: &str) -> String {
+fn published_run<S: AsRef<std::ffi::OsStr> + std::fmt::Debug>(args: &[S], domain: &str) -> String {
     let (mut sub, printed) = subscriber(domain);
     let mut run = Command::new(bin());
     run.args(args)
@@ -188,20 +172,6 @@ fn published_run(args: &[&str], domain: &str) -> String {
     stdout
 }
 
-fn eval_args(cfg: &str) -> Vec<&str> {
-    let args = [
-        "eval",
-        "--episodes",
-        "1",
-        "--jobs",
-        "1",
-        "--json",
-        "--config",
-        cfg,
-    ];
-    args.to_vec()
-}
-
 #[test]
 fn eval_ros2_publishes_typed_topics_a_cyclone_dds_subscriber_reads_and_changes_no_result() {
     if !cyclonedds_ready() {
@@ -218,7 +188,7 @@ fn eval_ros2_publishes_typed_topics_a_cyclone_dds_subscriber_reads_and_changes_n
         String::from_utf8_lossy(&plain.stderr)
     );
     let mut args = eval_args(&cfg);
-    args.extend(["--ros2", "--ros2-wait"]);
+    args.extend(["--ros2".into(), "--ros2-wait".into()]);
     let live = published_run(&args, &domain(0));
     assert_eq!(results(&live), results(&String::from_utf8_lossy(&plain.stdout)));
 }
@@ -233,7 +203,7 @@ fn replay_ros2_publishes_a_traced_episode_to_a_cyclone_dds_subscriber() {
     std::fs::write(&cfg, "max_plan_steps = 1\n").unwrap();
     let traces = dir.path().join("traces");
     let mut args = eval_args(cfg.to_str().unwrap());
-    args.extend(["--trace", traces.to_str().unwrap()]);
+    args.extend(["--trace".into(), traces.to_string_lossy().into_owned()]);
     let traced = Command::new(bin()).args(&args).output().unwrap();
     assert!(
         traced.status.success(),
@@ -287,7 +257,6 @@ fn collect_ros2_publishes_the_recorded_episode_live() {
     assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
     let mut with = args(&live);
     with.extend(["--ros2".to_string(), "--ros2-wait".to_string()]);
-    let with: Vec<&str> = with.iter().map(String::as_str).collect();
     let summary: Value = serde_json::from_str(&published_run(&with, &domain(2))).unwrap();
     assert_eq!(summary["kept"], 1, "{summary}");
     let mcap = |d: &std::path::Path| std::fs::read(d.join("ep00000.mcap")).unwrap();

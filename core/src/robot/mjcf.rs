@@ -34,16 +34,7 @@ pub(crate) fn tree(path: &Path) -> Result<Tree, ContentError> {
         let (origin, rotated) = pose(&b.pose);
         let moving: Vec<_> = b.joints.iter().filter(|j| j.type_ != JointType::Free).collect();
         let joint = match moving.as_slice() {
-            [] => Joint {
-                name: format!("{name} (fixed to its parent)"),
-                kind: JointKind::Fixed,
-                origin,
-                rotated,
-                axis: [1.0, 0.0, 0.0],
-                limits: None,
-                velocity: None,
-                effort: None,
-            },
+            [] => Joint::fixed(format!("{name} (fixed to its parent)"), origin, rotated),
             [j] => {
                 let jname = j.name.clone().unwrap_or_else(|| format!("{name}'s joint"));
                 if j.pos != [0.0; 3] {
@@ -112,16 +103,7 @@ pub(crate) fn tree(path: &Path) -> Result<Tree, ContentError> {
                 name: site.clone(),
                 parent: Some((
                     body_index,
-                    Joint {
-                        name: format!("{site} (site)"),
-                        kind: JointKind::Fixed,
-                        origin,
-                        rotated,
-                        axis: [1.0, 0.0, 0.0],
-                        limits: None,
-                        velocity: None,
-                        effort: None,
-                    },
+                    Joint::fixed(format!("{site} (site)"), origin, rotated),
                 )),
                 geoms: Vec::new(),
                 mass: None,

@@ -40,6 +40,22 @@ pub(crate) struct Joint {
     pub effort: Option<f64>,
 }
 
+impl Joint {
+    /// A frame fixed to its parent (an MJCF body without a joint, or a site).
+    pub(super) fn fixed(name: String, origin: [f64; 3], rotated: bool) -> Joint {
+        Joint {
+            name,
+            kind: JointKind::Fixed,
+            origin,
+            rotated,
+            axis: [1.0, 0.0, 0.0],
+            limits: None,
+            velocity: None,
+            effort: None,
+        }
+    }
+}
+
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) enum Shape {
     /// Full sizes.
