@@ -104,7 +104,7 @@ pub(crate) fn eval(args: EvalArgs) -> anyhow::Result<()> {
     let policy: PolicyChoice = args.policy.parse()?;
     if args.record.is_some() {
         // Videos are recorded by the workers' runner: serve the oracle as an endpoint for it.
-        let oracle = crate::eval_record::LoopbackOracle::start()?;
+        let oracle = crate::eval_record::LoopbackOracle::start(args.grasp)?;
         let args = EvalArgs {
             policy: oracle.url().to_string(),
             privileged: true,

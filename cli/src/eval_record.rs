@@ -6,6 +6,7 @@ use std::sync::Arc;
 
 use anyhow::Context;
 use kitchen_r_contract::server::{PolicyFactory, ServeOptions, serve_policy};
+use kitchen_r_core::GraspMode;
 use kitchen_r_episode::oracle::OraclePolicy;
 use kitchen_r_episode::policy::Policy;
 use kitchen_r_sim::Assets;
@@ -19,12 +20,17 @@ pub(crate) struct LoopbackOracle {
 }
 
 impl LoopbackOracle {
-    pub(crate) fn start() -> anyhow::Result<LoopbackOracle> {
+    /// `grasp`: the mode of the twin it drives (`eval --grasp`; `None` = configs/sim.toml's).
+    pub(crate) fn start(grasp: Option<GraspMode>) -> anyhow::Result<LoopbackOracle> {
         let assets = Arc::new(Assets::load_default().context("loading the benchmark assets")?);
         // One oracle per episode in flight; as many as the cores run.
         let concurrency = std::thread::available_parallelism().map_or(1, |n| n.get()) as u32;
         let factory: PolicyFactory = Arc::new(move || {
-            Box::new(OraclePolicy::new(&assets).with_max_concurrency(concurrency)) as Box<dyn Policy>
+            let oracle = OraclePolicy::new(&assets).with_max_concurrency(concurrency);
+            Box::new(match grasp {
+                Some(g) => oracle.with_grasp_mode(g),
+                None => oracle,
+            }) as Box<dyn Policy>
         });
         let rt = tokio::runtime::Builder::new_multi_thread()
             .worker_threads(1)

@@ -183,7 +183,9 @@ impl DrivenEpisode {
     ) -> Result<DrivenEpisode, DriveError> {
         let (cmd_tx, cmd_rx) = channel();
         let (ev_tx, ev_rx) = channel();
-        let expert = opts.expert.then(|| OraclePolicy::new(assets).without_images());
+        // The expert drives the twin's own grasp mode (the Python env's `grasp_mode`).
+        let grasp = sim.config().grasp.mode;
+        let expert = (opts.expert).then(|| OraclePolicy::new(assets).without_images().with_grasp_mode(grasp));
         // One sub-task from a later step needs the expert's states even without teleports.
         let starts_from =
             (opts.teleport_on_failure || opts.only_task.is_some_and(|j| j > 0)).then(|| assets.clone());

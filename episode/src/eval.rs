@@ -347,7 +347,7 @@ pub(crate) fn run_all(
             let (tx, next, run) = (tx.clone(), &next, &run);
             let (sim_cfg, sensors) = (sim_cfg.clone(), sensors.clone());
             scope.spawn(move || {
-                let mut oracle = OraclePolicy::new(assets);
+                let mut oracle = OraclePolicy::new(assets).with_grasp_mode(sim_cfg.grasp.mode);
                 let mut sim: Option<Sim> = None;
                 loop {
                     let i = next.fetch_add(1, Ordering::SeqCst);

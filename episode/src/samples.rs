@@ -343,7 +343,7 @@ fn worker(shared: &Shared, next: &AtomicUsize, window: &Window, tx: &Results) {
     let opts = &shared.opts;
     let mut sim: Option<Sim> = None;
     let mut recorder = Recorder {
-        oracle: OraclePolicy::new(&shared.assets),
+        oracle: OraclePolicy::new(&shared.assets).with_grasp_mode(shared.sim_cfg.grasp.mode),
         spec: PolicySpec {
             name: "expert-samples".into(),
             horizon: HORIZON,

@@ -27,7 +27,9 @@ impl StepHook for Starts {
 /// Run the expert once over `cfg`, loaded in `sim` and at its start, keeping its state at each
 /// task start; then reset `sim` to the episode's start.
 pub fn expert_starts(sim: &mut Sim, cfg: &EpisodeConfig, assets: &Assets) -> Result<Vec<Snapshot>, RunError> {
-    let mut expert = OraclePolicy::new(assets).without_images();
+    let mut expert = OraclePolicy::new(assets)
+        .without_images()
+        .with_grasp_mode(sim.config().grasp.mode);
     let mut starts = Starts::default();
     run_episode(sim, &mut expert, &expert_options(), None, &mut starts)?;
     sim.reset(cfg)?;

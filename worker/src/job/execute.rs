@@ -308,7 +308,7 @@ fn run(
     };
     let watch = &mut Watch(control);
     if mode == pb::EvalMode::Offline {
-        let mut expert = OraclePolicy::new(&ctx.assets);
+        let mut expert = OraclePolicy::new(&ctx.assets).with_grasp_mode(grasp);
         let opts = spec::offline_options(&run, ctx.sample_every);
         let out = run_offline(&mut sim, &mut expert, policy, &opts, watch)?;
         return Ok(Ran::tasks(offline_results(&out, log)));
