@@ -163,6 +163,14 @@ fn tracks_parse() {
 
 /// A policy submission with a finished (or active) run carrying exactly these scores.
 #[allow(clippy::too_many_arguments)]
+/// The dev split's standard-observation board of `track` as CSV bytes.
+async fn dev_csv(f: &crate::testutil::Fixture, track: Track) -> bytes::Bytes {
+    (f.state
+        .leaderboard_rendered(track, ObservationTrack::Standard, None, Split::Dev, Format::Csv))
+    .await
+    .unwrap()
+}
+
 async fn policy(
     pool: &sqlx::SqlitePool,
     team: i64,
@@ -329,20 +337,7 @@ async fn control_and_integrated_order_with_baselines_and_infinite_p() {
         json.contains(r#""p":"inf""#) && json.contains(r#""baseline":true"#),
         "{json}"
     );
-    let text = String::from_utf8(
-        f.state
-            .leaderboard_rendered(
-                Track::Integrated,
-                ObservationTrack::Standard,
-                None,
-                Split::Dev,
-                Format::Csv,
-            )
-            .await
-            .unwrap()
-            .to_vec(),
-    )
-    .unwrap();
+    let text = String::from_utf8(dev_csv(&f, Track::Integrated).await.to_vec()).unwrap();
     let mut lines = text.lines();
     assert_eq!(
         lines.next(),
@@ -380,17 +375,7 @@ async fn the_cache_is_dropped_when_a_run_finishes() {
         .register_policy(&f.caller(&token).await, f.request(Split::Dev))
         .await
         .unwrap();
-    let before = f
-        .state
-        .leaderboard_rendered(
-            Track::Control,
-            ObservationTrack::Standard,
-            None,
-            Split::Dev,
-            Format::Csv,
-        )
-        .await
-        .unwrap();
+    let before = dev_csv(&f, Track::Control).await;
     assert!(
         String::from_utf8_lossy(&before).contains(",active,"),
         "{before:?}"
@@ -400,17 +385,7 @@ async fn the_cache_is_dropped_when_a_run_finishes() {
         .report_result(f.worker().await, f.report("w", &job, |_| true, 0.0))
         .await
         .unwrap();
-    let after = f
-        .state
-        .leaderboard_rendered(
-            Track::Control,
-            ObservationTrack::Standard,
-            None,
-            Split::Dev,
-            Format::Csv,
-        )
-        .await
-        .unwrap();
+    let after = dev_csv(&f, Track::Control).await;
     assert!(
         String::from_utf8_lossy(&after).contains("1,alpha,1,1.000000,,finished,false,"),
         "{after:?}"
@@ -670,19 +645,7 @@ async fn runs_are_ranked_with_their_own_grasp_mode_and_the_contests_is_the_defau
         page.contains(&format!(">{old}</a> (abstract grasp)</td>")),
         "{page}"
     );
-    let csv = String::from_utf8(
-        (f.state.leaderboard_rendered(
-            Track::Control,
-            ObservationTrack::Standard,
-            None,
-            Split::Dev,
-            Format::Csv,
-        ))
-        .await
-        .unwrap()
-        .to_vec(),
-    )
-    .unwrap();
+    let csv = String::from_utf8(dev_csv(&f, Track::Control).await.to_vec()).unwrap();
     assert!(
         csv.lines().nth(1).unwrap().ends_with(",standard,physical"),
         "{csv}"
