@@ -161,8 +161,6 @@ fn tracks_parse() {
     assert!("nope".parse::<Track>().is_err());
 }
 
-/// A policy submission with a finished (or active) run carrying exactly these scores.
-#[allow(clippy::too_many_arguments)]
 /// The dev split's standard-observation board of `track` as CSV bytes.
 async fn dev_csv(f: &crate::testutil::Fixture, track: Track) -> bytes::Bytes {
     (f.state
@@ -171,6 +169,8 @@ async fn dev_csv(f: &crate::testutil::Fixture, track: Track) -> bytes::Bytes {
     .unwrap()
 }
 
+/// A policy submission with a finished (or active) run carrying exactly these scores.
+#[allow(clippy::too_many_arguments)]
 async fn policy(
     pool: &sqlx::SqlitePool,
     team: i64,
