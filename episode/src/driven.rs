@@ -21,6 +21,7 @@ use std::time::{Duration, Instant};
 
 use kitchen_r_sim::{Action, Assets, EpisodeConfig, Observation, Sim, StepInfo};
 
+use crate::eval::WrapHook;
 use crate::oracle::OraclePolicy;
 use crate::policy::{
     ACTION_DIM, Frame, HORIZON, MAX_OBSERVATION_HISTORY, Policy, PolicyError, PolicyInput, PolicySpec,
@@ -50,6 +51,9 @@ pub struct DriveOptions {
     /// Run only this plan step, from the expert's state at its start (one sub-task as an
     /// episode); `None` runs the plan from its first step (up to `run.max_tasks`).
     pub only_task: Option<usize>,
+    /// A live view the episode also runs with (the Python environment's `ros2=True`): a hook
+    /// around the episode's own, which like every hook must not change the episode.
+    pub watch: Option<WrapHook>,
 }
 
 impl Default for DriveOptions {
@@ -62,6 +66,7 @@ impl Default for DriveOptions {
             expert: true,
             expert_inline: false,
             only_task: None,
+            watch: None,
         }
     }
 }
@@ -218,11 +223,13 @@ impl DrivenEpisode {
             expert,
             abandoned: false,
         };
+        let watch = opts.watch.clone();
         let thread = std::thread::Builder::new()
             .name("kitchen-r-driven".into())
             .spawn(move || {
                 // A failure was sent as an event; the simulator comes back either way.
-                let _ = drive(&mut sim, &cfg, starts_from, relay, &run, first, ev_tx);
+                let how = (&run, first, watch.as_ref());
+                let _ = drive(&mut sim, &cfg, starts_from, relay, how, ev_tx);
                 sim
             })
             .map_err(|e| DriveError::Sim(format!("cannot start the episode's thread: {e}")))?;
@@ -364,8 +371,7 @@ fn drive(
     cfg: &EpisodeConfig,
     starts_from: Option<Assets>,
     mut relay: Relay,
-    run: &RunOptions,
-    first: usize,
+    (run, first, watch): (&RunOptions, usize, Option<&WrapHook>),
     events: Sender<Event>,
 ) -> Result<(), ()> {
     let fail = |e: String| {
@@ -386,7 +392,10 @@ fn drive(
         None => None,
     };
     let mut hook = TaskEnds(events.clone());
-    let outcome = match run_from_task(sim, &mut relay, run, starts.as_deref(), &mut hook, first) {
+    let ran = WrapHook::around(watch, &mut hook, |h| {
+        run_from_task(sim, &mut relay, run, starts.as_deref(), h, first)
+    });
+    let outcome = match ran {
         Ok(o) => o,
         Err(e) => {
             fail(e.to_string());

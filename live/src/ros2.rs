@@ -11,9 +11,11 @@
 
 mod config;
 mod dds;
+mod episodes;
 
 pub use config::{DOMAIN_ENV, Durability, MAX_DOMAIN_ID, Network, Reliability, Ros2Config};
 pub use dds::Ros2Publisher;
+pub use episodes::Ros2Episodes;
 
 /// Why the DDS side did not start.
 #[derive(Debug, thiserror::Error)]

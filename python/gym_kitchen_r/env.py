@@ -95,7 +95,14 @@ class KitchenREnv(gym.Env):
     ``[grasp] mode``; any other value is a ``ValueError`` naming the two),
     ``task_time_limit`` (sim seconds per task, 120), ``max_tasks`` (run only the first N plan
     steps; 0 = all), ``instruction`` (always this instruction id; otherwise ``reset`` picks
-    one, or takes ``options={"instruction": id}``).
+    one, or takes ``options={"instruction": id}``), ``ros2`` (publish each episode live as ROS 2
+    topics over DDS, the topics, types and frames of ``kitchen-r eval --ros2``: both cameras,
+    LiDAR, ``/tf``, ``/odom``, ``/imu``, ``/clock``, the action and the sub-task, at every step;
+    best effort, the episode is the same with it on or off), ``ros2_config`` (a ``live.toml``
+    whose ``[ros2]`` table sets domain, network and QoS; default ``configs/live.toml``: domain 0,
+    loopback only; ``ROS_DOMAIN_ID`` overrides the domain), ``ros2_wait`` (with ``ros2``: wait
+    up to this many seconds at construction for a ROS 2 subscriber, as ``--ros2-wait``; 0 waits
+    not). All environments of a process share one publisher, one episode at a time holding it.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
@@ -117,6 +124,9 @@ class KitchenREnv(gym.Env):
         max_tasks: int = 0,
         instruction: str | None = None,
         render_mode: str | None = None,
+        ros2: bool = False,
+        ros2_config: str | None = None,
+        ros2_wait: float = 0.0,
     ):
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode {render_mode!r}: only 'rgb_array' is supported")
@@ -136,6 +146,9 @@ class KitchenREnv(gym.Env):
             privileged_observation=privileged_observation,
             randomise=randomise,
             grasp_mode=grasp_mode,
+            ros2=ros2,
+            ros2_config=None if ros2_config is None else str(ros2_config),
+            ros2_wait=ros2_wait,
         )
         self.render_mode = render_mode
         self._images, self._depth, self._history = images, depth, history
@@ -315,6 +328,15 @@ class KitchenREnv(gym.Env):
             return None
         views = [v[-1] if self._history > 1 else v for v in self._last_obs["images"].values()]
         return np.concatenate(views, axis=1)
+
+    def ros2_stats(self) -> dict | None:
+        """With ``ros2=True``: ``{"domain_id", "written", "dropped"}``, the samples the process's
+        publisher wrote to DDS and those DDS dropped (a full send window); ``None`` otherwise or
+        after ``close()``."""
+        counts = self._native.ros2_counts()
+        if counts is None:
+            return None
+        return dict(zip(("domain_id", "written", "dropped"), counts))
 
     def close(self):
         self._native.close()

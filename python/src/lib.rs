@@ -8,6 +8,7 @@
 //! rule of its own. The simulator steps with the GIL released.
 
 mod convert;
+mod live;
 mod samples;
 
 use std::sync::{Mutex, MutexGuard, PoisonError};
@@ -37,6 +38,8 @@ struct Inner {
     /// A simulator between episodes (built once, reset for each episode as `eval` does).
     idle: Option<Sim>,
     episode: Option<DrivenEpisode>,
+    /// `ros2=True`: each episode published live as ROS 2 topics (`live`).
+    live: Option<live::Live>,
 }
 
 /// Errors of this layer, mapped once to Python exceptions.
@@ -125,8 +128,12 @@ impl Inner {
                 .0
             }
         };
+        let watch = (self.live.as_mut())
+            .map(|l| l.watch().map_err(EnvError::Setup))
+            .transpose()?;
         let opts = DriveOptions {
             only_task: task,
+            watch,
             ..self.opts.clone()
         };
         self.episode = Some(DrivenEpisode::launch(sim, cfg, &self.assets, &opts)?);
@@ -257,9 +264,10 @@ impl NativeEnv {
     /// `split`: `dev` (the public split with plans) or `test` with `ground_truth` (a JSON Lines
     /// file of instructions with plans, the organiser's). See `gym_kitchen_r.KitchenREnv`.
     #[new]
-    #[pyo3(signature = (split="dev", ground_truth=None, images=true, depth=false, teleport_on_failure=true, history=1, task_time_limit=120.0, max_tasks=0, expert=true, expert_inline=false, privileged=false, privileged_observation=false, randomise=false, grasp_mode=None))]
+    #[pyo3(signature = (split="dev", ground_truth=None, images=true, depth=false, teleport_on_failure=true, history=1, task_time_limit=120.0, max_tasks=0, expert=true, expert_inline=false, privileged=false, privileged_observation=false, randomise=false, grasp_mode=None, ros2=false, ros2_config=None, ros2_wait=0.0))]
     #[allow(clippy::too_many_arguments)]
     fn new(
+        py: Python<'_>,
         split: &str,
         ground_truth: Option<std::path::PathBuf>,
         images: bool,
@@ -274,6 +282,9 @@ impl NativeEnv {
         privileged_observation: bool,
         randomise: bool,
         grasp_mode: Option<&str>,
+        ros2: bool,
+        ros2_config: Option<std::path::PathBuf>,
+        ros2_wait: f64,
     ) -> PyResult<NativeEnv> {
         if !(1..=8).contains(&history) {
             return Err(PyValueError::new_err("history must be 1 to 8 control steps"));
@@ -287,6 +298,10 @@ impl NativeEnv {
             sim_cfg.grasp.mode = mode.parse().map_err(PyValueError::new_err)?;
         }
         let sensors = SensorsConfig::load_default().map_err(setup("configs/sensors.toml"))?;
+        let live = match ros2 {
+            true => Some(live::start(py, ros2_config.as_deref(), &sensors, ros2_wait)?),
+            false => None,
+        };
         let opts = DriveOptions {
             run: RunOptions {
                 task_time_limit,
@@ -299,6 +314,7 @@ impl NativeEnv {
             expert: expert || expert_inline,
             expert_inline,
             only_task: None,
+            watch: None,
         };
         Ok(NativeEnv {
             inner: Mutex::new(Inner {
@@ -311,6 +327,7 @@ impl NativeEnv {
                 randomise,
                 idle: None,
                 episode: None,
+                live,
             }),
             depth,
             show: convert::Show {
@@ -382,14 +399,24 @@ impl NativeEnv {
         Ok(chunk.iter().map(|a| a.to_vec()).collect())
     }
 
-    /// Stop the current episode, if any.
+    /// Stop the current episode, if any, and let go of the ROS 2 publisher (the next reset
+    /// takes it again).
     fn close(&self, py: Python<'_>) {
         py.detach(|| {
             let mut inner = self.lock();
             if let Some(old) = inner.episode.take() {
                 inner.idle = old.finish().or(inner.idle.take());
             }
+            if let Some(l) = inner.live.as_mut() {
+                l.release();
+            }
         });
+    }
+
+    /// `ros2=True`: `(domain id, samples written to DDS, samples DDS dropped)` of the
+    /// process's publisher; `None` without ros2 or after `close()`.
+    fn ros2_counts(&self) -> Option<(u16, u64, u64)> {
+        self.lock().live.as_ref().and_then(|l| l.counts())
     }
 }
 

@@ -12,9 +12,11 @@ use figment::providers::{Env, Format, Serialized, Toml};
 use kitchen_r_core::GraspMode;
 use serde::{Deserialize, Serialize};
 
+mod live;
 mod secrets;
 mod sessions;
 mod video;
+pub(crate) use live::LiveConfig;
 pub(crate) use secrets::SecretsConfig;
 pub(crate) use sessions::SessionConfig;
 pub(crate) use video::{Prerender, VideoConfig};
@@ -94,6 +96,7 @@ pub struct Config {
     pub control: ControlConfig,
     pub policy: PolicyConfig,
     pub video: VideoConfig,
+    pub live: LiveConfig,
     pub sessions: SessionConfig,
     pub secrets: SecretsConfig,
 }
@@ -244,6 +247,7 @@ impl Default for Config {
             control: ControlConfig::default(),
             policy: PolicyConfig::default(),
             video: VideoConfig::default(),
+            live: LiveConfig::default(),
             sessions: SessionConfig::default(),
             secrets: SecretsConfig::default(),
         }

@@ -109,6 +109,8 @@ impl JobSpec {
                 Some(PrivilegedScope::SubTask) => pb::PrivilegedScope::SubTask,
             }) as i32,
             grasp_mode: pb::GraspMode::from(self.grasp) as i32,
+            // Set at lease from `[live]` (grpc_worker), dev split only.
+            live_ros2: false,
         }
     }
 

@@ -9,6 +9,7 @@ use kitchen_r_proto::worker::v1 as pb;
 use pb::worker_server::Worker;
 use tonic::{Request, Response, Status};
 
+use crate::config::{LiveConfig, VideoConfig};
 use crate::episodes::TaskOutcome;
 use crate::grpc::caller;
 use crate::service::AppState;
@@ -35,15 +36,16 @@ impl WorkerService {
 /// not stored with the job, so the organiser can turn it off for queued work too. `test` says
 /// the episode is of the test split (recorded only with `[video] test_split`). The video is
 /// always wanted on demand (issue #26): the worker uploads the trace, and a render job makes
-/// the video when it is first asked for.
-fn job(j: LeasedJob, video: &crate::config::VideoConfig, store_ok: bool, test: bool) -> pb::Job {
+/// the video when it is first asked for. Live ROS 2 publishing (`[live] ros2`) is likewise
+/// decided here at lease, and never for a test-split episode: its topics would show the hidden
+/// plan's sub-tasks and where the robot was sent.
+fn job(j: LeasedJob, (video, live): (&VideoConfig, &LiveConfig), store_ok: bool, test: bool) -> pb::Job {
     let mut episode = j.spec.episode_proto(&j.policy_episode_id);
-    episode.record_video = video.enabled
-        && store_ok
-        && (video.test_split || !test)
-        && episode.mode == pb::EvalMode::Online as i32;
+    let online = episode.mode == pb::EvalMode::Online as i32;
+    episode.record_video = video.enabled && store_ok && (video.test_split || !test) && online;
     episode.video_on_demand = episode.record_video;
     episode.video_max_bytes = video.max_bytes;
+    episode.live_ros2 = live.ros2 && !test && online;
     pb::Job {
         job_id: j.id,
         attempt: j.attempt,
@@ -57,7 +59,7 @@ fn job(j: LeasedJob, video: &crate::config::VideoConfig, store_ok: bool, test: b
 }
 
 /// A render job on the wire (`Job.render`): the trace and the stored result to check against.
-fn render_job(r: LeasedRender, video: &crate::config::VideoConfig) -> pb::Job {
+fn render_job(r: LeasedRender, video: &VideoConfig) -> pb::Job {
     pb::Job {
         job_id: r.id,
         attempt: r.attempt,
@@ -94,11 +96,12 @@ impl Worker for WorkerService {
             .lease_work(worker, &m.worker_id, m.max_jobs, m.wait_ms, m.max_renders > 0)
             .await?;
         let store_ok = self.state.video_dir().is_some();
-        let video = &self.state.config().video;
+        let config = self.state.config();
+        let (video, live) = (&config.video, &config.live);
         let mut jobs: Vec<pb::Job> = (jobs.into_iter())
             .map(|j| {
                 let test = self.state.content().is_test(&j.spec.instruction_id);
-                job(j, video, store_ok, test)
+                job(j, (video, live), store_ok, test)
             })
             .collect();
         jobs.extend(render.map(|r| render_job(r, video)));

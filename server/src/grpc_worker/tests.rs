@@ -217,3 +217,52 @@ async fn reference_runs_reach_workers_as_privileged() {
         .jobs;
     assert!(jobs.iter().all(|j| j.episode.as_ref().unwrap().privileged));
 }
+
+/// `[live] ros2` (issue #28) reaches the workers with the online dev-split jobs only: never
+/// with a test-split job (its topics would show the hidden plan), nor an offline one; and with
+/// the setting off, with none.
+#[tokio::test]
+async fn live_ros2_is_sent_with_online_dev_jobs_only() {
+    for on in [true, false] {
+        let f = fixture(FakeProbe::ok(64), |c| {
+            c.control.dev_episodes = 1;
+            c.quota.concurrent_runs = 0;
+            c.live.ros2 = on;
+        })
+        .await;
+        let caller = f.caller(&f.team("alpha").await).await;
+        for split in [Split::Dev, Split::Test] {
+            f.state.register_policy(&caller, f.request(split)).await.unwrap();
+        }
+        let mut client = f.worker_client().await;
+        let mut seen = std::collections::BTreeMap::<(bool, i32), (usize, usize)>::new();
+        loop {
+            let req = with_token(
+                pb::LeaseRequest {
+                    max_jobs: 64,
+                    ..lease_req()
+                },
+                WORKER,
+            );
+            let jobs = client.lease(req).await.unwrap().into_inner().jobs;
+            if jobs.is_empty() {
+                break;
+            }
+            for e in jobs.iter().map(|j| j.episode.as_ref().unwrap()) {
+                let test = f.state.content().is_test(&e.instruction_id);
+                let n = seen.entry((test, e.mode)).or_default();
+                n.0 += 1;
+                n.1 += usize::from(e.live_ros2);
+            }
+        }
+        let online = pb::EvalMode::Online as i32;
+        for (&(test, mode), &(jobs, live)) in &seen {
+            let want = if on && !test && mode == online { jobs } else { 0 };
+            assert_eq!(live, want, "test split {test}, mode {mode}: {seen:?}");
+        }
+        assert!(
+            seen.contains_key(&(true, online)) && seen.contains_key(&(false, online)),
+            "{seen:?}"
+        );
+    }
+}

@@ -319,6 +319,7 @@ fn run(
         None
     };
     let mut hook = PathHook::new(watch);
+    let live = live_view(spec, ctx, log);
     let mut tracing = None;
     // A video wanted on demand: the trace, which renders it later, instead of the video now.
     let on_demand = spec.record_video && spec.video_on_demand;
@@ -329,12 +330,12 @@ fn run(
     let (out, recording) = if spec.record_video && !on_demand {
         let video = EpisodeVideo::new(&cfg.plan, n_tasks, spec.video_max_bytes as usize);
         let mut recorder = VideoHook::new(&mut hook, video);
-        let out = WrapHook::around(ctx.watch.as_ref(), &mut recorder, |h| {
+        let out = WrapHook::around(live.as_ref(), &mut recorder, |h| {
             run_episode(&mut sim, policy, &run, starts.as_deref(), h)
         })?;
         (out, Some(recorder.into_video()))
     } else {
-        let out = WrapHook::around(ctx.watch.as_ref(), &mut hook, |h| {
+        let out = WrapHook::around(live.as_ref(), &mut hook, |h| {
             run_episode(&mut sim, policy, &run, starts.as_deref(), h)
         })?;
         (out, None)
@@ -351,6 +352,21 @@ fn run(
         video,
         trace,
     })
+}
+
+/// The live view the online episode runs with: the command line's (`eval --foxglove`,
+/// `--ros2`), else live ROS 2 topics when the job asks for them (`live_ros2`, the server's
+/// `[live] ros2`, dev split only).
+fn live_view(spec: &pb::EpisodeSpec, ctx: &JobContext, log: &mut Log) -> Option<WrapHook> {
+    if ctx.watch.is_some() || !spec.live_ros2 {
+        return ctx.watch.clone();
+    }
+    let watch = ctx.live.watch(&ctx.sensors);
+    log.line(match &watch {
+        Some(_) => "published live as ROS 2 topics (server [live] ros2)",
+        None => "live ROS 2 topics asked for, not published: the DDS participant did not start (worker log)",
+    });
+    watch
 }
 
 /// The episode's MP4, its cost logged; a failed recording is logged and dropped.

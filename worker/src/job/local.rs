@@ -173,6 +173,7 @@ pub(crate) fn local_job(ins: &Instruction, url: &str, s: &LocalSettings, remote:
             video_max_bytes: 0,
             privileged_observations: super::spec::privileged_scope_to_wire(s.privileged_observations),
             grasp_mode: pb::GraspMode::from(s.grasp.unwrap_or_default()) as i32,
+            live_ros2: false,
         }),
         policy: Some(pb::PolicyEndpoint {
             url: url.to_string(),

@@ -8,6 +8,7 @@
 pub mod client;
 pub mod cores;
 mod execute;
+mod live;
 pub mod local;
 mod path;
 mod render;
@@ -22,6 +23,7 @@ use serde::{Deserialize, Serialize};
 
 pub use client::run_worker;
 pub use execute::{Executed, JobControl, execute_job, execute_job_recording, execute_job_traced};
+pub use live::LiveRos2;
 
 use kitchen_r_contract::{AllowedNetworks, RemoteConfig};
 use kitchen_r_episode::runner::RunError;
@@ -242,6 +244,9 @@ pub struct JobContext {
     pub sample_every: usize,
     /// A live view online episodes also run with (`eval --foxglove`); the workers have none.
     pub watch: Option<kitchen_r_episode::eval::WrapHook>,
+    /// Live ROS 2 topics of the jobs that ask for them (`EpisodeSpec.live_ros2`, the server's
+    /// `[live] ros2`), started at the first.
+    pub live: LiveRos2,
 }
 
 impl JobContext {
@@ -263,6 +268,7 @@ impl JobContext {
             },
             sample_every: sample_every.max(1),
             watch: None,
+            live: LiveRos2::default(),
         })
     }
 
@@ -280,6 +286,7 @@ impl JobContext {
             remote: cfg.remote()?,
             sample_every: cfg.sample_every.max(1),
             watch: None,
+            live: LiveRos2::default(),
         })
     }
 }

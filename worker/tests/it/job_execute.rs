@@ -55,6 +55,7 @@ pub(crate) fn job(url: &str, mode: pb::EvalMode, steps: u32, privileged: bool) -
             video_max_bytes: 0,
             privileged_observations: 0,
             grasp_mode: 0,
+            live_ros2: false,
         }),
         policy: Some(pb::PolicyEndpoint {
             url: url.to_string(),

@@ -237,6 +237,7 @@ fn job(id: i64, policy: &str) -> pb::Job {
             video_max_bytes: 0,
             privileged_observations: 0,
             grasp_mode: 0,
+            live_ros2: false,
         }),
         policy: Some(pb::PolicyEndpoint {
             url: policy.to_string(),

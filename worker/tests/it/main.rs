@@ -15,6 +15,7 @@ mod driven;
 mod job_execute;
 mod job_worker;
 mod lerobot_export;
+mod live_ros2;
 mod offline;
 mod oracle;
 mod place_reach;
