@@ -59,6 +59,12 @@ pub struct ArticulationConfig {
     /// Natural frequency of the contact softness (Hz; rapier's default is 30): stiffer contacts
     /// keep squeezed light objects from sinking millimetres into the fingers.
     pub contact_frequency: f64,
+    /// Rapier's solver in this mode: substeps per physics step (`num_solver_iterations`; each
+    /// rebuilds and factorises the arm's mass matrix, the mode's main cost) and constraint
+    /// iterations per substep (`num_internal_pgs_iterations`). The abstract mode keeps
+    /// `[physics] solver_iterations` substeps of one iteration each.
+    pub solver_iterations: u32,
+    pub pgs_iterations: u32,
 }
 
 impl Default for ArticulationConfig {
@@ -71,6 +77,8 @@ impl Default for ArticulationConfig {
             finger_damping: 40.0,
             finger_friction: 1.0,
             contact_frequency: 120.0,
+            solver_iterations: 1,
+            pgs_iterations: 4,
         }
     }
 }
@@ -226,9 +234,13 @@ impl SimConfig {
         if gains.iter().any(|v| v.is_nan() || *v <= 0.0)
             || a.finger_friction.is_nan()
             || a.finger_friction < 0.0
+            || a.solver_iterations == 0
+            || a.pgs_iterations == 0
         {
             return Err(SimError::Config(
-                "articulation: gains, force and contact frequency > 0, finger_friction >= 0".into(),
+                "articulation: gains, force and contact frequency > 0, finger_friction >= 0, \
+                 solver_iterations and pgs_iterations >= 1"
+                    .into(),
             ));
         }
         Ok(())

@@ -51,9 +51,29 @@ pub(crate) fn set_groups(world: &mut PhysicsWorld, body: RigidBodyHandle, groups
 /// before they touch.
 const TOUCH_DISTANCE: f32 = 0.001;
 
-fn touching(pair: &ContactPair) -> bool {
-    pair.find_deepest_contact()
-        .is_some_and(|(_, c)| c.dist <= TOUCH_DISTANCE)
+/// Where a collider is now: its body's pose (the collider's own copy is synchronised only at the
+/// end of a step) times its offset on the body.
+fn collider_pose(world: &PhysicsWorld, co: &Collider) -> Pose {
+    match co.parent().and_then(|b| world.bodies.get(b)) {
+        Some(body) => *body.position() * co.position_wrt_parent().copied().unwrap_or_default(),
+        None => *co.position(),
+    }
+}
+
+/// Whether colliders `a` and `b` touch, by a contact query at their bodies' current poses.
+///
+/// Not from the narrow phase's manifolds: with the physical mode's single solver substep a
+/// manifold between two moving bodies can keep the distance of an earlier step (a squeezing
+/// finger read 15 mm away), while the broad phase's pair list is current.
+fn touching(world: &PhysicsWorld, a: &Collider, b: &Collider) -> bool {
+    let pos12 = collider_pose(world, a).inv_mul(&collider_pose(world, b));
+    world
+        .narrow_phase
+        .query_dispatcher()
+        .contact(&pos12, a.shape(), b.shape(), TOUCH_DISTANCE)
+        .ok()
+        .flatten()
+        .is_some_and(|c| c.dist <= TOUCH_DISTANCE)
 }
 
 impl Sim {
@@ -69,23 +89,24 @@ impl Sim {
             let mut touched = [false; 2];
             let mut supported = false;
             for c in self.world.bodies[o.body].colliders() {
+                let Some(co) = self.world.colliders.get(*c) else {
+                    continue;
+                };
                 for pair in self.world.contact_pairs_with(*c) {
-                    if !touching(pair) {
-                        continue;
-                    }
                     let other = if pair.collider1 == *c {
                         pair.collider2
                     } else {
                         pair.collider1
                     };
+                    let Some(oco) = self.world.colliders.get(other) else {
+                        continue;
+                    };
+                    if !touching(&self.world, co, oco) {
+                        continue;
+                    }
                     if let Some(k) = fingers.iter().position(|f| *f == other) {
                         touched[k] = true;
-                    } else if self
-                        .world
-                        .colliders
-                        .get(other)
-                        .is_none_or(|co| Tag::unpack(co.user_data).owner != Owner::Robot)
-                    {
+                    } else if Tag::unpack(oco.user_data).owner != Owner::Robot {
                         supported = true;
                     }
                 }

@@ -4,9 +4,9 @@
 //!
 //! Like the paper's articulation controller: RMPflow's joint accelerations are integrated into
 //! position and velocity targets (`rmp.rs`, unchanged) and each joint's motor servos to them
-//! (stiffness, damping, the effort limit as its maximum torque). The links carry no gravity (an
-//! ideal gravity compensation, as an articulation controller applies), so the motors' torque goes
-//! to following the targets and carrying the load.
+//! (stiffness, damping, the description's effort limit as its maximum torque). The links carry
+//! no gravity (an ideal gravity compensation, as an articulation controller applies), so the
+//! motors' torque goes to following the targets and carrying the load.
 //!
 //! The multibody's root is a weightless mount body fixed to the base by an impulse joint: the
 //! base stays the velocity-driven body it is in the abstract mode, and the arm moves with it at
@@ -25,8 +25,6 @@ use crate::material::{Material, Materials, Owner};
 
 /// Link masses (kg), waist to wrist (the last one includes the palm): a ViperX-300-class arm.
 const LINK_MASS: [f32; DOF] = [0.9, 0.8, 0.6, 0.4, 0.3, 0.35];
-/// Joint effort limits (N·m), waist to wrist: the ViperX 300 s servos' (XM540/XM430 class).
-const EFFORT: [f32; DOF] = [10.0, 20.0, 15.0, 2.0, 5.0, 1.0];
 /// Mass of each finger (kg).
 const FINGER_MASS: f32 = 0.03;
 /// Mass of the mount body between the base and the waist (kg).
@@ -71,6 +69,11 @@ impl Robot {
         let p = &mut world.integration_parameters;
         p.contact_softness.natural_frequency = config.contact_frequency as f32;
         p.static_contact_softness.natural_frequency = 2.0 * config.contact_frequency as f32;
+        // The multibody's mass matrix is rebuilt and factorised at every solver substep (about
+        // 25 µs each for this arm), so the physical mode solves in fewer substeps with more
+        // constraint iterations each (docs/twin/robot.md has the figures).
+        p.num_solver_iterations = config.solver_iterations as usize;
+        p.num_internal_pgs_iterations = config.pgs_iterations as usize;
 
         let base_iso = robot.base_iso(world);
         let fk = robot.arm.forward(&state.arm.q);
@@ -125,7 +128,7 @@ impl Robot {
                     config.joint_stiffness as f32,
                     config.joint_damping as f32,
                 )
-                .motor_max_force(EFFORT[i]);
+                .motor_max_force(desc.arm.joints[i].effort as f32);
             let handle = world
                 .insert_multibody_joint(parent, h, joint)
                 .expect("a chain of new bodies is a valid multibody");
