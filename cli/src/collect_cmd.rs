@@ -55,6 +55,10 @@ pub(crate) struct CollectArgs {
     /// Monitor thresholds [default: configs/collect.toml].
     #[arg(long, value_name = "FILE")]
     config: Option<PathBuf>,
+    /// Grasp mode of every collected episode (abstract or physical): the expert drives the twin
+    /// in this mode [default: configs/sim.toml's `[grasp] mode`]. Written to manifest.jsonl.
+    #[arg(long, value_name = "MODE")]
+    grasp: Option<kitchen_r_core::GraspMode>,
     /// Print the summary as one JSON object.
     #[arg(long)]
     json: bool,
@@ -98,6 +102,7 @@ pub(crate) fn collect_cmd(args: CollectArgs) -> anyhow::Result<()> {
         depth,
         batch,
         video_codec: args.video_codec,
+        grasp: args.grasp,
         progress: !args.json,
         ..CollectOptions::new(args.out, args.episodes.unwrap_or(0))
     };

@@ -126,6 +126,8 @@ pub struct CollectOptions {
     pub lerobot_episodes_per_file: usize,
     /// The LeRobotDataset's video codec; `None`: the dataset's own when appending, else H.264.
     pub video_codec: Option<crate::video::Codec>,
+    /// Grasp mode of every episode (`collect --grasp`); `None` = `configs/sim.toml`'s.
+    pub grasp: Option<kitchen_r_core::GraspMode>,
     /// Draw an indicatif progress bar on stderr (hidden anyway when stderr is not a terminal).
     pub progress: bool,
     /// Publish the episodes live (`collect --foxglove`/`--ros2`, [`crate::live`]): one at a
@@ -154,6 +156,7 @@ impl CollectOptions {
             batch: None,
             lerobot_episodes_per_file: crate::lerobot::EPISODES_PER_FILE,
             video_codec: None,
+            grasp: None,
             progress: false,
             live: None,
         }
@@ -172,6 +175,9 @@ pub struct ManifestEntry {
     pub episode_id: String,
     pub instruction_id: String,
     pub seed: u64,
+    /// The grasp mode the episode ran in (manifests written before it existed: abstract).
+    #[serde(default)]
+    pub grasp_mode: kitchen_r_core::GraspMode,
     pub kept: bool,
     /// The monitor or failure that discarded the episode.
     #[serde(default, skip_serializing_if = "Option::is_none")]

@@ -9,6 +9,7 @@ use std::time::Instant;
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use kitchen_r_core::dataset::{Instruction, Split};
+use kitchen_r_core::GraspMode;
 use kitchen_r_sim::{Assets, EpisodeConfig, EpisodeParams, Sim, SimConfig, SimError};
 
 use super::hook::{Recorder, Trip};
@@ -89,6 +90,7 @@ fn one(
         episode_id: cfg.id.clone(),
         instruction_id: String::new(),
         seed: cfg.seed,
+        grasp_mode: GraspMode::Abstract,
         kept: false,
         reason: None,
         reason_kind: None,
@@ -102,6 +104,9 @@ fn one(
         None => {
             let mut sim_cfg = SimConfig::load_default()?;
             sim_cfg.monitors = opts.config.monitors.clone();
+            if let Some(mode) = opts.grasp {
+                sim_cfg.grasp.mode = mode;
+            }
             Sim::new(assets.clone(), sim_cfg, sensors(opts)?, cfg).map(|(s, _)| *sim = Some(s))
         }
     };
@@ -118,6 +123,7 @@ fn one(
         Ok(()) => {}
     }
     let s = sim.as_mut().ok_or(CollectError::Panicked)?;
+    entry.grasp_mode = s.config().grasp.mode;
     let meta = EpisodeMeta {
         episode_id: cfg.id.clone(),
         scene: cfg.scene.clone(),
@@ -287,7 +293,10 @@ pub fn collect(opts: &CollectOptions) -> Result<CollectSummary, CollectError> {
             let (tx, next, todo, assets, params, ins) = (tx.clone(), &next, &todo, &assets, &params, &ins);
             let staging = staging.as_deref().map(|s| (s, video));
             scope.spawn(move || {
-                let mut oracle = OraclePolicy::new(assets);
+                let mut oracle = match opts.grasp {
+                    Some(mode) => OraclePolicy::new(assets).with_grasp_mode(mode),
+                    None => OraclePolicy::new(assets),
+                };
                 let mut sim = None;
                 while let Some(&i) = todo.get(next.fetch_add(1, Ordering::SeqCst)) {
                     let r = episode(assets, params, ins, opts, i).and_then(|(cfg, text, id)| {

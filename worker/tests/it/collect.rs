@@ -139,10 +139,12 @@ fn a_rerun_skips_finished_episodes() {
 }
 
 #[test]
-fn an_episode_that_trips_a_monitor_is_discarded_with_its_reason() {
+fn an_episode_that_trips_a_monitor_is_discarded_with_its_reason_and_grasp_mode() {
     let dir = tempfile::tempdir().unwrap();
     let mut opts = options(dir.path(), 1, "mcap,hdf5");
     opts.config.monitors.move_time_limit = 1.0;
+    // `collect --grasp physical`: the episode runs (and the manifest says it ran) in that mode.
+    opts.grasp = Some(kitchen_r_core::GraspMode::Physical);
     let s = collect(&opts).unwrap();
     assert_eq!(s.kept, 0);
     assert_eq!(s.discarded.get("time_limit"), Some(&1), "{s:?}");
@@ -151,6 +153,7 @@ fn an_episode_that_trips_a_monitor_is_discarded_with_its_reason() {
         !e.kept && e.reason.as_deref().is_some_and(|r| r.contains("1 s limit")),
         "{e:?}"
     );
+    assert_eq!(e.grasp_mode, kitchen_r_core::GraspMode::Physical, "{e:?}");
     let files: Vec<_> = std::fs::read_dir(dir.path())
         .unwrap()
         .filter_map(|e| e.ok())
