@@ -8,8 +8,8 @@ use std::sync::mpsc;
 use std::time::Instant;
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use kitchen_r_core::dataset::{Instruction, Split};
 use kitchen_r_core::GraspMode;
+use kitchen_r_core::dataset::{Instruction, Split};
 use kitchen_r_sim::{Assets, EpisodeConfig, EpisodeParams, Sim, SimConfig, SimError};
 
 use super::hook::{Recorder, Trip};
