@@ -120,6 +120,10 @@ fn a_live_ros2_job_is_published_to_a_cyclone_dds_subscriber_and_one_without_publ
     );
     assert_eq!(published.platform_error, "", "{}", published.log_tail);
     assert!(published.tasks.iter().all(|t| t.success), "{:?}", published.tasks);
+    eprintln!(
+        "episode wall: {} ms without live_ros2, {} ms published to a subscriber reading every message",
+        plain.wall_ms, published.wall_ms
+    );
     // Debug text, bit for bit (the path's NaNs, no object held, are equal as text only).
     let result = |r: &pb::EpisodeResult| format!("{:?}", (&r.tasks, &r.path));
     assert!(
