@@ -84,35 +84,10 @@ impl Sim {
     }
 
     fn physical_hold(&self) -> Option<Held> {
-        let fingers = self.robot.bodies.fingers;
-        let found = self.objects.iter().position(|o| {
-            let mut touched = [false; 2];
-            let mut supported = false;
-            for c in self.world.bodies[o.body].colliders() {
-                let Some(co) = self.world.colliders.get(*c) else {
-                    continue;
-                };
-                for pair in self.world.contact_pairs_with(*c) {
-                    let other = if pair.collider1 == *c {
-                        pair.collider2
-                    } else {
-                        pair.collider1
-                    };
-                    let Some(oco) = self.world.colliders.get(other) else {
-                        continue;
-                    };
-                    if !touching(&self.world, co, oco) {
-                        continue;
-                    }
-                    if let Some(k) = fingers.iter().position(|f| *f == other) {
-                        touched[k] = true;
-                    } else if Tag::unpack(oco.user_data).owner != Owner::Robot {
-                        supported = true;
-                    }
-                }
-            }
-            touched == [true, true] && !supported
-        })?;
+        let found = self
+            .objects
+            .iter()
+            .position(|o| self.pinched_off_its_support(o.body))?;
         let tcp = self.robot.tcp_world(&self.world, &self.dynamic.robot);
         let pose = pose_to_iso(self.world.bodies[self.objects[found].body].position());
         Some(Held {
@@ -120,6 +95,40 @@ impl Sim {
             width: self.robot.measured_gap(&self.world).unwrap_or(0.0),
             offset: tcp.inverse() * pose,
         })
+    }
+
+    /// Both fingers touch `body` and nothing but the robot does. Contact queries cost
+    /// microseconds each, so only the broad phase's pairs are queried, the fingers first.
+    fn pinched_off_its_support(&self, body: RigidBodyHandle) -> bool {
+        let w = &self.world;
+        let pairs = || {
+            w.bodies[body].colliders().iter().flat_map(move |c| {
+                w.contact_pairs_with(*c).map(move |p| {
+                    let other = if p.collider1 == *c {
+                        p.collider2
+                    } else {
+                        p.collider1
+                    };
+                    (*c, other)
+                })
+            })
+        };
+        let touch = |(a, b): (ColliderHandle, ColliderHandle)| match (w.colliders.get(a), w.colliders.get(b))
+        {
+            (Some(a), Some(b)) => touching(w, a, b),
+            _ => false,
+        };
+        let robot = |h: ColliderHandle| {
+            w.colliders
+                .get(h)
+                .is_some_and(|co| Tag::unpack(co.user_data).owner == Owner::Robot)
+        };
+        self.robot
+            .bodies
+            .fingers
+            .iter()
+            .all(|f| pairs().any(|(c, o)| o == *f && touch((c, o))))
+            && !pairs().any(|(c, o)| !robot(o) && touch((c, o)))
     }
 
     /// Attach an object whose grasp point (or centre) is between the closing fingers; release on open.
