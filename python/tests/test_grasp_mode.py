@@ -24,18 +24,17 @@ def test_the_physical_expert_through_the_env_is_the_physical_eval_episode():
     binary = os.environ.get("KITCHEN_R_BIN", "target/debug/kitchen-r")
     assert os.path.exists(binary), f"{binary} is missing: build it (cargo build) or set KITCHEN_R_BIN"
     out = subprocess.run(
-        [binary, "eval", "--policy", "builtin:oracle", "--episodes", "4", "--seed", "0", "--grasp", "physical", "--json"],
+        [binary, "eval", "--policy", "builtin:oracle", "--episodes", "1", "--seed", "0", "--grasp", "physical", "--json"],
         check=True,
         capture_output=True,
         text=True,
     )
     report = json.loads(out.stdout)
     assert report["grasp_mode"] == "physical"
-    # dev-0004: every task succeeds physically. (After a failed task the env's teleported start
-    # and its episode clock differ from eval's, issue #27's note: compared here is a clean episode.)
-    (want,) = [e for e in report["episodes"] if e["episode_id"] == "dev-0004"]
-    assert all(t["success"] for t in want["tasks"]), want
-    env = KitchenREnv(images=False, grasp_mode="physical")
+    (want,) = report["episodes"]
+    # `eval` runs the built-in oracle without teleports (they are for endpoint runs), so the env
+    # does too; the episode then compares in full, a physically failed task included.
+    env = KitchenREnv(images=False, grasp_mode="physical", teleport_on_failure=False)
     env.reset(seed=0, options={"instruction": want["episode_id"]})
     terminated = False
     while not terminated:
