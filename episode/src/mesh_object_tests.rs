@@ -1,6 +1,6 @@
-//! An object from a glTF 2.0 mesh (issue #27 item 3) with catalogue changes only: the cup's
-//! cylinder replaced by a mesh file of the same cup, and the oracle completes a dev instruction
-//! that picks and places it. Here because the oracle policy lives in this crate.
+//! An object from a glTF 2.0, OBJ or STL mesh (issue #27 item 3) with catalogue changes only: the
+//! cup's cylinder replaced by a mesh file of the same cup, and the oracle completes a dev
+//! instruction that picks and places it. Here because the oracle policy lives in this crate.
 
 use std::f64::consts::TAU;
 use std::path::{Path, PathBuf};
@@ -80,8 +80,41 @@ fn write_gltf(dir: &Path, name: &str, (pos, idx): (Vec<[f32; 3]>, Vec<u32>)) {
     std::fs::write(dir.join(format!("{name}.bin")), bin).unwrap();
 }
 
-/// The committed assets with the cup's shape line replaced by `shape` and a glTF cup in
-/// `meshes/`.
+/// Positions in glTF's y-up frame turned to our z-up one, as OBJ and STL are read.
+fn z_up(pos: &[[f32; 3]]) -> Vec<[f32; 3]> {
+    pos.iter().map(|p| [p[0], -p[2], p[1]]).collect()
+}
+
+/// `name.obj` in `dir` (z-up, 1-based faces).
+fn write_obj(dir: &Path, name: &str, (pos, idx): &(Vec<[f32; 3]>, Vec<u32>)) {
+    let mut text = String::from("# a test mesh\no cup\n");
+    for p in z_up(pos) {
+        text += &format!("v {} {} {}\n", p[0], p[1], p[2]);
+    }
+    for t in idx.chunks(3) {
+        text += &format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1);
+    }
+    std::fs::write(dir.join(format!("{name}.obj")), text).unwrap();
+}
+
+/// `name.stl` in `dir` (ASCII STL, z-up).
+fn write_stl(dir: &Path, name: &str, (pos, idx): &(Vec<[f32; 3]>, Vec<u32>)) {
+    let pos = z_up(pos);
+    let mut text = format!("solid {name}\n");
+    for t in idx.chunks(3) {
+        text += "facet normal 0 0 0\nouter loop\n";
+        for i in t {
+            let p = pos[*i as usize];
+            text += &format!("vertex {} {} {}\n", p[0], p[1], p[2]);
+        }
+        text += "endloop\nendfacet\n";
+    }
+    text += &format!("endsolid {name}\n");
+    std::fs::write(dir.join(format!("{name}.stl")), text).unwrap();
+}
+
+/// The committed assets with the cup's shape line replaced by `shape` and the same cup in
+/// `meshes/` as glTF, OBJ and STL.
 fn assets_dir(tag: &str, shape: &str) -> PathBuf {
     let src = kitchen_r_core::assets::assets_dir();
     let dir = std::env::temp_dir().join(format!("kitchen-r-mesh-{tag}-{}", std::process::id()));
@@ -99,8 +132,50 @@ fn assets_dir(tag: &str, shape: &str) -> PathBuf {
         "the cup's shape line changed: update this test"
     );
     std::fs::write(dir.join("objects.toml"), objects.replacen(CUP, shape, 1)).unwrap();
-    write_gltf(&dir.join("meshes"), "cup", cylinder(0.04, 0.10, 24));
+    let cup = cylinder(0.04, 0.10, 24);
+    write_obj(&dir.join("meshes"), "cup", &cup);
+    write_stl(&dir.join("meshes"), "cup", &cup);
+    write_gltf(&dir.join("meshes"), "cup", cup);
     dir
+}
+
+#[test]
+fn obj_and_stl_read_as_the_same_cup_as_gltf() {
+    let dir = assets_dir("formats", CUP);
+    let read = |ext: &str| {
+        let file = dir.join(format!("meshes/cup.{ext}"));
+        kitchen_r_sim::mesh::load(&file.to_string_lossy(), 1.0).unwrap()
+    };
+    let gltf = read("gltf");
+    let sorted = |m: &kitchen_r_sim::mesh::MeshData| {
+        let mut v: Vec<[i64; 3]> = m
+            .vertices
+            .iter()
+            .map(|p| p.map(|c| (c * 1e6).round() as i64))
+            .collect();
+        v.sort_unstable();
+        v.dedup();
+        v
+    };
+    for ext in ["obj", "stl"] {
+        let m = read(ext);
+        assert_eq!(m.triangles.len(), gltf.triangles.len(), "{ext}");
+        assert!(
+            (0..3).all(|k| (m.size[k] - gltf.size[k]).abs() < 1e-6),
+            "{ext}: {:?}",
+            m.size
+        );
+        assert_eq!(sorted(&m), sorted(&gltf), "{ext}: other vertices");
+    }
+    let err = match kitchen_r_sim::mesh::load(&dir.join("objects.toml").to_string_lossy(), 1.0) {
+        Err(e) => e.to_string(),
+        Ok(_) => panic!("a .toml read as a mesh"),
+    };
+    assert!(
+        err.contains(".gltf") && err.contains(".obj") && err.contains(".stl"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
 }
 
 #[test]

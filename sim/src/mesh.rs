@@ -1,15 +1,22 @@
-//! Meshes from glTF 2.0, for objects (`Shape::Mesh` in the catalogue) and furniture (`mesh` in a
-//! scene file): read once when the assets load, kept in a process-wide cache by file and scale.
-//! A dynamic object collides and renders as the mesh's convex hull; static furniture as its
-//! triangles (a parry `TriMesh`). The ray caster casts against any parry shape, so both render
-//! without a renderer change.
+//! Meshes from glTF 2.0, OBJ and STL, for objects (`Shape::Mesh` in the catalogue) and furniture
+//! (`mesh` in a scene file): read once when the assets load, kept in a process-wide cache by file
+//! and scale. A dynamic object collides and renders as the mesh's convex hull; static furniture
+//! as its triangles (a parry `TriMesh`). The ray caster casts against any parry shape, so both
+//! render without a renderer change.
 //!
-//! The reader takes the default scene's mesh nodes with their transforms, positions and
+//! The glTF reader takes the default scene's mesh nodes with their transforms, positions and
 //! triangle indices of every `TRIANGLES` primitive, from a `.glb`'s binary chunk or `.bin` files
 //! beside a `.gltf` (no embedded `data:` URIs, no images: materials and textures are not read;
 //! the object's colour is the catalogue's). glTF is y-up: the mesh is turned z-up (x stays, glTF
-//! y becomes our z, glTF z becomes our -y), multiplied by the scale and centred on its bounding
-//! box, which is the catalogue's model origin.
+//! y becomes our z, glTF z becomes our -y).
+//!
+//! OBJ and STL are read with `mesh-loader`, the reader rapier's own URDF and MJCF mesh loader
+//! uses; every mesh of the file is taken, positions and faces only. Neither format names an up
+//! axis: they are read z-up, as URDF, MJCF and ROS read them (CAD exports STL z-up, and a robot
+//! description's OBJ and STL meshes are in their link's z-up frame).
+//!
+//! Whatever the format, the mesh is multiplied by the scale and centred on its bounding box,
+//! which is the catalogue's model origin.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -130,10 +137,64 @@ fn points(vertices: &[[f64; 3]]) -> Vec<Vector> {
 }
 
 fn read(path: &Path, scale: f64) -> Result<MeshData, SimError> {
-    let bad = |message: String| SimError::Mesh {
+    let bad = |message: String| mesh_error(path, message);
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    let (vertices, triangles) = match ext.as_deref() {
+        Some("gltf" | "glb") => read_gltf(path, scale)?,
+        Some("obj" | "stl") => read_obj_stl(path, scale)?,
+        _ => {
+            return Err(bad(
+                "unknown mesh format: give a glTF 2.0 (.gltf, .glb), OBJ (.obj) or STL (.stl) file".into(),
+            ));
+        }
+    };
+    centred(path, vertices, triangles)
+}
+
+fn mesh_error(path: &Path, message: String) -> SimError {
+    SimError::Mesh {
         path: path.to_path_buf(),
         message,
-    };
+    }
+}
+
+/// Vertices (z-up, scaled) and triangles of a mesh file.
+type Raw = (Vec<[f64; 3]>, Vec<[u32; 3]>);
+
+fn read_obj_stl(path: &Path, scale: f64) -> Result<Raw, SimError> {
+    let bad = |message: String| mesh_error(path, message);
+    let scene = mesh_loader::Loader::default()
+        .merge_meshes(true)
+        .load(path)
+        .map_err(|e| match e.kind() {
+            std::io::ErrorKind::NotFound => SimError::Io {
+                path: path.to_path_buf(),
+                source: e,
+            },
+            _ => bad(format!("not a readable OBJ or STL file: {e}")),
+        })?;
+    let mesh = scene
+        .meshes
+        .into_iter()
+        .next()
+        .ok_or_else(|| bad("no mesh in the file".into()))?;
+    let count = mesh.vertices.len();
+    if mesh.faces.iter().flatten().any(|i| *i as usize >= count) {
+        return Err(bad("face indices out of range".into()));
+    }
+    let vertices = mesh
+        .vertices
+        .iter()
+        .map(|v| v.map(|c| f64::from(c) * scale))
+        .collect();
+    Ok((vertices, mesh.faces))
+}
+
+fn read_gltf(path: &Path, scale: f64) -> Result<Raw, SimError> {
+    let bad = |message: String| mesh_error(path, message);
     let bytes = std::fs::read(path).map_err(|source| SimError::Io {
         path: path.to_path_buf(),
         source,
@@ -207,6 +268,15 @@ fn read(path: &Path, scale: f64) -> Result<MeshData, SimError> {
     }
     if triangles.is_empty() {
         return Err(bad("no triangles in the default scene".into()));
+    }
+    Ok((vertices, triangles))
+}
+
+/// The mesh centred on its bounding box, with its size and convex hull.
+fn centred(path: &Path, mut vertices: Vec<[f64; 3]>, triangles: Vec<[u32; 3]>) -> Result<MeshData, SimError> {
+    let bad = |message: String| mesh_error(path, message);
+    if triangles.is_empty() {
+        return Err(bad("no triangles in the file".into()));
     }
     let lo = (0..3).map(|k| vertices.iter().map(|v| v[k]).fold(f64::INFINITY, f64::min));
     let hi = (0..3).map(|k| vertices.iter().map(|v| v[k]).fold(f64::NEG_INFINITY, f64::max));
