@@ -65,3 +65,4 @@ section "the control baselines: starter-kit/baselines/{privileged,camera}/tests"
 for b in privileged camera; do
   KITCHEN_R_BIN=target/debug/kitchen-r python3 -m pytest -q "starter-kit/baselines/$b/tests"
 done
+section "all tests passed"
