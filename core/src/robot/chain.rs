@@ -183,6 +183,10 @@ fn joint(t: &Tree, s: &Sidecar, i: usize, a: &ArmJoint<'_>) -> Result<JointDesc,
     let effort = j.effort.or_else(|| from_side(&s.arm.effort)).ok_or_else(|| {
         at("no effort limit: give URDF <limit effort>, or effort in the sidecar's [arm] (one per joint)")
     })?;
+    let masses = fixed_to(t, a.child)
+        .into_iter()
+        .filter_map(|(l, _)| t.links[l].mass);
+    let mass = masses.reduce(|x, y| x + y).filter(|m| *m > 0.0);
     Ok(JointDesc {
         name: j.name.clone(),
         origin: a.origin,
@@ -190,6 +194,7 @@ fn joint(t: &Tree, s: &Sidecar, i: usize, a: &ArmJoint<'_>) -> Result<JointDesc,
         limits,
         max_velocity,
         effort,
+        mass,
         link_radius: match capsule(t, a.child)?.shape {
             Shape::Capsule { radius } | Shape::Cylinder { radius, .. } => radius,
             _ => unreachable!("capsule() returns capsules and cylinders"),

@@ -81,6 +81,10 @@ pub struct JointDesc {
     /// Largest torque the joint's servo gives (N·m).
     #[serde(default)]
     pub effort: f64,
+    /// Mass of the link this joint turns, with the frames fixed to it (kg, the description's
+    /// inertials); `None` where the description gives none. The physical grasp mode's arm uses it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mass: Option<f64>,
     /// Radius of the capsule from this joint to the next one (or to the palm).
     pub link_radius: f64,
 }

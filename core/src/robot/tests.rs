@@ -19,14 +19,17 @@ fn the_shipped_urdf_is_the_retired_robot_toml_bit_for_bit() {
     let urdf = RobotDesc::load(&shipped()).unwrap();
     let text = include_str!("testdata/legacy_robot.toml");
     let mut legacy: RobotDesc = toml::from_str(text).unwrap();
-    // The one thing the old schema did not say: effort limits (ViperX 300's servos).
+    // What the old schema did not say: effort limits (ViperX 300's servos) and link masses.
     for (l, u) in legacy.arm.joints.iter_mut().zip(&urdf.arm.joints) {
         l.effort = u.effort;
+        l.mass = u.mass;
     }
     assert_eq!(urdf, legacy);
     assert_eq!(bits(&urdf), bits(&legacy));
     let effort: Vec<f64> = urdf.arm.joints.iter().map(|j| j.effort).collect();
     assert_eq!(effort, [10.0, 20.0, 15.0, 2.0, 5.0, 1.0]);
+    let mass: Vec<Option<f64>> = urdf.arm.joints.iter().map(|j| j.mass).collect();
+    assert_eq!(mass, [0.9, 0.8, 0.6, 0.4, 0.3, 0.35].map(Some));
 }
 
 /// A copy of the shipped robot in a temporary directory with `edit` applied to the URDF and

@@ -23,8 +23,8 @@ use crate::config::ArticulationConfig;
 use crate::convert::{iso_to_pose, pose_to_iso, vec_to_glam};
 use crate::material::{Material, Materials, Owner};
 
-/// Link masses (kg), waist to wrist (the last one includes the palm): a ViperX-300-class arm.
-const LINK_MASS: [f32; DOF] = [0.9, 0.8, 0.6, 0.4, 0.3, 0.35];
+/// Mass of an arm link whose description gives none (kg): a ViperX-300-class link's.
+const DEFAULT_LINK_MASS: f64 = 0.5;
 /// Mass of each finger (kg).
 const FINGER_MASS: f32 = 0.03;
 /// Mass of the mount body between the base and the waist (kg).
@@ -105,7 +105,8 @@ impl Robot {
             };
             let r = desc.arm.joints[i].link_radius as f32;
             let shape = SharedShape::capsule(vec_to_glam(&Vector3::zeros()), vec_to_glam(&end), r);
-            let co = collider(shape, i as u32 + 1, arm_mat, false).mass(LINK_MASS[i]);
+            let mass = desc.arm.joints[i].mass.unwrap_or(DEFAULT_LINK_MASS);
+            let co = collider(shape, i as u32 + 1, arm_mat, false).mass(mass as f32);
             arm_colliders.push((world.insert_collider(co, Some(h)), i));
             if i == DOF - 1 {
                 let ps = g.palm_size.map(|v| v as f32 / 2.0);
