@@ -13,6 +13,7 @@ import subprocess
 import pytest
 
 from gym_kitchen_r import KitchenREnv
+from test_env import drive_expert
 
 
 def test_an_unknown_grasp_mode_is_a_value_error_naming_both():
@@ -35,12 +36,7 @@ def test_the_physical_expert_through_the_env_is_the_physical_eval_episode():
     # `eval` runs the built-in oracle without teleports (they are for endpoint runs), so the env
     # does too; the episode then compares in full, a physically failed task included.
     env = KitchenREnv(images=False, grasp_mode="physical", teleport_on_failure=False)
-    env.reset(seed=0, options={"instruction": want["episode_id"]})
-    terminated = False
-    while not terminated:
-        _, _, terminated, truncated, info = env.step_chunk(env.expert_chunk())
-        assert not truncated
-    got = info["episode"]
+    got = drive_expert(env, want["episode_id"])["episode"]
     assert got["sim_time"] == want["sim_time"]
     for g, w in zip(got["tasks"], want["tasks"], strict=True):
         assert (g["index"], g["step"], g["success"], g["failure"]) == (w["index"], w["step"], w["success"], w["failure"])
