@@ -131,6 +131,21 @@ else:
     for name in ("KITCHEN_R_ADMIN_TOKEN", "KITCHEN_R_WORKER_TOKEN"):
         if "secretKeyRef" not in env.get(name, {}).get("valueFrom", {}):
             errors.append(f"{name} must come from a Secret")
+    # The storage budgets (issue #37) must fit the volume the videos and traces live on, with
+    # room for the database: the total at most 85 % of the volume, the team's at most the total.
+    units = {"Ki": 1 << 10, "Mi": 1 << 20, "Gi": 1 << 30, "Ti": 1 << 40}
+    data = [v for v in vcts if v["metadata"]["name"] == "data"]
+    size = data[0]["spec"]["resources"]["requests"]["storage"] if data else "0Gi"
+    volume = int(size[:-2]) * units.get(size[-2:], 0)
+    budget = {k: int(env.get(f"KITCHEN_R_VIDEO_{k}_MAX_BYTES", {}).get("value", 0)) for k in ("TEAM", "TOTAL")}
+    if not budget["TOTAL"] or not budget["TEAM"]:
+        errors.append("the server must set KITCHEN_R_VIDEO_TEAM_MAX_BYTES and KITCHEN_R_VIDEO_TOTAL_MAX_BYTES for its volume")
+    elif budget["TOTAL"] > 0.85 * volume:
+        errors.append(f"[video] total_max_bytes {budget['TOTAL']} does not fit the {size} data volume with room for the database (at most 85 %)")
+    elif budget["TEAM"] > budget["TOTAL"]:
+        errors.append("[video] team_max_bytes must not exceed total_max_bytes")
+    else:
+        print(f"{overlay}: budgets {budget['TEAM']} / {budget['TOTAL']} bytes fit the {size} volume")
 workers = find("Deployment", "kitchen-r-worker")
 if len(workers) != 1:
     errors.append("expected one Deployment kitchen-r-worker")

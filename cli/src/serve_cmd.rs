@@ -45,6 +45,10 @@ pub(crate) struct ServeArgs {
     /// generate`, kept outside the repository) instead of the public sample [config `test_set`].
     #[arg(long, value_name = "DIR")]
     pub test_set: Option<PathBuf>,
+    /// Refuse to start on what is otherwise a warning: storage budgets larger than the free
+    /// space of their volume [config `strict`].
+    #[arg(long)]
+    pub strict: bool,
 }
 
 fn load(args: ServeArgs) -> anyhow::Result<Config> {
@@ -64,6 +68,7 @@ fn load(args: ServeArgs) -> anyhow::Result<Config> {
     if let Some(v) = args.test_set {
         cfg.test_set = v;
     }
+    cfg.strict |= args.strict;
     cfg.validate()?;
     Ok(cfg)
 }

@@ -37,7 +37,7 @@ fn beside_database(db: &str) -> Option<PathBuf> {
 
 /// Environment variables read into the configuration (`KITCHEN_R_<KEY>`). Listed explicitly so
 /// the client-side variables (`KITCHEN_R_SERVER`, `KITCHEN_R_TOKEN`) are not mistaken for keys.
-const ENV_KEYS: [&str; 12] = [
+const ENV_KEYS: [&str; 13] = [
     "http",
     "grpc",
     "db",
@@ -50,7 +50,12 @@ const ENV_KEYS: [&str; 12] = [
     "max_body_bytes",
     "request_timeout_ms",
     "metrics",
+    "strict",
 ];
+
+/// Nested keys also read from the environment, `KITCHEN_R_<SECTION>_<KEY>`: the storage budgets,
+/// so a deployment sizes them to its volume without a config file of its own (deploy/).
+const ENV_NESTED: [(&str, &str); 2] = [("video", "team_max_bytes"), ("video", "total_max_bytes")];
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -90,6 +95,9 @@ pub struct Config {
     /// Serve `GET /metrics` (Prometheus text format, no token: it holds no team data) and
     /// record the series it shows.
     pub metrics: bool,
+    /// Refuse to start on what is otherwise a start-up warning: storage budgets (`[video]
+    /// total_max_bytes`) that the free space of their volume cannot hold.
+    pub strict: bool,
     pub plans: PlanLimits,
     pub quota: Quota,
     pub db_pool: DbPool,
@@ -236,6 +244,7 @@ impl Default for Config {
             assets: PathBuf::new(),
             test_set: PathBuf::new(),
             contest: false,
+            strict: false,
             admin_token: String::new(),
             worker_token: String::new(),
             max_body_bytes: 4 << 20,
@@ -344,7 +353,20 @@ impl Config {
             None => fig = fig.merge(Toml::file("configs/server.toml")),
         }
         let env = Env::prefixed("KITCHEN_R_").only(&ENV_KEYS);
+        let nested: Vec<String> = ENV_NESTED.iter().map(|(s, k)| format!("{s}_{k}")).collect();
+        let nested = Env::prefixed("KITCHEN_R_")
+            .filter(move |k| nested.iter().any(|n| k.as_str().eq_ignore_ascii_case(n)))
+            .map(|k| {
+                match ENV_NESTED
+                    .iter()
+                    .find(|(s, key)| k.as_str().eq_ignore_ascii_case(&format!("{s}_{key}")))
+                {
+                    Some((s, key)) => format!("{s}.{key}").into(),
+                    None => k.into(),
+                }
+            });
         fig.merge(env)
+            .merge(nested)
             .extract()
             .map_err(|e| ConfigError::Load(Box::new(e)))
     }

@@ -69,9 +69,12 @@ fn render_job(r: LeasedRender, video: &VideoConfig) -> pb::Job {
         episode: None,
         policy: None,
         render: Some(pb::RenderJob {
-            trace_gz: r.trace_gz,
+            // Fetched with FetchTrace: a lease reply is one message, a trace may be larger.
+            trace_gz: Vec::new(),
             expected: r.expected.iter().map(task_proto).collect(),
             video_max_bytes: video.max_bytes,
+            trace_bytes: r.trace_bytes,
+            trace_sha256: r.trace_sha256,
         }),
     }
 }
@@ -188,6 +191,20 @@ impl Worker for WorkerService {
         caller(&req)?.worker()?;
         let (sha256, bytes) = upload::receive_trace(&self.state, req.into_inner()).await?;
         Ok(Response::new(pb::UploadTraceResponse { sha256, bytes }))
+    }
+
+    type FetchTraceStream = upload::TraceStream;
+
+    async fn fetch_trace(
+        &self,
+        req: Request<pb::FetchTraceRequest>,
+    ) -> Result<Response<Self::FetchTraceStream>, Status> {
+        let worker = caller(&req)?.worker()?;
+        let m = req.into_inner();
+        let trace = (self.state)
+            .render_trace(worker, m.worker_id.trim(), m.render_id, m.attempt)
+            .await?;
+        Ok(Response::new(upload::send_trace(trace).await?))
     }
 
     async fn fail_render(

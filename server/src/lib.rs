@@ -109,6 +109,7 @@ pub async fn build_with(config: Config, probe: Arc<dyn PolicyProbe>) -> anyhow::
     state.seal_stored_tokens().await?;
     // Before anything listens, so no upload of this process is in `tmp/` yet.
     service::videos::clear_partial_uploads(&state).await?;
+    service::volume::check_volume(&state).await?;
     Ok(Server {
         state,
         generated_admin_token,

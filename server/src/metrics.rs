@@ -36,9 +36,10 @@ pub(crate) const JOB_RETRIES: &str = "kitchen_r_job_retries_total";
 pub(crate) const LEASES_RECLAIMED: &str = "kitchen_r_leases_reclaimed_total";
 pub(crate) const VIDEO_EVICTIONS: &str = "kitchen_r_video_evictions_total";
 pub(crate) const VIDEO_STORED_BYTES: &str = "kitchen_r_video_stored_bytes";
+pub(crate) const VIDEO_REFUSED: &str = "kitchen_r_video_uploads_refused_total";
 pub(crate) const VIDEO_RENDERS: &str = "kitchen_r_video_renders_total";
 /// The `outcome` label values of [`VIDEO_RENDERS`].
-pub(crate) const RENDER_OUTCOMES: [&str; 5] = ["queued", "reused", "done", "failed", "requeued"];
+pub(crate) const RENDER_OUTCOMES: [&str; 6] = ["queued", "reused", "done", "failed", "requeued", "waiting"];
 
 /// The Prometheus text format's content type.
 pub(crate) const CONTENT_TYPE: &str = "text/plain; version=0.0.4; charset=utf-8";
@@ -163,22 +164,29 @@ fn describe() {
     );
     describe_counter!(
         VIDEO_EVICTIONS,
-        "Episode videos removed to keep a storage budget, by budget (team: [video] team_max_bytes; total: total_max_bytes)"
+        "Episode videos and traces removed to keep a storage budget, by budget (team: [video] team_max_bytes; total: total_max_bytes, from teams over their fair share)"
+    );
+    describe_counter!(
+        VIDEO_REFUSED,
+        "Video and trace uploads refused for want of room, by file (video, trace): nothing could be evicted (uploads in flight, every team within its fair share, protected traces)"
     );
     describe_counter!(
         VIDEO_RENDERS,
-        "Episode videos rendered on demand from traces, by outcome (queued: asked for; reused: another episode's render of the same trace; done: rendered and stored; failed: refused, e.g. the replay disagreed with the stored result; requeued: a lost render lease queued again)"
+        "Episode videos rendered on demand from traces, by outcome (queued: asked for; reused: another episode's render of the same trace; done: rendered and stored; failed: refused, e.g. the replay disagreed with the stored result; requeued: a lost render lease queued again; waiting: its video found no room in the storage budgets, queued again later)"
     );
     metrics::describe_gauge!(
         VIDEO_STORED_BYTES,
         metrics::Unit::Bytes,
-        "Bytes of episode video stored, as the budgets count them (per linked episode), after the last upload or sweep"
+        "Bytes of episode videos and traces stored, as the budgets count them (per linked episode), after the last upload or sweep"
     );
     for outcome in ["done", "failed"] {
         metrics::counter!(JOBS_FINISHED, "outcome" => outcome).increment(0);
     }
     for budget in ["team", "total"] {
         metrics::counter!(VIDEO_EVICTIONS, "budget" => budget).increment(0);
+    }
+    for file in ["video", "trace"] {
+        metrics::counter!(VIDEO_REFUSED, "file" => file).increment(0);
     }
     metrics::counter!(LEASES_RECLAIMED).increment(0);
     for outcome in RENDER_OUTCOMES {

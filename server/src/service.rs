@@ -42,6 +42,7 @@ mod submissions;
 mod teams;
 mod video_budget;
 pub(crate) mod videos;
+pub(crate) mod volume;
 
 use std::sync::Arc;
 
@@ -88,7 +89,7 @@ struct Inner {
     stopping: std::sync::atomic::AtomicBool,
     /// Per-team upload rate limits and refusal counts (in memory: see [`limits`]).
     limits: limits::Limits,
-    /// Failed page logins, per client address and in all (in memory: see [`login_throttle`]).
+    /// Failed page logins per client address (in memory: see [`login_throttle`]).
     logins: login_throttle::LoginThrottle,
     /// What `/metrics` reads when scraped (workers seen, cached queue gauges).
     telemetry: metrics::Telemetry,
@@ -128,10 +129,7 @@ impl AppState {
                 db,
                 limits: limits::Limits::new(config.quota.per_minute, now_ms()),
                 telemetry: metrics::Telemetry::new(),
-                logins: login_throttle::LoginThrottle::new(
-                    config.sessions.failures_per_minute_per_address,
-                    config.sessions.failures_per_minute,
-                ),
+                logins: login_throttle::LoginThrottle::new(config.sessions.failures_per_minute_per_address),
                 config,
                 content,
                 admin_hash: hash_token(tokens.admin),

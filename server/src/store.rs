@@ -17,6 +17,7 @@
 
 pub(crate) mod admin;
 pub(crate) mod board;
+pub(crate) mod budget;
 mod compact;
 mod packed;
 pub(crate) mod portal;

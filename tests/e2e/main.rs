@@ -35,4 +35,5 @@ mod secrets;
 mod submission;
 mod video;
 mod video_files;
+mod video_limits;
 mod workers;

@@ -23,11 +23,14 @@ pub struct VideoConfig {
     pub retention_days: u32,
     /// Largest video (or gzipped trace) file accepted, bytes (workers do not upload a larger one).
     pub max_bytes: u64,
-    /// Most bytes of stored video one team's episodes may link; an upload past it first
-    /// removes that team's oldest videos (their episodes say so where the video was).
+    /// Most bytes of stored videos and traces one team's episodes may link; an upload past it
+    /// first removes that team's oldest videos, then its oldest traces (their episodes say so
+    /// where the video was). Env: `KITCHEN_R_VIDEO_TEAM_MAX_BYTES`.
     pub team_max_bytes: u64,
-    /// Most bytes of stored video of all teams together; past it the oldest videos of any
-    /// team are removed, after the uploading team's own budget was applied.
+    /// Most bytes of stored videos and traces of all teams together; past it only teams over
+    /// their fair share (`min(team_max_bytes, total_max_bytes / teams storing files)`) lose their
+    /// oldest files, and when none is over, the upload is refused (a render waits). Traces of
+    /// ranked test runs are never removed. Env: `KITCHEN_R_VIDEO_TOTAL_MAX_BYTES`.
     pub total_max_bytes: u64,
     /// Which videos workers render before anyone asks, whenever no evaluation job and no
     /// asked-for render waits: `failed` (episodes with a failed task: the ones people open, and
@@ -57,7 +60,8 @@ impl Default for VideoConfig {
             // A failing policy's dev episode makes 1–6.5 MB of video (docs/contest/video.md):
             // 2 GiB keeps a team's last two full dev runs of the worst such policy.
             team_max_bytes: 2 << 30,
-            total_max_bytes: 64 << 30,
+            // Fits the shipped 10 Gi volume (deploy/k8s/base) with room for the database.
+            total_max_bytes: 8 << 30,
             prerender: Prerender::Failed,
             dir: PathBuf::new(),
         }

@@ -1,14 +1,19 @@
 //! `UploadVideo` and `UploadTrace`: an episode video or trace streamed in chunks after the
-//! episode's result. The first chunk names the job; the upload is accepted only for a job whose
+//! episode's result; and `FetchTrace`, a render job's trace streamed back the same way. The first chunk names the job; the upload is accepted only for a job whose
 //! result that attempt reported (or, for a render's video, the render lease it names), so a
 //! worker token cannot attach a file to any other episode. A video's announced size is booked
-//! against the storage budgets before a byte is written (`service::video_budget`); traces are
-//! small (tens of KB gzipped) and limited by `[video] max_bytes` only.
+//! against the storage budgets before a byte is written (`service::video_budget`), and so is a
+//! trace's (videos and traces share the budgets).
+
+use std::pin::Pin;
 
 use kitchen_r_proto::worker::v1 as pb;
+use tokio::io::AsyncReadExt;
+use tokio_stream::Stream;
 use tonic::{Status, Streaming};
 
 use crate::service::AppState;
+use crate::service::renders::RenderTrace;
 use crate::service::videos::{Complete, Incoming, UploadError};
 use crate::store;
 
@@ -51,10 +56,15 @@ pub(super) async fn receive(
     let file = Incoming::start(&dir, first.total_bytes, limit)
         .await
         .map_err(refused)?;
-    let booking = state
-        .book_video(&dir, run, key, first.total_bytes)
-        .await
-        .map_err(refused)?;
+    let booking = match state.book_video(&dir, run, key, first.total_bytes).await {
+        Ok(b) => b,
+        // A render's video with no room: the render waits, queued with the reason.
+        Err(UploadError::NoRoom(why)) if first.render => {
+            state.render_waits(id, attempt, &why).await?;
+            return Err(Status::resource_exhausted(why));
+        }
+        Err(e) => return Err(refused(e)),
+    };
     let file = write_all(file, &first.data, &mut stream, |c: &pb::VideoChunk| &c.data).await?;
     let (sha, bytes) = state
         .store_video(&dir, booking, run, key, file)
@@ -89,9 +99,13 @@ pub(super) async fn receive_trace(
     let file = Incoming::start(&dir, first.total_bytes, limit)
         .await
         .map_err(refused)?;
+    let booking = state
+        .book_trace(&dir, run, key, first.total_bytes)
+        .await
+        .map_err(refused)?;
     let file = write_all(file, &first.data, &mut stream, |c: &pb::TraceChunk| &c.data).await?;
     let (sha, bytes) = state
-        .trace_uploaded(&dir, run, key, file)
+        .trace_uploaded(&dir, booking, run, key, file)
         .await
         .map_err(refused)?;
     tracing::info!(run, episode = %key, bytes, sha256 = %sha, "episode trace stored");
@@ -133,4 +147,70 @@ fn refused(e: UploadError) -> Status {
         UploadError::NoRoom(why) => Status::resource_exhausted(why),
         e => Status::invalid_argument(e.to_string()),
     }
+}
+
+/// Bytes per `FetchTrace` chunk: well under the 4 MiB a gRPC client takes by default.
+const FETCH_CHUNK: usize = 1 << 20;
+
+/// The chunks of a trace as `FetchTrace` answers them.
+pub(super) type TraceStream = Pin<Box<dyn Stream<Item = Result<pb::TraceChunk, Status>> + Send>>;
+
+/// Stream `trace`'s file in chunks of [`FETCH_CHUNK`]: the first names the episode and the
+/// size, each later one carries only bytes. The file is opened before the answer starts, so a
+/// trace deleted meanwhile is a NOT_FOUND, not a stream that breaks.
+pub(super) async fn send_trace(trace: RenderTrace) -> Result<TraceStream, Status> {
+    let mut file = tokio::fs::File::open(&trace.path)
+        .await
+        .map_err(|e| match e.kind() {
+            std::io::ErrorKind::NotFound => Status::not_found("the trace file is gone"),
+            _ => Status::internal(format!("opening the trace: {e}")),
+        })?;
+    let (tx, rx) = tokio::sync::mpsc::channel(2);
+    tokio::spawn(async move {
+        let mut first = Some(pb::TraceChunk {
+            run_id: trace.run_id,
+            episode_key: trace.episode_key,
+            total_bytes: trace.bytes,
+            ..Default::default()
+        });
+        let mut sent = 0u64;
+        loop {
+            let mut data = vec![0; FETCH_CHUNK];
+            let n = match read_full(&mut file, &mut data).await {
+                Ok(n) => n,
+                Err(e) => {
+                    let _ = tx
+                        .send(Err(Status::internal(format!("reading the trace: {e}"))))
+                        .await;
+                    return;
+                }
+            };
+            data.truncate(n);
+            sent += n as u64;
+            let chunk = match first.take() {
+                Some(c) => pb::TraceChunk { data, ..c },
+                None => pb::TraceChunk {
+                    data,
+                    ..Default::default()
+                },
+            };
+            // The worker went away: nothing more to send.
+            if tx.send(Ok(chunk)).await.is_err() || n < FETCH_CHUNK || sent >= trace.bytes {
+                return;
+            }
+        }
+    });
+    Ok(Box::pin(tokio_stream::wrappers::ReceiverStream::new(rx)))
+}
+
+/// Fill `buf` from `file` as far as it goes; the bytes read (less than `buf` only at its end).
+async fn read_full(file: &mut tokio::fs::File, buf: &mut [u8]) -> std::io::Result<usize> {
+    let mut n = 0;
+    while n < buf.len() {
+        match file.read(&mut buf[n..]).await? {
+            0 => break,
+            k => n += k,
+        }
+    }
+    Ok(n)
 }

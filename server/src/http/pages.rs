@@ -347,6 +347,8 @@ async fn entry_page(
 }
 
 #[cfg(test)]
+mod login_throttle_tests;
+#[cfg(test)]
 mod session_tests;
 #[cfg(test)]
 mod tests;

@@ -132,6 +132,9 @@ pub(crate) struct VideoView {
     pub url: Option<String>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
+    /// `queued`: why the render waits (its video found no room in the storage budgets).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub waiting: Option<String>,
 }
 
 impl AppState {

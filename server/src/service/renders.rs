@@ -29,6 +29,9 @@ use crate::store::{self, renders as store_renders};
 
 /// Longest failure text kept for a render.
 const MAX_ERROR_CHARS: usize = 2000;
+/// How long a render whose video found no room waits before it is leased again (doubling with
+/// each wait, up to an hour).
+const RENDER_WAIT_MS: i64 = 60_000;
 
 /// What an episode's video is now.
 #[derive(Debug, Clone)]
@@ -50,8 +53,19 @@ pub(crate) struct LeasedRender {
     pub lease_expires_at_ms: i64,
     pub run_id: i64,
     pub episode_key: String,
-    pub trace_gz: Vec<u8>,
+    /// The trace the worker fetches (`AppState::render_trace`): its sha256 and size.
+    pub trace_sha256: String,
+    pub trace_bytes: u64,
     pub expected: Vec<TaskOutcome>,
+}
+
+/// The trace of a held render lease, to stream to its worker.
+#[derive(Debug, Clone)]
+pub(crate) struct RenderTrace {
+    pub path: std::path::PathBuf,
+    pub bytes: u64,
+    pub run_id: i64,
+    pub episode_key: String,
 }
 
 impl AppState {
@@ -85,11 +99,12 @@ impl AppState {
     pub(crate) async fn trace_uploaded(
         &self,
         dir: &Path,
+        booking: super::video_budget::Booking,
         run: i64,
         key: &str,
         file: Complete,
     ) -> Result<(String, u64), UploadError> {
-        let stored = self.store_trace(dir, run, key, file).await?;
+        let stored = self.store_trace(dir, booking, run, key, file).await?;
         // Best effort: the trace is stored whatever happens to its pre-render.
         if let Err(e) = self.prerender(dir, run, key).await {
             tracing::warn!(run, episode = %key, error = %e, "cannot queue the video's pre-render");
@@ -218,13 +233,17 @@ impl AppState {
             progress,
             url: Some(url(key)),
             error: None,
+            waiting: None,
         };
         for key in store::traces::keys(self.read_pool(), run).await? {
             out.insert(key.clone(), view("available", 0.0, &key));
         }
         for r in store_renders::of_run(self.read_pool(), run).await? {
             let v = match r.state.as_str() {
-                "queued" => view("queued", 0.0, &r.episode_key),
+                "queued" => VideoView {
+                    waiting: r.waiting.clone(),
+                    ..view("queued", 0.0, &r.episode_key)
+                },
                 "leased" => view("rendering", r.progress, &r.episode_key),
                 "failed" => VideoView {
                     error: r.error.clone(),
@@ -247,10 +266,10 @@ impl AppState {
         let Some(dir) = self.video_dir() else {
             return Ok(None);
         };
-        if !store_renders::any_queued(self.read_pool()).await? {
+        let now = now_ms();
+        if !store_renders::any_queued(self.read_pool(), now).await? {
             return Ok(None);
         }
-        let now = now_ms();
         let until = now + self.lease_ms();
         let Some(c) = store_renders::claim(self.pool(), worker, now, until).await? else {
             return Ok(None);
@@ -261,12 +280,22 @@ impl AppState {
             owner: worker,
         };
         let expected = store_renders::stored_tasks(self.read_pool(), c.run_id, &c.episode_key).await?;
-        let trace = tokio::fs::read(trace_path(&dir, &c.trace_sha256)).await;
-        let (expected, trace_gz) = match (expected, trace) {
-            (Some(e), Ok(t)) => (e, t),
+        // Only the size here: the worker fetches the bytes in chunks (`render_trace`), so a
+        // trace of any size the server accepted reaches it (a lease reply is one message).
+        let trace = tokio::fs::metadata(trace_path(&dir, &c.trace_sha256)).await;
+        let max = self.config().video.max_bytes;
+        let (expected, trace_bytes) = match (expected, trace) {
             (None, _) => {
                 return self
                     .refuse_render(lease, "the episode has no stored result")
+                    .await;
+            }
+            (_, Err(e)) if e.kind() == std::io::ErrorKind::NotFound => {
+                return self
+                    .refuse_render(
+                        lease,
+                        "the trace is gone (removed to keep a storage budget, or past retention)",
+                    )
                     .await;
             }
             (_, Err(e)) => {
@@ -274,17 +303,78 @@ impl AppState {
                     .refuse_render(lease, &format!("the trace file cannot be read: {e}"))
                     .await;
             }
+            (Some(_), Ok(m)) if m.len() > max => {
+                let why = format!(
+                    "the trace is too large to render: {} bytes, more than [video] max_bytes ({max}); raise it to render this video",
+                    m.len()
+                );
+                return self.refuse_render(lease, &why).await;
+            }
+            (Some(e), Ok(m)) => (e, m.len()),
         };
-        tracing::info!(render = c.id, run = c.run_id, episode = %c.episode_key, attempt = c.attempt, worker, "render leased");
+        tracing::info!(render = c.id, run = c.run_id, episode = %c.episode_key, attempt = c.attempt, worker, trace_bytes, "render leased");
         Ok(Some(LeasedRender {
             id: c.id,
             attempt: u32::try_from(c.attempt).unwrap_or(u32::MAX),
             lease_expires_at_ms: c.lease_expires_at,
             run_id: c.run_id,
             episode_key: c.episode_key,
-            trace_gz,
+            trace_sha256: c.trace_sha256,
+            trace_bytes,
             expected,
         }))
+    }
+
+    /// The trace of the render lease `(id, attempt)` that `worker` holds, to stream to it.
+    pub(crate) async fn render_trace(
+        &self,
+        _: WorkerCred,
+        worker: &str,
+        id: i64,
+        attempt: u32,
+    ) -> Result<RenderTrace, ServiceError> {
+        let Some(dir) = self.video_dir() else {
+            return Err(ServiceError::Conflict(
+                "this server does not store episode traces (`[video] enabled` is false)".into(),
+            ));
+        };
+        let lease = store_renders::Lease {
+            id,
+            attempt: i64::from(attempt),
+            owner: worker,
+        };
+        let Some(c) = store_renders::leased(self.read_pool(), lease).await? else {
+            return Err(ServiceError::Conflict(format!(
+                "render {id} attempt {attempt} is not leased to worker {worker:?}"
+            )));
+        };
+        let path = trace_path(&dir, &c.trace_sha256);
+        match tokio::fs::metadata(&path).await {
+            Ok(m) => Ok(RenderTrace {
+                path,
+                bytes: m.len(),
+                run_id: c.run_id,
+                episode_key: c.episode_key,
+            }),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Err(ServiceError::not_found(format!(
+                "the trace of render {id} (removed to keep a storage budget, or past retention)"
+            ))),
+            Err(e) => Err(ServiceError::Internal(
+                anyhow::Error::new(e).context("reading a trace file"),
+            )),
+        }
+    }
+
+    /// The video of render lease `(id, attempt)` found no room in the storage budgets: the
+    /// render waits, queued, with `why` shown where its video would be (tried again after a
+    /// minute, then less often, up to hourly; waiting is not an attempt).
+    pub(crate) async fn render_waits(&self, id: i64, attempt: i64, why: &str) -> Result<(), ServiceError> {
+        let why: String = why.chars().take(MAX_ERROR_CHARS).collect();
+        if store_renders::wait(self.pool(), id, attempt, &why, now_ms(), RENDER_WAIT_MS).await? {
+            rendered_metric("waiting", 1);
+            tracing::info!(render = id, attempt, %why, "render waits for room");
+        }
+        Ok(())
     }
 
     /// A rendered video was stored: its render is done.

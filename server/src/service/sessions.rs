@@ -8,8 +8,8 @@
 //!   deletes it; rotating a team's token ends all of that team's sessions; changing the
 //!   organiser token (config) ends the organiser's. Sessions expire after
 //!   `[sessions] team_hours` / `organiser_hours`.
-//! - Failed logins are throttled per client address and for all addresses together
-//!   ([`super::login_throttle`]); while throttled a login is refused before its token is read.
+//! - Failed logins are throttled per client address only ([`super::login_throttle`]); while
+//!   throttled a login is refused before its token is read.
 
 use std::net::IpAddr;
 use std::time::Instant;
@@ -37,7 +37,7 @@ pub(crate) enum Login {
     },
     /// The token is not one for this form; what to say.
     Refused(&'static str),
-    /// Too many failed logins from this address (or in all): try again after this many seconds.
+    /// Too many failed logins from this address: try again after this many seconds.
     Throttled { retry_after_s: u64 },
 }
 

@@ -1,12 +1,10 @@
-//! Bounded video storage (issue 23): per-team and total byte budgets (`[video] team_max_bytes`,
-//! `total_max_bytes`), and no file left on disk that nothing links.
+//! Bounded media storage (issue 23, issue #37): per-team and total byte budgets (`[video]
+//! team_max_bytes`, `total_max_bytes`) over videos and traces together, and no file left on
+//! disk that nothing links.
 //!
-//! Policy: an upload's announced size is booked before a byte is written. If the team's stored
-//! videos plus its uploads in flight plus this one would pass the team's budget, that team's
-//! oldest videos are removed until it fits; then the oldest videos of any team until the total
-//! fits (newest kept, as the retention sweep keeps them). A removed video keeps its row with a
-//! note that the episode shows where the video was. Bytes count per row: a file that two
-//! episodes link counts twice (simple, and never under the disk's use).
+//! Policy: an upload's announced size (a video's or a trace's) is booked before a byte is
+//! written; what to evict for it, fairly between teams, is `crate::store::budget`'s rule. A
+//! removed file keeps its row with a note that the episode shows where the video was.
 //!
 //! Concurrency: this server is its video directory's only writer (one replica, `deploy/`), so
 //! uploads in flight are booked in memory, and one lock (`turn`) orders every step that decides
@@ -23,7 +21,8 @@ use super::videos::{Complete, UploadError, file_path};
 use super::{AppState, now_ms};
 use crate::error::ServiceError;
 use crate::metrics as m;
-use crate::store::videos::{self as store, Budget, Row};
+use crate::store::budget::{self, Refusal};
+use crate::store::videos::{self as store, Row};
 
 /// Uploads in flight and the lock that orders file decisions; one per server.
 #[derive(Default)]
@@ -52,6 +51,13 @@ pub(crate) struct Booking {
     bytes: u64,
 }
 
+impl Booking {
+    /// The team the booked upload is charged to.
+    pub(crate) fn team(&self) -> i64 {
+        self.team
+    }
+}
+
 impl Drop for Booking {
     fn drop(&mut self) {
         let mut p = self.state.inner.videos.pending();
@@ -66,9 +72,9 @@ impl Drop for Booking {
 }
 
 impl AppState {
-    /// Book `bytes` for the video of `(run, key)`, evicting the oldest videos the budgets
-    /// need gone (their files deleted once no row names them). Refused, with a note on the
-    /// episode, only when uploads in flight hold the budget's rest.
+    /// Book `bytes` for the video of `(run, key)`, evicting the files the budgets need gone
+    /// (`store::budget`; their files deleted once no row names them). Refused, with a note on
+    /// the episode, when nothing may go.
     pub(crate) async fn book_video(
         &self,
         dir: &Path,
@@ -76,62 +82,93 @@ impl AppState {
         key: &str,
         bytes: u64,
     ) -> Result<Booking, UploadError> {
+        self.book(dir, run, key, bytes, false).await
+    }
+
+    /// [`Self::book_video`] for the trace of `(run, key)` (its upload is refused without a note:
+    /// the episode shows no video then, and says so only where a video was).
+    pub(crate) async fn book_trace(
+        &self,
+        dir: &Path,
+        run: i64,
+        key: &str,
+        bytes: u64,
+    ) -> Result<Booking, UploadError> {
+        self.book(dir, run, key, bytes, true).await
+    }
+
+    async fn book(
+        &self,
+        dir: &Path,
+        run: i64,
+        key: &str,
+        bytes: u64,
+        trace: bool,
+    ) -> Result<Booking, UploadError> {
         let (team, name) = store::team_of_run(self.read_pool(), run)
             .await
             .map_err(ServiceError::from)?
             .ok_or_else(|| ServiceError::not_found(format!("scoring run {run}")))?;
         let cfg = &self.config().video;
-        let team_note = format!(
-            "video removed to keep team {name}'s videos within [video] team_max_bytes ({}); newer episodes' videos are kept",
-            size(cfg.team_max_bytes)
+        let (team_max, total_max) = (size(cfg.team_max_bytes), size(cfg.total_max_bytes));
+        let team_within =
+            format!("team {name}'s videos and traces within [video] team_max_bytes ({team_max})");
+        let total_within = format!(
+            "all teams' videos and traces within [video] total_max_bytes ({total_max}), from a team over its fair share"
         );
-        let total_note = format!(
-            "video removed to keep all teams' videos within [video] total_max_bytes ({}); newer episodes' videos are kept",
-            size(cfg.total_max_bytes)
-        );
+        let again = "it is rendered again from the episode's trace when asked for";
+        let lost = "the episode's video can no longer be rendered";
+        let team_video = format!("video removed to keep {team_within}; {again}");
+        let team_trace = format!("trace removed to keep {team_within}; {lost}");
+        let total_video = format!("video removed to keep {total_within}; {again}");
+        let total_trace = format!("trace removed to keep {total_within}; {lost}");
         let _turn = self.inner.videos.turn.lock().await;
         let (team_pending, total_pending) = {
             let p = self.inner.videos.pending();
             (p.teams.get(&team).copied().unwrap_or(0), p.total)
         };
-        let budgets = [
-            Budget {
-                team: Some(team),
-                max: cfg.team_max_bytes,
-                pending: team_pending,
-                note: &team_note,
+        let ask = budget::Ask {
+            team,
+            incoming: bytes,
+            team_max: cfg.team_max_bytes,
+            total_max: cfg.total_max_bytes,
+            team_pending,
+            total_pending,
+            notes: budget::Notes {
+                team_video: &team_video,
+                team_trace: &team_trace,
+                total_video: &total_video,
+                total_trace: &total_trace,
             },
-            Budget {
-                team: None,
-                max: cfg.total_max_bytes,
-                pending: total_pending,
-                note: &total_note,
-            },
-        ];
-        let room = store::make_room(self.pool(), &budgets, bytes)
+        };
+        let room = budget::make_room(self.pool(), &ask)
             .await
             .map_err(ServiceError::from)?;
-        let row = Row {
-            run,
-            key,
-            team,
-            now: now_ms(),
-        };
-        if !room.fits {
+        if let Some(why) = room.refused {
+            let what = if trace { "trace" } else { "video" };
             let why = format!(
-                "video not stored: other uploads in progress fill [video] team_max_bytes ({}) or total_max_bytes ({}); the worker retries",
-                size(cfg.team_max_bytes),
-                size(cfg.total_max_bytes)
+                "{what} not stored: {}",
+                refusal(why, &name, &team_max, &total_max)
             );
-            store::note(self.pool(), row, &why)
-                .await
-                .map_err(ServiceError::from)?;
+            if !trace {
+                let row = Row {
+                    run,
+                    key,
+                    team,
+                    now: now_ms(),
+                };
+                store::note(self.pool(), row, &why)
+                    .await
+                    .map_err(ServiceError::from)?;
+            }
+            metrics::counter!(m::VIDEO_REFUSED, "file" => what).increment(1);
             return Err(UploadError::NoRoom(why));
         }
-        for (budget, n) in ["team", "total"].into_iter().zip(&room.evicted) {
-            metrics::counter!(m::VIDEO_EVICTIONS, "budget" => budget).increment(*n as u64);
+        for (budget, n) in ["team", "total"].into_iter().zip(room.evicted) {
+            metrics::counter!(m::VIDEO_EVICTIONS, "budget" => budget).increment(n as u64);
         }
-        self.delete_unlinked_locked(dir, room.orphans).await;
+        self.delete_unlinked_locked(dir, room.orphan_videos).await;
+        self.delete_traces_locked(dir, room.orphan_traces).await;
         let mut p = self.inner.videos.pending();
         *p.teams.entry(team).or_default() += bytes;
         p.total += bytes;
@@ -211,7 +248,7 @@ impl AppState {
         if !m::installed() {
             return;
         }
-        match store::stored_bytes(self.read_pool()).await {
+        match budget::stored_bytes(self.read_pool()).await {
             Ok(b) => metrics::gauge!(m::VIDEO_STORED_BYTES).set(b as f64),
             Err(e) => tracing::debug!(error = %e, "stored video bytes not recorded"),
         }
@@ -243,6 +280,21 @@ impl AppState {
             }
         }
         deleted
+    }
+}
+
+/// Why an upload found no room, in words the episode shows.
+fn refusal(why: Refusal, team: &str, team_max: &str, total_max: &str) -> String {
+    match why {
+        Refusal::InFlight => format!(
+            "other uploads in progress fill [video] team_max_bytes ({team_max}) or total_max_bytes ({total_max}); it is tried again"
+        ),
+        Refusal::TeamProtected => format!(
+            "team {team}'s [video] team_max_bytes ({team_max}) is full of traces of ranked test runs, which are kept for verification"
+        ),
+        Refusal::TotalFair => format!(
+            "[video] total_max_bytes ({total_max}) is full and every team is within its fair share (or holds only traces of ranked test runs); it waits until retention or the organiser frees room"
+        ),
     }
 }
 

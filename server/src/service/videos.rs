@@ -110,16 +110,25 @@ impl AppState {
         Ok(run.map(|r| (dir, r.episodes_run())))
     }
 
-    /// The episodes of `run` with a video row (none when videos are off): `None` for a stored
-    /// video, else the note saying why it is gone.
+    /// The episodes of `run` with a video row or a removed trace (none when videos are off):
+    /// `None` for a stored video, else the note saying why it is gone.
     pub(crate) async fn video_keys(&self, run: i64) -> Result<HashMap<String, Option<String>>, ServiceError> {
         if self.video_dir().is_none() {
             return Ok(HashMap::new());
         }
-        Ok(store::videos::keys(self.read_pool(), run)
+        let mut keys: HashMap<String, Option<String>> = store::videos::keys(self.read_pool(), run)
             .await?
             .into_iter()
-            .collect())
+            .collect();
+        // A trace removed to keep a budget: its video cannot come back, which says more than a
+        // removed video's note (rendered again from the trace when asked for).
+        for (key, note) in store::traces::notes(self.read_pool(), run).await? {
+            // A stored video (`Some(None)`) stays watchable.
+            if !matches!(keys.get(&key), Some(None)) {
+                keys.insert(key, Some(note));
+            }
+        }
+        Ok(keys)
     }
 
     /// Delete the videos linked before `now - retention_days` and the files left unlinked.

@@ -13,12 +13,14 @@ pub(crate) struct RenderRow {
     pub progress: f64,
     pub error: Option<String>,
     pub video_sha256: Option<String>,
+    /// Queued: why it waits (no room for its video).
+    pub waiting: Option<String>,
 }
 
 /// The render of `(run, key)`, if one was ever asked for.
 pub(crate) async fn render(pool: &SqlitePool, run: i64, key: &str) -> sqlx::Result<Option<RenderRow>> {
     sqlx::query_as(
-        "SELECT id, episode_key, trace_sha256, state, progress, error, video_sha256
+        "SELECT id, episode_key, trace_sha256, state, progress, error, video_sha256, waiting
          FROM video_renders WHERE run_id = ? AND episode_key = ?",
     )
     .bind(run)
@@ -30,7 +32,7 @@ pub(crate) async fn render(pool: &SqlitePool, run: i64, key: &str) -> sqlx::Resu
 /// Every render of `run`.
 pub(crate) async fn of_run(pool: &SqlitePool, run: i64) -> sqlx::Result<Vec<RenderRow>> {
     sqlx::query_as(
-        "SELECT id, episode_key, trace_sha256, state, progress, error, video_sha256
+        "SELECT id, episode_key, trace_sha256, state, progress, error, video_sha256, waiting
          FROM video_renders WHERE run_id = ?",
     )
     .bind(run)
@@ -55,6 +57,7 @@ pub(crate) async fn request(
          VALUES (?1, ?2, ?3, ?4, ?4, ?5)
          ON CONFLICT (run_id, episode_key) DO UPDATE SET state = 'queued', progress = 0,
              error = NULL, video_sha256 = NULL, trace_sha256 = excluded.trace_sha256,
+             waiting = NULL, not_before = 0, waits = 0,
              attempt = 0, updated_at = excluded.updated_at, prerender = excluded.prerender
          WHERE state = 'done' OR (state = 'failed' AND trace_sha256 <> excluded.trace_sha256)",
     )
@@ -91,11 +94,14 @@ pub(crate) async fn rendered(pool: &SqlitePool, trace: &str) -> sqlx::Result<Opt
     .await
 }
 
-/// Whether any render waits.
-pub(crate) async fn any_queued(pool: &SqlitePool) -> sqlx::Result<bool> {
-    sqlx::query_scalar("SELECT EXISTS (SELECT 1 FROM video_renders WHERE state = 'queued')")
-        .fetch_one(pool)
-        .await
+/// Whether any render may be leased at `now`.
+pub(crate) async fn any_queued(pool: &SqlitePool, now: i64) -> sqlx::Result<bool> {
+    sqlx::query_scalar(
+        "SELECT EXISTS (SELECT 1 FROM video_renders WHERE state = 'queued' AND not_before <= ?)",
+    )
+    .bind(now)
+    .fetch_one(pool)
+    .await
 }
 
 /// A claimed render: what the worker needs to find its trace and check its replay.
@@ -121,7 +127,8 @@ pub(crate) async fn claim(
     sqlx::query_as(
         "UPDATE video_renders SET state = 'leased', lease_owner = ?1, lease_expires_at = ?2,
                 attempt = attempt + 1, updated_at = ?3
-         WHERE id = (SELECT id FROM video_renders WHERE state = 'queued' ORDER BY prerender, id LIMIT 1)
+         WHERE id = (SELECT id FROM video_renders WHERE state = 'queued' AND not_before <= ?3
+                     ORDER BY prerender, id LIMIT 1)
            AND NOT EXISTS (SELECT 1 FROM jobs WHERE state = 'queued')
          RETURNING id, attempt, run_id, episode_key, trace_sha256, lease_expires_at",
     )
@@ -185,6 +192,46 @@ pub(crate) async fn held(
     Ok(found.is_some())
 }
 
+/// The render lease `lease` when it is held: which episode and which trace it renders.
+pub(crate) async fn leased(pool: &SqlitePool, lease: Lease<'_>) -> sqlx::Result<Option<Claimed>> {
+    sqlx::query_as(
+        "SELECT id, attempt, run_id, episode_key, trace_sha256, lease_expires_at FROM video_renders
+         WHERE id = ? AND attempt = ? AND lease_owner = ? AND state = 'leased'",
+    )
+    .bind(lease.id)
+    .bind(lease.attempt)
+    .bind(lease.owner)
+    .fetch_optional(pool)
+    .await
+}
+
+/// The render lease `(id, attempt)` found no room for its video: queued again, not before
+/// `not_before` (the pause doubling with each wait, `pause_ms` the first), with `why`; the
+/// lease does not count as an attempt. `false` when the lease is not held.
+pub(crate) async fn wait(
+    pool: &SqlitePool,
+    id: i64,
+    attempt: i64,
+    why: &str,
+    now: i64,
+    pause_ms: i64,
+) -> sqlx::Result<bool> {
+    let done = sqlx::query(
+        "UPDATE video_renders SET state = 'queued', waiting = ?1, lease_owner = NULL,
+                lease_expires_at = NULL, progress = 0, attempt = attempt - 1,
+                not_before = ?2 + MIN(?3 << MIN(waits, 6), 3600000), waits = waits + 1, updated_at = ?2
+         WHERE id = ?4 AND attempt = ?5 AND state = 'leased'",
+    )
+    .bind(why)
+    .bind(now)
+    .bind(pause_ms)
+    .bind(id)
+    .bind(attempt)
+    .execute(pool)
+    .await?;
+    Ok(done.rows_affected() == 1)
+}
+
 /// The render `(id, attempt)` made the video `video`.
 pub(crate) async fn done(
     pool: &SqlitePool,
@@ -195,7 +242,7 @@ pub(crate) async fn done(
 ) -> sqlx::Result<()> {
     sqlx::query(
         "UPDATE video_renders SET state = 'done', progress = 1, video_sha256 = ?1, lease_owner = NULL,
-                lease_expires_at = NULL, updated_at = ?2
+                lease_expires_at = NULL, updated_at = ?2, waiting = NULL
          WHERE id = ?3 AND attempt = ?4 AND state = 'leased'",
     )
     .bind(video)

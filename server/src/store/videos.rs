@@ -1,5 +1,5 @@
 //! Episode videos' rows (`episode_videos`): which stored file (by sha256) shows which
-//! (run, episode), the budgets' evictions and the retention sweep's deletes. The files are
+//! (run, episode), and the retention sweep's deletes (the budgets' evictions: `super::budget`). The files are
 //! `crate::service::videos`'.
 //!
 //! A row with a `note` is a video removed to keep a budget: it has no file any more and says
@@ -104,97 +104,6 @@ pub(crate) struct Row<'a> {
     pub now: i64,
 }
 
-/// A byte budget of stored videos: one team's (`team`) or everyone's (`None`).
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct Budget<'a> {
-    pub team: Option<i64>,
-    pub max: u64,
-    /// Bytes of uploads in flight that this budget must hold too.
-    pub pending: u64,
-    /// What a row evicted for this budget says.
-    pub note: &'a str,
-}
-
-/// What [`make_room`] did.
-#[derive(Debug, Default)]
-pub(crate) struct Room {
-    /// Whether `incoming` bytes fit every budget now; when not, nothing was evicted.
-    pub fits: bool,
-    /// Rows evicted, per budget in the order given.
-    pub evicted: Vec<usize>,
-    /// Files of evicted rows that no stored row names any more.
-    pub orphans: Vec<String>,
-}
-
-// Two statements per kind of budget rather than `team_id = ? OR ? IS NULL`, so SQLite uses the
-// partial indexes (migration 20261126000100).
-const SUM_ALL: &str = "SELECT COALESCE(SUM(bytes), 0) FROM episode_videos WHERE note IS NULL";
-const SUM_TEAM: &str =
-    "SELECT COALESCE(SUM(bytes), 0) FROM episode_videos WHERE note IS NULL AND team_id = ?";
-const OLDEST_ALL: &str = "SELECT rowid, sha256, bytes FROM episode_videos WHERE note IS NULL
-     ORDER BY created_at, rowid LIMIT 1";
-const OLDEST_TEAM: &str = "SELECT rowid, sha256, bytes FROM episode_videos WHERE note IS NULL AND team_id = ?
-     ORDER BY created_at, rowid LIMIT 1";
-
-/// Evict the oldest stored rows of each budget in turn until `incoming` more bytes fit it, in
-/// one write transaction (two uploads never pick the same row nor both count the room one
-/// eviction freed). Nothing is evicted when a budget cannot hold `incoming` even emptied.
-pub(crate) async fn make_room(
-    pool: &SqlitePool,
-    budgets: &[Budget<'_>],
-    incoming: u64,
-) -> sqlx::Result<Room> {
-    if budgets.iter().any(|b| b.pending.saturating_add(incoming) > b.max) {
-        return Ok(Room::default());
-    }
-    let mut tx = pool.begin_with("BEGIN IMMEDIATE").await?;
-    let mut room = Room {
-        fits: true,
-        ..Room::default()
-    };
-    let mut freed = Vec::new();
-    for b in budgets {
-        let (sum, oldest) = match b.team {
-            Some(_) => (SUM_TEAM, OLDEST_TEAM),
-            None => (SUM_ALL, OLDEST_ALL),
-        };
-        let mut q = sqlx::query_scalar::<_, i64>(sum);
-        if let Some(team) = b.team {
-            q = q.bind(team);
-        }
-        let used = q.fetch_one(&mut *tx).await?;
-        let mut used = used.max(0) as u64;
-        let mut n = 0;
-        while used + b.pending + incoming > b.max {
-            let mut q = sqlx::query_as::<_, (i64, String, i64)>(oldest);
-            if let Some(team) = b.team {
-                q = q.bind(team);
-            }
-            let row = q.fetch_optional(&mut *tx).await?;
-            // Unreachable: emptied, the budget holds `pending + incoming` (checked above).
-            let Some((rowid, sha, bytes)) = row else { break };
-            sqlx::query("UPDATE episode_videos SET note = ? WHERE rowid = ?")
-                .bind(b.note)
-                .bind(rowid)
-                .execute(&mut *tx)
-                .await?;
-            used = used.saturating_sub(bytes.max(0) as u64);
-            n += 1;
-            if !freed.contains(&sha) {
-                freed.push(sha);
-            }
-        }
-        room.evicted.push(n);
-    }
-    for sha in freed {
-        if !stored(&mut tx, &sha).await? {
-            room.orphans.push(sha);
-        }
-    }
-    tx.commit().await?;
-    Ok(room)
-}
-
 /// Whether a stored row names the file `sha256`, inside a transaction.
 async fn stored(tx: &mut sqlx::SqliteConnection, sha256: &str) -> sqlx::Result<bool> {
     let found: Option<i64> =
@@ -225,7 +134,8 @@ pub(crate) async fn keys(pool: &SqlitePool, run: i64) -> sqlx::Result<Vec<(Strin
         .await
 }
 
-/// Bytes of every stored video (per row, as the budgets count them).
+/// Bytes of every stored video (per row, as the budgets count them; traces too: `super::budget`).
+#[cfg(test)]
 pub(crate) async fn stored_bytes(pool: &SqlitePool) -> sqlx::Result<i64> {
     sqlx::query_scalar("SELECT COALESCE(SUM(bytes), 0) FROM episode_videos WHERE note IS NULL")
         .fetch_one(pool)

@@ -8,6 +8,7 @@
 pub mod client;
 pub mod cores;
 mod execute;
+mod fetch;
 mod live;
 pub mod local;
 mod path;

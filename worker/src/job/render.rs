@@ -2,7 +2,8 @@
 //! instead of its video, and when the video is first asked for it hands a worker a render job
 //! (`Job.render`) at the lowest priority. The worker replays the trace into the episode video
 //! (the recorder `eval --record` uses, as a hook on the replay), heartbeats the render's
-//! progress, and uploads the MP4 through `UploadVideo`, which completes the render.
+//! progress, and uploads the MP4 through `UploadVideo`, which completes the render. The trace
+//! is fetched first, in chunks (`super::fetch`): a lease reply never carries it.
 //!
 //! Rendering never delays evaluation: the server hands a render out only while no evaluation
 //! job is queued, the worker takes at most one render per slot and keeps leasing episodes
@@ -32,6 +33,7 @@ use tracing::{Instrument, info, info_span, warn};
 use super::JobContext;
 use super::client::Worker;
 use super::cores::{Core, Cores};
+use super::fetch::FetchError;
 
 /// The share of a render spent replaying; the rest is the encoder's flush and the upload.
 const REPLAY_SHARE: f32 = 0.95;
@@ -109,11 +111,12 @@ impl StepHook for Progress<'_> {
 /// Blocking: run it on a thread of its own.
 pub(crate) fn render(
     job: &pb::RenderJob,
+    trace_gz: &[u8],
     ctx: &JobContext,
     control: &RenderControl,
     core: &mut Core,
 ) -> Result<RecordedVideo, String> {
-    let trace = Trace::from_bytes(&job.trace_gz).map_err(|e| format!("the trace does not load: {e}"))?;
+    let trace = Trace::from_bytes(trace_gz).map_err(|e| format!("the trace does not load: {e}"))?;
     let plan = &trace.episode.plan;
     let n_tasks = trace.run.max_tasks.map_or(plan.len(), |m| m.min(plan.len()));
     let video = EpisodeVideo::new(plan, n_tasks, job.video_max_bytes as usize);
@@ -180,28 +183,30 @@ impl Worker {
         async {
             info!("render started");
             let control = Arc::new(RenderControl::default());
-            let mut done = spawn_render(&job, self.ctx.clone(), control.clone(), self.cores.clone());
-            let mut next = super::client::heartbeat_in(job.lease_expires_at_ms);
-            let result = loop {
-                tokio::select! {
-                    r = &mut done => break r.unwrap_or_else(|_| Err("the render thread panicked".into())),
-                    () = tokio::time::sleep(next) => {
-                        match self.render_heartbeat(&job, control.progress()).await {
-                            Some(d) => next = d,
-                            None => {
-                                control.cancel();
-                                info!("render lease cancelled by the server: stopping");
-                                return;
-                            }
-                        }
-                    }
-                    _ = stop.changed() => {
-                        // Cheap to redo: the lease expires and the server queues the render again.
-                        control.cancel();
-                        info!("draining: render stopped");
-                        return;
-                    }
+            let fetch = super::fetch::trace(&self.client, &self.id, &job);
+            let trace_gz = match self.heartbeating(&job, &control, fetch, stop).await {
+                None => return,
+                Some(Ok(t)) => t,
+                Some(Err(FetchError::LeaseGone)) => {
+                    info!("render lease gone while fetching its trace: stopping");
+                    return;
                 }
+                // The lease expires and the server queues the render again.
+                Some(Err(FetchError::Transient(e))) => {
+                    warn!("the trace could not be fetched ({e}); the render will be tried again");
+                    return;
+                }
+                Some(Err(FetchError::Fails(why))) => {
+                    warn!(%why, "render failed");
+                    self.fail_render(&job, &why).await;
+                    return;
+                }
+            };
+            info!(trace_bytes = trace_gz.len(), "trace fetched");
+            let done = spawn_render(&job, trace_gz, self.ctx.clone(), control.clone(), self.cores.clone());
+            let replayed = async { done.await.unwrap_or_else(|_| Err("the render thread panicked".into())) };
+            let Some(result) = self.heartbeating(&job, &control, replayed, stop).await else {
+                return;
             };
             let why = match result {
                 Ok(video) => {
@@ -213,8 +218,8 @@ impl Worker {
                     );
                     match super::upload::upload_video(&self.client, &self.id, &job, video.mp4).await {
                         Ok(()) => return,
-                        // The server may take it later (a budget full of uploads in flight, a
-                        // restart): the lease expires and the render is queued again.
+                        // The server may take it later (storage budgets full: the server queues
+                        // the render again with the reason; a restart): nothing to report.
                         Err(s) if super::client::retryable(&s) => {
                             warn!("the rendered video was not stored ({:?}: {}); the render will be tried again", s.code(), s.message());
                             return;
@@ -229,6 +234,40 @@ impl Worker {
         }
         .instrument(span)
         .await;
+    }
+
+    /// Run `work` while heartbeating the render lease with `control`'s progress; `None` (and
+    /// `control` cancelled) when the server cancels the lease or the worker drains.
+    async fn heartbeating<T>(
+        &self,
+        job: &pb::Job,
+        control: &RenderControl,
+        work: impl std::future::Future<Output = T>,
+        stop: &mut watch::Receiver<bool>,
+    ) -> Option<T> {
+        let mut next = super::client::heartbeat_in(job.lease_expires_at_ms);
+        tokio::pin!(work);
+        loop {
+            tokio::select! {
+                r = &mut work => return Some(r),
+                () = tokio::time::sleep(next) => {
+                    match self.render_heartbeat(job, control.progress()).await {
+                        Some(d) => next = d,
+                        None => {
+                            control.cancel();
+                            info!("render lease cancelled by the server: stopping");
+                            return None;
+                        }
+                    }
+                }
+                _ = stop.changed() => {
+                    // Cheap to redo: the lease expires and the server queues the render again.
+                    control.cancel();
+                    info!("draining: render stopped");
+                    return None;
+                }
+            }
+        }
     }
 
     /// One render heartbeat; when the next is due, or `None` when the lease is gone.
@@ -280,6 +319,7 @@ impl Worker {
 /// priority than any episode ([`Core::hold_background`]).
 fn spawn_render(
     job: &pb::Job,
+    trace_gz: Vec<u8>,
     ctx: Arc<JobContext>,
     control: Arc<RenderControl>,
     cores: Cores,
@@ -290,7 +330,7 @@ fn spawn_render(
         .name(format!("render-{}", job.job_id))
         .spawn(move || {
             let mut core = cores.core();
-            let _ = tx.send(render(&job_spec, &ctx, &control, &mut core));
+            let _ = tx.send(render(&job_spec, &trace_gz, &ctx, &control, &mut core));
         });
     if let Err(e) = spawned {
         warn!("cannot start a render thread: {e}");

@@ -38,6 +38,8 @@ struct State {
     render_failures: Vec<pb::FailRenderRequest>,
     /// Heartbeats of render leases: (render id, progress).
     render_heartbeats: Vec<(i64, f32)>,
+    /// What `FetchTrace` streams, per render id, in chunks of 64 KiB.
+    fetchable: std::collections::HashMap<i64, Vec<u8>>,
 }
 
 #[derive(Clone)]
@@ -170,6 +172,30 @@ impl Worker for TestWorkerServer {
             sha256: String::new(),
             bytes: n,
         }))
+    }
+
+    type FetchTraceStream =
+        std::pin::Pin<Box<dyn tokio_stream::Stream<Item = Result<pb::TraceChunk, Status>> + Send>>;
+
+    async fn fetch_trace(
+        &self,
+        req: Request<pb::FetchTraceRequest>,
+    ) -> Result<Response<Self::FetchTraceStream>, Status> {
+        authed(&req)?;
+        let id = req.into_inner().render_id;
+        let bytes = (self.0.lock().unwrap().fetchable.get(&id).cloned())
+            .ok_or_else(|| Status::not_found(format!("no trace for render {id}")))?;
+        let total_bytes = bytes.len() as u64;
+        let chunks: Vec<Result<pb::TraceChunk, Status>> = (bytes.chunks(64 << 10).enumerate())
+            .map(|(i, d)| {
+                Ok(pb::TraceChunk {
+                    data: d.to_vec(),
+                    total_bytes: if i == 0 { total_bytes } else { 0 },
+                    ..Default::default()
+                })
+            })
+            .collect();
+        Ok(Response::new(Box::pin(tokio_stream::iter(chunks))))
     }
 
     async fn fail_render(
@@ -613,10 +639,13 @@ fn an_on_demand_episode_uploads_its_trace_and_a_render_job_makes_its_video_or_re
         episode_key: "dev-0001".into(),
         episode: None,
         policy: None,
+        // Named, not carried (issue #37): the worker fetches it with FetchTrace, in chunks.
         render: Some(pb::RenderJob {
-            trace_gz: gz.clone(),
+            trace_gz: Vec::new(),
             expected,
             video_max_bytes: 0,
+            trace_bytes: gz.len() as u64,
+            trace_sha256: hex::encode(<sha2::Sha256 as sha2::Digest>::digest(&gz)),
         }),
     };
     let mut tampered = tasks.clone();
@@ -624,11 +653,18 @@ fn an_on_demand_episode_uploads_its_trace_and_a_render_job_makes_its_video_or_re
     tampered[0].completion_time_s = 1.0;
     {
         let mut s = state.lock().unwrap();
-        s.queue.push(render(50, tasks));
+        s.fetchable.insert(50, gz.clone());
+        s.fetchable.insert(51, gz.clone());
+        // A trace that arrives other than its render job names it: never replayed.
+        let mut altered = gz.clone();
+        *altered.last_mut().unwrap() ^= 1;
+        s.fetchable.insert(52, altered);
+        s.queue.push(render(50, tasks.clone()));
         s.queue.push(render(51, tampered));
+        s.queue.push(render(52, tasks));
     }
     wait("the render", &|s| {
-        !s.videos.is_empty() && !s.render_failures.is_empty()
+        !s.videos.is_empty() && s.render_failures.len() >= 2
     });
     stop_tx.send(()).unwrap();
     rt.block_on(worker).unwrap().unwrap();
@@ -637,11 +673,17 @@ fn an_on_demand_episode_uploads_its_trace_and_a_render_job_makes_its_video_or_re
     assert!(first.render && first.job_id == 50, "{first:?}");
     assert_eq!(&mp4[4..8], b"ftyp");
     assert_eq!(s.videos.len(), 1, "the refused render uploaded a video");
-    let failed = &s.render_failures[0];
-    assert_eq!(failed.render_id, 51);
+    let failed = |id: i64| {
+        &s.render_failures
+            .iter()
+            .find(|f| f.render_id == id)
+            .unwrap()
+            .error
+    };
     assert!(
-        failed.error.contains("replay disagrees with the stored result"),
+        failed(51).contains("replay disagrees with the stored result"),
         "{}",
-        failed.error
+        failed(51)
     );
+    assert!(failed(52).contains("arrived altered"), "{}", failed(52));
 }

@@ -311,7 +311,15 @@ fn media(ep: &EpisodeView) -> String {
     let page = |url: &str| escape(url.strip_prefix("/api/v1").unwrap_or(url));
     let key = escape(&ep.key);
     let mut out = String::new();
-    if let Some(progress) = video_pending(ep) {
+    let waiting = ep.video.as_ref().and_then(|v| v.waiting.as_deref());
+    if let (Some(_), Some(why)) = (video_pending(ep), waiting) {
+        // No room for its video yet (the storage budgets): why, instead of a stuck 0 %.
+        let _ = write!(
+            out,
+            "<br><span class=\"muted video-waiting\" role=status>Video waiting: {}</span>",
+            escape(why)
+        );
+    } else if let Some(progress) = video_pending(ep) {
         // Never a player before its file exists: the page reloads until the render is done.
         let _ = write!(
             out,
@@ -395,6 +403,7 @@ mod tests {
             progress: 0.42,
             url: Some(url.into()),
             error: None,
+            waiting: None,
         });
         let html = media(&ep);
         assert!(!html.contains("<video"), "{html}");
@@ -406,6 +415,7 @@ mod tests {
             progress: 0.0,
             url: Some(url.into()),
             error: None,
+            waiting: None,
         });
         let html = media(&evicted);
         assert!(!html.contains("<video") && !html.contains("Rendering"), "{html}");

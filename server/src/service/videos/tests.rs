@@ -7,6 +7,7 @@ use super::*;
 use crate::testutil::{FakeProbe, Fixture, WORKER, fixture};
 
 mod budget;
+mod fair;
 mod renders;
 
 /// `(job id, attempt, run, key)` of every reported online job, dev run first.

@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 
 use super::{Complete, UploadError, trace_path};
 use crate::error::ServiceError;
+use crate::service::video_budget::Booking;
 use crate::service::{AppState, Caller, now_ms};
 use crate::store;
 
@@ -44,6 +45,7 @@ impl AppState {
     pub(crate) async fn store_trace(
         &self,
         dir: &Path,
+        booking: Booking,
         run: i64,
         key: &str,
         file: Complete,
@@ -51,9 +53,17 @@ impl AppState {
         let (sha, bytes) = (file.sha256.clone(), file.bytes);
         let _turn = self.file_turn().await;
         file.place_at(trace_path(dir, &sha)).await?;
-        let replaced = store::traces::link(self.pool(), run, key, &sha, bytes, now_ms())
+        let row = store::videos::Row {
+            run,
+            key,
+            team: booking.team(),
+            now: now_ms(),
+        };
+        let replaced = store::traces::link(self.pool(), row, &sha, bytes)
             .await
             .map_err(ServiceError::from)?;
+        // Linked: the row counts against the budgets from now on.
+        drop(booking);
         self.delete_traces_locked(dir, replaced.into_iter().collect())
             .await;
         Ok((sha, bytes))
@@ -86,7 +96,8 @@ impl AppState {
         self.delete_traces_locked(dir, shas).await
     }
 
-    async fn delete_traces_locked(&self, dir: &Path, shas: Vec<String>) -> usize {
+    /// [`Self::delete_unlinked_traces`], for a caller holding the file lock.
+    pub(crate) async fn delete_traces_locked(&self, dir: &Path, shas: Vec<String>) -> usize {
         let mut deleted = 0;
         for sha in shas {
             if !matches!(store::traces::linked(self.pool(), &sha).await, Ok(false)) {

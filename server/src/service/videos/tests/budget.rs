@@ -4,9 +4,9 @@
 use super::*;
 
 /// Videos of one KiB at most, a team budget of two, four in all.
-const KIB: u64 = 1024;
+pub(super) const KIB: u64 = 1024;
 
-async fn budget_fixture() -> Fixture {
+pub(super) async fn budget_fixture() -> Fixture {
     fixture(FakeProbe::ok(8), |c| {
         c.control.offline_mse = false;
         c.quota.concurrent_runs = 0;
@@ -19,7 +19,7 @@ async fn budget_fixture() -> Fixture {
 
 /// `team` registers a dev policy run whose three episodes are all reported; returns the
 /// submission id and the jobs.
-async fn dev_run(f: &Fixture, team: &str) -> (String, i64, Vec<(i64, i64, i64, String)>) {
+pub(super) async fn dev_run(f: &Fixture, team: &str) -> (String, i64, Vec<(i64, i64, i64, String)>) {
     let token = f.team(team).await;
     let caller = f.caller(&token).await;
     let id = f
@@ -44,7 +44,7 @@ async fn dev_run(f: &Fixture, team: &str) -> (String, i64, Vec<(i64, i64, i64, S
 }
 
 /// Each episode's `(key, video_url present, video_note)` as its team sees the submission.
-async fn shown(f: &Fixture, token: &str, id: i64) -> Vec<(String, bool, Option<String>)> {
+pub(super) async fn shown(f: &Fixture, token: &str, id: i64) -> Vec<(String, bool, Option<String>)> {
     let view = f.state.get_submission(&f.caller(token).await, id).await.unwrap();
     let eps = view.latest_run.unwrap().evaluation.unwrap().episodes;
     eps.into_iter()
@@ -52,7 +52,7 @@ async fn shown(f: &Fixture, token: &str, id: i64) -> Vec<(String, bool, Option<S
         .collect()
 }
 
-fn note_of<'a>(eps: &'a [(String, bool, Option<String>)], key: &str) -> (bool, Option<&'a str>) {
+pub(super) fn note_of<'a>(eps: &'a [(String, bool, Option<String>)], key: &str) -> (bool, Option<&'a str>) {
     let e = eps.iter().find(|e| e.0 == key).unwrap();
     (e.1, e.2.as_deref())
 }
@@ -81,7 +81,7 @@ async fn uploads_past_a_budget_evict_the_oldest_videos_and_their_episodes_say_wh
     assert!(!url, "{eps:?}");
     let note = note.unwrap_or_else(|| panic!("no note on the evicted episode: {eps:?}"));
     assert!(
-        note.contains("team alpha's videos within [video] team_max_bytes (2 KiB)"),
+        note.contains("team alpha's videos and traces within [video] team_max_bytes (2 KiB)"),
         "{note}"
     );
     assert!(!file_path(&dir, &sha[0]).exists());

@@ -22,7 +22,8 @@ async fn store_trace(f: &Fixture, run: i64, key: &str, bytes: &[u8]) {
     let mut up = Incoming::start(&dir, bytes.len() as u64, 1 << 20).await.unwrap();
     up.write(bytes).await.unwrap();
     let done = up.finish().await.unwrap();
-    f.state.store_trace(&dir, run, key, done).await.unwrap();
+    let booking = (f.state.book_trace(&dir, run, key, bytes.len() as u64).await).unwrap();
+    f.state.store_trace(&dir, booking, run, key, done).await.unwrap();
 }
 
 /// Team alpha's dev policy run, registered, and a worker's credentials.
@@ -75,7 +76,12 @@ async fn a_render_waits_for_evaluation_and_a_lost_render_lease_is_queued_again()
     let render = render.expect("the render is leased once no evaluation job waits");
     assert!(jobs.is_empty());
     assert_eq!((render.run_id, render.episode_key.as_str()), (job.run_id, key));
-    assert_eq!(render.trace_gz, b"\x1f\x8b trace");
+    // The trace is named, not carried: the worker fetches it in chunks.
+    assert_eq!(render.trace_bytes, 8);
+    assert_eq!(
+        render.trace_sha256,
+        hex::encode(Sha256::digest(b"\x1f\x8b trace"))
+    );
     assert_eq!(render.expected.len(), job.spec.task_count());
     assert!(render.expected.iter().all(|t| !t.success));
     // Its progress is what the episode shows.
