@@ -29,7 +29,15 @@ pub(crate) fn assert_oracle_completes(assets: &Assets, cfg: &EpisodeConfig, ins:
         privileged: true,
         ..RunOptions::default()
     };
-    let out = run_episode(&mut sim, &mut OraclePolicy::new(assets), &run, None, &mut ()).unwrap();
+    let mut oracle = OraclePolicy::new(assets);
+    let out = run_episode(&mut sim, &mut oracle, &run, None, &mut ()).unwrap();
     assert_eq!(out.tasks.len(), ins.plan.len());
     assert!(out.tasks.iter().all(|t| t.success), "{}: {:?}", ins.id, out.tasks);
+    // Undisturbed, the state never leaves the oracle's plan (issue #38): it never re-plans.
+    assert_eq!(
+        oracle.replans(),
+        0,
+        "{}: the oracle re-planned in its own episode",
+        ins.id
+    );
 }

@@ -22,7 +22,8 @@ frame, the gripper command). The action space holds only legal actions (a unit q
 Reward: 1 for each task that succeeds (sparse). ``terminated`` when the plan's last task has
 ended; ``truncated`` is never set (each task's 120 s limit is part of the episode).
 ``info``: ``task_index``, ``sub_task``, ``tasks_ended`` (records of the tasks that ended with this
-step), ``is_success`` (every task so far succeeded; at the end, the whole plan), and on request
+step), ``is_success`` (False until the episode ends; then whether every task of it succeeded:
+the whole plan, or ``Task-v0``'s one task, as gymnasium-robotics and LeRobot read it), and on request
 ``expert_chunk`` (the expert's 16x10 chunk for the current state) and ``privileged`` (robot pose
 in the scene frame, the task's goal, the key objects' poses).
 """
@@ -161,7 +162,6 @@ class KitchenREnv(gym.Env):
         self._cameras = self._native.cameras()
         self._decision: dict | None = None
         self._last_obs: dict | None = None
-        self._success = True
         self.instruction: dict | None = None
         self.action_space = ActionSpace()
         self.observation_space = self._observation_space()
@@ -204,9 +204,8 @@ class KitchenREnv(gym.Env):
 
     def _info(self, progress: dict) -> dict:
         info: dict[str, Any] = {"tasks_ended": progress["tasks_ended"]}
-        for t in progress["tasks_ended"]:
-            self._success = self._success and t["success"]
-        info["is_success"] = self._success
+        # Nothing has succeeded before the episode's end (a reset is no success).
+        info["is_success"] = False
         d = progress["decision"]
         if d is not None:
             info["task_index"] = d["task_index"]
@@ -251,7 +250,6 @@ class KitchenREnv(gym.Env):
         return None
 
     def _after_reset(self, progress: dict, instruction: str, run_seed: int, task: int | None = None):
-        self._success = True
         if progress["decision"] is None:
             raise RuntimeError(f"instruction {instruction!r} has no task to run")
         self._decision = progress["decision"]

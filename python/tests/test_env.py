@@ -183,6 +183,7 @@ def test_the_readme_snippet_steps_the_expert_to_success():
     import gymnasium as gym, gym_kitchen_r  # noqa: E401,F401
     env = gym.make("KitchenR/Plan-v0", expert=True)
     obs, info = env.reset(seed=0, options={"instruction": "dev-0001"})
+    assert info["is_success"] is False  # nothing has succeeded yet (issue #38)
     done = False
     while not done: obs, reward, done, _, info = env.step(info["expert_chunk"][0])  # noqa: E701
     assert info["is_success"] and len(info["episode"]["tasks"]) == len(info["episode"]["tasks"]) > 0
@@ -195,6 +196,8 @@ def test_task_env_runs_one_sub_task_from_the_experts_state_at_its_start():
     j = next(i for i, step in enumerate(plan) if step.startswith("place"))
     obs, info = env.reset(seed=0, options={"instruction": "dev-0001", "task": j})
     assert obs["sub_task"] == plan[j] and obs["task_index"] == j and info["task"] == j
+    # Issue #38: a reset is no success; only the task's end can be one.
+    assert info["is_success"] is False
     # The robot starts holding what the expert picked before this step: the gripper is closed on it.
     assert obs["state"][gym_kitchen_r.STATE_FIELDS.index("gripper")] < 0.9
     terminated, steps = False, 0

@@ -32,7 +32,7 @@ use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 
 use crate::policy::{ACTION_DIM, HORIZON, Policy, PolicyError, PolicyInput, PolicySpec, Privileged};
 use crate::runner::RunOptions;
-use task::{Goal, Now, TaskCtl, World};
+use task::{Goal, Measured, Now, TaskCtl, World};
 
 /// Name the oracle announces and `--policy builtin:oracle` selects.
 pub(crate) const ORACLE_NAME: &str = "builtin:oracle";
@@ -75,6 +75,8 @@ pub struct OraclePolicy {
     /// The twin's grasp mode: in the physical one the oracle gives the fingers time to squeeze
     /// before it lifts.
     grasp: GraspMode,
+    /// How often the measured state left the plan and the oracle planned again from it.
+    replans: u64,
 }
 
 impl OraclePolicy {
@@ -93,7 +95,15 @@ impl OraclePolicy {
             episode: String::new(),
             images: true,
             grasp: SimConfig::load_default().map_or(GraspMode::Abstract, |c| c.grasp.mode),
+            replans: 0,
         }
+    }
+
+    /// How often this oracle planned again from the measured state because it had left the
+    /// plan (issue #38): never in its own undisturbed episodes, at every step a learner drives
+    /// differently when it labels them.
+    pub fn replans(&self) -> u64 {
+        self.replans
     }
 
     /// Drive a twin of this grasp mode (default: `configs/sim.toml`'s `[grasp] mode`).
@@ -158,10 +168,16 @@ impl OraclePolicy {
             TaskTarget::Pick { .. } => Goal::Pick,
             TaskTarget::Place { target, .. } => Goal::Place { target },
         };
-        let approach = self
-            .last_goal
-            .filter(|g| (g[0] - here[0]).hypot(g[1] - here[1]) < SETTLE_RANGE);
+        let near = |g: &[f64; 3]| (g[0] - here[0]).hypot(g[1] - here[1]) < SETTLE_RANGE;
         let scene = self.scene(&p.scene)?;
+        // An oracle that did not drive the last move (a start mid-plan, a state a learner
+        // reached) squares up on the approach pose of the zone it stands at.
+        let approach = self.last_goal.filter(near).or_else(|| {
+            let d = |g: &[f64; 3]| (g[0] - here[0]).hypot(g[1] - here[1]);
+            (scene.zones.iter().map(|z| z.approach))
+                .filter(near)
+                .min_by(|a, b| d(a).total_cmp(&d(b)))
+        });
         let tool_world = kitchen_r_sim::oracle::manip::base_isometry(p.base_pose) * tool;
         let t = tool_world.translation;
         // The board that matters is the first one above the hand.
@@ -254,6 +270,22 @@ impl Policy for OraclePolicy {
         // A pick that closed on nothing goes round again from where the tool is.
         if matches!(ctl.goal, Goal::Pick) && ctl.manipulation_finished() && p.held.is_none() {
             ctl.restart_manipulation();
+        }
+        // A state the plan does not expect (a policy drove, the world was pushed): plan again
+        // from the state, as at a task's start.
+        let measured_tool = iso(&p.ee_pose);
+        let measured = Measured {
+            now: &Now {
+                base: p.base_pose,
+                velocity: input.observation.odometry.velocity,
+            },
+            tool: &measured_tool,
+            held: world.held_in_tool.is_some(),
+            object: world.object.as_ref(),
+        };
+        if ctl.off_plan(&measured).is_some() {
+            self.replans += 1;
+            ctl = self.start_task(p)?;
         }
         let mut now = Now {
             base: p.base_pose,

@@ -162,6 +162,16 @@ impl PhasePlan {
         &self.targets
     }
 
+    /// The plan from `phase` on (the phases before it dropped): a plan resumed from a state
+    /// that is past them, e.g. a pick whose object is already in the hand starts at `Lift`.
+    pub fn from_phase(mut self, phase: Phase) -> Self {
+        let keep = self.targets.iter().position(|p| p.phase == phase);
+        if let Some(i) = keep {
+            self.targets.drain(..i);
+        }
+        self
+    }
+
     pub fn duration(&self) -> f64 {
         self.targets.iter().map(|p| p.duration).sum()
     }
