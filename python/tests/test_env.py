@@ -254,3 +254,26 @@ def test_randomise_gives_the_episodes_kitchen_r_episodes_generate_writes(tmp_pat
             assert g["sim_time"] == w["sim_time"], (instruction, g["index"])
     env.close()
     plain.close()
+
+
+def test_the_expert_labels_a_state_a_lagging_policy_reached_and_finishes_from_it():
+    """Issue #38: a policy that holds the hand still for 6 s of a place (the expert's own plan
+    would have lowered and let go by then) gets a label at every step, and the expert, taking
+    over from that state, completes the task."""
+    env = gym.make("KitchenR/Task-v0", expert=True)
+    plan = env.unwrapped.instruction_of("dev-0001")["plan"]
+    j = next(i for i, step in enumerate(plan) if step.startswith("place"))
+    obs, info = env.reset(seed=0, options={"instruction": "dev-0001", "task": j})
+    f = gym_kitchen_r.STATE_FIELDS
+    hand = [obs["state"][f.index(k)] for k in ("ee_x", "ee_y", "ee_z", "ee_qw", "ee_qx", "ee_qy", "ee_qz")]
+    still = np.array([0.0, 0.0, *hand, 0.0])  # the gripper stays closed on what it holds
+    still[5:9] /= np.linalg.norm(still[5:9])
+    for _ in range(60):
+        chunk = info["expert_chunk"]
+        assert chunk.shape == (16, 10) and np.isfinite(chunk).all()
+        obs, _, terminated, _, info = env.step(still)
+        assert not terminated
+    while not terminated:
+        obs, reward, terminated, _, info = env.step(info["expert_chunk"][0])
+    assert info["is_success"] and reward == 1.0
+    env.close()

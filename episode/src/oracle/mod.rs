@@ -285,7 +285,11 @@ impl Policy for OraclePolicy {
         };
         if ctl.off_plan(&measured).is_some() {
             self.replans += 1;
-            ctl = self.start_task(p)?;
+            // A state no plan starts from (a path planner boxed in by a learner's base) keeps
+            // the plan it had: a label is better than an error in a DAgger round.
+            if let Ok(fresh) = self.start_task(p) {
+                ctl = fresh;
+            }
         }
         let mut now = Now {
             base: p.base_pose,
