@@ -307,7 +307,9 @@ pub(crate) async fn reap(pool: &SqlitePool, now: i64, max_attempts: i64) -> sqlx
     }
     sqlx::query(
         "UPDATE video_renders SET state = 'failed', lease_owner = NULL, lease_expires_at = NULL,
-                error = 'the render was tried ' || attempt || ' times and no worker finished it',
+                error = 'the render was tried ' || attempt || ' times and no worker finished it within its lease: the last, '
+                    || COALESCE(lease_owner, 'a worker') || ', stopped at ' || CAST(ROUND(progress * 100) AS INTEGER)
+                    || ' % (killed, out of memory, or cut off from the server; its log says which)',
                 updated_at = ?1
          WHERE state = 'leased' AND lease_expires_at < ?1 AND attempt >= ?2",
     )

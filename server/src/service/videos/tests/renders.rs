@@ -299,3 +299,42 @@ async fn asking_for_a_queued_prerender_moves_it_ahead_and_none_prerenders_nothin
         "none: only on request"
     );
 }
+
+/// Issue #37: a render whose every lease was lost fails saying whose lease it was last and how
+/// far it got, not only that "no worker finished it".
+#[tokio::test]
+async fn a_render_out_of_attempts_says_whose_lease_ended_and_how_far_it_got() {
+    let f = render_fixture().await;
+    let DevRun {
+        caller, id, worker, ..
+    } = dev_run(&f).await;
+    let job = f.lease("w1", 2).await.remove(0);
+    let report = f.report("w1", &job, |_| false, 0.0);
+    f.state.report_result(worker, report).await.unwrap();
+    for j in f.lease("w1", 2).await {
+        let report = f.report("w1", &j, |_| false, 0.0);
+        f.state.report_result(worker, report).await.unwrap();
+    }
+    store_trace(&f, job.run_id, &job.episode_key, b"trace").await;
+    let key = job.episode_key.as_str();
+    f.state.video_or_render(&caller, id, key).await.unwrap();
+    let render = f.state.claim_render("w7").await.unwrap().unwrap();
+    let hb = (f.state)
+        .render_heartbeat(worker, "w7", render.id, render.attempt, 0.25)
+        .await
+        .unwrap();
+    let expired = hb.lease_expires_at_ms.unwrap() + 1;
+    store::renders::reap(f.state.pool(), expired, i64::from(render.attempt))
+        .await
+        .unwrap();
+    let failed = store::renders::render(f.state.pool(), job.run_id, key)
+        .await
+        .unwrap()
+        .unwrap();
+    assert_eq!(failed.state, "failed");
+    let why = failed.error.unwrap();
+    assert!(
+        why.contains("tried 1 times") && why.contains("w7, stopped at 25 %"),
+        "{why}"
+    );
+}
