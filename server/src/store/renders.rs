@@ -307,7 +307,8 @@ pub(crate) async fn reap(pool: &SqlitePool, now: i64, max_attempts: i64) -> sqlx
     }
     sqlx::query(
         "UPDATE video_renders SET state = 'failed', lease_owner = NULL, lease_expires_at = NULL,
-                error = 'the render was tried ' || attempt || ' times and no worker finished it within its lease: the last, '
+                error = 'the render was tried ' || attempt || CASE WHEN attempt = 1 THEN ' time' ELSE ' times' END
+                    || ' and no worker finished it within its lease: the last, '
                     || COALESCE(lease_owner, 'a worker') || ', stopped at ' || CAST(ROUND(progress * 100) AS INTEGER)
                     || ' % (killed, out of memory, or cut off from the server; its log says which)',
                 updated_at = ?1

@@ -334,7 +334,7 @@ async fn a_render_out_of_attempts_says_whose_lease_ended_and_how_far_it_got() {
     assert_eq!(failed.state, "failed");
     let why = failed.error.unwrap();
     assert!(
-        why.contains("tried 1 times") && why.contains("w7, stopped at 25 %"),
+        why.contains("tried 1 time and") && why.contains("w7, stopped at 25 %"),
         "{why}"
     );
 }
