@@ -3,12 +3,13 @@
 //! completes the task; undisturbed it never re-plans, so its own episodes are unchanged.
 
 use kitchen_r_core::dataset::{Instruction, Split};
-use kitchen_r_sim::{Assets, SensorsConfig, Sim, SimConfig};
+use kitchen_r_sim::Assets;
 
 use crate::eval::{episode_configs, instructions};
 use crate::oracle::OraclePolicy;
 use crate::policy::{ACTION_DIM, HORIZON, Policy, PolicyError, PolicyInput, PolicySpec};
 use crate::runner::{RunOptions, run_episode};
+use crate::test_oracle::blind_sim;
 
 /// The oracle, but for `len` steps from the `from`-th step of task `task` the actions are
 /// disturbed: the hand target moved by up to `reach` m and random base velocities, as a
@@ -84,12 +85,7 @@ fn disturbed_run(
     reach: f64,
 ) -> (bool, u64, String) {
     let cfg = &episode_configs(assets, std::slice::from_ref(ins), 0, None).unwrap()[0];
-    let blind = SensorsConfig {
-        cameras: Vec::new(),
-        lidar: None,
-        ..SensorsConfig::default()
-    };
-    let (mut sim, _) = Sim::new(assets.clone(), SimConfig::load_default().unwrap(), blind, cfg).unwrap();
+    let mut sim = blind_sim(assets, cfg);
     let mut policy = Disturbed {
         oracle: OraclePolicy::new(assets).without_images(),
         task,
@@ -155,21 +151,10 @@ fn from_every_sampled_task_start_a_fresh_expert_completes_the_task() {
     for kind in ["pick", "place", "move"] {
         cases.extend(tasks_of(kind, 4));
     }
-    let blind = SensorsConfig {
-        cameras: Vec::new(),
-        lidar: None,
-        ..SensorsConfig::default()
-    };
     let mut failed = Vec::new();
     for (ins, j) in &cases {
         let cfg = &episode_configs(&assets, std::slice::from_ref(ins), 0, None).unwrap()[0];
-        let (mut sim, _) = Sim::new(
-            assets.clone(),
-            SimConfig::load_default().unwrap(),
-            blind.clone(),
-            cfg,
-        )
-        .unwrap();
+        let mut sim = blind_sim(&assets, cfg);
         let starts = crate::teleport::expert_starts(&mut sim, cfg, &assets).unwrap();
         let run = RunOptions {
             execute: 1,

@@ -17,14 +17,21 @@ pub(crate) fn copy_shipped_robot(src: &std::path::Path, dir: &std::path::Path) {
     }
 }
 
-/// Run `cfg` (the episode of `ins`) with the privileged oracle and assert every task succeeds.
-pub(crate) fn assert_oracle_completes(assets: &Assets, cfg: &EpisodeConfig, ins: &Instruction) {
+/// The twin of `cfg` without cameras or LiDAR: the oracle reads only privileged state.
+pub(crate) fn blind_sim(assets: &Assets, cfg: &EpisodeConfig) -> Sim {
     let blind = SensorsConfig {
         cameras: Vec::new(),
         lidar: None,
         ..SensorsConfig::default()
     };
-    let (mut sim, _) = Sim::new(assets.clone(), SimConfig::load_default().unwrap(), blind, cfg).unwrap();
+    Sim::new(assets.clone(), SimConfig::load_default().unwrap(), blind, cfg)
+        .unwrap()
+        .0
+}
+
+/// Run `cfg` (the episode of `ins`) with the privileged oracle and assert every task succeeds.
+pub(crate) fn assert_oracle_completes(assets: &Assets, cfg: &EpisodeConfig, ins: &Instruction) {
+    let mut sim = blind_sim(assets, cfg);
     let run = RunOptions {
         privileged: true,
         ..RunOptions::default()

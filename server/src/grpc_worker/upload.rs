@@ -8,8 +8,8 @@
 use std::pin::Pin;
 
 use kitchen_r_proto::worker::v1 as pb;
-use tokio::io::AsyncReadExt;
-use tokio_stream::Stream;
+use tokio_stream::{Stream, StreamExt};
+use tokio_util::io::ReaderStream;
 use tonic::{Status, Streaming};
 
 use crate::service::AppState;
@@ -155,62 +155,28 @@ const FETCH_CHUNK: usize = 1 << 20;
 /// The chunks of a trace as `FetchTrace` answers them.
 pub(super) type TraceStream = Pin<Box<dyn Stream<Item = Result<pb::TraceChunk, Status>> + Send>>;
 
-/// Stream `trace`'s file in chunks of [`FETCH_CHUNK`]: the first names the episode and the
-/// size, each later one carries only bytes. The file is opened before the answer starts, so a
-/// trace deleted meanwhile is a NOT_FOUND, not a stream that breaks.
+/// Stream `trace`'s file in chunks of at most [`FETCH_CHUNK`]: the first names the episode and
+/// the size, each later one carries only bytes. The file is opened before the answer starts, so
+/// a trace deleted meanwhile is a NOT_FOUND, not a stream that breaks.
 pub(super) async fn send_trace(trace: RenderTrace) -> Result<TraceStream, Status> {
-    let mut file = tokio::fs::File::open(&trace.path)
+    let file = tokio::fs::File::open(&trace.path)
         .await
         .map_err(|e| match e.kind() {
             std::io::ErrorKind::NotFound => Status::not_found("the trace file is gone"),
             _ => Status::internal(format!("opening the trace: {e}")),
         })?;
-    let (tx, rx) = tokio::sync::mpsc::channel(2);
-    tokio::spawn(async move {
-        let mut first = Some(pb::TraceChunk {
-            run_id: trace.run_id,
-            episode_key: trace.episode_key,
-            total_bytes: trace.bytes,
-            ..Default::default()
-        });
-        let mut sent = 0u64;
-        loop {
-            let mut data = vec![0; FETCH_CHUNK];
-            let n = match read_full(&mut file, &mut data).await {
-                Ok(n) => n,
-                Err(e) => {
-                    let _ = tx
-                        .send(Err(Status::internal(format!("reading the trace: {e}"))))
-                        .await;
-                    return;
-                }
-            };
-            data.truncate(n);
-            sent += n as u64;
-            let chunk = match first.take() {
-                Some(c) => pb::TraceChunk { data, ..c },
-                None => pb::TraceChunk {
-                    data,
-                    ..Default::default()
-                },
-            };
-            // The worker went away: nothing more to send.
-            if tx.send(Ok(chunk)).await.is_err() || n < FETCH_CHUNK || sent >= trace.bytes {
-                return;
-            }
-        }
+    let mut first = Some(pb::TraceChunk {
+        run_id: trace.run_id,
+        episode_key: trace.episode_key,
+        total_bytes: trace.bytes,
+        ..Default::default()
     });
-    Ok(Box::pin(tokio_stream::wrappers::ReceiverStream::new(rx)))
-}
-
-/// Fill `buf` from `file` as far as it goes; the bytes read (less than `buf` only at its end).
-async fn read_full(file: &mut tokio::fs::File, buf: &mut [u8]) -> std::io::Result<usize> {
-    let mut n = 0;
-    while n < buf.len() {
-        match file.read(&mut buf[n..]).await? {
-            0 => break,
-            k => n += k,
-        }
-    }
-    Ok(n)
+    let chunks = ReaderStream::with_capacity(file, FETCH_CHUNK).map(move |read| {
+        let data = read
+            .map_err(|e| Status::internal(format!("reading the trace: {e}")))?
+            .to_vec();
+        let header = first.take().unwrap_or_default();
+        Ok(pb::TraceChunk { data, ..header })
+    });
+    Ok(Box::pin(chunks))
 }

@@ -82,7 +82,7 @@ impl AppState {
         key: &str,
         bytes: u64,
     ) -> Result<Booking, UploadError> {
-        self.book(dir, run, key, bytes, false).await
+        self.book(dir, run, key, bytes, Media::Video).await
     }
 
     /// [`Self::book_video`] for the trace of `(run, key)` (its upload is refused without a note:
@@ -94,7 +94,7 @@ impl AppState {
         key: &str,
         bytes: u64,
     ) -> Result<Booking, UploadError> {
-        self.book(dir, run, key, bytes, true).await
+        self.book(dir, run, key, bytes, Media::Trace).await
     }
 
     async fn book(
@@ -103,7 +103,7 @@ impl AppState {
         run: i64,
         key: &str,
         bytes: u64,
-        trace: bool,
+        media: Media,
     ) -> Result<Booking, UploadError> {
         let (team, name) = store::team_of_run(self.read_pool(), run)
             .await
@@ -111,17 +111,7 @@ impl AppState {
             .ok_or_else(|| ServiceError::not_found(format!("scoring run {run}")))?;
         let cfg = &self.config().video;
         let (team_max, total_max) = (size(cfg.team_max_bytes), size(cfg.total_max_bytes));
-        let team_within =
-            format!("team {name}'s videos and traces within [video] team_max_bytes ({team_max})");
-        let total_within = format!(
-            "all teams' videos and traces within [video] total_max_bytes ({total_max}), from a team over its fair share"
-        );
-        let again = "it is rendered again from the episode's trace when asked for";
-        let lost = "the episode's video can no longer be rendered";
-        let team_video = format!("video removed to keep {team_within}; {again}");
-        let team_trace = format!("trace removed to keep {team_within}; {lost}");
-        let total_video = format!("video removed to keep {total_within}; {again}");
-        let total_trace = format!("trace removed to keep {total_within}; {lost}");
+        let [team_video, team_trace, total_video, total_trace] = eviction_notes(&name, &team_max, &total_max);
         let _turn = self.inner.videos.turn.lock().await;
         let (team_pending, total_pending) = {
             let p = self.inner.videos.pending();
@@ -145,12 +135,13 @@ impl AppState {
             .await
             .map_err(ServiceError::from)?;
         if let Some(why) = room.refused {
-            let what = if trace { "trace" } else { "video" };
+            let what = media.name();
             let why = format!(
                 "{what} not stored: {}",
                 refusal(why, &name, &team_max, &total_max)
             );
-            if !trace {
+            // A video's episode says why where its video would be; a trace has no such place.
+            if media == Media::Video {
                 let row = Row {
                     run,
                     key,
@@ -280,6 +271,39 @@ impl AppState {
             }
         }
         deleted
+    }
+}
+
+/// What a file evicted to make room says where the video was: for the team's budget and the
+/// total, of a video (rendered again from its trace) and of a trace (its video lost).
+fn eviction_notes(team: &str, team_max: &str, total_max: &str) -> [String; 4] {
+    let team_within = format!("team {team}'s videos and traces within [video] team_max_bytes ({team_max})");
+    let total_within = format!(
+        "all teams' videos and traces within [video] total_max_bytes ({total_max}), from a team over its fair share"
+    );
+    let again = "it is rendered again from the episode's trace when asked for";
+    let lost = "the episode's video can no longer be rendered";
+    [
+        format!("video removed to keep {team_within}; {again}"),
+        format!("trace removed to keep {team_within}; {lost}"),
+        format!("video removed to keep {total_within}; {again}"),
+        format!("trace removed to keep {total_within}; {lost}"),
+    ]
+}
+
+/// What an upload books room for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Media {
+    Video,
+    Trace,
+}
+
+impl Media {
+    fn name(self) -> &'static str {
+        match self {
+            Media::Video => "video",
+            Media::Trace => "trace",
+        }
     }
 }
 

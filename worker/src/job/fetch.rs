@@ -1,16 +1,16 @@
 //! A render job's trace, fetched from the server in chunks (`FetchTrace`). A trace may be far
 //! larger than one gRPC message (a failing policy that executes one action of each chunk leaves
-//! about 10 MB gzipped), so the lease names it by size and sha256 and the worker streams it.
-//! The bytes are checked against both before a replay starts: a trace that arrives short or
-//! altered is never rendered.
+//! up to about 14 MB gzipped), so the lease names it by size and sha256 and the worker streams
+//! it. The bytes are checked against both before a replay starts: a trace that arrives short or
+//! altered is never rendered. The call itself is the caller's (it holds the client): this file
+//! only reads the stream, retries and decides what a failure means.
 
+use std::future::Future;
 use std::time::Duration;
 
 use kitchen_r_proto::worker::v1 as pb;
 use sha2::{Digest, Sha256};
-use tonic::{Code, Request, Status};
-
-use super::client::Client;
+use tonic::{Code, Status, Streaming};
 
 /// Tries of a fetch that failed in transit before the render is left to its lease.
 const TRIES: u32 = 3;
@@ -27,15 +27,20 @@ pub(crate) enum FetchError {
     Transient(String),
 }
 
-/// The trace of render `job` (`RenderJob.trace_gz` when an older server inlined it).
-pub(crate) async fn trace(client: &Client, worker_id: &str, job: &pb::Job) -> Result<Vec<u8>, FetchError> {
-    let render = job.render.as_ref().ok_or(FetchError::LeaseGone)?;
+/// The trace of the render job `render` (its `trace_gz` when an older server inlined it);
+/// `call` opens one `FetchTrace` stream for the job's lease (the caller holds the client).
+pub(crate) async fn trace<F, Fut>(render: Option<&pb::RenderJob>, call: F) -> Result<Vec<u8>, FetchError>
+where
+    F: Fn() -> Fut,
+    Fut: Future<Output = Result<Streaming<pb::TraceChunk>, Status>>,
+{
+    let render = render.ok_or(FetchError::LeaseGone)?;
     if !render.trace_gz.is_empty() {
         return Ok(render.trace_gz.clone());
     }
     let mut last = String::new();
     for attempt in 1..=TRIES {
-        match fetch_once(client, worker_id, job, render).await {
+        match fetch_once(&call, render).await {
             Ok(bytes) => return Ok(bytes),
             Err(Err(s)) if s.code() == Code::NotFound => {
                 return Err(FetchError::Fails(format!(
@@ -57,18 +62,12 @@ pub(crate) async fn trace(client: &Client, worker_id: &str, job: &pb::Job) -> Re
 
 /// One fetch: the bytes, a transport error (`Err(Err)`), or why the bytes are not the trace
 /// the lease named (`Err(Ok)`).
-async fn fetch_once(
-    client: &Client,
-    worker_id: &str,
-    job: &pb::Job,
-    render: &pb::RenderJob,
-) -> Result<Vec<u8>, Result<String, Status>> {
-    let req = Request::new(pb::FetchTraceRequest {
-        worker_id: worker_id.to_string(),
-        render_id: job.job_id,
-        attempt: job.attempt,
-    });
-    let mut stream = client.clone().fetch_trace(req).await.map_err(Err)?.into_inner();
+async fn fetch_once<F, Fut>(call: &F, render: &pb::RenderJob) -> Result<Vec<u8>, Result<String, Status>>
+where
+    F: Fn() -> Fut,
+    Fut: Future<Output = Result<Streaming<pb::TraceChunk>, Status>>,
+{
+    let mut stream = call().await.map_err(Err)?;
     let announced = render.trace_bytes;
     let mut bytes = Vec::with_capacity(usize::try_from(announced).unwrap_or(0).min(1 << 30));
     while let Some(chunk) = stream.message().await.map_err(Err)? {

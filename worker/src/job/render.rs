@@ -183,7 +183,16 @@ impl Worker {
         async {
             info!("render started");
             let control = Arc::new(RenderControl::default());
-            let fetch = super::fetch::trace(&self.client, &self.id, &job);
+            let open = || {
+                let mut client = self.client.clone();
+                let req = Request::new(pb::FetchTraceRequest {
+                    worker_id: self.id.clone(),
+                    render_id: job.job_id,
+                    attempt: job.attempt,
+                });
+                async move { client.fetch_trace(req).await.map(tonic::Response::into_inner) }
+            };
+            let fetch = super::fetch::trace(job.render.as_ref(), open);
             let trace_gz = match self.heartbeating(&job, &control, fetch, stop).await {
                 None => return,
                 Some(Ok(t)) => t,
