@@ -173,8 +173,9 @@ def make_servicer(
             if request.protocol_version != PROTOCOL_VERSION:
                 logging.warning("worker speaks protocol %d, this server %d", request.protocol_version, PROTOCOL_VERSION)
             cams = [
-                pb2.CameraRequest(name=n, width=w, height=h, encoding=pb2.IMAGE_ENCODING_RAW_RGB8, depth=False)
-                for n, w, h in cameras
+                pb2.CameraRequest(name=c[0], width=c[1], height=c[2], encoding=pb2.IMAGE_ENCODING_RAW_RGB8,
+                                  depth=bool(c[3]) if len(c) > 3 else False)
+                for c in cameras
             ]
             return pb2.PolicySpec(
                 protocol_version=PROTOCOL_VERSION,
@@ -249,7 +250,7 @@ def serve(
     """Serve `policy` (an object with `reset(episode_id, task_index, sub_task)` and
     `decide(obs)`, as StarterPolicy) with the health service until interrupted; prints
     `listening grpc=HOST:PORT` once it accepts calls. Learned policies (baselines/) reuse this.
-    `cameras`: `(name, width, height)` per camera GetSpec asks for (default both at 128x128;
+    `cameras`: `(name, width, height[, depth])` per camera GetSpec asks for (default both at 128x128, no depth;
     an empty list means the server's default cameras, so a policy that reads none asks for one
     small image)."""
     import grpc

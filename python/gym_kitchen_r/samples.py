@@ -39,7 +39,9 @@ class ExpertSamples:
     ``shard`` (``(index, count)``: episodes ``n`` with ``n % count == index``, for data loader
     workers sharing one collection), ``privileged_observation`` (each sample carries what the
     privileged track sends a policy at that decision: robot pose, goal in the robot frame, the key
-    objects the split allows).
+    objects the split allows), ``instructions`` (a list of instruction ids: episode ``n`` runs
+    ``instructions[n % len]``, so a training set can leave held-out instructions out; ``None``:
+    the whole split, in dataset order).
 
     Iterating starts the simulators afresh each time (an epoch gives the same samples; change
     ``seed`` for new episodes). ``episodes_iter()`` yields whole episodes with their outcome.
@@ -62,6 +64,7 @@ class ExpertSamples:
         max_tasks: int = 0,
         shard: tuple[int, int] = (0, 1),
         privileged_observation: bool = False,
+        instructions: list[str] | None = None,
     ):
         if episodes < 0:
             raise ValueError("episodes must be 0 or more")
@@ -82,6 +85,7 @@ class ExpertSamples:
             shard_index=int(shard[0]),
             shard_count=int(shard[1]),
             privileged_observation=privileged_observation,
+            instructions=None if instructions is None else [str(i) for i in instructions],
         )
         self._history, self._images, self._depth = history, images, depth
         # Check the arguments now rather than at the first iteration.

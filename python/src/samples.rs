@@ -3,6 +3,7 @@
 use std::path::PathBuf;
 use std::sync::Mutex;
 
+use kitchen_r_core::dataset::{Instruction, Split};
 use kitchen_r_core::observations::PrivilegedScope;
 use kitchen_r_episode::runner::RunOptions;
 use kitchen_r_episode::samples::{EpisodeSamples, SampleOptions, SampleStream};
@@ -26,7 +27,7 @@ pub(crate) struct NativeSamples {
 #[pymethods]
 impl NativeSamples {
     #[new]
-    #[pyo3(signature = (split="dev", ground_truth=None, episodes=1, seed=0, workers=1, execute=8, history=1, images=true, depth=false, randomise=true, successful_only=true, task_time_limit=120.0, max_tasks=0, shard_index=0, shard_count=1, privileged_observation=false))]
+    #[pyo3(signature = (split="dev", ground_truth=None, episodes=1, seed=0, workers=1, execute=8, history=1, images=true, depth=false, randomise=true, successful_only=true, task_time_limit=120.0, max_tasks=0, shard_index=0, shard_count=1, privileged_observation=false, instructions=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         split: &str,
@@ -45,8 +46,13 @@ impl NativeSamples {
         shard_index: usize,
         shard_count: usize,
         privileged_observation: bool,
+        instructions: Option<Vec<String>>,
     ) -> PyResult<NativeSamples> {
         let (split, ins) = crate::split_instructions(split, ground_truth.as_ref(), task_time_limit)?;
+        let ins = match instructions {
+            Some(ids) => only(ins, &ids, split)?,
+            None => ins,
+        };
         let assets = Assets::load_default().map_err(|e| PyRuntimeError::new_err(format!("assets: {e}")))?;
         let opts = SampleOptions {
             seed,
@@ -99,6 +105,23 @@ impl NativeSamples {
             .take();
         py.detach(move || drop(stream));
     }
+}
+
+/// The split's instructions named by `ids`, in that order (a training set that leaves the
+/// held-out instructions out); an id the split lacks is an error that names it.
+fn only(ins: Vec<Instruction>, ids: &[String], split: Split) -> PyResult<Vec<Instruction>> {
+    if ids.is_empty() {
+        return Err(PyValueError::new_err(
+            "instructions is empty: name at least one instruction id, or pass None for all",
+        ));
+    }
+    ids.iter()
+        .map(|id| {
+            ins.iter().find(|i| &i.id == id).cloned().ok_or_else(|| {
+                PyValueError::new_err(format!("no instruction {id:?} in the {split} split"))
+            })
+        })
+        .collect()
 }
 
 fn episode<'py>(py: Python<'py>, ep: &EpisodeSamples, how: &NativeSamples) -> PyResult<Bound<'py, PyDict>> {

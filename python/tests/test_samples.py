@@ -42,6 +42,19 @@ def test_shards_split_the_collection_without_overlap():
     assert_same(whole, sorted(even + odd, key=lambda e: e["index"]))
 
 
+def test_a_training_set_of_named_instructions_never_runs_another():
+    env = gym_kitchen_r.KitchenREnv(images=False)
+    ids = env.instruction_ids()
+    env.close()
+    chosen = [ids[4], ids[2]]
+    eps = list(ExpertSamples(episodes=3, workers=2, images=False, max_tasks=1, instructions=chosen).episodes_iter())
+    assert [e["instruction_id"] for e in eps] == [ids[4], ids[2], ids[4]]
+    with pytest.raises(ValueError, match="no instruction .dev-9999. in the dev split"):
+        ExpertSamples(episodes=1, instructions=["dev-9999"])
+    with pytest.raises(ValueError, match="instructions is empty"):
+        ExpertSamples(episodes=1, instructions=[])
+
+
 def test_a_sample_is_a_decision_with_its_history_and_the_experts_chunk():
     ep = collect(episodes=1, workers=1, history=3, execute=4)[0]
     samples = ep["samples"]

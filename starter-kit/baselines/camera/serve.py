@@ -48,7 +48,7 @@ class CameraRunner:
         self.clock.reset(episode_id)
 
     def inputs(self, obs):
-        images, state = F.from_grpc(obs, self.clock.seconds(obs))
+        images, state = F.from_grpc(obs, self.clock.seconds(obs), self.model.config.get("depth", False))
         return images, state, F.encode(obs.sub_task, self.vocab_index)
 
     def decide(self, obs):
@@ -86,7 +86,7 @@ def main():
         name=f"camera baseline ({meta.get('stage')}, {meta.get('rows')} rows)",
         max_concurrency=args.concurrency,
         privileged=False,
-        cameras=[(c, size, size) for c in F.CAMERAS],
+        cameras=[(c, size, size, runner.model.config.get("depth", False)) for c in F.CAMERAS],
     )
 
 

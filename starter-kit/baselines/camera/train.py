@@ -43,7 +43,7 @@ sys.path.insert(0, str(HERE))
 sys.path.insert(1, str(HERE.parent))  # baselines/, for common
 
 import features as F  # noqa: E402
-from common import sr_by_kind  # noqa: E402
+from common import sr_by_kind, train_instructions  # noqa: E402
 from model import Batcher, CameraPolicy, load, save  # noqa: E402
 
 
@@ -111,7 +111,7 @@ def aux_of(privileged):
     return F.aux_target(privileged)
 
 
-def expert_rows(rows, vocab_index, args):
+def expert_rows(rows, vocab_index, args, training_ids):
     """Stream the expert's samples into `rows`; stops at `--collect-minutes`."""
     from gym_kitchen_r import ExpertSamples
 
@@ -120,10 +120,12 @@ def expert_rows(rows, vocab_index, args):
     first, staged, n_ep, episodes = {}, empty_rows(), -1, 0
     aux = args.aux_weight > 0
     stream = ExpertSamples(episodes=args.episodes, workers=args.workers, seed=args.seed, images=True,
-                           history=F.HISTORY, randomise=True, max_tasks=args.max_tasks, privileged_observation=aux)
+                           history=F.HISTORY, randomise=True, max_tasks=args.max_tasks, privileged_observation=aux,
+                           depth=args.depth,
+                           instructions=training_ids)
     for s in stream:
         start = first.setdefault((s["episode_index"], s["task_index"]), s["step"])
-        ims, st = F.from_env(s, (s["step"] - start) * F.CONTROL_DT)
+        ims, st = F.from_env(s, (s["step"] - start) * F.CONTROL_DT, args.depth)
         target = aux_of(s.get("privileged_observation"))
         for lst, v in zip(staged, (ims, st, F.encode(s["sub_task"], vocab_index), np.asarray(s["action"]).reshape(-1),
                                    *target)):
@@ -204,16 +206,19 @@ def fit(model, opt, rows, steps, minutes, peak, args, tag, device):
     return {"steps": i, "loss": loss_val, "seconds": secs, "ms_per_step": 1000 * secs / max(i, 1)}
 
 
-def rollout(batcher, vocab_index, env, ins, seed, beta, rng, deadline, record=("move",)):
-    """One randomised episode with the policy driving; returns (rows, task outcomes). `record`:
-    the task kinds (a sub-task's first word) whose decisions the expert labels and keeps."""
-    obs, info = env.reset(seed=seed, options={"instruction": ins})
+def rollout(batcher, vocab_index, env, job, beta, rng, deadline, record=("move",), depth=False):
+    """One randomised episode with the policy driving; returns (rows, task outcomes). `job`:
+    (instruction, run seed, plan step or None for the whole plan). `record`: the task kinds (a
+    sub-task's first word) whose decisions the expert labels and keeps."""
+    ins, seed, step = job
+    options = {"instruction": ins} if step is None else {"instruction": ins, "task": step}
+    obs, info = env.reset(seed=seed, options=options)
     out, outcomes = empty_rows(), []
     task, start, steps, done = None, 0, 0, False
     while not done and time.time() < deadline:
         if obs["task_index"] != task:
             task, start = obs["task_index"], steps
-        ims, st = F.from_env(obs, (steps - start) * F.CONTROL_DT)
+        ims, st = F.from_env(obs, (steps - start) * F.CONTROL_DT, depth)
         wd = F.encode(obs["sub_task"], vocab_index)
         expert = info.get("expert_chunk")
         if expert is not None and obs["sub_task"].split()[0] in record:
@@ -235,7 +240,7 @@ def rollout(batcher, vocab_index, env, ins, seed, beta, rng, deadline, record=("
 
 
 def run_round(batcher, vocab_index, jobs, args, seed):
-    from gym_kitchen_r import KitchenREnv
+    from gym_kitchen_r import KitchenREnv, KitchenRTaskEnv
 
     lock = threading.Lock()
     queue = list(jobs)
@@ -243,17 +248,21 @@ def run_round(batcher, vocab_index, jobs, args, seed):
     deadline = time.time() + args.rollout_minutes * 60 if args.rollout_minutes > 0 else math.inf
 
     def worker(i):
-        env = KitchenREnv(images=True, history=F.HISTORY, expert=True, randomise=True, max_tasks=args.max_tasks,
-                          privileged_observation=args.aux_weight > 0)
+        common = dict(images=True, depth=args.depth, history=F.HISTORY, expert=True, randomise=True,
+                      privileged_observation=args.aux_weight > 0)
+        if args.round_env == "task":
+            env = KitchenRTaskEnv(task_time_limit=args.round_task_seconds, **common)
+        else:
+            env = KitchenREnv(max_tasks=args.max_tasks, **common)
         rng = np.random.default_rng(seed * 1000 + i)
         try:
             while time.time() < deadline:
                 with lock:
                     if not queue:
                         break
-                    ins, s = queue.pop()
-                r, o, done = rollout(batcher, vocab_index, env, ins, s, args.beta * 0.5 ** (seed - 1), rng, deadline,
-                                        tuple(args.dagger_kinds.split(",")))
+                    job = queue.pop()
+                r, o, done = rollout(batcher, vocab_index, env, job, args.beta * 0.5 ** (seed - 1), rng, deadline,
+                                     tuple(args.dagger_kinds.split(",")), args.depth)
                 with lock:
                     for a, b in zip(rows, r):
                         a.extend(b)
@@ -266,6 +275,27 @@ def run_round(batcher, vocab_index, jobs, args, seed):
     with ThreadPoolExecutor(args.envs) as pool:
         list(pool.map(worker, range(args.envs)))
     return rows, outcomes, finished
+
+
+def round_jobs(ids, args, rng):
+    """A round's episodes: (instruction, run seed, plan step). `--round-env plan` runs whole plans;
+    `task` runs single plan steps of the `--dagger-kinds` (KitchenR/Task-v0, from the expert's
+    state at the step's start), so a round's time goes to the kinds it labels."""
+    from gym_kitchen_r import KitchenREnv
+
+    seeds = lambda: int(rng.integers(1, 2**62))  # noqa: E731
+    if args.round_env == "plan":
+        return [(ids[int(rng.integers(len(ids)))], seeds(), None) for _ in range(args.round_episodes)]
+    probe = KitchenREnv(images=False)
+    try:
+        kinds = set(args.dagger_kinds.split(","))
+        steps = [(i, j) for i in ids for j, st in enumerate(probe.instruction_of(i)["plan"]) if st.split()[0] in kinds]
+    finally:
+        probe.close()
+    if not steps:
+        sys.exit(f"no plan step of kinds {args.dagger_kinds!r} in the training instructions")
+    picks = rng.integers(len(steps), size=args.round_episodes)
+    return [(steps[k][0], seeds(), steps[k][1]) for k in picks]
 
 
 def main():
@@ -284,9 +314,17 @@ def main():
                     "training only, so the encoder learns to localise; 0 (default, the measured run) leaves it out")
     ap.add_argument("--init", help="start from this checkpoint (a run split over GPU leases; use another --seed "
                     "for new expert episodes); its architecture and statistics are kept")
-    ap.add_argument("--dagger-kinds", default="move",
+    ap.add_argument("--instructions", default="1-100",
+                    help="dev instructions (1-based inclusive range) the expert episodes and DAgger rounds draw from; "
+                    "the rest are held out for evaluation")
+    ap.add_argument("--dagger-kinds", default="move,pick,place",
                     help="task kinds whose policy-driven decisions the expert labels (comma-separated: move, pick, "
-                    "place); navigation only by default, as the privileged baseline (its README says why)")
+                    "place); the closed-loop expert labels any state, so all three by default")
+    ap.add_argument("--round-env", choices=("task", "plan"), default="task",
+                    help="DAgger episodes: single plan steps of the labelled kinds (KitchenR/Task-v0), or whole plans")
+    ap.add_argument("--round-task-seconds", type=float, default=60.0,
+                    help="with --round-env task: a step's time limit in the rounds (a drive that has not finished by "
+                    "then teaches little more)")
     ap.add_argument("--beta", type=float, default=0.0, help="chance the expert drives a decision in round 1 (halves each round)")
     ap.add_argument("--envs", type=int, default=os.cpu_count(), help="environments (threads) in DAgger rounds")
     ap.add_argument("--collect-minutes", type=float, default=0.0, help="wall budget of the expert stream (0: none)")
@@ -301,6 +339,8 @@ def main():
     ap.add_argument("--warmup", type=int, default=500)
     ap.add_argument("--shift", type=int, default=4, help="random-shift augmentation, pixels (0: off)")
     ap.add_argument("--image-size", type=int, default=96, help="training resolution (the cameras render 128)")
+    ap.add_argument("--depth", action="store_true",
+                    help="also read both cameras' depth (two more views: twice the image memory and trunk work)")
     ap.add_argument("--d-model", type=int, default=256)
     ap.add_argument("--layers", type=int, default=3)
     ap.add_argument("--max-tasks", type=int, default=0, help="only the first N plan steps of each episode (tests)")
@@ -331,7 +371,9 @@ def main():
     vocab_index = {w: i for i, w in enumerate(vocab)}
     # About 132 expert rows an episode; a DAgger episode adds up to about 300 labelled rows.
     rows = Rows(args.image_size, device, capacity=int(args.episodes * 140 + args.rounds * args.round_episodes * 300))
-    logbook["expert"] = expert_rows(rows, vocab_index, args)
+    training_ids = train_instructions(args.instructions)
+    logbook["instructions"] = {"split": "dev", "range": args.instructions, "count": len(training_ids)}
+    logbook["expert"] = expert_rows(rows, vocab_index, args, training_ids)
     if rows.n == 0:
         sys.exit("no expert rows: raise --episodes or --collect-minutes")
 
@@ -341,6 +383,9 @@ def main():
         model, init_vocab, init_meta = load(args.init, device)
         if list(init_vocab) != list(vocab):
             sys.exit(f"--init {args.init}: its vocabulary differs from this checkout's dev vocabulary")
+        if model.config.get("depth", False) != args.depth:
+            sys.exit(f"--init {args.init} was trained {'with' if model.config.get('depth') else 'without'} --depth: "
+                     "pass the same")
         if model.config["image_size"] != args.image_size:
             sys.exit(f"--init {args.init} was trained at --image-size {model.config['image_size']}: pass that")
         logbook["init"] = {"checkpoint": str(args.init), "meta": init_meta}
@@ -349,7 +394,7 @@ def main():
     else:
         grid = max(1, math.ceil(args.image_size / 32))
         model = CameraPolicy(len(vocab), args.image_size, args.d_model, args.layers, grid=grid,
-                             pretrained=not args.no_pretrained, aux=args.aux_weight > 0).to(device)
+                             pretrained=not args.no_pretrained, aux=args.aux_weight > 0, depth=args.depth).to(device)
         model.set_statistics(rows.view("state"), rows.view("y"))
     if args.compile:
         COMPILED[id(model)] = torch.compile(model)
@@ -365,17 +410,9 @@ def main():
     write_log()
 
     batcher = Batcher(model, max_batch=max(1, args.envs)) if args.rounds else None
-    ids = None
     for r in range(1, args.rounds + 1):
-        if ids is None:
-            from gym_kitchen_r import KitchenREnv
-
-            probe = KitchenREnv(images=False)
-            ids = probe.instruction_ids()
-            probe.close()
         model.eval()
-        rng = np.random.default_rng(1000 + r)
-        jobs = [(ids[int(rng.integers(len(ids)))], int(rng.integers(1, 2**62))) for _ in range(args.round_episodes)]
+        jobs = round_jobs(training_ids, args, np.random.default_rng(1000 * args.seed + r))
         t0 = time.time()
         new, outcomes, (finished, cut) = run_round(batcher, vocab_index, jobs, args, r)
         roll_s = time.time() - t0

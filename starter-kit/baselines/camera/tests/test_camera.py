@@ -4,6 +4,7 @@ step only) writes a checkpoint that reloads and answers a valid 16x10 chunk thro
 runner. Skipped without torch or gym_kitchen_r (KITCHEN_R_ASSETS / KITCHEN_R_CONFIGS must point
 at the repository's assets/ and configs/; they default to them here)."""
 
+import json
 import os
 import subprocess
 import sys
@@ -40,6 +41,9 @@ def grpc_like(obs, step, episode="ep-0"):
             step=step,
             images=[SimpleNamespace(camera=c, width=128, height=128, data=np.ascontiguousarray(obs["images"][c][k]).tobytes())
                     for c in ("base", "gripper")],
+            depth=[SimpleNamespace(camera=c, width=128, height=128,
+                                   data=np.ascontiguousarray(obs["depth"][c][k], dtype="<f4").tobytes())
+                   for c in ("base", "gripper")] if "depth" in obs else [],
             robot=SimpleNamespace(base_x=s[0], base_y=s[1], base_yaw=s[2], base_v=s[3], base_omega=s[4],
                                   arm_joints=list(s[5:11]), gripper=s[11], ee_pose=list(s[12:19])),
             previous_action=[] if not prev.any() else list(prev),
@@ -48,7 +52,7 @@ def grpc_like(obs, step, episode="ep-0"):
     newest = frame(len(state) - 1)
     return SimpleNamespace(history=[frame(k) for k in range(len(state) - 1)], episode_id=episode, step=step,
                            task_index=obs["task_index"], sub_task=obs["sub_task"], **{k: getattr(newest, k) for k in
-                                                                                       ("images", "robot", "previous_action")})
+                                                                                       ("images", "depth", "robot", "previous_action")})
 
 
 @unittest.skipIf(torch is None, "torch or gym_kitchen_r missing")
@@ -57,7 +61,7 @@ class CameraBaselineTest(unittest.TestCase):
     def setUpClass(cls):
         from gym_kitchen_r import KitchenREnv
 
-        env = KitchenREnv(images=True, history=2, expert=True, randomise=True, max_tasks=1)
+        env = KitchenREnv(images=True, depth=True, history=2, expert=True, randomise=True, max_tasks=1)
         obs0, info = env.reset(seed=3, options={"instruction": env.instruction_ids()[0]})
         obs1 = obs0
         for a in info["expert_chunk"][:8]:
@@ -67,7 +71,7 @@ class CameraBaselineTest(unittest.TestCase):
         env.close()
         cls.observations = [(obs0, 0), (obs1, 8)]
 
-    def test_features_env_equals_grpc(self):
+    def test_features_env_equals_grpc_with_and_without_depth(self):
         import features as F
 
         for obs, step in self.observations:
@@ -77,6 +81,13 @@ class CameraBaselineTest(unittest.TestCase):
             np.testing.assert_array_equal(ims_e, ims_g)
             np.testing.assert_allclose(st_e, st_g, rtol=0, atol=1e-6)
             self.assertEqual(st_e.shape, (F.STATE_DIM,))
+            d_e, _ = F.from_env(obs, step * F.CONTROL_DT, depth=True)
+            d_g, _ = F.from_grpc(grpc_like(obs, step), step * F.CONTROL_DT, depth=True)
+            self.assertEqual(d_e.shape, (4, F.HISTORY, 128, 128, 3))
+            np.testing.assert_array_equal(d_e, d_g)
+            np.testing.assert_array_equal(d_e[:2], ims_e)
+            # Depth views carry the scene: not one flat value (a lost or misread depth image would be).
+            self.assertGreater(len(np.unique(d_e[2:])), 10)
         vocab = F.dev_vocab()
         ids = F.encode("pick the red cup", {w: i for i, w in enumerate(vocab)})
         self.assertEqual(len(ids), F.MAX_WORDS)
@@ -84,10 +95,19 @@ class CameraBaselineTest(unittest.TestCase):
 
     def test_tiny_training_run_serves_a_valid_chunk(self):
         with tempfile.TemporaryDirectory() as d:
+            # One DAgger round of one pick step (KitchenR/Task-v0, cut at 3 s): the closed-loop
+            # expert labels the policy's states in a pick. With depth, which the served runner reads too.
             cmd = [sys.executable, str(HERE / "train.py"), "--out", d, "--episodes", "2", "--bc-steps", "3",
-                   "--rounds", "0", "--max-tasks", "1", "--batch", "4", "--workers", "2", "--device", "cpu"]
+                   "--rounds", "1", "--round-episodes", "1", "--round-steps", "1", "--envs", "1",
+                   "--dagger-kinds", "pick", "--round-task-seconds", "3", "--instructions", "1-3",
+                   "--depth", "--max-tasks", "1", "--batch", "4", "--workers", "2", "--device", "cpu"]
             subprocess.run(cmd, check=True, capture_output=True, timeout=600)
-            self.assertTrue((Path(d) / "train_log.json").is_file())
+            logbook = json.loads((Path(d) / "train_log.json").read_text())
+            self.assertEqual(logbook["instructions"], {"split": "dev", "range": "1-3", "count": 3})
+            (round1,) = logbook["rounds"]
+            self.assertEqual(round1["episodes"], 1)
+            self.assertEqual(round1["sr_while_driving"]["pick"]["tasks"], 1)
+            self.assertGreater(round1["rows_added"], 0)
             ck = Path(d) / "ckpt.pt"
             self.assertLessEqual(ck.stat().st_size, 16 * 2**20)
             sys.path.insert(1, str(HERE.parent.parent))  # policy_server, for serve.py

@@ -1,0 +1,85 @@
+#!/usr/bin/env bash
+# The control baselines trained on part of the dev split and measured on episodes nothing in
+# their training saw (issue #38's gates). Two stages, each a separate GPU lease if need be:
+#
+#   STAGE=train bash starter-kit/baselines/held_out.sh   # camera + privileged runs -> $RUN/{cam,priv}
+#   STAGE=eval  bash starter-kit/baselines/held_out.sh   # both gates on the held-out episodes -> $RUN/results
+#   STAGE=all   bash starter-kit/baselines/held_out.sh   # one, then the other
+#
+# Long: start it detached (`setsid nohup ... &`) and follow $RUN/held_out.log.
+#
+# What is held out:
+# - training (both baselines): dev instructions TRAIN_INSTRUCTIONS (1-100) with collection seed 1
+#   and DAgger rounds drawn from the same instructions; the final checkpoint is used (none is
+#   chosen by evaluation, so no selection set is needed);
+# - evaluation: dev instructions 101-163 with batch seed EVAL_SEED (2: neither training nor the
+#   60-episode dev gate, seed 0, used it), and the first 100 test-split instructions with the
+#   organiser's ground truth; the gate is judged on both together (each kind >= 100 tasks).
+#
+# Settings (environment): RUN [/tmp/kr-held-out], TRAIN_INSTRUCTIONS [1-100], EVAL_SEED [2],
+# EVAL_DEV [101-163] / EVAL_TEST [1-100] (the held-out ranges), EVAL [cam priv] (which gates),
+# CAM_ARGS / PRIV_ARGS (extra train.py arguments), JOBS [16], DEVICE [cuda], CAM_CKPT /
+# PRIV_CKPT (evaluate these checkpoints instead of $RUN's).
+set -euo pipefail
+
+HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
+REPO="$(cd "$HERE/../.." && pwd)"
+cd "$REPO"
+RUN="${RUN:-/tmp/kr-held-out}"
+TRAIN_INSTRUCTIONS="${TRAIN_INSTRUCTIONS:-1-100}"
+EVAL_SEED="${EVAL_SEED:-2}"
+EVAL_DEV="${EVAL_DEV:-101-163}"
+EVAL_TEST="${EVAL_TEST:-1-100}"
+JOBS="${JOBS:-16}"
+DEVICE="${DEVICE:-cuda}"
+STAGE="${STAGE:?set STAGE=train, eval or all}"
+mkdir -p "$RUN"
+exec > >(tee -a "$RUN/held_out.log") 2>&1
+say() { echo "[held_out $(date +%H:%M:%S)] $*"; }
+
+train() {
+  say "camera baseline: dev $TRAIN_INSTRUCTIONS"
+  # shellcheck disable=SC2086
+  (cd "$HERE/camera" && python3 train.py --out "$RUN/cam" --instructions "$TRAIN_INSTRUCTIONS" --device "$DEVICE" \
+     --workers "$JOBS" --envs "$JOBS" ${CAM_ARGS:-}) >"$RUN/cam.log" 2>&1 &
+  cam=$!
+  # The privileged run starts once the camera run's behaviour cloning holds the GPU and leaves
+  # the CPUs to it (its own expert stream renders no image).
+  while kill -0 $cam 2>/dev/null && ! grep -q "^\[.*\] bc: " "$RUN/cam.log" 2>/dev/null; do sleep 5; done
+  say "privileged baseline: dev $TRAIN_INSTRUCTIONS"
+  # shellcheck disable=SC2086
+  python3 "$HERE/privileged/train.py" --out "$RUN/priv" --instructions "$TRAIN_INSTRUCTIONS" --device "$DEVICE" \
+    --workers "$JOBS" --envs "$JOBS" ${PRIV_ARGS:-} >"$RUN/priv.log" 2>&1 || say "privileged run failed (see priv.log)"
+  wait $cam || { say "camera run failed (see cam.log)"; exit 1; }
+  say "trained: $(ls -la "$RUN"/cam/ckpt.pt "$RUN"/priv/ckpt.pt 2>&1 | tr '\n' ' ')"
+}
+
+CAM_CKPT="${CAM_CKPT:-$RUN/cam/ckpt.pt}"
+PRIV_CKPT="${PRIV_CKPT:-$RUN/priv/ckpt.pt}"
+gate() {  # name track serve-command train-log
+  local name=$1 track=$2 serve=$3 log=$4
+  local out="$RUN/results/$name"
+  python3 "$HERE/gate.py" --track "$track" --out "$out/dev-$EVAL_DEV" --split dev --instructions "$EVAL_DEV" \
+    --seed "$EVAL_SEED" --held-out --no-offline --jobs "$JOBS" --train-log "$log" --serve "$serve"
+  python3 "$HERE/gate.py" --track "$track" --out "$out/test-$EVAL_TEST" --split test --instructions "$EVAL_TEST" \
+    --seed "$EVAL_SEED" --held-out --no-offline --jobs "$JOBS" --train-log "$log" --serve "$serve"
+  python3 "$HERE/gate.py" --track "$track" --out "$out" --train-log "$log" --combine "$out/dev-$EVAL_DEV" "$out/test-$EVAL_TEST"
+}
+evaluate() {
+  for which in ${EVAL:-cam priv}; do
+    case $which in
+      cam) gate camera standard "python3 $HERE/camera/serve.py --checkpoint $CAM_CKPT --listen 127.0.0.1:0 --device $DEVICE" \
+             "$(dirname "$CAM_CKPT")/train_log.json" ;;
+      priv) gate privileged privileged "python3 $HERE/privileged/serve.py --checkpoint $PRIV_CKPT --listen 127.0.0.1:0" \
+             "$(dirname "$PRIV_CKPT")/train_log.json" || say "privileged gate failed" ;;
+    esac
+  done
+  say "done: $RUN/results"
+}
+
+case $STAGE in
+  train) train ;;
+  eval) evaluate ;;
+  all) train && evaluate ;;
+  *) echo "STAGE=$STAGE: use train, eval or all" >&2; exit 2 ;;
+esac
