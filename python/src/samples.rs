@@ -117,9 +117,10 @@ fn only(ins: Vec<Instruction>, ids: &[String], split: Split) -> PyResult<Vec<Ins
     }
     ids.iter()
         .map(|id| {
-            ins.iter().find(|i| &i.id == id).cloned().ok_or_else(|| {
-                PyValueError::new_err(format!("no instruction {id:?} in the {split} split"))
-            })
+            ins.iter()
+                .find(|i| &i.id == id)
+                .cloned()
+                .ok_or_else(|| PyValueError::new_err(format!("no instruction {id:?} in the {split} split")))
         })
         .collect()
 }

@@ -285,9 +285,14 @@ impl Policy for OraclePolicy {
         };
         if ctl.off_plan(&measured).is_some() {
             self.replans += 1;
-            // A state no plan starts from (a path planner boxed in by a learner's base) keeps
-            // the plan it had: a label is better than an error in a DAgger round.
-            if let Ok(fresh) = self.start_task(p) {
+            // A manipulation goes on from where the hand is; anything else starts the task
+            // afresh from the state. A state no plan starts from (a path planner boxed in by a
+            // learner's base) keeps the plan it had: a label is better than an error in a
+            // DAgger round.
+            let now = *measured.now;
+            if !ctl.resume(&measured_tool, &now, &world)
+                && let Ok(fresh) = self.start_task(p)
+            {
                 ctl = fresh;
             }
         }

@@ -222,6 +222,37 @@ impl TaskCtl {
         }
     }
 
+    /// Plan again from the measured state without going back to the task's start (issue #38):
+    /// the hand is not sent home and the base not squared up again unless it strayed far, and a
+    /// hand already in the column over the work goes on down rather than back up. A learner
+    /// that lags its expert by a few centimetres is then labelled with the way on from where it
+    /// is, not with the task's beginning. `false` where only a fresh start will do: a move, the
+    /// physical grasp, a task whose manipulation had not begun.
+    pub(super) fn resume(&mut self, tool: &Isometry3<f64>, now: &Now, world: &World) -> bool {
+        if self.physical || matches!(self.goal, Goal::Move { .. }) {
+            return false;
+        }
+        let Stage::Manip(_, _, anchor) = &self.stage else {
+            return false;
+        };
+        let [bx, by, byaw] = now.base;
+        let [ax, ay, ayaw] = anchor.base;
+        self.tool = *tool;
+        if (bx - ax).hypot(by - ay) > RESETTLE || wrap(byaw - ayaw).abs() > RESETTLE_TURN {
+            self.stage = Stage::Settle { positioned: false };
+            return true;
+        }
+        let Some(plan) = self.plan(now, world) else {
+            return false;
+        };
+        let anchor = Anchor {
+            base: now.base,
+            object: world.object,
+        };
+        self.stage = Stage::Manip(skip_reached(plan, tool), 0.0, anchor);
+        true
+    }
+
     /// A finished machine left its task undone: a pick holds nothing, or a place (which picked
     /// its object up again first) still holds it.
     fn task_undone(&self, held: bool) -> bool {
@@ -345,6 +376,40 @@ impl TaskCtl {
             }
         }
     }
+}
+
+/// A resumed manipulation squares the base up again first when it stands further than this from
+/// where the manipulation was planned, m and rad (closer, the arm makes up the difference).
+const RESETTLE: f64 = 0.15;
+const RESETTLE_TURN: f64 = 0.2;
+/// Horizontally this close to the approach pose over the work (and between its height and the
+/// work's), the hand is in the column and a resumed plan goes on down, m.
+const IN_COLUMN: f64 = 0.03;
+/// Slack on the column's top and bottom, m.
+const COLUMN_SLACK: f64 = 0.02;
+
+/// `plan` from the first phase the tool has not reached: a hand in the column over the object
+/// (pick) or the target (place) starts at the way down instead of the approach above it.
+fn skip_reached(plan: PhasePlan, tool: &Isometry3<f64>) -> PhasePlan {
+    let (above, down) = match plan.targets() {
+        [a, b, ..]
+            if matches!(
+                (a.phase, b.phase),
+                (Phase::PreGrasp, Phase::Descend) | (Phase::Transport, Phase::Lower)
+            ) =>
+        {
+            (
+                a.ee_in_base.translation.vector,
+                (b.phase, b.ee_in_base.translation.z),
+            )
+        }
+        _ => return plan,
+    };
+    let p = tool.translation.vector;
+    let in_column = (p.x - above.x).hypot(p.y - above.y) < IN_COLUMN
+        && p.z <= above.z + COLUMN_SLACK
+        && p.z >= down.1 - COLUMN_SLACK;
+    if in_column { plan.from_phase(down.0) } else { plan }
 }
 
 fn yaw(q: &nalgebra::UnitQuaternion<f64>) -> f64 {
