@@ -57,6 +57,22 @@ struct Active {
     ctl: TaskCtl,
     queried_at: u64,
     predicted: Vec<TaskCtl>,
+    /// The chunk answered at `queried_at`.
+    chunk: Vec<[f64; ACTION_DIM]>,
+}
+
+/// How close an executed action must be to the expert's own to count as the expert's: tool
+/// position (m) and base velocities (m/s, rad/s).
+const OWN_ACTION: (f64, f64) = (0.01, 0.02);
+
+/// Whether `executed` is `own` to within [`OWN_ACTION`].
+fn same_action(executed: &[f64; ACTION_DIM], own: &[f64; ACTION_DIM]) -> bool {
+    let off = (executed[2] - own[2])
+        .hypot(executed[3] - own[3])
+        .hypot(executed[4] - own[4]);
+    off < OWN_ACTION.0
+        && (executed[0] - own[0]).abs() < OWN_ACTION.1
+        && (executed[1] - own[1]).abs() < OWN_ACTION.1
 }
 
 pub struct OraclePolicy {
@@ -257,10 +273,17 @@ impl Policy for OraclePolicy {
     fn act(&mut self, input: &PolicyInput<'_>) -> Result<Vec<[f64; ACTION_DIM]>, PolicyError> {
         let p = input.privileged.ok_or(PolicyError::NeedsPrivileged)?;
         let world = self.world(p);
+        // Whether the action just executed was this expert's own: then a state off its plan
+        // was the world's doing, not a learner's.
+        let mut own = false;
         let mut ctl = match self.active.take() {
             None => self.start_task(p)?,
             Some(a) => {
                 let done = input.step.saturating_sub(a.queried_at) as usize;
+                own = match (done, input.previous_action) {
+                    (1..=HORIZON, Some(executed)) => same_action(&executed, &a.chunk[done - 1]),
+                    _ => false,
+                };
                 match done {
                     0 => a.ctl,
                     n => a.predicted.into_iter().nth(n.min(HORIZON) - 1).unwrap_or(a.ctl),
@@ -285,12 +308,14 @@ impl Policy for OraclePolicy {
         };
         if ctl.off_plan(&measured).is_some() {
             self.replans += 1;
-            // A manipulation goes on from where the hand is; anything else starts the task
-            // afresh from the state. A state no plan starts from (a path planner boxed in by a
-            // learner's base) keeps the plan it had: a label is better than an error in a
-            // DAgger round.
+            // Off its plan under a learner's actions, a manipulation goes on from where the
+            // hand is (the label a lagging learner needs); under its own actions the world held
+            // the hand or base back (an object at the edge of reach), and the task starts
+            // afresh from the state, base squared up again. A state no plan starts from (a path
+            // planner boxed in by a learner's base) keeps the plan it had: a label is better
+            // than an error in a DAgger round.
             let now = *measured.now;
-            if !ctl.resume(&measured_tool, &now, &world)
+            if !(!own && ctl.resume(&measured_tool, &now, &world))
                 && let Ok(fresh) = self.start_task(p)
             {
                 ctl = fresh;
@@ -313,6 +338,7 @@ impl Policy for OraclePolicy {
             ctl,
             queried_at: input.step,
             predicted,
+            chunk: chunk.clone(),
         });
         Ok(chunk)
     }
