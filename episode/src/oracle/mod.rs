@@ -315,7 +315,7 @@ impl Policy for OraclePolicy {
             // planner boxed in by a learner's base) keeps the plan it had: a label is better
             // than an error in a DAgger round.
             let now = *measured.now;
-            if !(!own && ctl.resume(&measured_tool, &now, &world))
+            if (own || !ctl.resume(&measured_tool, &now, &world))
                 && let Ok(fresh) = self.start_task(p)
             {
                 ctl = fresh;
