@@ -18,7 +18,9 @@
 #
 # Settings (environment): RUN [/tmp/kr-held-out], TRAIN_INSTRUCTIONS [1-100], EVAL_SEED [2],
 # EVAL_DEV [101-163] / EVAL_TEST [1-100] (the held-out ranges), EVAL [cam priv] (which gates),
-# CAM_ARGS / PRIV_ARGS (extra train.py arguments), JOBS [16], DEVICE [cuda], CAM_CKPT /
+# CAM_ARGS / PRIV_ARGS (extra train.py arguments; the privileged run is done before the camera
+# run's rounds start, so CAM_ARGS="--teacher $RUN/priv/ckpt.pt --beta B" lets it drive a share of
+# them), JOBS [16], DEVICE [cuda], CAM_CKPT /
 # PRIV_CKPT (evaluate these checkpoints instead of $RUN's).
 set -euo pipefail
 

@@ -206,10 +206,11 @@ def fit(model, opt, rows, steps, minutes, peak, args, tag, device):
     return {"steps": i, "loss": loss_val, "seconds": secs, "ms_per_step": 1000 * secs / max(i, 1)}
 
 
-def rollout(batcher, vocab_index, env, job, beta, rng, deadline, record=("move",), depth=False):
+def rollout(batcher, vocab_index, env, job, beta, rng, deadline, record=("move",), depth=False, teacher=None):
     """One randomised episode with the policy driving; returns (rows, task outcomes). `job`:
     (instruction, run seed, plan step or None for the whole plan). `record`: the task kinds (a
-    sub-task's first word) whose decisions the expert labels and keeps."""
+    sub-task's first word) whose decisions the expert labels and keeps. A `beta` share of the
+    decisions is driven by `teacher` (a PrivilegedTeacher) or, without one, by the expert."""
     ins, seed, step = job
     options = {"instruction": ins} if step is None else {"instruction": ins, "task": step}
     obs, info = env.reset(seed=seed, options=options)
@@ -225,8 +226,9 @@ def rollout(batcher, vocab_index, env, job, beta, rng, deadline, record=("move",
             for lst, v in zip(out, (ims, st, wd, np.asarray(expert, dtype=np.float32).reshape(-1),
                                     *aux_of(info.get("privileged_observation")))):
                 lst.append(v)
-        if expert is not None and beta > 0 and rng.random() < beta:
-            chunk = np.asarray(expert, dtype=np.float64)
+        if beta > 0 and rng.random() < beta and (teacher is not None or expert is not None):
+            chunk = (teacher.chunk(obs, info, (steps - start) * F.CONTROL_DT) if teacher is not None
+                     else np.asarray(expert, dtype=np.float64))
         else:
             chunk = batcher.decide(ims, st, wd)
         for a in chunk[: F.EXECUTE]:
@@ -239,7 +241,7 @@ def rollout(batcher, vocab_index, env, job, beta, rng, deadline, record=("move",
     return out, outcomes, done
 
 
-def run_round(batcher, vocab_index, jobs, args, seed):
+def run_round(batcher, vocab_index, jobs, args, seed, teacher=None):
     from gym_kitchen_r import KitchenREnv, KitchenRTaskEnv
 
     lock = threading.Lock()
@@ -249,7 +251,7 @@ def run_round(batcher, vocab_index, jobs, args, seed):
 
     def worker(i):
         common = dict(images=True, depth=args.depth, history=F.HISTORY, expert=True, randomise=True,
-                      privileged_observation=args.aux_weight > 0)
+                      privileged_observation=args.aux_weight > 0 or teacher is not None)
         if args.round_env == "task":
             env = KitchenRTaskEnv(task_time_limit=args.round_task_seconds, **common)
         else:
@@ -262,7 +264,7 @@ def run_round(batcher, vocab_index, jobs, args, seed):
                         break
                     job = queue.pop()
                 r, o, done = rollout(batcher, vocab_index, env, job, args.beta * 0.5 ** (seed - 1), rng, deadline,
-                                     tuple(args.dagger_kinds.split(",")), args.depth)
+                                     tuple(args.dagger_kinds.split(",")), args.depth, teacher)
                 with lock:
                     for a, b in zip(rows, r):
                         a.extend(b)
@@ -275,6 +277,40 @@ def run_round(batcher, vocab_index, jobs, args, seed):
     with ThreadPoolExecutor(args.envs) as pool:
         list(pool.map(worker, range(args.envs)))
     return rows, outcomes, finished
+
+
+class PrivilegedTeacher:
+    """A privileged-track checkpoint (privileged/train.py) driving a share of the rounds'
+    decisions: learning by cheating. Its features come from what the environment puts in
+    `info["privileged_observation"]`, which only the rounds' environments are asked for; the
+    camera policy never sees it. The privileged baseline's modules are loaded under their own
+    names (both baselines call theirs `features`)."""
+
+    def __init__(self, path):
+        import importlib.util
+
+        def module(name, file):
+            spec = importlib.util.spec_from_file_location(name, file)
+            m = importlib.util.module_from_spec(spec)
+            spec.loader.exec_module(m)
+            return m
+
+        here = HERE.parent / "privileged"
+        ours = sys.modules.get("features")
+        try:
+            self.F = sys.modules["features"] = module("privileged_features", here / "features.py")
+            model = module("privileged_model", here / "model.py")
+        finally:
+            sys.modules["features"] = ours
+        # On the CPU: one small forward per decision beats a GPU round trip (as privileged/train.py).
+        self.model, self.meta = model.load(path, "cpu")
+        self.lock = threading.Lock()
+
+    def chunk(self, obs, info, task_time):
+        x = self.F.from_env(np.asarray(obs["state"]).reshape(-1, 29)[-1], info["privileged_observation"], task_time)
+        with self.lock, torch.no_grad():
+            out = self.model.chunk(torch.as_tensor(x[None], dtype=torch.float32))[0]
+        return self.F.finish(out.numpy())
 
 
 def round_jobs(ids, args, rng):
@@ -325,7 +361,12 @@ def main():
     ap.add_argument("--round-task-seconds", type=float, default=60.0,
                     help="with --round-env task: a step's time limit in the rounds (a drive that has not finished by "
                     "then teaches little more)")
-    ap.add_argument("--beta", type=float, default=0.0, help="chance the expert drives a decision in round 1 (halves each round)")
+    ap.add_argument("--beta", type=float, default=0.0,
+                    help="chance the teacher drives a decision in round 1 (halves each round)")
+    ap.add_argument("--teacher", default="expert",
+                    help="who drives the --beta share of the rounds' decisions: `expert`, or a privileged-track "
+                    "checkpoint (privileged/train.py's ckpt.pt; learning by cheating). The expert labels every "
+                    "decision either way")
     ap.add_argument("--envs", type=int, default=os.cpu_count(), help="environments (threads) in DAgger rounds")
     ap.add_argument("--collect-minutes", type=float, default=0.0, help="wall budget of the expert stream (0: none)")
     ap.add_argument("--bc-minutes", type=float, default=0.0, help="wall budget of behaviour cloning (0: none)")
@@ -410,11 +451,15 @@ def main():
     write_log()
 
     batcher = Batcher(model, max_batch=max(1, args.envs)) if args.rounds else None
+    teacher = None
+    if args.rounds and args.teacher != "expert":
+        teacher = PrivilegedTeacher(args.teacher)
+        logbook["teacher"] = {"checkpoint": args.teacher, "meta": teacher.meta}
     for r in range(1, args.rounds + 1):
         model.eval()
         jobs = round_jobs(training_ids, args, np.random.default_rng(1000 * args.seed + r))
         t0 = time.time()
-        new, outcomes, (finished, cut) = run_round(batcher, vocab_index, jobs, args, r)
+        new, outcomes, (finished, cut) = run_round(batcher, vocab_index, jobs, args, r, teacher)
         roll_s = time.time() - t0
         sr = sr_by_kind(outcomes)
         log(f"round {r}: policy drove {finished}/{args.round_episodes} episodes "

@@ -123,6 +123,26 @@ class CameraBaselineTest(unittest.TestCase):
             self.assertTrue(((chunk[:, 9] >= 0) & (chunk[:, 9] <= 1)).all())
 
 
+@unittest.skipIf(torch is None, "torch or gym_kitchen_r missing")
+class TeacherTest(unittest.TestCase):
+    def test_a_privileged_teacher_drives_the_rounds_to_a_completed_pick(self):
+        # Learning by cheating: the committed privileged checkpoint drives every decision of a
+        # round (--beta 1) while the expert labels them for the camera policy.
+        teacher = REPO / "starter-kit/baselines/privileged/results/h200-2026-11-26/ckpt.pt"
+        with tempfile.TemporaryDirectory() as d:
+            cmd = [sys.executable, str(HERE / "train.py"), "--out", d, "--episodes", "2", "--bc-steps", "2",
+                   "--rounds", "1", "--round-episodes", "1", "--round-steps", "1", "--envs", "1",
+                   "--dagger-kinds", "pick", "--round-task-seconds", "40", "--instructions", "1-3",
+                   "--teacher", str(teacher), "--beta", "1", "--max-tasks", "1", "--batch", "4",
+                   "--workers", "2", "--device", "cpu"]
+            subprocess.run(cmd, check=True, capture_output=True, timeout=900)
+            logbook = json.loads((Path(d) / "train_log.json").read_text())
+            self.assertEqual(logbook["teacher"]["checkpoint"], str(teacher))
+            (round1,) = logbook["rounds"]
+            self.assertEqual(round1["sr_while_driving"]["pick"], {"success": 1, "tasks": 1, "sr": 1.0})
+            self.assertGreater(round1["rows_added"], 0)
+
+
 class AuxTargetTest(unittest.TestCase):
     def test_the_auxiliary_target_is_the_goal_its_kind_defines(self):
         import features as F
