@@ -306,6 +306,10 @@ impl Policy for OraclePolicy {
             held: world.held_in_tool.is_some(),
             object: world.object.as_ref(),
         };
+        // A learner's hand sets the plan's pace, not the plan's own clock.
+        if !own {
+            ctl.follow_hand(&measured_tool);
+        }
         if ctl.off_plan(&measured).is_some() {
             self.replans += 1;
             // Off its plan under a learner's actions, a manipulation goes on from where the

@@ -71,6 +71,18 @@ enum Stage {
     Done,
 }
 
+impl Stage {
+    /// The commanded tool pose (base frame) `t` seconds into a timed stage (the arm's prelude,
+    /// the pick-and-place machine); `Isometry3::identity()` for the others, which have no clock.
+    fn pose_at(&self, t: f64) -> Isometry3<f64> {
+        match self {
+            Stage::Arm(path, _) => path.at(t),
+            Stage::Manip(plan, _, _) => plan.target_at(t).0,
+            _ => Isometry3::identity(),
+        }
+    }
+}
+
 /// What a pick-and-place plan was made from.
 #[derive(Debug, Clone, Copy)]
 struct Anchor {
@@ -219,6 +231,34 @@ impl TaskCtl {
                 }
             }
             _ => None,
+        }
+    }
+
+    /// Hold the plan's clock back to the hand a learner drove (issue #38): the arm's prelude and
+    /// the pick-and-place machine run on their own clocks, which a lagging learner's hand does
+    /// not keep up with; left running, the label at a state would be the plan's pose and gripper
+    /// of some seconds later (fingers closing above an object the hand has not reached). The
+    /// clock goes back to the latest time, not after where it stands, whose commanded pose is
+    /// nearest the measured hand (within [`SYNC_SLACK`]), so the label is the way on from where
+    /// the hand is. A hand that keeps up changes nothing.
+    pub(super) fn follow_hand(&mut self, tool: &Isometry3<f64>) {
+        let hand = tool.translation.vector;
+        let (Stage::Arm(_, t) | Stage::Manip(_, t, _)) = &self.stage else {
+            return;
+        };
+        let now = *t;
+        let stage = &self.stage;
+        let dist = |x: f64| (stage.pose_at(x).translation.vector - hand).norm();
+        let times = (0..=(now / SYNC_STEP).floor() as usize).map(|k| now - k as f64 * SYNC_STEP);
+        let best = times.clone().map(dist).fold(f64::INFINITY, f64::min);
+        let Some(back) = times.into_iter().find(|&x| dist(x) <= best + SYNC_SLACK) else {
+            return;
+        };
+        if back < now {
+            self.tool = self.stage.pose_at(back);
+            if let Stage::Arm(_, t) | Stage::Manip(_, t, _) = &mut self.stage {
+                *t = back;
+            }
         }
     }
 
@@ -377,6 +417,12 @@ impl TaskCtl {
         }
     }
 }
+
+/// The step the plan clock is searched back in when it follows a learner's hand, s.
+const SYNC_STEP: f64 = 0.05;
+/// A commanded pose this much further from the hand than the nearest still counts as where the
+/// hand is, m: the clock goes back no further than it must.
+const SYNC_SLACK: f64 = 0.005;
 
 /// A resumed manipulation squares the base up again first when it stands further than this from
 /// where the manipulation was planned, m and rad (closer, the arm makes up the difference).
