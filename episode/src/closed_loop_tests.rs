@@ -222,7 +222,10 @@ impl Policy for Lagging {
 /// take every sampled pick and place to success. Re-planned from the task's start instead (the
 /// hand sent home, the base squared up again, the approach from above: the expert before
 /// `TaskCtl::resume`), the same labels completed 0 of these 5 picks, at 40 % and at 25 %: each
-/// re-plan undid the progress the lagging hand had made.
+/// re-plan undid the progress the lagging hand had made. And the labels are the way on from the
+/// hand, not the plan's clock: at most 3.6 cm ahead of it, where the plan's own clock (before
+/// `TaskCtl::follow_hand`) put them up to 11.8 cm ahead (fingers told to close above an object
+/// the hand had not reached yet).
 #[test]
 fn a_learner_lagging_the_expert_is_labelled_on_to_success() {
     let assets = Assets::load_default().unwrap();
@@ -263,6 +266,10 @@ fn a_learner_lagging_the_expert_is_labelled_on_to_success() {
         assert!(
             failed.is_empty(),
             "{kind} tasks a lagging learner failed under the expert's labels: {failed:#?}"
+        );
+        assert!(
+            ahead < 0.05,
+            "{kind}: a label {ahead:.3} m ahead of the hand is the plan's clock, not the way on from the hand"
         );
     }
 }
