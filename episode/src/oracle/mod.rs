@@ -281,6 +281,8 @@ impl Policy for OraclePolicy {
             Some(a) => {
                 let done = input.step.saturating_sub(a.queried_at) as usize;
                 own = match (done, input.previous_action) {
+                    // Asked again before anything ran (the Python env's `expert_chunk`).
+                    (0, _) => true,
                     (1..=HORIZON, Some(executed)) => same_action(&executed, &a.chunk[done - 1]),
                     _ => false,
                 };
