@@ -353,9 +353,11 @@ def main():
     ap.add_argument("--instructions", default="1-100",
                     help="dev instructions (1-based inclusive range) the expert episodes and DAgger rounds draw from; "
                     "the rest are held out for evaluation")
-    ap.add_argument("--dagger-kinds", default="move,pick,place",
+    ap.add_argument("--dagger-kinds", default="move",
                     help="task kinds whose policy-driven decisions the expert labels (comma-separated: move, pick, "
-                    "place); the closed-loop expert labels any state, so all three by default")
+                    "place). Navigation only by default: labelling pick and place lowered both baselines' pick "
+                    "and place round by round (docs/measured/baseline-gates.md, run 3); with --round-env task the "
+                    "rounds run steps of these kinds")
     ap.add_argument("--round-env", choices=("task", "plan"), default="task",
                     help="DAgger episodes: single plan steps of the labelled kinds (KitchenR/Task-v0), or whole plans")
     ap.add_argument("--round-task-seconds", type=float, default=60.0,
