@@ -241,7 +241,9 @@ def main():
     lines = split_file(args.split, args.ground_truth).read_text().splitlines()
     lines = [ln for ln in lines if ln.strip()]
     lo, hi = instruction_range(args.instructions, len(lines)) if args.instructions else (0, min(args.episodes, len(lines)))
-    evaluated = {"eval_split": args.split, "eval_instructions": f"{lo + 1}-{hi}", "held_out": args.held_out}
+    # The batch seed the episodes were drawn with (eval's own "seed" is the run seed, 0).
+    evaluated = {"eval_split": args.split, "eval_instructions": f"{lo + 1}-{hi}", "eval_seed": args.seed,
+                 "held_out": args.held_out}
     res = Path(args.out)
     res.mkdir(parents=True, exist_ok=True)
     work = Path(tempfile.mkdtemp(prefix="kr-gate-"))
