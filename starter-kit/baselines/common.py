@@ -5,9 +5,11 @@ keep one definition each:
   episode; the task's time is one of both baselines' features (the expert's pick-and-place
   phases are timed from a task's start);
 - `sr_by_kind`: success counts per task kind of the episodes a policy drove in training;
-- `train_instructions`: the dev instructions a run trains on (the others stay held out).
+- `instruction_range` / `train_instructions`: the `--instructions A-B` range a run trains on or a
+  gate evaluates (the dev instructions outside a training range stay held out).
 """
 
+import re
 import sys
 import threading
 
@@ -46,6 +48,15 @@ def sr_by_kind(outcomes):
     return out
 
 
+def instruction_range(text, count):
+    """`A-B` (1-based, inclusive) -> (first index, last index + 1), checked against the split's
+    `count` instructions; anything else exits with a message saying what to pass."""
+    m = re.fullmatch(r"(\d+)-(\d+)", text or "")
+    if not m or not 1 <= int(m.group(1)) <= int(m.group(2)) <= count:
+        sys.exit(f"--instructions {text!r}: give A-B with 1 <= A <= B <= {count} (the split's instructions)")
+    return int(m.group(1)) - 1, int(m.group(2))
+
+
 def train_instructions(text):
     """The dev instruction ids of the 1-based inclusive range `A-B` (the rest stay held out)."""
     from gym_kitchen_r import KitchenREnv
@@ -55,10 +66,5 @@ def train_instructions(text):
         ids = probe.instruction_ids()
     finally:
         probe.close()
-    try:
-        lo, hi = (int(x) for x in text.split("-"))
-    except ValueError:
-        sys.exit(f"--instructions {text!r}: give A-B, e.g. 1-100")
-    if not 1 <= lo <= hi <= len(ids):
-        sys.exit(f"--instructions {text!r}: the dev split has instructions 1-{len(ids)}")
-    return ids[lo - 1 : hi]
+    lo, hi = instruction_range(text, len(ids))
+    return ids[lo:hi]

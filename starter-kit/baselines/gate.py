@@ -47,6 +47,9 @@ import tempfile
 import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import instruction_range  # noqa: E402
+
 KINDS = ("navigation", "pick", "place")
 GATES = {
     "privileged": {"navigation": 0.9, "pick": 0.7, "place": 0.7},
@@ -123,14 +126,6 @@ def summarise(online, offline, train_log, track, gates, evaluated=None):
         "offline_mse": (offline or {}).get("mse"),
         **(evaluated or {}),
     }
-
-
-def instruction_range(text, count):
-    """`A-B` (1-based, inclusive) -> (first index, last index + 1), checked against `count`."""
-    m = re.fullmatch(r"(\d+)-(\d+)", text or "")
-    if not m or not 1 <= int(m.group(1)) <= int(m.group(2)) <= count:
-        raise SystemExit(f"--instructions {text!r}: give A-B with 1 <= A <= B <= {count} (the split's instructions)")
-    return int(m.group(1)) - 1, int(m.group(2))
 
 
 def split_file(split, ground_truth):
