@@ -11,11 +11,44 @@ use crate::policy::{ACTION_DIM, HORIZON, Policy, PolicyError, PolicyInput, Polic
 use crate::runner::{RunOptions, run_episode};
 use crate::test_oracle::blind_sim;
 
-/// The oracle, but for `len` steps from the `from`-th step of task `task` the actions are
-/// disturbed: the hand target moved by up to `reach` m and random base velocities, as a
-/// learner's rollout might leave the robot.
-struct Disturbed {
+/// The oracle as a learner's teacher: it is asked at every step, and `learner` turns its label
+/// into the action the learner executes (or keeps it).
+struct Driven<L> {
     oracle: OraclePolicy,
+    learner: L,
+}
+
+/// What a learner makes of the expert's label at one step: `None` keeps the whole chunk.
+trait Learner {
+    fn act(&mut self, input: &PolicyInput<'_>, label: [f64; ACTION_DIM]) -> Option<[f64; ACTION_DIM]>;
+    /// A new task starts.
+    fn reset(&mut self) {}
+}
+
+impl<L: Learner + Send> Policy for Driven<L> {
+    fn spec(&self) -> &PolicySpec {
+        self.oracle.spec()
+    }
+    fn wants_images(&self) -> bool {
+        false
+    }
+    fn reset(&mut self, episode: &str, task: usize, sub_task: &str) -> Result<(), PolicyError> {
+        self.learner.reset();
+        self.oracle.reset(episode, task, sub_task)
+    }
+    fn act(&mut self, input: &PolicyInput<'_>) -> Result<Vec<[f64; ACTION_DIM]>, PolicyError> {
+        let chunk = self.oracle.act(input)?;
+        Ok(match self.learner.act(input, chunk[0]) {
+            Some(a) => vec![a; HORIZON],
+            None => chunk,
+        })
+    }
+}
+
+/// For `len` steps from the `from`-th step of task `task` the actions are disturbed: the hand
+/// target moved by up to `reach` m and random base velocities, as a learner's rollout might
+/// leave the robot.
+struct Disturbed {
     task: usize,
     from: u64,
     len: u64,
@@ -33,25 +66,16 @@ impl Disturbed {
     }
 }
 
-impl Policy for Disturbed {
-    fn spec(&self) -> &PolicySpec {
-        self.oracle.spec()
-    }
-    fn wants_images(&self) -> bool {
-        false
-    }
-    fn reset(&mut self, episode: &str, task: usize, sub_task: &str) -> Result<(), PolicyError> {
+impl Learner for Disturbed {
+    fn reset(&mut self) {
         self.task_start = None;
-        self.oracle.reset(episode, task, sub_task)
     }
-    fn act(&mut self, input: &PolicyInput<'_>) -> Result<Vec<[f64; ACTION_DIM]>, PolicyError> {
-        let chunk = self.oracle.act(input)?;
+    fn act(&mut self, input: &PolicyInput<'_>, mut a: [f64; ACTION_DIM]) -> Option<[f64; ACTION_DIM]> {
         let start = *self.task_start.get_or_insert(input.step);
         let k = input.step - start;
         if input.task_index != self.task || !(self.from..self.from + self.len).contains(&k) {
-            return Ok(chunk);
+            return None;
         }
-        let mut a = chunk[0];
         // Where the oracle would go, off by up to `reach` in each direction; the base driven.
         let (dx, dy, dz) = (self.noise(), self.noise(), self.noise());
         a[2] += dx * self.reach;
@@ -59,7 +83,7 @@ impl Policy for Disturbed {
         a[4] += dz * self.reach;
         a[0] = self.noise() * 0.1;
         a[1] = self.noise() * 0.3;
-        Ok(vec![a; HORIZON])
+        Some(a)
     }
 }
 
@@ -86,14 +110,16 @@ fn disturbed_run(
 ) -> (bool, u64, String) {
     let cfg = &episode_configs(assets, std::slice::from_ref(ins), 0, None).unwrap()[0];
     let mut sim = blind_sim(assets, cfg);
-    let mut policy = Disturbed {
+    let mut policy = Driven {
         oracle: OraclePolicy::new(assets).without_images(),
-        task,
-        from,
-        len: 30,
-        reach,
-        task_start: None,
-        rng: 0x2545_F491_4F6C_DD1D ^ task as u64,
+        learner: Disturbed {
+            task,
+            from,
+            len: 30,
+            reach,
+            task_start: None,
+            rng: 0x2545_F491_4F6C_DD1D ^ task as u64,
+        },
     };
     let run = RunOptions {
         execute: 1,
@@ -182,29 +208,17 @@ fn from_every_sampled_task_start_a_fresh_expert_completes_the_task() {
 /// commands `lag` of the way from where the hand is to the expert's label, on task `task`; the
 /// rest of the label (base, gripper) as given. The expert labels every step it reaches.
 struct Lagging {
-    oracle: OraclePolicy,
     task: usize,
     lag: f64,
     /// The furthest the expert's label (its first hand target) was from the hand, m.
     label_ahead: f64,
 }
 
-impl Policy for Lagging {
-    fn spec(&self) -> &PolicySpec {
-        self.oracle.spec()
-    }
-    fn wants_images(&self) -> bool {
-        false
-    }
-    fn reset(&mut self, episode: &str, task: usize, sub_task: &str) -> Result<(), PolicyError> {
-        self.oracle.reset(episode, task, sub_task)
-    }
-    fn act(&mut self, input: &PolicyInput<'_>) -> Result<Vec<[f64; ACTION_DIM]>, PolicyError> {
-        let chunk = self.oracle.act(input)?;
+impl Learner for Lagging {
+    fn act(&mut self, input: &PolicyInput<'_>, mut a: [f64; ACTION_DIM]) -> Option<[f64; ACTION_DIM]> {
         if input.task_index != self.task {
-            return Ok(chunk);
+            return None;
         }
-        let mut a = chunk[0];
         let ahead = (0..3)
             .map(|i| (a[2 + i] - input.ee_pose[i]).powi(2))
             .sum::<f64>()
@@ -213,7 +227,7 @@ impl Policy for Lagging {
         for i in 0..3 {
             a[2 + i] = input.ee_pose[i] + self.lag * (a[2 + i] - input.ee_pose[i]);
         }
-        Ok(vec![a; HORIZON])
+        Some(a)
     }
 }
 
@@ -239,11 +253,13 @@ fn a_learner_lagging_the_expert_is_labelled_on_to_success() {
         for (ins, j) in &tasks_of(kind, 5) {
             let cfg = &episode_configs(&assets, std::slice::from_ref(ins), 0, None).unwrap()[0];
             let mut sim = blind_sim(&assets, cfg);
-            let mut policy = Lagging {
+            let mut policy = Driven {
                 oracle: OraclePolicy::new(&assets).without_images(),
-                task: *j,
-                lag: 0.4,
-                label_ahead: 0.0,
+                learner: Lagging {
+                    task: *j,
+                    lag: 0.4,
+                    label_ahead: 0.0,
+                },
             };
             let run = RunOptions {
                 max_tasks: Some(j + 1),
@@ -253,7 +269,7 @@ fn a_learner_lagging_the_expert_is_labelled_on_to_success() {
             let t = &out.tasks[*j];
             runs += 1;
             secs += t.sim_time;
-            ahead = ahead.max(policy.label_ahead);
+            ahead = ahead.max(policy.learner.label_ahead);
             if !t.success {
                 failed.push(format!("{} task {j}: {:?}", ins.id, t.failure));
             }

@@ -247,11 +247,13 @@ impl TaskCtl {
             return;
         };
         let now = *t;
-        let stage = &self.stage;
-        let dist = |x: f64| (stage.pose_at(x).translation.vector - hand).norm();
-        let times = (0..=(now / SYNC_STEP).floor() as usize).map(|k| now - k as f64 * SYNC_STEP);
-        let best = times.clone().map(dist).fold(f64::INFINITY, f64::min);
-        let Some(back) = times.into_iter().find(|&x| dist(x) <= best + SYNC_SLACK) else {
+        // (time, distance to the hand), latest first.
+        let back_in_time: Vec<(f64, f64)> = (0..=(now / SYNC_STEP).floor() as usize)
+            .map(|k| now - k as f64 * SYNC_STEP)
+            .map(|x| (x, (self.stage.pose_at(x).translation.vector - hand).norm()))
+            .collect();
+        let best = back_in_time.iter().map(|&(_, d)| d).fold(f64::INFINITY, f64::min);
+        let Some(&(back, _)) = back_in_time.iter().find(|&&(_, d)| d <= best + SYNC_SLACK) else {
             return;
         };
         if back < now {

@@ -313,23 +313,25 @@ class PrivilegedTeacher:
         return self.F.finish(out.numpy())
 
 
-def round_jobs(ids, args, rng):
-    """A round's episodes: (instruction, run seed, plan step). `--round-env plan` runs whole plans;
-    `task` runs single plan steps of the `--dagger-kinds` (KitchenR/Task-v0, from the expert's
-    state at the step's start), so a round's time goes to the kinds it labels."""
+def labelled_steps(ids, kinds):
+    """(instruction, plan step) of every step of `kinds` (a sub-task's first word) in `ids`."""
     from gym_kitchen_r import KitchenREnv
 
+    probe = KitchenREnv(images=False)
+    try:
+        return [(i, j) for i in ids for j, st in enumerate(probe.instruction_of(i)["plan"]) if st.split()[0] in kinds]
+    finally:
+        probe.close()
+
+
+def round_jobs(ids, steps, args, rng):
+    """A round's episodes: (instruction, run seed, plan step). `--round-env plan` runs whole plans
+    of `ids`; `task` runs single plan steps drawn from `steps` (labelled_steps of the
+    `--dagger-kinds`; KitchenR/Task-v0, from the expert's state at the step's start), so a
+    round's time goes to the kinds it labels."""
     seeds = lambda: int(rng.integers(1, 2**62))  # noqa: E731
     if args.round_env == "plan":
         return [(ids[int(rng.integers(len(ids)))], seeds(), None) for _ in range(args.round_episodes)]
-    probe = KitchenREnv(images=False)
-    try:
-        kinds = set(args.dagger_kinds.split(","))
-        steps = [(i, j) for i in ids for j, st in enumerate(probe.instruction_of(i)["plan"]) if st.split()[0] in kinds]
-    finally:
-        probe.close()
-    if not steps:
-        sys.exit(f"no plan step of kinds {args.dagger_kinds!r} in the training instructions")
     picks = rng.integers(len(steps), size=args.round_episodes)
     return [(steps[k][0], seeds(), steps[k][1]) for k in picks]
 
@@ -457,9 +459,14 @@ def main():
     if args.rounds and args.teacher != "expert":
         teacher = PrivilegedTeacher(args.teacher)
         logbook["teacher"] = {"checkpoint": args.teacher, "meta": teacher.meta}
+    steps = []
+    if args.rounds and args.round_env == "task":
+        steps = labelled_steps(training_ids, set(args.dagger_kinds.split(",")))
+        if not steps:
+            sys.exit(f"no plan step of kinds {args.dagger_kinds!r} in the training instructions")
     for r in range(1, args.rounds + 1):
         model.eval()
-        jobs = round_jobs(training_ids, args, np.random.default_rng(1000 * args.seed + r))
+        jobs = round_jobs(training_ids, steps, args, np.random.default_rng(1000 * args.seed + r))
         t0 = time.time()
         new, outcomes, (finished, cut) = run_round(batcher, vocab_index, jobs, args, r, teacher)
         roll_s = time.time() - t0
