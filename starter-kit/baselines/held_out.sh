@@ -21,7 +21,9 @@
 # CAM_ARGS / PRIV_ARGS (extra train.py arguments; the privileged run is done before the camera
 # run's rounds start, so CAM_ARGS="--teacher $RUN/priv/ckpt.pt --beta B" lets it drive a share of
 # them), JOBS [16], DEVICE [cuda], CAM_CKPT /
-# PRIV_CKPT (evaluate these checkpoints instead of $RUN's).
+# PRIV_CKPT (evaluate these checkpoints instead of $RUN's), TRAIN [cam priv] (which baselines to
+# train), PRIV_JOBS [4] (the privileged gate's jobs: its gate runs beside the camera's, which takes
+# JOBS). On a machine of several GPUs, give each run its own with CUDA_VISIBLE_DEVICES and RUN.
 set -euo pipefail
 
 HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -40,43 +42,54 @@ exec > >(tee -a "$RUN/held_out.log") 2>&1
 say() { echo "[held_out $(date +%H:%M:%S)] $*"; }
 
 train() {
-  say "camera baseline: dev $TRAIN_INSTRUCTIONS"
-  # shellcheck disable=SC2086
-  (cd "$HERE/camera" && python3 train.py --out "$RUN/cam" --instructions "$TRAIN_INSTRUCTIONS" --device "$DEVICE" \
-     --workers "$JOBS" --envs "$JOBS" ${CAM_ARGS:-}) >"$RUN/cam.log" 2>&1 &
-  cam=$!
-  # The privileged run starts once the camera run's behaviour cloning holds the GPU and leaves
-  # the CPUs to it (its own expert stream renders no image).
-  while kill -0 $cam 2>/dev/null && ! grep -q "^\[.*\] bc: " "$RUN/cam.log" 2>/dev/null; do sleep 5; done
-  say "privileged baseline: dev $TRAIN_INSTRUCTIONS"
-  # shellcheck disable=SC2086
-  python3 "$HERE/privileged/train.py" --out "$RUN/priv" --instructions "$TRAIN_INSTRUCTIONS" --device "$DEVICE" \
-    --workers "$JOBS" --envs "$JOBS" ${PRIV_ARGS:-} >"$RUN/priv.log" 2>&1 || say "privileged run failed (see priv.log)"
-  wait $cam || { say "camera run failed (see cam.log)"; exit 1; }
+  local cam="" want=" ${TRAIN:-cam priv} "
+  if [[ $want == *" cam "* ]]; then
+    say "camera baseline: dev $TRAIN_INSTRUCTIONS"
+    # shellcheck disable=SC2086
+    (cd "$HERE/camera" && python3 train.py --out "$RUN/cam" --instructions "$TRAIN_INSTRUCTIONS" --device "$DEVICE" \
+       --workers "$JOBS" --envs "$JOBS" ${CAM_ARGS:-}) >"$RUN/cam.log" 2>&1 &
+    cam=$!
+    # The privileged run starts once the camera run's behaviour cloning holds the GPU and leaves
+    # the CPUs to it (its own expert stream renders no image).
+    while kill -0 $cam 2>/dev/null && ! grep -q "^\[.*\] bc: " "$RUN/cam.log" 2>/dev/null; do sleep 5; done
+  fi
+  if [[ $want == *" priv "* ]]; then
+    say "privileged baseline: dev $TRAIN_INSTRUCTIONS"
+    # shellcheck disable=SC2086
+    python3 "$HERE/privileged/train.py" --out "$RUN/priv" --instructions "$TRAIN_INSTRUCTIONS" --device "$DEVICE" \
+      --workers "$JOBS" --envs "$JOBS" ${PRIV_ARGS:-} >"$RUN/priv.log" 2>&1 || say "privileged run failed (see priv.log)"
+  fi
+  if [ -n "$cam" ]; then wait $cam || { say "camera run failed (see cam.log)"; exit 1; }; fi
   say "trained: $(ls -la "$RUN"/cam/ckpt.pt "$RUN"/priv/ckpt.pt 2>&1 | tr '\n' ' ')"
 }
 
 CAM_CKPT="${CAM_CKPT:-$RUN/cam/ckpt.pt}"
 PRIV_CKPT="${PRIV_CKPT:-$RUN/priv/ckpt.pt}"
-gate() {  # name track serve-command train-log
-  local name=$1 track=$2 serve=$3 log=$4
+gate() {  # name track serve-command train-log jobs
+  local name=$1 track=$2 serve=$3 log=$4 jobs=$5
   local out="$RUN/results/$name"
   python3 "$HERE/gate.py" --track "$track" --out "$out/dev-$EVAL_DEV" --split dev --instructions "$EVAL_DEV" \
-    --seed "$EVAL_SEED" --held-out --no-offline --jobs "$JOBS" --train-log "$log" --serve "$serve"
+    --seed "$EVAL_SEED" --held-out --no-offline --jobs "$jobs" --train-log "$log" --serve "$serve"
   python3 "$HERE/gate.py" --track "$track" --out "$out/test-$EVAL_TEST" --split test --instructions "$EVAL_TEST" \
-    --seed "$EVAL_SEED" --held-out --no-offline --jobs "$JOBS" --train-log "$log" --serve "$serve"
+    --seed "$EVAL_SEED" --held-out --no-offline --jobs "$jobs" --train-log "$log" --serve "$serve"
   python3 "$HERE/gate.py" --track "$track" --out "$out" --train-log "$log" --combine "$out/dev-$EVAL_DEV" "$out/test-$EVAL_TEST"
 }
 evaluate() {
+  # The gates run side by side: the privileged one is light (no images) and done well before.
+  local pids=()
   for which in ${EVAL:-cam priv}; do
     case $which in
       cam) gate camera standard "python3 $HERE/camera/serve.py --checkpoint $CAM_CKPT --listen 127.0.0.1:0 --device $DEVICE" \
-             "$(dirname "$CAM_CKPT")/train_log.json" ;;
-      priv) gate privileged privileged "python3 $HERE/privileged/serve.py --checkpoint $PRIV_CKPT --listen 127.0.0.1:0" \
-             "$(dirname "$PRIV_CKPT")/train_log.json" || say "privileged gate failed" ;;
+             "$(dirname "$CAM_CKPT")/train_log.json" "$JOBS" & pids+=($!) ;;
+      priv) { gate privileged privileged "python3 $HERE/privileged/serve.py --checkpoint $PRIV_CKPT --listen 127.0.0.1:0" \
+             "$(dirname "$PRIV_CKPT")/train_log.json" "${PRIV_JOBS:-4}" || say "privileged gate failed"; } & pids+=($!) ;;
+      *) echo "EVAL=$which: use cam and/or priv" >&2; exit 2 ;;
     esac
   done
+  local failed=0
+  for p in "${pids[@]}"; do wait "$p" || failed=1; done
   say "done: $RUN/results"
+  return $failed
 }
 
 case $STAGE in
