@@ -105,17 +105,25 @@ pub(crate) fn frames<'py>(
         if !(padded.iter()).all(|v| of(v, c, &cam.name).is_some_and(|i| !i.rgb.is_empty())) {
             continue;
         }
-        let mut rgb = Vec::with_capacity(n * cam.rgb.len());
-        let mut z = Vec::with_capacity(if depth { n * cam.depth.len() * 4 } else { 0 });
-        for im in padded.iter().filter_map(|v| of(v, c, &cam.name)) {
-            rgb.extend_from_slice(&im.rgb);
-            if depth {
-                z.extend(im.depth.iter().flat_map(|v| v.to_ne_bytes()));
+        let shown: Vec<&CameraImage> = padded.iter().filter_map(|v| of(v, c, &cam.name)).collect();
+        // Written straight into the Python bytes: one copy of each frame, not two.
+        let rgb = PyBytes::new_with(py, shown.iter().map(|im| im.rgb.len()).sum(), |out| {
+            let mut at = 0;
+            for im in &shown {
+                out[at..at + im.rgb.len()].copy_from_slice(&im.rgb);
+                at += im.rgb.len();
             }
-        }
-        images.set_item(&cam.name, (n, cam.height, cam.width, PyBytes::new(py, &rgb)))?;
+            Ok(())
+        })?;
+        images.set_item(&cam.name, (n, cam.height, cam.width, rgb))?;
         if depth {
-            depths.set_item(&cam.name, (n, cam.height, cam.width, PyBytes::new(py, &z)))?;
+            let z = PyBytes::new_with(py, shown.iter().map(|im| im.depth.len() * 4).sum(), |out| {
+                for (b, v) in out.chunks_exact_mut(4).zip(shown.iter().flat_map(|im| &im.depth)) {
+                    b.copy_from_slice(&v.to_ne_bytes());
+                }
+                Ok(())
+            })?;
+            depths.set_item(&cam.name, (n, cam.height, cam.width, z))?;
         }
     }
     let mut s = Vec::with_capacity(n * STATE_FIELDS.len());
