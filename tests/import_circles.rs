@@ -1,8 +1,6 @@
-//! No two files of a crate import each other, directly or round a longer circle (issue #29 item
-//! 4). Included, by `#[path]`, as a `#[cfg(test)]` module of the server, cli, core and record
-//! crates, so each crate's unit tests check its own `src/`:
-//! `cargo test -p kitchen-r-server --lib import_circles` (likewise `-p kitchen-r-core`,
-//! `-p kitchen-r-record`; `-p kitchen-r --bin kitchen-r` for the cli).
+//! No two files of any crate in the workspace import each other, directly or round a longer
+//! circle. One test walks every member that the workspace's `Cargo.toml` lists, with no way for a
+//! crate to opt out: `cargo test -p kitchen-r --test import_circles`.
 //!
 //! What counts as an import. The module tree is read from the crate root through its `mod`
 //! declarations (`#[path]` included). A file depends on another when its code names an item
@@ -770,16 +768,38 @@ fn crate_circles(manifest_dir: &Path) -> (usize, Vec<String>) {
     (krate.files.len(), krate.circles())
 }
 
+/// The workspace's members, read from its `Cargo.toml` (this file is the cli package's test, one
+/// folder down).
+fn members() -> (PathBuf, Vec<String>) {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let manifest = std::fs::read_to_string(root.join("Cargo.toml")).expect("the workspace's Cargo.toml");
+    let doc: toml::Table = manifest.parse().expect("the workspace's Cargo.toml parses");
+    let members = doc["workspace"]["members"]
+        .as_array()
+        .expect("[workspace] members");
+    let members = members
+        .iter()
+        .map(|m| m.as_str().expect("a member path").to_string())
+        .collect();
+    (root, members)
+}
+
 #[test]
-fn no_two_files_of_the_crate_import_each_other() {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let (files, circles) = crate_circles(dir);
-    assert!(files > 3, "read only {files} files under {}", dir.display());
+fn no_two_files_of_any_crate_import_each_other() {
+    let (root, members) = members();
+    assert!(members.len() >= 10, "the workspace lists only {members:?}");
+    let mut found = Vec::new();
+    for m in &members {
+        let dir = root.join(m);
+        let (files, circles) = crate_circles(&dir);
+        assert!(files > 1, "read only {files} files under {}", dir.display());
+        found.extend(circles.into_iter().map(|c| format!("{m}: {c}")));
+    }
     assert!(
-        circles.is_empty(),
+        found.is_empty(),
         "files importing each other in a circle (put what they share in a third file; \
          rule in tests/import_circles.rs):\n{}",
-        circles.join("\n")
+        found.join("\n")
     );
 }
 

@@ -9,7 +9,7 @@ use std::time::Duration;
 
 use anyhow::Context;
 use clap::Args;
-use kitchen_r_episode::eval::WrapHook;
+use kitchen_r_episode::hooks::WrapHook;
 use kitchen_r_live::foxglove::{FoxgloveServer, LiveError};
 use kitchen_r_live::ros2::{Network, Ros2Config, Ros2Publisher};
 use kitchen_r_record::live::{Fanout, LivePublisher, LiveQueue, LiveSink};

@@ -14,9 +14,6 @@ mod dataset_cmd;
 mod episodes_cmd;
 mod eval_cmd;
 mod eval_record;
-#[cfg(test)]
-#[path = "../../tests/import_circles.rs"]
-mod import_circles;
 mod leaderboard_table;
 mod live_view;
 mod load_bench;

@@ -17,8 +17,8 @@ use anyhow::Context;
 use clap::Args;
 use kitchen_r_contract::{AllowedNetworks, RemoteConfig};
 use kitchen_r_server::Config;
+use kitchen_r_worker::job::Worker;
 use kitchen_r_worker::job::WorkerConfig;
-use kitchen_r_worker::job::client::Worker;
 use tokio::sync::watch;
 
 use crate::probe_glue::WorkerProbe;

@@ -1,6 +1,6 @@
 //! `kitchen-r worker --server URL [--slots N]`: a standalone simulation worker leasing episodes
 //! from a server's gRPC port. Parsing, tracing set-up and the stop signals only; the loop is
-//! `kitchen_r_worker::job::client`.
+//! `kitchen_r_worker::job::Worker`.
 //!
 //! Settings: `configs/worker.toml` (or `--config FILE`), then flags; a flag that is not given
 //! leaves the file's value alone. SIGTERM or Ctrl-C drains the worker: no more leases, running
@@ -11,8 +11,8 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::Args;
+use kitchen_r_worker::job::Worker;
 use kitchen_r_worker::job::WorkerConfig;
-use kitchen_r_worker::job::client::Worker;
 
 #[derive(Args, Debug)]
 pub(crate) struct WorkerArgs {

@@ -15,9 +15,6 @@ pub mod dataset;
 pub mod describe;
 pub mod error;
 pub mod grasp_mode;
-#[cfg(test)]
-#[path = "../../tests/import_circles.rs"]
-mod import_circles;
 pub mod layout;
 pub mod metrics;
 pub mod observations;

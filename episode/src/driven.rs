@@ -21,7 +21,7 @@ use std::time::{Duration, Instant};
 
 use kitchen_r_sim::{Action, Assets, EpisodeConfig, Observation, Sim, StepInfo};
 
-use crate::eval::WrapHook;
+use crate::hooks::WrapHook;
 use crate::oracle::OraclePolicy;
 use crate::policy::{
     ACTION_DIM, Frame, HORIZON, MAX_OBSERVATION_HISTORY, Policy, PolicyError, PolicyInput, PolicySpec,
@@ -40,6 +40,10 @@ pub struct DriveOptions {
     pub teleport_on_failure: bool,
     /// Render the cameras (and LiDAR) at every decision; false gives the robot state only.
     pub images: bool,
+    /// Hand the cameras' depth out with each decision ([`Decision::observation`]); false leaves
+    /// it (and the LiDAR scan, which no driver reads) behind on the episode's thread: less to
+    /// copy at every step. What is simulated and rendered is the same either way.
+    pub depth: bool,
     /// Consecutive control steps each decision shows, the newest included (1..=8).
     pub observation_history: usize,
     /// Keep the expert ready for [`DrivenEpisode::expert_chunk`].
@@ -62,6 +66,7 @@ impl Default for DriveOptions {
             run: RunOptions::default(),
             teleport_on_failure: true,
             images: true,
+            depth: true,
             observation_history: 1,
             expert: true,
             expert_inline: false,
@@ -219,6 +224,7 @@ impl DrivenEpisode {
             cmds: cmd_rx,
             events: ev_tx.clone(),
             inline: opts.expert_inline && expert.is_some(),
+            depth: opts.depth,
             last_action: None,
             expert,
             abandoned: false,
@@ -319,8 +325,19 @@ impl DrivenEpisode {
 
     /// Events up to the next decision or the end: what the launch or the last action sent led
     /// to. Called again while a decision waits, it reports nothing new ([`DriveError::Ended`]
-    /// after the end).
+    /// after the end). The caller's thread waits awake for up to [`DRIVER_SPIN`]: for a driver
+    /// of one episode.
     pub fn receive(&mut self) -> Result<Progress, DriveError> {
+        self.receive_within(DRIVER_SPIN)
+    }
+
+    /// [`DrivenEpisode::receive`] for a driver of several episodes on fewer cores (the vector
+    /// env): it sleeps at once and leaves the cores to the episodes.
+    pub fn receive_sleeping(&mut self) -> Result<Progress, DriveError> {
+        self.receive_within(Duration::ZERO)
+    }
+
+    fn receive_within(&mut self, spin: Duration) -> Result<Progress, DriveError> {
         if self.waiting {
             return Err(DriveError::Pending);
         }
@@ -329,7 +346,7 @@ impl DrivenEpisode {
         }
         let mut tasks_ended = Vec::new();
         loop {
-            match self.events.recv() {
+            match recv_soon(&self.events, spin) {
                 Ok(Event::TaskEnded(t)) => tasks_ended.push(t),
                 Ok(Event::Decision(d)) => {
                     self.waiting = true;
@@ -444,6 +461,8 @@ struct Relay {
     expert: Option<OraclePolicy>,
     /// Ask `expert` at every decision and send its chunk with it.
     inline: bool,
+    /// Decisions carry depth and LiDAR ([`DriveOptions::depth`]).
+    depth: bool,
     /// The previous action of the decision last handed out, then the action that answered it.
     last_action: Option<[f64; ACTION_DIM]>,
     /// The driver is gone: every decision fails at once so the runner ends quickly.
@@ -482,7 +501,7 @@ impl Policy for Relay {
             step: input.step,
             task_index: input.task_index,
             sub_task: input.sub_task.to_string(),
-            observation: input.observation.clone(),
+            observation: handed_out(input.observation, self.depth),
             ee_pose: input.ee_pose,
             previous_action: input.previous_action,
             history: input.history.to_vec(),
@@ -493,7 +512,7 @@ impl Policy for Relay {
             return Err(PolicyError::Call(ABANDONED.into()));
         }
         loop {
-            match recv_soon(&self.cmds) {
+            match recv_soon(&self.cmds, SPIN) {
                 Ok(Cmd::Act(a)) => {
                     self.last_action = Some(a);
                     return Ok(vec![a; HORIZON]);
@@ -521,20 +540,52 @@ impl Policy for Relay {
     }
 }
 
+/// The observation a decision carries: all of it, or without depth and LiDAR.
+fn handed_out(o: &Observation, depth: bool) -> Observation {
+    if depth {
+        return o.clone();
+    }
+    let images = (o.images.iter())
+        .map(|im| kitchen_r_sim::sensors::CameraImage {
+            name: im.name.clone(),
+            width: im.width,
+            height: im.height,
+            rgb: im.rgb.clone(),
+            depth: Vec::new(),
+        })
+        .collect();
+    Observation {
+        time: o.time,
+        images,
+        lidar: None,
+        odometry: o.odometry,
+        joints: o.joints,
+        gripper: o.gripper,
+        task: o.task.clone(),
+    }
+}
+
 /// How long the episode's thread waits for the driver's answer awake before it sleeps.
 const SPIN: Duration = Duration::from_millis(1);
+
+/// How long the driver waits awake for the episode's next decision before it sleeps: a control
+/// step (simulation, cameras, the expert) takes a few milliseconds, and a driver woken from
+/// sleep after each one added about 0.2 ms a step on a virtual machine, the binding's overhead
+/// over the Rust runner. Yielding between polls gives the core to any thread that needs it (the
+/// vector env's episodes on a machine with fewer cores than environments).
+const DRIVER_SPIN: Duration = Duration::from_millis(10);
 
 /// The driver answers a decision within a fraction of a millisecond (it converts the decision
 /// and hands back an action), and waking a sleeping thread costs about as much on a virtual
 /// machine: so the episode's thread polls for the answer for up to [`SPIN`], yielding its core
 /// between polls, before it sleeps. Timing only: what is received is the same.
-fn recv_soon<T>(rx: &Receiver<T>) -> Result<T, RecvError> {
+fn recv_soon<T>(rx: &Receiver<T>, spin: Duration) -> Result<T, RecvError> {
     let started = Instant::now();
     loop {
         match rx.try_recv() {
             Ok(v) => return Ok(v),
             Err(TryRecvError::Disconnected) => return Err(RecvError),
-            Err(TryRecvError::Empty) if started.elapsed() < SPIN => std::thread::yield_now(),
+            Err(TryRecvError::Empty) if started.elapsed() < spin => std::thread::yield_now(),
             Err(TryRecvError::Empty) => return rx.recv(),
         }
     }

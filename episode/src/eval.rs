@@ -10,17 +10,19 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::{Arc, mpsc};
+use std::sync::mpsc;
 use std::time::Instant;
 
 use kitchen_r_core::GraspMode;
 use kitchen_r_core::dataset::{Instruction, Split, read_jsonl};
-use kitchen_r_sim::generator::splitmix;
 use kitchen_r_sim::{Assets, EpisodeConfig, EpisodeParams, SensorsConfig, Sim, SimConfig, SimError};
 use serde::{Deserialize, Serialize};
 
+use crate::hooks::WrapHook;
 use crate::oracle::{ORACLE_NAME, OraclePolicy};
-use crate::runner::{EpisodeOutcome, RunError, RunOptions, StepHook, run_episode};
+use crate::runner::{EpisodeOutcome, RunError, RunOptions, run_episode};
+use crate::seeds::instruction_seed;
+use crate::sim_slot::load;
 use crate::trace::{self, TracingPolicy};
 
 /// The policies `eval` can run in this build.
@@ -89,42 +91,6 @@ pub struct EvalOptions {
     pub watch: Option<WrapHook>,
     /// `eval --grasp`: the simulator's grasp mode; `None` = configs/sim.toml's `[grasp] mode`.
     pub grasp: Option<GraspMode>,
-}
-
-/// A hook to run each episode with, made per episode around the episode's own hook: a live
-/// view (`kitchen-r eval --foxglove`) publishes through it. Like every hook it must not change
-/// an episode (the runner leaves its reported overhead out of the wall-clock budget).
-#[derive(Clone)]
-pub struct WrapHook(pub Arc<WrapFn>);
-
-/// What a [`WrapHook`] calls: the episode's hook in, the hook to run the episode with out.
-pub type WrapFn = dyn for<'a> Fn(&'a mut dyn StepHook) -> Box<dyn StepHook + 'a> + Send + Sync;
-
-impl WrapHook {
-    /// `run` with `hook`, wrapped in `watch` when there is one: how `eval` and the workers run
-    /// an episode that may be watched live.
-    pub fn around<T>(
-        watch: Option<&WrapHook>,
-        hook: &mut dyn StepHook,
-        run: impl FnOnce(&mut dyn StepHook) -> T,
-    ) -> T {
-        match watch {
-            Some(w) => run((w.0)(hook).as_mut()),
-            None => run(hook),
-        }
-    }
-}
-
-impl std::fmt::Debug for WrapHook {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str("WrapHook")
-    }
-}
-
-impl PartialEq for WrapHook {
-    fn eq(&self, other: &Self) -> bool {
-        Arc::ptr_eq(&self.0, &other.0)
-    }
 }
 
 impl Default for EvalOptions {
@@ -290,14 +256,6 @@ pub fn instructions(split: Split, ground_truth: Option<&PathBuf>) -> Result<Vec<
     }
 }
 
-/// The seed of an instruction's episode: stable per (run seed, instruction id).
-pub fn instruction_seed(seed: u64, id: &str) -> u64 {
-    let fnv = id.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
-        (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
-    });
-    splitmix(seed ^ fnv)
-}
-
 /// One episode configuration per instruction (the first `n`, if given).
 pub fn episode_configs(
     assets: &Assets,
@@ -369,23 +327,6 @@ pub(crate) fn run_all(
         Ok(())
     })?;
     out.into_iter().map(|o| o.ok_or(EvalError::Panicked)).collect()
-}
-
-/// `cfg` loaded into the thread's simulator: the one it has, reset, or a new one the first time.
-pub(crate) fn load<'a>(
-    sim: &'a mut Option<Sim>,
-    assets: &Assets,
-    sim_cfg: &SimConfig,
-    sensors: &SensorsConfig,
-    cfg: &EpisodeConfig,
-) -> Result<&'a mut Sim, SimError> {
-    match sim {
-        Some(s) => {
-            s.reset(cfg)?;
-            Ok(s)
-        }
-        None => Ok(sim.insert(Sim::new(assets.clone(), sim_cfg.clone(), sensors.clone(), cfg)?.0)),
-    }
 }
 
 /// What every episode of a run is built from: assets and the simulator's configs.

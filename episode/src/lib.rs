@@ -14,6 +14,7 @@
 mod closed_loop_tests;
 pub mod driven;
 pub mod eval;
+pub mod hooks;
 #[cfg(test)]
 mod mesh_object_tests;
 pub mod offline;
@@ -23,6 +24,8 @@ pub mod policy;
 mod robot_file_tests;
 pub mod runner;
 pub mod samples;
+pub mod seeds;
+pub mod sim_slot;
 pub mod teleport;
 #[cfg(test)]
 mod test_oracle;

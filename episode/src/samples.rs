@@ -394,7 +394,7 @@ fn one(
         opts.randomise,
     )
     .map_err(ep)?;
-    let s = crate::eval::load(sim, &shared.assets, &shared.sim_cfg, &shared.sensors, &cfg).map_err(ep)?;
+    let s = crate::sim_slot::load(sim, &shared.assets, &shared.sim_cfg, &shared.sensors, &cfg).map_err(ep)?;
     recorder.samples.clear();
     let outcome =
         run_episode(s, recorder, run, None, &mut ()).map_err(|source| SampleError::Run { index, source })?;

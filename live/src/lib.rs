@@ -19,7 +19,4 @@
 //! the build, where this is a few hundred lines on what the HTTP API already builds.
 
 pub mod foxglove;
-#[cfg(test)]
-#[path = "../../tests/import_circles.rs"]
-mod import_circles;
 pub mod ros2;

@@ -16,9 +16,10 @@ use std::sync::{Mutex, MutexGuard, PoisonError};
 use kitchen_r_core::dataset::{Instruction, Split};
 use kitchen_r_core::observations::PrivilegedScope;
 use kitchen_r_episode::driven::{DriveError, DriveOptions, DrivenEpisode, Progress};
-use kitchen_r_episode::eval::{instruction_seed, instructions};
+use kitchen_r_episode::eval::instructions;
 use kitchen_r_episode::runner::RunOptions;
 use kitchen_r_episode::samples::instruction_episode;
+use kitchen_r_episode::seeds::instruction_seed;
 use kitchen_r_sim::{Assets, EpisodeParams, SensorsConfig, Sim, SimConfig};
 use pyo3::exceptions::{PyKeyError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -170,6 +171,11 @@ impl Inner {
         Ok(self.episode()?.receive()?)
     }
 
+    /// As `receive`, asleep while waiting: `step_many` waits for several episodes at once.
+    fn receive_sleeping(&mut self) -> Result<Progress, EnvError> {
+        Ok(self.episode()?.receive_sleeping()?)
+    }
+
     fn expert_chunk(&mut self) -> Result<Vec<[f64; 10]>, EnvError> {
         Ok(self.episode()?.expert_chunk()?)
     }
@@ -250,7 +256,7 @@ fn step_many<'py>(
             .map_err(|e| (i, e))?;
         }
         (inners.iter_mut().enumerate())
-            .map(|(i, inner)| inner.receive().map_err(|e| (i, e)))
+            .map(|(i, inner)| inner.receive_sleeping().map_err(|e| (i, e)))
             .collect()
     });
     let done = done.map_err(|(i, e)| e.into_py(&format!("environment {i}: ")))?;
@@ -310,6 +316,7 @@ impl NativeEnv {
             },
             teleport_on_failure,
             images: images || depth,
+            depth,
             observation_history: history,
             expert: expert || expert_inline,
             expert_inline,

@@ -12,7 +12,7 @@ use std::path::Path;
 use std::sync::{Arc, Mutex, PoisonError, Weak};
 use std::time::Duration;
 
-use kitchen_r_episode::eval::WrapHook;
+use kitchen_r_episode::hooks::WrapHook;
 use kitchen_r_live::ros2::{Ros2Config, Ros2Episodes};
 use kitchen_r_sim::SensorsConfig;
 use pyo3::exceptions::{PyRuntimeError, PyValueError};

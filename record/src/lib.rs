@@ -24,9 +24,6 @@ pub mod collect;
 mod frame;
 pub use frame::keep_cameras;
 pub mod hdf5_aloha;
-#[cfg(test)]
-#[path = "../../tests/import_circles.rs"]
-mod import_circles;
 pub mod lerobot;
 pub mod live;
 pub mod live_hook;

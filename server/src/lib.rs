@@ -18,9 +18,9 @@
 //! imports the service or an adapter (tests aside), and nothing outside an adapter imports one:
 //! schema stand-ins the OpenAPI document needs live with the domain types ([`scores`],
 //! [`schema`]), never as an import of [`http`] from the domain (issue #29).
-//! `layering_tests` checks this on the source text, and `import_circles` (the workspace's
-//! `tests/import_circles.rs`, shared with cli, core and record) that no two files import each
-//! other round a circle, which states when a parent module and its children count.
+//! `layering_tests` checks this on the source text, and the workspace's `import_circles` test
+//! (`tests/import_circles.rs`, over every crate) that no two files import each other round a
+//! circle, which states when a parent module and its children count.
 
 mod clock;
 mod config;
@@ -30,9 +30,6 @@ mod error;
 mod grpc;
 mod grpc_worker;
 mod http;
-#[cfg(test)]
-#[path = "../../tests/import_circles.rs"]
-mod import_circles;
 #[cfg(test)]
 mod layering_tests;
 mod leaderboard;

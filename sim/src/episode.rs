@@ -12,7 +12,7 @@ use kitchen_r_core::catalogue::{Catalogue, ObjectModel};
 use kitchen_r_core::dataset::Instruction;
 use kitchen_r_core::plan::parse_plan;
 use kitchen_r_core::scene::{KeyObject, Scene};
-use rand::{RngExt, SeedableRng};
+use rand::RngExt;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
@@ -83,47 +83,6 @@ pub fn key_object_placement(
 }
 
 impl EpisodeConfig {
-    /// The episode of a dataset instruction: every key object of the scene at its start, the
-    /// instruction's plan and place targets; the robot start and background objects are drawn
-    /// with `seed` from `params`. When `params.batch` holds an episode for the instruction's id
-    /// (a saved batch run locally), that episode, checked against the instruction.
-    pub fn from_instruction(
-        ins: &Instruction,
-        scene: &Scene,
-        cat: &Catalogue,
-        params: &crate::generator::EpisodeParams,
-        seed: u64,
-    ) -> Result<EpisodeConfig, SimError> {
-        if ins.scene != scene.id {
-            return Err(SimError::Episode(format!(
-                "instruction is for scene {:?}, not {:?}",
-                ins.scene, scene.id
-            )));
-        }
-        if let Some(cfg) = params.batch.as_ref().and_then(|b| b.get(&ins.id)) {
-            return batch_episode(cfg, ins, scene, cat);
-        }
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let objects = scene
-            .key_objects
-            .iter()
-            .map(|o| key_object_placement(scene, cat, o))
-            .collect::<Result<Vec<_>, _>>()?;
-        let cfg = EpisodeConfig {
-            id: ins.id.clone(),
-            scene: scene.id.clone(),
-            seed,
-            robot_start: crate::generator::draw_start(&mut rng, scene, params),
-            background: crate::generator::draw_background(&mut rng, scene, cat, params, &objects),
-            objects,
-            style: Style::of(scene),
-            plan: ins.plan.clone(),
-            place_targets: ins.place_targets.clone(),
-        };
-        cfg.validate(scene, cat)?;
-        Ok(cfg)
-    }
-
     /// Check the config against its scene and the catalogue.
     pub fn validate(&self, scene: &Scene, cat: &Catalogue) -> Result<(), SimError> {
         let bad = |m: String| Err(SimError::Episode(m));
@@ -170,7 +129,7 @@ impl EpisodeConfig {
 }
 
 /// A saved batch's episode for `ins`: it must be the instruction's task in its scene.
-fn batch_episode(
+pub(crate) fn batch_episode(
     cfg: &EpisodeConfig,
     ins: &Instruction,
     scene: &Scene,

@@ -9,6 +9,7 @@ use std::path::Path;
 use std::sync::Arc;
 
 use kitchen_r_core::catalogue::Catalogue;
+use kitchen_r_core::dataset::Instruction;
 use kitchen_r_core::dataset::symbolic::{Placed, spot_is_reachable};
 use kitchen_r_core::plan::Step;
 use kitchen_r_core::reach::ArmReach;
@@ -17,9 +18,11 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::episode::{EpisodeConfig, ObjectPlacement, in_disc, object_color};
+use crate::episode::{
+    EpisodeConfig, ObjectPlacement, batch_episode, in_disc, key_object_placement, object_color,
+};
 use crate::error::{SimError, read_toml};
-use crate::randomise::Randomise;
+use crate::randomise_settings::Randomise;
 use crate::world::Style;
 
 /// `configs/episodes.toml`.
@@ -388,4 +391,48 @@ pub fn splitmix(mut z: u64) -> u64 {
     z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
     z ^ (z >> 31)
+}
+
+/// Drawn here, not in `episode.rs`: the episode's data does not depend on how it is drawn.
+impl EpisodeConfig {
+    /// The episode of a dataset instruction: every key object of the scene at its start, the
+    /// instruction's plan and place targets; the robot start and background objects are drawn
+    /// with `seed` from `params`. When `params.batch` holds an episode for the instruction's id
+    /// (a saved batch run locally), that episode, checked against the instruction.
+    pub fn from_instruction(
+        ins: &Instruction,
+        scene: &Scene,
+        cat: &Catalogue,
+        params: &EpisodeParams,
+        seed: u64,
+    ) -> Result<EpisodeConfig, SimError> {
+        if ins.scene != scene.id {
+            return Err(SimError::Episode(format!(
+                "instruction is for scene {:?}, not {:?}",
+                ins.scene, scene.id
+            )));
+        }
+        if let Some(cfg) = params.batch.as_ref().and_then(|b| b.get(&ins.id)) {
+            return batch_episode(cfg, ins, scene, cat);
+        }
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let objects = scene
+            .key_objects
+            .iter()
+            .map(|o| key_object_placement(scene, cat, o))
+            .collect::<Result<Vec<_>, _>>()?;
+        let cfg = EpisodeConfig {
+            id: ins.id.clone(),
+            scene: scene.id.clone(),
+            seed,
+            robot_start: draw_start(&mut rng, scene, params),
+            background: draw_background(&mut rng, scene, cat, params, &objects),
+            objects,
+            style: Style::of(scene),
+            plan: ins.plan.clone(),
+            place_targets: ins.place_targets.clone(),
+        };
+        cfg.validate(scene, cat)?;
+        Ok(cfg)
+    }
 }

@@ -7,9 +7,10 @@
 use nalgebra::{Isometry3, Point3, Vector3};
 use rapier3d::prelude::*;
 
+use crate::bodies::Held;
 use crate::convert::{pose_to_iso, vec_to_glam};
 use crate::material::{Owner, Tag};
-use crate::sim::{Held, Sim};
+use crate::sim::Sim;
 
 /// Speed limits of the grasp servo (m/s, rad/s): a snagged object is not flung.
 const MAX_CARRY_SPEED: f64 = 2.0;
@@ -29,16 +30,6 @@ fn set_carried(world: &mut PhysicsWorld, body: RigidBodyHandle, carried: bool) {
         Owner::KeyObject.groups(false)
     };
     world.bodies[body].set_gravity_scale(if carried { 0.0 } else { 1.0 }, true);
-    let handles: Vec<ColliderHandle> = world.bodies[body].colliders().to_vec();
-    for c in handles {
-        if let Some(co) = world.colliders.get_mut(c) {
-            co.set_collision_groups(groups);
-        }
-    }
-}
-
-/// Set the collision groups of every collider of `body`.
-pub(crate) fn set_groups(world: &mut PhysicsWorld, body: RigidBodyHandle, groups: InteractionGroups) {
     let handles: Vec<ColliderHandle> = world.bodies[body].colliders().to_vec();
     for c in handles {
         if let Some(co) = world.colliders.get_mut(c) {

@@ -9,6 +9,7 @@
 //! substeps. See `kitchen_r_core::robot` and docs/twin/robot.md for the arm and TCP frames.
 
 pub mod bench;
+pub mod bodies;
 pub mod config;
 pub mod convert;
 pub mod episode;
@@ -21,6 +22,7 @@ pub mod mesh;
 pub mod oracle;
 pub mod preflight;
 pub mod randomise;
+pub mod randomise_settings;
 pub mod render;
 pub mod report;
 pub mod robot;

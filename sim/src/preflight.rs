@@ -3,9 +3,9 @@
 
 use rapier3d::prelude::*;
 
+use crate::bodies::ObjectBody;
 use crate::error::SimError;
 use crate::material::{Owner, Tag};
-use crate::sim::ObjectBody;
 
 /// Every key object has an enabled, solid, finite collider with positive volume and mass that
 /// collides with the furniture and encloses the object's centre in its bounding box.

@@ -61,25 +61,7 @@ impl Assets {
     }
 }
 
-/// A key object in the world.
-#[derive(Debug, Clone)]
-pub struct ObjectBody {
-    pub name: String,
-    pub body: RigidBodyHandle,
-    pub half_height: f64,
-    /// Grasp point from the centre, object frame.
-    pub grasp_offset: Vector3<f64>,
-}
-
-/// The gripper's hold on an object.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Held {
-    pub object: usize,
-    /// Finger gap when the grasp closed (m).
-    pub width: f64,
-    /// Object pose in the TCP frame at the grasp.
-    pub offset: Isometry3<f64>,
-}
+pub use crate::bodies::{Held, ObjectBody};
 
 /// Everything that changes while stepping (what a snapshot holds besides the physics sets).
 #[derive(Debug, Clone)]
@@ -280,7 +262,7 @@ fn build(assets: &Assets, config: &SimConfig, ep: &EpisodeConfig) -> Result<Buil
         GraspMode::Abstract => Robot::spawn(&mut world, &mut materials, &assets.robot, ep.robot_start),
         GraspMode::Physical => {
             for o in &objects {
-                crate::grasp::set_groups(&mut world, o.body, Owner::KeyObject.physical_key_groups());
+                crate::bodies::set_groups(&mut world, o.body, Owner::KeyObject.physical_key_groups());
             }
             let a = &config.articulation;
             Robot::spawn_articulated(&mut world, &mut materials, &assets.robot, ep.robot_start, a)

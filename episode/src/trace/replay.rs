@@ -3,9 +3,9 @@
 use kitchen_r_sim::{Assets, SensorsConfig, Sim, SimConfig, SimError};
 
 use super::{Call, TaskCheck, Trace, TraceOutcome};
-use crate::eval::load;
 use crate::policy::{ACTION_DIM, Policy, PolicyError, PolicyInput, PolicySpec};
 use crate::runner::{EpisodeOutcome, RunError, StepHook, TaskRecord, run_episode};
+use crate::sim_slot::load;
 use crate::teleport::expert_starts;
 
 /// Why a trace was not replayed, or its replay must not be shown.

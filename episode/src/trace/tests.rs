@@ -44,7 +44,7 @@ fn traced_in<P: Policy>(
         sim_cfg.grasp.mode = g;
     }
     let mut slot = None;
-    let sim = crate::eval::load(&mut slot, assets, &sim_cfg, &sensors, cfg).unwrap();
+    let sim = crate::sim_slot::load(&mut slot, assets, &sim_cfg, &sensors, cfg).unwrap();
     let starts = teleport.then(|| expert_starts(sim, cfg, assets).unwrap());
     let mut tracing = TracingPolicy::new(policy);
     let out = run_episode(sim, &mut tracing, run, starts.as_deref(), &mut ()).unwrap();

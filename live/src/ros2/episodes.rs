@@ -9,7 +9,7 @@
 use std::sync::Arc;
 use std::time::Duration;
 
-use kitchen_r_episode::eval::WrapHook;
+use kitchen_r_episode::hooks::WrapHook;
 use kitchen_r_record::live::{LivePublisher, LiveStats};
 use kitchen_r_record::live_hook::LiveHook;
 use kitchen_r_record::ros2_frame::topics;

@@ -6,6 +6,7 @@ use nalgebra::{Isometry3, Vector3};
 use rapier3d::prelude::*;
 use serde::{Deserialize, Serialize};
 
+pub use super::projection::Projection;
 use super::raycast::{Caster, Hit, Ray3};
 use crate::config::{CameraConfig, LightConfig};
 use crate::convert::vec_to_glam;
@@ -25,15 +26,6 @@ pub struct CameraImage {
     pub rgb: Vec<u8>,
     /// Row-major depth along the optical axis (m), 0 where nothing was hit within range.
     pub depth: Vec<f32>,
-}
-
-/// A ray-generation model: perspective (`pinhole`) or orthographic (top-down view).
-#[derive(Debug, Clone, Copy)]
-pub enum Projection {
-    /// Horizontal field of view (rad).
-    Pinhole { fov: f64 },
-    /// Metres per pixel.
-    Ortho { scale: f64 },
 }
 
 /// Scene data the renderer needs besides the physics world.

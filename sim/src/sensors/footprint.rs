@@ -8,7 +8,7 @@
 use nalgebra::{Isometry3, Point3, Vector3};
 use rapier3d::prelude::Aabb;
 
-use super::camera::Projection;
+use super::projection::Projection;
 use crate::convert::vec_from_glam;
 
 /// Distance (camera frame, along the optical axis) in front of the eye below which a corner

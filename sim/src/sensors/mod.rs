@@ -5,6 +5,7 @@ pub mod camera;
 mod footprint;
 pub mod lidar;
 pub mod png;
+pub mod projection;
 mod ray_shapes;
 pub mod raycast;
 

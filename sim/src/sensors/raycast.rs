@@ -11,8 +11,8 @@ use nalgebra::Isometry3;
 use rapier3d::math::{Pose, Vec3A, Vector};
 use rapier3d::prelude::*;
 
-use super::camera::Projection;
 use super::footprint::{Coverage, Footprint, Projector};
+use super::projection::Projection;
 use super::ray_shapes::{aligned_normal, ray_capsule, ray_cuboid, ray_cylinder, slab};
 use crate::convert::vec_to_glam;
 

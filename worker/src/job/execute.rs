@@ -19,7 +19,7 @@ use super::path::PathHook;
 use super::spec;
 use super::{JobContext, JobError};
 use kitchen_r_contract::{Credentials, RemotePolicy, SimCamera};
-use kitchen_r_episode::eval::WrapHook;
+use kitchen_r_episode::hooks::WrapHook;
 use kitchen_r_episode::offline::{OfflineOutcome, run_offline};
 use kitchen_r_episode::oracle::OraclePolicy;
 use kitchen_r_episode::policy::{Corrections, Policy, Unreachable};

@@ -12,7 +12,7 @@
 
 use std::sync::{Arc, OnceLock};
 
-use kitchen_r_episode::eval::WrapHook;
+use kitchen_r_episode::hooks::WrapHook;
 use kitchen_r_live::ros2::{Ros2Config, Ros2Episodes};
 use kitchen_r_sim::SensorsConfig;
 

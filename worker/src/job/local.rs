@@ -63,7 +63,7 @@ pub struct LocalSettings {
     pub trace: Option<PathBuf>,
     /// `eval --foxglove`: the live view each online episode also runs with.
     #[serde(skip)]
-    pub watch: Option<kitchen_r_episode::eval::WrapHook>,
+    pub watch: Option<kitchen_r_episode::hooks::WrapHook>,
     /// `eval --grasp`: the grasp mode every job carries, as a server's `[control] grasp` does;
     /// `None` = configs/sim.toml's `[grasp] mode`.
     #[serde(default)]

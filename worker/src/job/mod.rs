@@ -5,16 +5,18 @@
 //! `kitchen-r eval --policy http://…` runs its episodes through [`execute::execute_job`] too,
 //! with jobs built the way the server builds them, so local and leaderboard numbers agree.
 
-pub mod client;
 pub mod cores;
 mod execute;
 mod fetch;
+mod lease;
 mod live;
 pub mod local;
 mod path;
 mod render;
+mod rpc;
 pub mod spec;
 mod upload;
+mod worker;
 
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -22,9 +24,10 @@ use std::time::Duration;
 use kitchen_r_sim::{Assets, EpisodeParams, SensorsConfig, SimConfig, SimError};
 use serde::{Deserialize, Serialize};
 
-pub use client::run_worker;
 pub use execute::{Executed, JobControl, execute_job, execute_job_recording, execute_job_traced};
+pub use lease::run_worker;
 pub use live::LiveRos2;
+pub use worker::Worker;
 
 use kitchen_r_contract::{AllowedNetworks, RemoteConfig};
 use kitchen_r_episode::runner::RunError;
@@ -244,7 +247,7 @@ pub struct JobContext {
     /// Offline mode: query the policy at every N-th decision point.
     pub sample_every: usize,
     /// A live view online episodes also run with (`eval --foxglove`); the workers have none.
-    pub watch: Option<kitchen_r_episode::eval::WrapHook>,
+    pub watch: Option<kitchen_r_episode::hooks::WrapHook>,
     /// Live ROS 2 topics of the jobs that ask for them (`EpisodeSpec.live_ros2`, the server's
     /// `[live] ros2`), started at the first.
     pub live: LiveRos2,

@@ -31,9 +31,9 @@ use tonic::Request;
 use tracing::{Instrument, info, info_span, warn};
 
 use super::JobContext;
-use super::client::Worker;
 use super::cores::{Core, Cores};
 use super::fetch::FetchError;
+use super::worker::Worker;
 
 /// The share of a render spent replaying; the rest is the encoder's flush and the upload.
 const REPLAY_SHARE: f32 = 0.95;
@@ -229,7 +229,7 @@ impl Worker {
                         Ok(()) => return,
                         // The server may take it later (storage budgets full: the server queues
                         // the render again with the reason; a restart): nothing to report.
-                        Err(s) if super::client::retryable(&s) => {
+                        Err(s) if super::rpc::retryable(&s) => {
                             warn!("the rendered video was not stored ({:?}: {}); the render will be tried again", s.code(), s.message());
                             return;
                         }
@@ -254,7 +254,7 @@ impl Worker {
         work: impl std::future::Future<Output = T>,
         stop: &mut watch::Receiver<bool>,
     ) -> Option<T> {
-        let mut next = super::client::heartbeat_in(job.lease_expires_at_ms);
+        let mut next = super::rpc::heartbeat_in(job.lease_expires_at_ms);
         tokio::pin!(work);
         loop {
             tokio::select! {
@@ -292,7 +292,7 @@ impl Worker {
         req.set_timeout(Duration::from_secs(10));
         match self.client.clone().heartbeat(req).await {
             Ok(r) if r.get_ref().cancelled => None,
-            Ok(r) => Some(super::client::heartbeat_in(r.into_inner().lease_expires_at_ms)),
+            Ok(r) => Some(super::rpc::heartbeat_in(r.into_inner().lease_expires_at_ms)),
             Err(s) => {
                 warn!(
                     "render heartbeat failed ({:?}: {}); retrying",

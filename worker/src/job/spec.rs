@@ -16,10 +16,10 @@ use kitchen_r_proto::worker::v1 as pb;
 use kitchen_r_sim::{Assets, EpisodeConfig, EpisodeParams, SimConfig};
 
 use super::JobError;
-use kitchen_r_episode::eval::instruction_seed;
 use kitchen_r_episode::offline::OfflineOptions;
 use kitchen_r_episode::policy::{ChunkTolerance, HORIZON, PrivilegedScope};
 use kitchen_r_episode::runner::RunOptions;
+use kitchen_r_episode::seeds::instruction_seed;
 
 /// The instruction a job's spec describes: its plan and place targets as the server sent them.
 pub(crate) fn instruction(spec: &pb::EpisodeSpec) -> Result<Instruction, JobError> {

@@ -11,7 +11,7 @@ use kitchen_r_proto::worker::v1 as pb;
 use tonic::{Request, Status};
 use tracing::{info, warn};
 
-use super::client::Client;
+use super::rpc::Client;
 
 /// Bytes per chunk (the server decodes messages of up to 1 MiB).
 pub(crate) const CHUNK: usize = 256 << 10;
@@ -128,7 +128,7 @@ where
                 info!(bytes, %sha256, "{what} uploaded");
                 return Ok(());
             }
-            Err(s) if attempt < TRIES && super::client::retryable(&s) => {
+            Err(s) if attempt < TRIES && super::rpc::retryable(&s) => {
                 warn!(
                     "uploading the {what} failed ({:?}: {}); retrying",
                     s.code(),

@@ -23,21 +23,18 @@
 
 use std::future::Future;
 use std::sync::Arc;
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant};
 
 use kitchen_r_proto::worker::v1 as pb;
-use pb::worker_client::WorkerClient;
 use tokio::sync::{oneshot, watch};
 use tokio::task::JoinSet;
-use tonic::metadata::{Ascii, MetadataValue};
-use tonic::service::Interceptor;
-use tonic::service::interceptor::InterceptedService;
-use tonic::transport::{Channel, ClientTlsConfig, Endpoint};
-use tonic::{Code, Request, Status};
+use tonic::{Code, Request};
 use tracing::{Instrument, error, info, info_span, warn};
 
 use super::cores::Cores;
 use super::execute::{Executed, JobControl, execute_job_traced};
+use super::rpc::{heartbeat_in, retryable};
+use super::worker::Worker;
 use super::{JobContext, WorkerConfig, WorkerError};
 
 /// How long a shutting-down worker keeps trying to hand in its last result.
@@ -54,85 +51,12 @@ const MAX_JOBS_PER_CALL: usize = 16;
 /// Longest pause between retries of a failed call.
 const MAX_BACKOFF: Duration = Duration::from_secs(30);
 
-/// Adds `authorization: Bearer <worker token>` to every call.
-#[derive(Debug, Clone)]
-pub(crate) struct Auth(MetadataValue<Ascii>);
-
-impl Interceptor for Auth {
-    fn call(&mut self, mut req: Request<()>) -> Result<Request<()>, Status> {
-        req.metadata_mut().insert("authorization", self.0.clone());
-        Ok(req)
-    }
-}
-
-pub(crate) type Client = WorkerClient<InterceptedService<Channel, Auth>>;
-
-/// A worker ready to run: configuration checked, assets and dataset loaded.
-pub struct Worker {
-    pub(super) id: String,
-    cfg: WorkerConfig,
-    /// One permit per slot: the episodes in flight share them while they simulate (and a
-    /// render job while it replays, `super::render`).
-    pub(super) cores: Cores,
-    pub(super) ctx: Arc<JobContext>,
-    pub(super) client: Client,
-}
-
-impl std::fmt::Debug for Worker {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Worker")
-            .field("id", &self.id)
-            .field("server", &self.cfg.server)
-            .field("slots", &self.cfg.slot_count())
-            .field("max_episodes", &self.cfg.episode_limit())
-            .finish_non_exhaustive()
-    }
-}
-
 /// Build and run until `shutdown` resolves.
 pub async fn run_worker(cfg: WorkerConfig, shutdown: impl Future<Output = ()>) -> Result<(), WorkerError> {
     Worker::build(cfg).await?.run(shutdown).await
 }
 
 impl Worker {
-    /// Validate `cfg`, load what every job needs, and prepare a (lazy) channel to the server:
-    /// nothing is sent yet, so a server that is not up is not an error here.
-    pub async fn build(cfg: WorkerConfig) -> Result<Worker, WorkerError> {
-        cfg.validate()?;
-        let c = cfg.clone();
-        let ctx = tokio::task::spawn_blocking(move || JobContext::from_worker_config(&c))
-            .await
-            .map_err(|e| WorkerError::Config(format!("loading the assets: {e}")))??;
-        Worker::with_context(cfg, Arc::new(ctx))
-    }
-
-    /// As [`Worker::build`] with an already loaded context.
-    pub(crate) fn with_context(cfg: WorkerConfig, ctx: Arc<JobContext>) -> Result<Worker, WorkerError> {
-        cfg.validate()?;
-        let bad = |e: String| WorkerError::Config(format!("`server` {:?}: {e}", cfg.server));
-        let mut ep = Endpoint::from_shared(cfg.server.clone())
-            .map_err(|e| bad(e.to_string()))?
-            .connect_timeout(Duration::from_secs(5))
-            .tcp_nodelay(true);
-        if cfg.server.starts_with("https://") {
-            ep = ep
-                .tls_config(ClientTlsConfig::new().with_webpki_roots())
-                .map_err(|e| bad(e.to_string()))?;
-        }
-        let token = format!("Bearer {}", cfg.token)
-            .parse()
-            .map_err(|_| WorkerError::Config("`token` must be printable ASCII".into()))?;
-        // Results carry at most a 64 KiB log; jobs are small too.
-        let client = WorkerClient::with_interceptor(ep.connect_lazy(), Auth(token));
-        Ok(Worker {
-            id: cfg.worker_id(),
-            cores: Cores::new(cfg.slot_count()),
-            cfg,
-            ctx,
-            client,
-        })
-    }
-
     /// The lease owner name this worker uses.
     pub fn id(&self) -> &str {
         &self.id
@@ -549,33 +473,6 @@ fn platform(why: &str) -> pb::EpisodeResult {
     }
 }
 
-/// A third of the time left on the lease, within [0.5 s, 60 s].
-pub(super) fn heartbeat_in(expires_at_ms: i64) -> Duration {
-    let now = SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map_or(0, |d| d.as_millis() as i64);
-    let left = expires_at_ms.saturating_sub(now);
-    if left <= 0 {
-        return Duration::from_secs(1);
-    }
-    Duration::from_millis((left / 3) as u64).clamp(Duration::from_millis(500), Duration::from_secs(60))
-}
-
-/// Transport trouble and server hiccups are retried; a refusal (stale attempt, bad request) is
-/// final.
-pub(crate) fn retryable(s: &Status) -> bool {
-    matches!(
-        s.code(),
-        Code::Unavailable
-            | Code::Unknown
-            | Code::DeadlineExceeded
-            | Code::Cancelled
-            | Code::ResourceExhausted
-            | Code::Aborted
-            | Code::Internal
-    )
-}
-
 /// Sleep until `t`, or forever when there is none.
 async fn sleep_until_opt(t: Option<tokio::time::Instant>) {
     match t {
@@ -619,17 +516,5 @@ mod tests {
         assert_eq!(*v.last().unwrap(), 30_000);
         b.reset();
         assert_eq!(b.next(), Duration::from_millis(250));
-    }
-
-    #[test]
-    fn heartbeats_come_at_a_third_of_the_lease() {
-        let now = SystemTime::now().duration_since(UNIX_EPOCH).unwrap().as_millis() as i64;
-        let d = heartbeat_in(now + 30_000);
-        assert!(
-            d > Duration::from_millis(9_000) && d <= Duration::from_millis(10_000),
-            "{d:?}"
-        );
-        assert_eq!(heartbeat_in(now - 5), Duration::from_secs(1));
-        assert_eq!(heartbeat_in(now + 600), Duration::from_millis(500));
     }
 }
