@@ -9,11 +9,10 @@ use anyhow::{Context, bail};
 use clap::{Args, Subcommand};
 use kitchen_r_core::dataset::{Instruction, read_jsonl};
 use kitchen_r_episode::samples::instruction_episode;
-use kitchen_r_episode::seeds::instruction_seed;
 use kitchen_r_sim::episode::{load_batch, save_batch};
-use kitchen_r_sim::generator::splitmix;
 use kitchen_r_sim::material::Pattern;
 use kitchen_r_sim::randomise::generate_varied;
+use kitchen_r_sim::seeds::{instruction_seed, sub_seed};
 use kitchen_r_sim::{Assets, EpisodeConfig, EpisodeParams};
 
 #[derive(Args, Debug)]
@@ -191,7 +190,7 @@ fn from_instruction(
 ) -> anyhow::Result<EpisodeConfig> {
     let run_seed = match pass {
         0 => seed,
-        n => splitmix(seed ^ splitmix(n as u64)),
+        n => sub_seed(seed, n as u64),
     };
     let s = instruction_seed(run_seed, &ins.id);
     // The aspects switched off above are off in `p`, so `randomise = true` draws only the rest.

@@ -15,13 +15,13 @@ use std::time::Instant;
 
 use kitchen_r_core::GraspMode;
 use kitchen_r_core::dataset::{Instruction, Split, read_jsonl};
+use kitchen_r_sim::seeds::instruction_seed;
 use kitchen_r_sim::{Assets, EpisodeConfig, EpisodeParams, SensorsConfig, Sim, SimConfig, SimError};
 use serde::{Deserialize, Serialize};
 
 use crate::hooks::WrapHook;
 use crate::oracle::{ORACLE_NAME, OraclePolicy};
 use crate::runner::{EpisodeOutcome, RunError, RunOptions, run_episode};
-use crate::seeds::instruction_seed;
 use crate::sim_slot::load;
 use crate::trace::{self, TracingPolicy};
 

@@ -24,7 +24,6 @@ pub mod policy;
 mod robot_file_tests;
 pub mod runner;
 pub mod samples;
-pub mod seeds;
 pub mod sim_slot;
 pub mod teleport;
 #[cfg(test)]

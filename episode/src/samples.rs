@@ -20,7 +20,7 @@ use std::sync::{Arc, Condvar, Mutex, PoisonError};
 use std::thread::JoinHandle;
 
 use kitchen_r_core::dataset::Instruction;
-use kitchen_r_sim::generator::splitmix;
+use kitchen_r_sim::seeds::sub_seed;
 use kitchen_r_sim::{Assets, EpisodeConfig, EpisodeParams, SensorsConfig, Sim, SimConfig, SimError};
 
 use crate::oracle::OraclePolicy;
@@ -45,7 +45,7 @@ pub fn collection_episode(
         return Err(SimError::Episode("no instructions to build episodes from".into()));
     }
     let instruction = &instructions[index % instructions.len()];
-    let episode_seed = splitmix(seed ^ splitmix(index as u64));
+    let episode_seed = sub_seed(seed, index as u64);
     let mut cfg = instruction_episode(assets, params, instruction, episode_seed, randomise)?;
     cfg.id = format!("ep{index:05}");
     Ok(cfg)

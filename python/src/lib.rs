@@ -19,7 +19,7 @@ use kitchen_r_episode::driven::{DriveError, DriveOptions, DrivenEpisode, Progres
 use kitchen_r_episode::eval::instructions;
 use kitchen_r_episode::runner::RunOptions;
 use kitchen_r_episode::samples::instruction_episode;
-use kitchen_r_episode::seeds::instruction_seed;
+use kitchen_r_sim::seeds::instruction_seed;
 use kitchen_r_sim::{Assets, EpisodeParams, SensorsConfig, Sim, SimConfig};
 use pyo3::exceptions::{PyKeyError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;

@@ -23,6 +23,7 @@ use crate::episode::{
 };
 use crate::error::{SimError, read_toml};
 use crate::randomise_settings::Randomise;
+use crate::seeds::sub_seed;
 use crate::world::Style;
 
 /// `configs/episodes.toml`.
@@ -239,7 +240,7 @@ pub fn generate(
     seed: u64,
     index: u64,
 ) -> Result<EpisodeConfig, SimError> {
-    let episode_seed = splitmix(seed ^ splitmix(index));
+    let episode_seed = sub_seed(seed, index);
     let mut rng = ChaCha8Rng::seed_from_u64(episode_seed);
     let r = &p.randomise;
     let robot_start = match draw_start(&mut rng, scene, p) {
@@ -383,14 +384,6 @@ pub fn batch(
     (0..n)
         .map(|i| generate(&scenes[i % scenes.len()], cat, p, seed, i as u64))
         .collect()
-}
-
-/// SplitMix64 finaliser: decorrelates nearby seeds.
-pub fn splitmix(mut z: u64) -> u64 {
-    z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
 }
 
 /// Drawn here, not in `episode.rs`: the episode's data does not depend on how it is drawn.

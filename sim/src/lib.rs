@@ -26,6 +26,7 @@ pub mod randomise_settings;
 pub mod render;
 pub mod report;
 pub mod robot;
+pub mod seeds;
 pub mod sensors;
 pub mod sim;
 pub mod snapshot;

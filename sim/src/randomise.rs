@@ -24,9 +24,10 @@ use rand_chacha::ChaCha8Rng;
 use crate::config::LightConfig;
 use crate::episode::{EpisodeConfig, ObjectPlacement, in_disc};
 use crate::error::SimError;
-use crate::generator::{EpisodeParams, draw_background, draw_start, generate, splitmix};
+use crate::generator::{EpisodeParams, draw_background, draw_start, generate};
 use crate::material::Pattern;
 pub use crate::randomise_settings::Randomise;
+use crate::seeds::sub_seed;
 use crate::world::Style;
 
 /// Draws per object before it keeps its pose.
@@ -49,7 +50,7 @@ enum Aspect {
 }
 
 fn stream(seed: u64, aspect: Aspect) -> ChaCha8Rng {
-    ChaCha8Rng::seed_from_u64(splitmix(seed ^ splitmix(0x7261_6e64_0000 + aspect as u64)))
+    ChaCha8Rng::seed_from_u64(sub_seed(seed, 0x7261_6e64_0000 + aspect as u64))
 }
 
 /// Uniform in `[lo, hi]` (a point range gives its point).

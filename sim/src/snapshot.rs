@@ -75,7 +75,7 @@ impl Sim {
 
     /// FNV-1a over the bits of every body's pose and velocity and the controller state.
     pub fn state_hash(&self) -> u64 {
-        let mut h = Fnv(0xcbf2_9ce4_8422_2325);
+        let mut h = Fnv(crate::seeds::FNV_OFFSET);
         for (_, b) in self.world.bodies.iter() {
             let p = b.position();
             let (t, r, lv, av) = (p.translation, p.rotation, b.linvel(), b.angvel());
@@ -102,8 +102,6 @@ struct Fnv(u64);
 
 impl Fnv {
     fn u64(&mut self, v: u64) {
-        for b in v.to_le_bytes() {
-            self.0 = (self.0 ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3);
-        }
+        self.0 = crate::seeds::fnv1a(self.0, &v.to_le_bytes());
     }
 }

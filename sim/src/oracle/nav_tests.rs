@@ -74,11 +74,9 @@ struct Rng(u64);
 
 impl Rng {
     fn unit(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        (z ^ (z >> 31)) as f64 / u64::MAX as f64
+        let z = crate::seeds::splitmix(self.0);
+        self.0 = self.0.wrapping_add(crate::seeds::GOLDEN_GAMMA);
+        z as f64 / u64::MAX as f64
     }
 
     fn free_point(&mut self, grid: &OccupancyGrid, room: P2) -> P2 {

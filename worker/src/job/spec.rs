@@ -19,7 +19,7 @@ use super::JobError;
 use kitchen_r_episode::offline::OfflineOptions;
 use kitchen_r_episode::policy::{ChunkTolerance, HORIZON, PrivilegedScope};
 use kitchen_r_episode::runner::RunOptions;
-use kitchen_r_episode::seeds::instruction_seed;
+use kitchen_r_sim::seeds::instruction_seed;
 
 /// The instruction a job's spec describes: its plan and place targets as the server sent them.
 pub(crate) fn instruction(spec: &pb::EpisodeSpec) -> Result<Instruction, JobError> {
