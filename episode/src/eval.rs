@@ -9,8 +9,6 @@
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::mpsc;
 use std::time::Instant;
 
 use kitchen_r_core::GraspMode;
@@ -19,6 +17,7 @@ use kitchen_r_sim::seeds::instruction_seed;
 use kitchen_r_sim::{Assets, EpisodeConfig, EpisodeParams, SensorsConfig, Sim, SimConfig, SimError};
 use serde::{Deserialize, Serialize};
 
+use crate::batch::run_batch;
 use crate::hooks::WrapHook;
 use crate::oracle::{ORACLE_NAME, OraclePolicy};
 use crate::runner::{EpisodeOutcome, RunError, RunOptions, run_episode};
@@ -294,38 +293,28 @@ pub(crate) fn run_all(
     (trace, watch): (Option<&Path>, Option<&WrapHook>),
     progress: &mut dyn FnMut(usize, &EpisodeOutcome),
 ) -> Result<Vec<EpisodeOutcome>, EvalError> {
-    let next = AtomicUsize::new(0);
-    let (tx, rx) = mpsc::channel::<(usize, Result<EpisodeOutcome, EvalError>)>();
     let mut run = run.clone();
     run.privileged = policy == PolicyChoice::Oracle;
     let sensors = SensorsConfig::load_default()?;
     let mut out: Vec<Option<EpisodeOutcome>> = vec![None; configs.len()];
-    std::thread::scope(|scope| -> Result<(), EvalError> {
-        for _ in 0..jobs.clamp(1, configs.len().max(1)) {
-            let (tx, next, run) = (tx.clone(), &next, &run);
-            let (sim_cfg, sensors) = (sim_cfg.clone(), sensors.clone());
-            scope.spawn(move || {
-                let mut oracle = OraclePolicy::new(assets).with_grasp_mode(sim_cfg.grasp.mode);
-                let mut sim: Option<Sim> = None;
-                loop {
-                    let i = next.fetch_add(1, Ordering::SeqCst);
-                    let Some(cfg) = configs.get(i) else { break };
-                    let world = (assets, &sim_cfg, &sensors);
-                    let r = one(world, &mut sim, cfg, &mut oracle, run, (trace, watch));
-                    if tx.send((i, r)).is_err() {
-                        break;
-                    }
-                }
-            });
-        }
-        drop(tx);
-        for (i, r) in rx {
+    let world = (assets, sim_cfg, &sensors);
+    run_batch(
+        configs.len(),
+        jobs,
+        || {
+            (
+                OraclePolicy::new(assets).with_grasp_mode(sim_cfg.grasp.mode),
+                None::<Sim>,
+            )
+        },
+        |(oracle, sim), i| one(world, sim, &configs[i], oracle, &run, (trace, watch)),
+        |i, r| {
             let o = r?;
             progress(i, &o);
             out[i] = Some(o);
-        }
-        Ok(())
-    })?;
+            Ok::<(), EvalError>(())
+        },
+    )?;
     out.into_iter().map(|o| o.ok_or(EvalError::Panicked)).collect()
 }
 

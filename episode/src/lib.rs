@@ -10,6 +10,7 @@
 //! transports wrap a policy from outside (kitchen-r-contract), the job loop leases and reports
 //! (kitchen-r-worker), and scoring and storage belong to the server.
 
+pub mod batch;
 #[cfg(test)]
 mod closed_loop_tests;
 pub mod driven;

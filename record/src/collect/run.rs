@@ -3,8 +3,6 @@
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::mpsc;
 use std::time::Instant;
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -22,6 +20,7 @@ use crate::lerobot::{EpisodeRecorder, LeRobotDataset};
 use crate::live_hook::LiveHook;
 use crate::mcap_ros2::McapRecorder;
 use crate::video::VideoSettings;
+use kitchen_r_episode::batch::run_batch;
 use kitchen_r_episode::oracle::{OraclePolicy, expert_options};
 use kitchen_r_episode::runner::run_episode;
 use kitchen_r_episode::samples::collection_episode;
@@ -286,32 +285,24 @@ pub fn collect(opts: &CollectOptions) -> Result<CollectSummary, CollectError> {
         .open(&manifest_path)
         .map_err(io(&manifest_path))?;
     let pb = bar(opts, todo.len());
-    let next = AtomicUsize::new(0);
-    let (tx, rx) = mpsc::channel::<Result<ManifestEntry, CollectError>>();
-    std::thread::scope(|scope| -> Result<(), CollectError> {
-        for _ in 0..opts.jobs.clamp(1, todo.len().max(1)) {
-            let (tx, next, todo, assets, params, ins) = (tx.clone(), &next, &todo, &assets, &params, &ins);
-            let staging = staging.as_deref().map(|s| (s, video));
-            scope.spawn(move || {
-                let mut oracle = match opts.grasp {
-                    Some(mode) => OraclePolicy::new(assets).with_grasp_mode(mode),
-                    None => OraclePolicy::new(assets),
-                };
-                let mut sim = None;
-                while let Some(&i) = todo.get(next.fetch_add(1, Ordering::SeqCst)) {
-                    let r = episode(assets, params, ins, opts, i).and_then(|(cfg, text, id)| {
-                        let mut e = one(assets, &mut sim, &mut oracle, &cfg, &text, opts, i, staging)?;
-                        e.instruction_id = id;
-                        Ok(e)
-                    });
-                    if tx.send(r).is_err() {
-                        break;
-                    }
-                }
-            });
-        }
-        drop(tx);
-        for r in rx {
+    let staging = staging.as_deref().map(|s| (s, video));
+    let oracle = || match opts.grasp {
+        Some(mode) => OraclePolicy::new(&assets).with_grasp_mode(mode),
+        None => OraclePolicy::new(&assets),
+    };
+    run_batch(
+        todo.len(),
+        opts.jobs,
+        || (oracle(), None::<Sim>),
+        |(oracle, sim), k| {
+            let i = todo[k];
+            episode(&assets, &params, &ins, opts, i).and_then(|(cfg, text, id)| {
+                let mut e = one(&assets, sim, oracle, &cfg, &text, opts, i, staging)?;
+                e.instruction_id = id;
+                Ok(e)
+            })
+        },
+        |_, r| {
             let e = r?;
             let line = serde_json::to_string(&e).unwrap_or_default();
             writeln!(manifest, "{line}").map_err(io(&manifest_path))?;
@@ -336,9 +327,9 @@ pub fn collect(opts: &CollectOptions) -> Result<CollectSummary, CollectError> {
             }
             pb.inc(1);
             pb.set_message(format!("kept {}", summary.kept));
-        }
-        Ok(())
-    })?;
+            Ok::<(), CollectError>(())
+        },
+    )?;
     pb.finish_and_clear();
     if let Some(d) = &mut dataset {
         d.finish()?;

@@ -14,7 +14,6 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
 use kitchen_r_core::GraspMode;
@@ -29,6 +28,7 @@ use super::{JobContext, JobError};
 use kitchen_r_contract::probe::{ProbeFailure, probe_endpoint};
 use kitchen_r_contract::{AllowedNetworks, RemoteConfig};
 pub use kitchen_r_core::observations::ObservationTrack as Track;
+use kitchen_r_episode::batch::run_batch;
 use kitchen_r_episode::eval::{Sr, task_kinds};
 use kitchen_r_episode::policy::PrivilegedScope;
 use kitchen_r_episode::runner::RunOptions;
@@ -266,45 +266,39 @@ fn evaluate_endpoint_with(
         .jobs
         .clamp(1, probed.max_concurrency.max(1) as usize)
         .min(jobs.len().max(1));
-    let next = AtomicUsize::new(0);
-    let (tx, rx) = std::sync::mpsc::channel::<(usize, LocalEpisode)>();
     let mut slots: Vec<Option<LocalEpisode>> = vec![None; jobs.len()];
-    std::thread::scope(|scope| {
-        for _ in 0..workers {
-            let (tx, next, jobs, ctx) = (tx.clone(), &next, &jobs, &ctx);
-            scope.spawn(move || {
-                loop {
-                    let i = next.fetch_add(1, Ordering::SeqCst);
-                    let Some(job) = jobs.get(i) else { break };
-                    let t = Instant::now();
-                    let done = execute_job_traced(job, ctx, &JobControl::default(), s.trace.is_some());
-                    let (r, video) = (&done.result, done.video);
-                    let mut ep = episode(job, r, t.elapsed().as_secs_f64());
-                    if let (Some(dir), Some(trace)) = (&s.trace, &done.trace) {
-                        let path = dir.join(trace::file_name(&job.episode_key));
-                        match trace.save(&path) {
-                            Ok(()) => ep.trace = Some(path),
-                            Err(e) => ep.trace_error = e,
-                        }
-                    }
-                    if let (Some(dir), Some(v)) = (&s.record, video) {
-                        match write_video(dir, &job.episode_key, v) {
-                            Ok(v) => ep.video = Some(v),
-                            Err(e) => ep.video_error = e,
-                        }
-                    }
-                    if tx.send((i, ep)).is_err() {
-                        break;
-                    }
+    let ran = run_batch(
+        jobs.len(),
+        workers,
+        || (),
+        |(), i| {
+            let job = &jobs[i];
+            let t = Instant::now();
+            let done = execute_job_traced(job, &ctx, &JobControl::default(), s.trace.is_some());
+            let (r, video) = (&done.result, done.video);
+            let mut ep = episode(job, r, t.elapsed().as_secs_f64());
+            if let (Some(dir), Some(trace)) = (&s.trace, &done.trace) {
+                let path = dir.join(trace::file_name(&job.episode_key));
+                match trace.save(&path) {
+                    Ok(()) => ep.trace = Some(path),
+                    Err(e) => ep.trace_error = e,
                 }
-            });
-        }
-        drop(tx);
-        for (i, ep) in rx {
+            }
+            if let (Some(dir), Some(v)) = (&s.record, video) {
+                match write_video(dir, &job.episode_key, v) {
+                    Ok(v) => ep.video = Some(v),
+                    Err(e) => ep.video_error = e,
+                }
+            }
+            ep
+        },
+        |i, ep| {
             progress(&ep);
             slots[i] = Some(ep);
-        }
-    });
+            Ok::<(), std::convert::Infallible>(())
+        },
+    );
+    let Ok(()) = ran;
     let episodes: Vec<LocalEpisode> = slots.into_iter().flatten().collect();
     Ok(report(url, probed.summary, split, s, workers, episodes, started))
 }
