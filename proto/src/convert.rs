@@ -2,6 +2,7 @@
 //! mode against `kitchen_r_core::scoring`, and the grasp mode against `kitchen_r_core::GraspMode`.
 
 use kitchen_r_core::GraspMode;
+use kitchen_r_core::observations::PrivilegedScope;
 use kitchen_r_core::scoring::{Mode, TaskOutcome};
 
 use crate::worker::v1 as pb;
@@ -96,6 +97,93 @@ impl pb::EpisodeSpec {
     }
 }
 
+/// How an episode is run and scored, besides which episode it is: what the server stores with a
+/// job and what local `eval` sets, made into an [`pb::EpisodeSpec`] here only.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EpisodeRules {
+    pub seed: u64,
+    pub mode: Mode,
+    pub task_time_limit_s: f64,
+    pub actions_executed_per_chunk: u32,
+    pub teleport_on_failure: bool,
+    /// 0 = every plan step.
+    pub max_plan_steps: u32,
+    /// Organiser reference run: the policy gets privileged state.
+    pub privileged: bool,
+    /// The privileged track's observations; `None` on the standard track.
+    pub privileged_observations: Option<PrivilegedScope>,
+    pub grasp: GraspMode,
+}
+
+impl From<Option<PrivilegedScope>> for pb::PrivilegedScope {
+    fn from(s: Option<PrivilegedScope>) -> Self {
+        match s {
+            None => pb::PrivilegedScope::None,
+            Some(PrivilegedScope::Episode) => pb::PrivilegedScope::Episode,
+            Some(PrivilegedScope::SubTask) => pb::PrivilegedScope::SubTask,
+        }
+    }
+}
+
+impl From<&[f64; 3]> for pb::PlaceTarget {
+    fn from(t: &[f64; 3]) -> Self {
+        pb::PlaceTarget {
+            x: t[0],
+            y: t[1],
+            z: t[2],
+        }
+    }
+}
+
+impl pb::EpisodeSpec {
+    /// The episode of instruction `instruction_id` (its scene, plan and place targets) run
+    /// under `rules`. What a lease adds (the name the policy sees, video, the live view) is
+    /// left unset for the caller.
+    pub fn build(
+        scene_id: &str,
+        instruction_id: &str,
+        plan: &[String],
+        place_targets: &[[f64; 3]],
+        rules: &EpisodeRules,
+    ) -> pb::EpisodeSpec {
+        pb::EpisodeSpec {
+            scene_id: scene_id.to_string(),
+            instruction_id: instruction_id.to_string(),
+            plan: plan.to_vec(),
+            seed: rules.seed,
+            mode: pb::EvalMode::from(rules.mode) as i32,
+            task_time_limit_s: rules.task_time_limit_s,
+            actions_executed_per_chunk: rules.actions_executed_per_chunk,
+            teleport_on_failure: rules.teleport_on_failure,
+            max_plan_steps: rules.max_plan_steps,
+            privileged: rules.privileged,
+            place_targets: place_targets.iter().map(pb::PlaceTarget::from).collect(),
+            privileged_observations: pb::PrivilegedScope::from(rules.privileged_observations) as i32,
+            grasp_mode: pb::GraspMode::from(rules.grasp) as i32,
+            policy_episode_id: String::new(),
+            record_video: false,
+            video_on_demand: false,
+            video_max_bytes: 0,
+            live_ros2: false,
+        }
+    }
+
+    /// The privileged observations the job grants its policy; `None` on the standard track. The
+    /// server chose the scope from the split; a value this build does not know grants nothing.
+    pub fn privileged_scope(&self) -> Option<PrivilegedScope> {
+        match pb::PrivilegedScope::try_from(self.privileged_observations) {
+            Ok(pb::PrivilegedScope::Episode) => Some(PrivilegedScope::Episode),
+            Ok(pb::PrivilegedScope::SubTask) => Some(PrivilegedScope::SubTask),
+            Ok(pb::PrivilegedScope::None) | Err(_) => None,
+        }
+    }
+
+    /// The place targets as world `[x, y, z]`, in plan order.
+    pub fn place_target_points(&self) -> Vec<[f64; 3]> {
+        self.place_targets.iter().map(|t| [t.x, t.y, t.z]).collect()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -141,5 +229,39 @@ mod tests {
             ..Default::default()
         };
         assert!(future.grasp().unwrap_err().contains("unknown grasp mode 7"));
+    }
+
+    #[test]
+    fn a_built_spec_carries_its_rules_and_targets_back() {
+        for scope in [
+            None,
+            Some(PrivilegedScope::Episode),
+            Some(PrivilegedScope::SubTask),
+        ] {
+            let rules = EpisodeRules {
+                seed: 7,
+                mode: Mode::Offline,
+                task_time_limit_s: 60.0,
+                actions_executed_per_chunk: 8,
+                teleport_on_failure: true,
+                max_plan_steps: 2,
+                privileged: false,
+                privileged_observations: scope,
+                grasp: GraspMode::Abstract,
+            };
+            let plan = vec!["pick the apple".to_string()];
+            let spec = pb::EpisodeSpec::build("s1", "dev-0001", &plan, &[[1.0, 2.0, 3.0]], &rules);
+            assert_eq!(spec.privileged_scope(), scope);
+            assert_eq!(spec.place_target_points(), vec![[1.0, 2.0, 3.0]]);
+            assert_eq!(
+                (spec.seed, spec.mode().mode(), spec.grasp()),
+                (7, Some(Mode::Offline), Ok(GraspMode::Abstract))
+            );
+        }
+        let unknown = pb::EpisodeSpec {
+            privileged_observations: 9,
+            ..Default::default()
+        };
+        assert_eq!(unknown.privileged_scope(), None);
     }
 }

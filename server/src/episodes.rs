@@ -9,6 +9,7 @@ use std::collections::HashMap;
 use kitchen_r_core::GraspMode;
 use kitchen_r_core::observations::PrivilegedScope;
 use kitchen_r_core::scoring;
+use kitchen_r_proto::convert::EpisodeRules;
 use kitchen_r_proto::worker::v1 as pb;
 use serde::{Deserialize, Serialize};
 
@@ -80,37 +81,27 @@ impl JobSpec {
 
     /// The episode as a worker gets it; `policy_episode_id` is the opaque name the endpoint sees.
     pub(crate) fn episode_proto(&self, policy_episode_id: &str) -> pb::EpisodeSpec {
-        pb::EpisodeSpec {
-            scene_id: self.scene_id.clone(),
-            instruction_id: self.instruction_id.clone(),
-            plan: self.plan.clone(),
+        let rules = EpisodeRules {
             seed: self.seed,
-            mode: pb::EvalMode::from(self.mode) as i32,
+            mode: self.mode,
             task_time_limit_s: self.task_time_limit_s,
             actions_executed_per_chunk: self.actions_executed_per_chunk,
             teleport_on_failure: self.teleport_on_failure,
             max_plan_steps: self.max_plan_steps,
             privileged: self.privileged,
-            place_targets: (self.place_targets.iter())
-                .map(|t| pb::PlaceTarget {
-                    x: t[0],
-                    y: t[1],
-                    z: t[2],
-                })
-                .collect(),
+            privileged_observations: self.privileged_observations,
+            grasp: self.grasp,
+        };
+        // Video and the live view are set at lease (`grpc_worker`), not stored with the job.
+        pb::EpisodeSpec {
             policy_episode_id: policy_episode_id.to_string(),
-            // Set at lease from `[video]` (grpc_worker), not stored with the job.
-            record_video: false,
-            video_on_demand: false,
-            video_max_bytes: 0,
-            privileged_observations: (match self.privileged_observations {
-                None => pb::PrivilegedScope::None,
-                Some(PrivilegedScope::Episode) => pb::PrivilegedScope::Episode,
-                Some(PrivilegedScope::SubTask) => pb::PrivilegedScope::SubTask,
-            }) as i32,
-            grasp_mode: pb::GraspMode::from(self.grasp) as i32,
-            // Set at lease from `[live]` (grpc_worker), dev split only.
-            live_ros2: false,
+            ..pb::EpisodeSpec::build(
+                &self.scene_id,
+                &self.instruction_id,
+                &self.plan,
+                &self.place_targets,
+                &rules,
+            )
         }
     }
 

@@ -33,6 +33,7 @@ use kitchen_r_episode::eval::{Sr, task_kinds};
 use kitchen_r_episode::policy::PrivilegedScope;
 use kitchen_r_episode::runner::RunOptions;
 use kitchen_r_episode::trace;
+use kitchen_r_proto::convert::EpisodeRules;
 use kitchen_r_record::video::episode::RecordedVideo;
 use kitchen_r_sim::EpisodeConfig;
 use kitchen_r_sim::episode::as_instruction;
@@ -68,6 +69,23 @@ pub struct LocalSettings {
     /// `None` = configs/sim.toml's `[grasp] mode`.
     #[serde(default)]
     pub grasp: Option<GraspMode>,
+}
+
+impl LocalSettings {
+    /// How every job of this run is run and scored, as a server's job would carry it.
+    fn rules(&self) -> EpisodeRules {
+        EpisodeRules {
+            seed: self.seed,
+            mode: self.mode,
+            task_time_limit_s: self.run.task_time_limit,
+            actions_executed_per_chunk: self.run.execute as u32,
+            teleport_on_failure: self.teleport_on_failure,
+            max_plan_steps: self.run.max_tasks.unwrap_or(0) as u32,
+            privileged: self.privileged,
+            privileged_observations: self.privileged_observations,
+            grasp: self.grasp.unwrap_or_default(),
+        }
+    }
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -155,25 +173,8 @@ pub(crate) fn local_job(ins: &Instruction, url: &str, s: &LocalSettings, remote:
         run_id: 0,
         episode_key: key,
         episode: Some(pb::EpisodeSpec {
-            scene_id: ins.scene.clone(),
-            instruction_id: ins.id.clone(),
-            plan: ins.plan.clone(),
-            seed: s.seed,
-            mode: pb::EvalMode::from(s.mode) as i32,
-            task_time_limit_s: s.run.task_time_limit,
-            actions_executed_per_chunk: s.run.execute as u32,
-            teleport_on_failure: s.teleport_on_failure,
-            max_plan_steps: s.run.max_tasks.unwrap_or(0) as u32,
-            privileged: s.privileged,
-            place_targets: super::spec::place_targets(ins),
-            policy_episode_id: String::new(),
             record_video: s.record.is_some(),
-            // `eval --record` wants the video now.
-            video_on_demand: false,
-            video_max_bytes: 0,
-            privileged_observations: super::spec::privileged_scope_to_wire(s.privileged_observations),
-            grasp_mode: pb::GraspMode::from(s.grasp.unwrap_or_default()) as i32,
-            live_ros2: false,
+            ..pb::EpisodeSpec::build(&ins.scene, &ins.id, &ins.plan, &ins.place_targets, &s.rules())
         }),
         policy: Some(pb::PolicyEndpoint {
             url: url.to_string(),

@@ -17,7 +17,7 @@ use kitchen_r_sim::{Assets, EpisodeConfig, EpisodeParams, SimConfig};
 
 use super::JobError;
 use kitchen_r_episode::offline::OfflineOptions;
-use kitchen_r_episode::policy::{ChunkTolerance, HORIZON, PrivilegedScope};
+use kitchen_r_episode::policy::{ChunkTolerance, HORIZON};
 use kitchen_r_episode::runner::RunOptions;
 use kitchen_r_sim::seeds::instruction_seed;
 
@@ -39,19 +39,8 @@ pub(crate) fn instruction(spec: &pb::EpisodeSpec) -> Result<Instruction, JobErro
         instruction: String::new(),
         plan: spec.plan.clone(),
         template: String::new(),
-        place_targets: spec.place_targets.iter().map(|t| [t.x, t.y, t.z]).collect(),
+        place_targets: spec.place_target_points(),
     })
-}
-
-/// The wire form of an instruction's place targets.
-pub fn place_targets(ins: &Instruction) -> Vec<pb::PlaceTarget> {
-    (ins.place_targets.iter())
-        .map(|t| pb::PlaceTarget {
-            x: t[0],
-            y: t[1],
-            z: t[2],
-        })
-        .collect()
 }
 
 /// The simulator configuration of the job's episode; `episode_id` names it towards the policy.
@@ -85,25 +74,6 @@ pub fn sim_config(spec: &pb::EpisodeSpec, base: &SimConfig) -> Result<SimConfig,
 /// the worker's default. Every millisecond field of a job is read through here, once.
 fn limit_ms(ms: u32) -> Option<Duration> {
     (ms > 0).then(|| Duration::from_millis(u64::from(ms)))
-}
-
-/// The privileged observations the job grants its policy (the privileged track); `None` on the
-/// standard track. The server chose the scope from the split; an unknown value grants nothing.
-pub(crate) fn privileged_scope(spec: &pb::EpisodeSpec) -> Option<PrivilegedScope> {
-    match pb::PrivilegedScope::try_from(spec.privileged_observations) {
-        Ok(pb::PrivilegedScope::Episode) => Some(PrivilegedScope::Episode),
-        Ok(pb::PrivilegedScope::SubTask) => Some(PrivilegedScope::SubTask),
-        Ok(pb::PrivilegedScope::None) | Err(_) => None,
-    }
-}
-
-/// The wire form of a privileged scope, for jobs made on this side (local `eval`).
-pub(crate) fn privileged_scope_to_wire(scope: Option<PrivilegedScope>) -> i32 {
-    (match scope {
-        None => pb::PrivilegedScope::None,
-        Some(PrivilegedScope::Episode) => pb::PrivilegedScope::Episode,
-        Some(PrivilegedScope::SubTask) => pb::PrivilegedScope::SubTask,
-    }) as i32
 }
 
 /// The worker's transport limits with the job endpoint's deadlines; GetSpec announces the
@@ -158,7 +128,7 @@ pub(crate) fn run_options(spec: &pb::EpisodeSpec, ep: &pb::PolicyEndpoint) -> Re
         execute: if execute == 0 { d.execute } else { execute },
         max_tasks: (spec.max_plan_steps > 0).then_some(spec.max_plan_steps as usize),
         privileged: spec.privileged,
-        privileged_observations: privileged_scope(spec),
+        privileged_observations: spec.privileged_scope(),
         max_consecutive_timeouts: match ep.max_successive_timeouts {
             0 => d.max_consecutive_timeouts,
             n => n,

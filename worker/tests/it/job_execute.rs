@@ -48,7 +48,7 @@ pub(crate) fn job(url: &str, mode: pb::EvalMode, steps: u32, privileged: bool) -
             teleport_on_failure: true,
             max_plan_steps: steps,
             privileged,
-            place_targets: kitchen_r_worker::job::spec::place_targets(ins),
+            place_targets: ins.place_targets.iter().map(pb::PlaceTarget::from).collect(),
             policy_episode_id: "ep-0123456789abcdef01234567".into(),
             record_video: false,
             video_on_demand: false,

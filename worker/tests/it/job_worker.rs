@@ -256,7 +256,7 @@ fn job(id: i64, policy: &str) -> pb::Job {
             teleport_on_failure: false,
             max_plan_steps: 1,
             privileged: false,
-            place_targets: kitchen_r_worker::job::spec::place_targets(ins),
+            place_targets: ins.place_targets.iter().map(pb::PlaceTarget::from).collect(),
             policy_episode_id: String::new(),
             record_video: false,
             video_on_demand: false,
