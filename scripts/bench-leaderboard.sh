@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Load benchmark of GET /api/v1/leaderboard with 10,000 stored submissions (DESIGN.md target:
+# Load benchmark of GET /api/v1/leaderboard with 10,000 stored submissions (target in docs/measured/performance.md:
 # >= 5,000 req/s, p99 <= 20 ms on a 2-core machine). Not a test: it prints wrk's figures.
 #
 # How the data is seeded: the release server is started once on a fresh database in a temporary

@@ -1,4 +1,4 @@
-//! Worker-side overhead of one policy call on loopback (DESIGN.md performance table: ≤ 1 ms
+//! Worker-side overhead of one policy call on loopback (docs/measured/performance.md: ≤ 1 ms
 //! p50 with two 128×128 raw images): everything between the runner handing over an
 //! observation and getting a chunk back — encoding, gRPC over a real socket, decoding — with a
 //! trivial policy on the other end, so the figure is the transport's cost alone.

@@ -1,4 +1,4 @@
-//! Wire ↔ domain: the cameras a GetSpec asks for, the observation (in [`observation`]: the
+//! Wire ↔ domain: the cameras a GetSpec asks for, the observation (in [`mod@observation`]: the
 //! simulator's frames as the policy contract's `Observation` and back), privileged state both
 //! ways, and action chunks both ways.
 

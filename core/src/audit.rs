@@ -1,7 +1,7 @@
 //! Leak and feasibility audit of a test set (`kitchen-r dataset audit DIR`).
 //!
-//! A contest's test set must not be answerable from public information (DESIGN.md, Integrity
-//! rules). The public material is what the repository ships: `assets/templates.toml`, the scene
+//! A contest's test set must not be answerable from public information (docs/integrity.md).
+//! The public material is what the repository ships: `assets/templates.toml`, the scene
 //! files and the public dev split `assets/dataset/dev.jsonl` (never the audited directory's own
 //! dev file). For the audited test split the audit reports
 //! - instructions whose phrasing is a public one: a template phrasing or a phrasing abstracted

@@ -1,7 +1,7 @@
 //! Navigability rules for scene layouts, stricter than [`Scene::validate`].
 //!
 //! `validate` checks that a scene file is self-consistent; this module checks the conventions the
-//! simulator's oracle navigator relies on (DESIGN.md, "The oracle expert"): a robot of radius
+//! simulator's oracle navigator relies on (docs/twin/oracle.md): a robot of radius
 //! [`ROBOT_RADIUS`] can stop at every approach point and start anywhere on a start segment without
 //! touching furniture or walls, furniture pieces either touch or leave a corridor of at least
 //! [`MIN_CORRIDOR`], and every approach point is reachable from every start segment. These rules

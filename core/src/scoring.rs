@@ -3,7 +3,7 @@
 //! local number and the leaderboard's are computed by the same code.
 //!
 //! Owns: the episode mode and its key, a task's outcome as stored and reported, a recorded
-//! episode, a run's scores and how episodes become them (DESIGN.md "Metrics"). Pure: no I/O, no
+//! episode, a run's scores and how episodes become them (docs/reference/metrics.md). Pure: no I/O, no
 //! wire types (conversions to and from the gRPC messages live in `kitchen-r-proto`).
 //!
 //! Policy decisions:

@@ -1,6 +1,6 @@
 //! An episode driven one action at a time from outside: the Python environment's `step`.
 //!
-//! It is not a second runner. The episode runs in [`run_episode`] on a thread of its own, with
+//! It is not a second runner. The episode runs in [`run_episode`](crate::runner::run_episode) on a thread of its own, with
 //! a relay as its policy: at every decision point the relay hands the decision out and waits
 //! for the next action, which it returns as a chunk that the runner executes one action of
 //! (`actions_executed_per_chunk = 1`). Task starts and ends, success checks, time limits,

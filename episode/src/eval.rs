@@ -1,5 +1,5 @@
 //! Local online evaluation (`kitchen-r eval`): one episode per split instruction, each run
-//! through [`run_episode`](crate::runner::run_episode), the same code path the server's workers
+//! through [`crate::runner::run_episode`], the same code path the server's workers
 //! use, and the paper's SR per task kind and overall with sim and wall times.
 //!
 //! Episode configurations come from [`EpisodeConfig::from_instruction`] with a seed derived from

@@ -4,7 +4,7 @@
 //! Episodes are bit-reproducible: the simulator is deterministic and the runner's decisions
 //! depend only on the episode's configuration, the run's options and what the policy answered.
 //! A [`Trace`] holds exactly those (a few tens to hundreds of KB of JSON), plus the outcome the
-//! run reported. [`replay`] runs the episode again from it, with the policy's answers played
+//! run reported. [`fn@replay`] runs the episode again from it, with the policy's answers played
 //! back by a [`ReplayPolicy`], and refuses ([`ReplayError::Disagrees`]) unless every task's
 //! success, sim time (bit for bit) and failure text match the stored outcome: whatever a
 //! replay renders is shown only when it is the episode that was scored.

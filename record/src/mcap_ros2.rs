@@ -1,13 +1,13 @@
 //! MCAP writer with ROS 2 encodings (`ros2msg` schemas, `cdr` messages, profile `ros2`).
 //!
-//! Topics (frame ids in brackets):
+//! Topics (frame ids in parentheses):
 //! - `/clock` `rosgraph_msgs/Clock`: the sim time of each control step
-//! - `/camera/<cam>/image_raw` `sensor_msgs/Image` rgb8 [`<cam>_optical_frame`]
-//! - `/camera/<cam>/depth` `sensor_msgs/Image` 32FC1, metres [`<cam>_optical_frame`]
-//! - `/lidar/points` `sensor_msgs/PointCloud2` xyz float32 [`lidar`]
+//! - `/camera/<cam>/image_raw` `sensor_msgs/Image` rgb8 (frame `<cam>_optical_frame`)
+//! - `/camera/<cam>/depth` `sensor_msgs/Image` 32FC1, metres (frame `<cam>_optical_frame`)
+//! - `/lidar/points` `sensor_msgs/PointCloud2` xyz float32 (frame `lidar`)
 //! - `/camera/<cam>/depth` is absent when depth is not recorded (`collect --no-depth`)
-//! - `/odom` `nav_msgs/Odometry` [`odom` → `base_link`]
-//! - `/imu` `sensor_msgs/Imu` [`base_link`]: the base's motion (yaw, yaw rate, acceleration
+//! - `/odom` `nav_msgs/Odometry` (frame `odom` → `base_link`)
+//! - `/imu` `sensor_msgs/Imu` (frame `base_link`): the base's motion (yaw, yaw rate, acceleration
 //!   from the change of base speed plus gravity on z; covariances in `ros2_msgs::IMU_COVARIANCE`)
 //! - `/tf` `tf2_msgs/TFMessage` (odom → base_link, base_link → ee_link) and `/tf_static` (sensor mounts)
 //! - `/cmd_vel` `geometry_msgs/Twist`: the commanded base twist

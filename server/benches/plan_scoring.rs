@@ -1,4 +1,4 @@
-//! Parse + validate + score one 563-line plan file (target ≤ 5 ms, DESIGN.md performance table).
+//! Parse + validate + score one 563-line plan file (target ≤ 5 ms, docs/measured/performance.md).
 //!
 //! The dataset is synthetic (563 instructions of 4 to 8 canonical steps, the generator's
 //! shape) so the benchmark does not depend on the committed files; the submitted file gets

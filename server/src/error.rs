@@ -5,7 +5,7 @@
 //! to be shown to them as is; internal failures are logged in full and answered with a generic
 //! message instead of leaking paths or SQL.
 //!
-//! Every error also carries the id of the request that caused it (DESIGN.md: "request ids in
+//! Every error also carries the id of the request that caused it (docs/reference/cli.md, "request ids in
 //! every error"): the transport stacks ([`crate::http::stack`], [`crate::grpc::GrpcStackLayer`])
 //! run each request inside [`with_request_id`], and the conversions below read it back with
 //! [`current_request_id`], so a participant can quote the id and an organiser find the log line.

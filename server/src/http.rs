@@ -1,4 +1,4 @@
-//! The HTTP adapter (axum): routes of DESIGN.md "The public interface".
+//! The HTTP adapter (axum): routes of docs/reference/http-api.md.
 //!
 //! Handlers only extract, call one service function and shape the answer; every rule is in
 //! [`crate::service`]. Errors are always JSON (`{"error", "code", "request_id", ...}`): unknown
@@ -7,8 +7,6 @@
 //! [`extract`]'s wrappers; [`stack`] is the tower stack (request id, JSON errors, trace,
 //! catch-panic, timeout) every route runs in. HTML pages are [`admin`]'s console and
 //! [`pages`] (sessions and CSRF in [`session`]); their errors are pages, not JSON.
-
-use std::collections::HashMap;
 
 use axum::Router;
 use axum::body::Body;
@@ -30,11 +28,10 @@ use crate::service::auth::bearer_token;
 use crate::service::{AppState, Caller, RegisterPolicy};
 
 use extract::{BodyBytes, PathArg, QueryArgs};
+use queries::{LeaderboardQuery, PlansQuery, SplitQuery};
 // The route tests (`tests.rs`, `use super::*`) build expected bodies with it.
 #[cfg(test)]
 use serde_json::json;
-
-type Params = QueryArgs<HashMap<String, String>>;
 
 mod admin;
 mod conditional;
@@ -42,6 +39,7 @@ mod error_body;
 mod extract;
 pub(crate) mod openapi;
 mod pages;
+mod queries;
 mod session;
 pub(crate) mod stack;
 mod video;
@@ -169,8 +167,11 @@ async fn metrics(State(s): State<AppState>) -> Result<Response, ServiceError> {
     Ok(typed(crate::metrics::CONTENT_TYPE, Bytes::from(text)))
 }
 
-async fn index(State(s): State<AppState>, QueryArgs(q): Params) -> Result<Response, ServiceError> {
-    let split = split_param(q.get("split"), Some(Split::Test))?;
+async fn index(
+    State(s): State<AppState>,
+    QueryArgs(q): QueryArgs<SplitQuery>,
+) -> Result<Response, ServiceError> {
+    let split = split_param(q.split.as_ref(), Some(Split::Test))?;
     let body = s.leaderboard_page(split).await?;
     Ok(Html(body).into_response())
 }
@@ -403,12 +404,12 @@ async fn read_limited(body: Body, limit: usize) -> Result<Vec<u8>, ServiceError>
 )]
 async fn submit_plans(
     State(s): State<AppState>,
-    QueryArgs(q): Params,
+    QueryArgs(q): QueryArgs<PlansQuery>,
     caller: Caller,
     body: Body,
 ) -> Result<Response, ServiceError> {
     // Refuse bad credentials and parameters before reading a possibly large body.
-    let reference = match q.get("reference").map(String::as_str) {
+    let reference = match q.reference.as_deref() {
         None | Some("" | "false" | "0") => false,
         Some("true" | "1") => true,
         Some(other) => {
@@ -422,7 +423,7 @@ async fn submit_plans(
     } else {
         caller.team()?;
     }
-    let split = split_param(q.get("split"), None)?;
+    let split = split_param(q.split.as_ref(), None)?;
     let body = read_limited(body, s.config().max_body_bytes).await?;
     let done = match reference {
         true => s.submit_reference_plans(&caller, split, &body).await?,
@@ -533,17 +534,20 @@ async fn episode_plot(
         (status = 400, description = "An unknown track, split, observations, grasp mode or format, or a grasp mode for the planning track", body = openapi::ErrorBody),
     )
 )]
-async fn leaderboard(State(s): State<AppState>, QueryArgs(q): Params) -> Result<Response, ServiceError> {
-    let track: Track = q.get("track").map_or("", String::as_str).parse()?;
-    let split = split_param(q.get("split"), Some(Split::Test))?;
-    let observations: ObservationTrack = (q.get("observations").map_or("", String::as_str))
+async fn leaderboard(
+    State(s): State<AppState>,
+    QueryArgs(q): QueryArgs<LeaderboardQuery>,
+) -> Result<Response, ServiceError> {
+    let track: Track = q.track.as_deref().unwrap_or("").parse()?;
+    let split = split_param(q.split.as_ref(), Some(Split::Test))?;
+    let observations: ObservationTrack = (q.observations.as_deref().unwrap_or(""))
         .parse()
         .map_err(ServiceError::BadRequest)?;
-    let grasp = match q.get("grasp_mode").map(String::as_str) {
+    let grasp = match q.grasp_mode.as_deref() {
         None | Some("") => None,
         Some(m) => Some(m.parse::<GraspMode>().map_err(ServiceError::BadRequest)?),
     };
-    let (format, content_type) = match q.get("format").map(String::as_str) {
+    let (format, content_type) = match q.format.as_deref() {
         None | Some("" | "json") => (Format::Json, "application/json"),
         Some("csv") => (Format::Csv, "text/csv; charset=utf-8"),
         Some("html") => (Format::Html, "text/html; charset=utf-8"),

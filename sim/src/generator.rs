@@ -48,7 +48,7 @@ pub struct EpisodeParams {
     pub scene: BTreeMap<String, SceneParams>,
     /// Fixed values that replace draws.
     pub fixed: Overrides,
-    /// One switch per randomised aspect, and the ranges ([`crate::randomise`]).
+    /// One switch per randomised aspect, and the ranges ([`mod@crate::randomise`]).
     pub randomise: Randomise,
     /// Whole episodes by instruction id (a saved batch, `eval --episodes-file`) that
     /// [`EpisodeConfig::from_instruction`] returns instead of building one. Never read from a

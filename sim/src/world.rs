@@ -20,7 +20,7 @@ use crate::material::{Material, Materials, Owner, Pattern, Tag};
 const STATIC_FRICTION: f32 = 0.8;
 
 /// The looks of one episode: the scene's colours and patterns and the sensors' light unless
-/// randomised ([`crate::randomise`]). The optional fields are absent from configs written before
+/// randomised ([`mod@crate::randomise`]). The optional fields are absent from configs written before
 /// they existed and from unrandomised ones, so those load and render exactly as before.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Style {

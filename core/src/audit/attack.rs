@@ -5,7 +5,7 @@
 //! patterns, and each dev instruction abstracted back into a phrasing (objects and places
 //! replaced by slots, see [`abstract_text`]) paired with its dev plan, where every zone of the
 //! plan is traced to a slot or to the start zone of a mentioned object. A test instruction is
-//! matched against every entry ([`matches`]); the first entry that reproduces the text exactly
+//! matched against every entry ([`fn@matches`]); the first entry that reproduces the text exactly
 //! gives the plan, its object slots bound by name, its zone slots by colour or by a referring
 //! expression, and start zones read from the scene's key objects. When no entry matches, the
 //! fallback abstracts the instruction the same way and fills the most common plan shape of the

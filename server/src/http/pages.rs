@@ -19,8 +19,6 @@ mod layout;
 mod submission;
 mod team;
 
-use std::collections::HashMap;
-
 use axum::Router;
 use axum::extract::{Form, State};
 use axum::http::{HeaderMap, StatusCode};
@@ -30,6 +28,7 @@ use kitchen_r_core::dataset::Split;
 use serde::Deserialize;
 
 use super::extract::{ClientAddr, PathArg, QueryArgs};
+use super::queries::LoginQuery;
 use super::session;
 use super::viewer::{TEAM_COOKIE, Who, session_caller, who};
 use crate::error::ServiceError;
@@ -159,8 +158,8 @@ fn login_page(headers: &HeaderMap, status: StatusCode, message: Option<&str>, ne
     session::html_with(status, page, &csrf)
 }
 
-async fn login_form(headers: HeaderMap, QueryArgs(q): QueryArgs<HashMap<String, String>>) -> Response {
-    let next = session::local_path(q.get("next").map(String::as_str)).unwrap_or("/team");
+async fn login_form(headers: HeaderMap, QueryArgs(q): QueryArgs<LoginQuery>) -> Response {
+    let next = session::local_path(q.next.as_deref()).unwrap_or("/team");
     login_page(&headers, StatusCode::OK, None, next)
 }
 

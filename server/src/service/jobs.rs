@@ -107,7 +107,7 @@ impl AppState {
             .0)
     }
 
-    /// As [`Self::lease`]; with `renders`, a video render (`super::renders`) when no evaluation
+    /// As `Self::lease`; with `renders`, a video render (`super::renders`) when no evaluation
     /// job is queued: the lowest priority, one per call.
     pub(crate) async fn lease_work(
         &self,

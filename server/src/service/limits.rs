@@ -10,7 +10,7 @@
 //! what bounds the database; this bounds the rate at which it can be reached.
 //!
 //! Limitation: buckets and counts live in this process's memory. A contest runs one server
-//! process (DESIGN.md: one replica), so that suffices; a restart refills every bucket and
+//! process (docs/contest/deploy.md: one replica), so that suffices; a restart refills every bucket and
 //! resets the counts, and several processes behind one address would each allow the full
 //! rate. The daily quota is counted in the database and holds across both.
 

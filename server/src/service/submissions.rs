@@ -172,7 +172,7 @@ impl AppState {
     }
 
     /// Why the test plan submission `id` of `team` cannot appear on the leaderboard (the rule
-    /// [`store::planning_leaderboard`] applies), or `None` when it can.
+    /// `store::planning_leaderboard` applies), or `None` when it can.
     pub(super) async fn unranked_reason(&self, team: i64, id: i64) -> Result<Option<String>, ServiceError> {
         Ok(match store::first_test_policy(self.read_pool(), team).await? {
             Some(first) if first < id => Some(format!(

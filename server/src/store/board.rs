@@ -2,7 +2,7 @@
 //! split, refreshed inside the transaction of every write that adds a scoring run or changes a
 //! run's state, so reading a board costs O(teams) however many submissions there are.
 //!
-//! The ranking rules live here, once, in [`refresh_team`]: planning by the latest run's EM;
+//! The ranking rules live here, once, in `refresh_team`: planning by the latest run's EM;
 //! control by SR then MSE, integrated by M then P (only finished runs have keys; integrated
 //! counts only runs linked to a plans submission); ties to the earlier submission, then the
 //! lower id; unscored entries last; organiser reference runs are each their own row (reference

@@ -4,7 +4,7 @@
 //! call, and during that call the episode's thread sleeps on the network. So a worker holds more
 //! episodes than it has cores, and each episode holds a *core permit* only while it steps: it
 //! takes one before it builds its simulator, gives it back around every policy call
-//! ([`YieldsCore`]) and for the policy's start-up handshake, and takes it again to go on.
+//! (`YieldsCore`) and for the policy's start-up handshake, and takes it again to go on.
 //!
 //! The permits are handed out first come, first served (a ticket queue), so no episode waits on
 //! a core for longer than the episodes ahead of it take to reach their next policy call. The

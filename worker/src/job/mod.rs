@@ -1,6 +1,6 @@
 //! Server jobs: a leased `kitchen_r.worker.v1.Job` run to its `EpisodeResult`
 //! ([`execute::execute_job`]) and the worker loop that leases, heartbeats and reports
-//! ([`client::run_worker`]), used by `kitchen-r worker` and by the server's in-process slots.
+//! ([`run_worker`]), used by `kitchen-r worker` and by the server's in-process slots.
 //!
 //! `kitchen-r eval --policy http://…` runs its episodes through [`execute::execute_job`] too,
 //! with jobs built the way the server builds them, so local and leaderboard numbers agree.

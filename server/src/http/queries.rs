@@ -1,0 +1,35 @@
+//! The query strings of the HTTP routes, one typed struct each, read through
+//! [`super::extract::QueryArgs`] (axum's `Query<T>` with the API's error body). A malformed query
+//! string, or a parameter given twice, is a 400 naming it; the values are checked where they are
+//! used, with the errors the API documents. Parameters a route does not know are ignored.
+
+use serde::Deserialize;
+
+/// `GET /`: which split's boards the page shows.
+#[derive(Debug, Default, Deserialize)]
+pub(crate) struct SplitQuery {
+    pub split: Option<String>,
+}
+
+/// `POST /api/v1/submissions/plans`: the split, and whether it is the organiser's reference run.
+#[derive(Debug, Default, Deserialize)]
+pub(crate) struct PlansQuery {
+    pub split: Option<String>,
+    pub reference: Option<String>,
+}
+
+/// `GET /api/v1/leaderboard`: which board, and in which format.
+#[derive(Debug, Default, Deserialize)]
+pub(crate) struct LeaderboardQuery {
+    pub track: Option<String>,
+    pub split: Option<String>,
+    pub observations: Option<String>,
+    pub grasp_mode: Option<String>,
+    pub format: Option<String>,
+}
+
+/// `GET /login`: where to go after signing in.
+#[derive(Debug, Default, Deserialize)]
+pub(crate) struct LoginQuery {
+    pub next: Option<String>,
+}
