@@ -59,8 +59,7 @@ def main():
     procs = []
 
     def ready(cmd, prefix):
-        p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, env=env,
-                             text=True, cwd=ROOT)
+        p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, env=env, text=True, cwd=ROOT)
         procs.append(p)
         for line in p.stdout:
             if line.startswith(prefix):
@@ -74,16 +73,17 @@ def main():
             "sweep": [sys.executable, str(ROOT / "scripts/sweep_policy.py"), "--listen", "127.0.0.1:0"],
         }[a.policy]
         endpoint = "http://" + ready(policy_cmd, "listening grpc=").split("=", 1)[1]
-        line = ready([a.bin, "serve", "--workers", str(a.workers), "--config", str(work / "server.toml")],
-                     "listening ")
+        line = ready([a.bin, "serve", "--workers", str(a.workers), "--config", str(work / "server.toml")], "listening ")
         http = [w.split("=", 1)[1] for w in line.split() if w.startswith("http=")][0]
         http = http if http.startswith("http") else "http://" + http
 
         def req(path, body=None):
             r = urllib.request.Request(
-                http + path, data=json.dumps(body).encode() if body else None,
+                http + path,
+                data=json.dumps(body).encode() if body else None,
                 method="POST" if body else "GET",
-                headers={"authorization": f"Bearer {ADMIN}", "content-type": "application/json"})
+                headers={"authorization": f"Bearer {ADMIN}", "content-type": "application/json"},
+            )
             try:
                 with urllib.request.urlopen(r) as resp:
                     return resp.status, resp.read()
@@ -91,8 +91,10 @@ def main():
                 return e.code, e.read()
 
         t0 = time.time()
-        st, body = req("/api/v1/submissions/policies",
-                       {"endpoint": endpoint, "split": "dev", "episodes": a.episodes, "reference": True})
+        st, body = req(
+            "/api/v1/submissions/policies",
+            {"endpoint": endpoint, "split": "dev", "episodes": a.episodes, "reference": True},
+        )
         if st != 201:
             sys.exit(f"registering the policy: HTTP {st} {body[:300]!r}")
         sid = json.loads(body)["id"]
@@ -105,21 +107,27 @@ def main():
         run_s = time.time() - t0
         eps = ev["episodes"]
         walls = sum(e["wall_ms"] for e in eps) / 1000
-        print(f"policy {a.policy}, videos {a.videos}: {len(eps)} episodes, run wall {run_s:.1f} s "
-              f"(episodes' walls sum to {walls:.1f} s), state {ev['state']}", flush=True)
+        print(
+            f"policy {a.policy}, videos {a.videos}: {len(eps)} episodes, run wall {run_s:.1f} s "
+            f"(episodes' walls sum to {walls:.1f} s), state {ev['state']}",
+            flush=True,
+        )
         if a.videos == "off":
             return
         time.sleep(2)  # the traces' uploads follow the results
         eps = json.loads(req(f"/api/v1/submissions/{sid}")[1])["latest_run"]["evaluation"]["episodes"]
-        for e in eps[:a.ask]:
+        for e in eps[: a.ask]:
             t1 = time.time()
             while True:
                 st, b = req(e["video_url"])
                 if st != 202:
                     break
                 time.sleep(0.25)
-            print(f"  {e['key']}: HTTP {st} after {time.time() - t1:.1f} s, {len(b)} bytes, "
-                  f"sha256 {hashlib.sha256(b).hexdigest()[:16]}", flush=True)
+            print(
+                f"  {e['key']}: HTTP {st} after {time.time() - t1:.1f} s, {len(b)} bytes, "
+                f"sha256 {hashlib.sha256(b).hexdigest()[:16]}",
+                flush=True,
+            )
         sizes = {"trace (.json.gz)": 0, "video (.mp4)": 0}
         for root, _, files in os.walk(work / "db"):
             for f in files:

@@ -29,9 +29,8 @@ import subprocess
 import tempfile
 import time
 
-import gymnasium as gym
-
 import gym_kitchen_r
+import gymnasium as gym
 
 
 def rust(binary: str, n: int) -> tuple[int, float]:
@@ -41,9 +40,24 @@ def rust(binary: str, n: int) -> tuple[int, float]:
     try:
         started = time.perf_counter()
         out = subprocess.run(
-            [binary, "eval", "--policy", "builtin:oracle", "--episodes", str(n), "--jobs", "1", "--seed", "0",
-             "--config", cfg, "--json"],
-            check=True, capture_output=True, text=True,
+            [
+                binary,
+                "eval",
+                "--policy",
+                "builtin:oracle",
+                "--episodes",
+                str(n),
+                "--jobs",
+                "1",
+                "--seed",
+                "0",
+                "--config",
+                cfg,
+                "--json",
+            ],
+            check=True,
+            capture_output=True,
+            text=True,
         )
         wall = time.perf_counter() - started
     finally:
@@ -69,8 +83,13 @@ def one_env(ids: list[str]) -> tuple[int, float]:
 
 
 def vector_env(n_envs: int, total: int) -> tuple[int, float]:
-    v = gym.make_vec("KitchenR/Plan-v0", num_envs=n_envs, vectorization_mode="vector_entry_point",
-                     teleport_on_failure=False, expert=True)
+    v = gym.make_vec(
+        "KitchenR/Plan-v0",
+        num_envs=n_envs,
+        vectorization_mode="vector_entry_point",
+        teleport_on_failure=False,
+        expert=True,
+    )
     _, infos = v.reset(seed=0)
     steps = 0
     started = time.perf_counter()
@@ -113,8 +132,10 @@ def main() -> None:
         print(f"binding overhead: {overheads[-1]:+.1f} % (python env time over the rust runner's)")
         print(f"vector env of {a.envs}: {gains[-1]:.2f}x one env", flush=True)
     if a.repeat > 1:
-        print(f"median of {a.repeat}: binding overhead {statistics.median(overheads):+.1f} %, "
-              f"vector env of {a.envs} {statistics.median(gains):.2f}x one env")
+        print(
+            f"median of {a.repeat}: binding overhead {statistics.median(overheads):+.1f} %, "
+            f"vector env of {a.envs} {statistics.median(gains):.2f}x one env"
+        )
 
 
 if __name__ == "__main__":

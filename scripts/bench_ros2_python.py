@@ -65,8 +65,19 @@ def main() -> int:
                 sub = None
                 if mode == "subscriber":
                     sub = subprocess.Popen(
-                        [sys.executable, str(WATCH), "--domain", str(args.domain), "--count", "100000000", "--seconds", "600"],
-                        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env,
+                        [
+                            sys.executable,
+                            str(WATCH),
+                            "--domain",
+                            str(args.domain),
+                            "--count",
+                            "100000000",
+                            "--seconds",
+                            "600",
+                        ],
+                        stdout=subprocess.DEVNULL,
+                        stderr=subprocess.PIPE,
+                        env=env,
                     )
                     sub.stderr.readline()  # "ready"
                 cmd = [sys.executable, __file__, "--one", mode, "--live-toml", live_toml]

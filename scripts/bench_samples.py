@@ -55,13 +55,34 @@ def exported(binary: str, episodes: int, workers: int) -> list[dict]:
     with tempfile.TemporaryDirectory() as out:
         started = time.perf_counter()
         subprocess.run(
-            [binary, "collect", "--format", "lerobot", "--episodes", str(episodes), "--jobs", str(workers),
-             "--seed", "0", "--out", out, "--json"],
-            check=True, capture_output=True, text=True,
+            [
+                binary,
+                "collect",
+                "--format",
+                "lerobot",
+                "--episodes",
+                str(episodes),
+                "--jobs",
+                str(workers),
+                "--seed",
+                "0",
+                "--out",
+                out,
+                "--json",
+            ],
+            check=True,
+            capture_output=True,
+            text=True,
         )
         collect = time.perf_counter() - started
-        rows.append({"path": "collect --format lerobot", "episodes": episodes, "wall_s": round(collect, 2),
-                     "episodes_per_min": round(episodes / collect * 60, 1)})
+        rows.append(
+            {
+                "path": "collect --format lerobot",
+                "episodes": episodes,
+                "wall_s": round(collect, 2),
+                "episodes_per_min": round(episodes / collect * 60, 1),
+            }
+        )
         try:
             import av  # noqa: F401
             import pyarrow  # noqa: F401
@@ -74,11 +95,23 @@ def exported(binary: str, episodes: int, workers: int) -> list[dict]:
         started = time.perf_counter()
         LeRobotExport(Path(out) / "lerobot", image_size=128, workers=workers, log=lambda *a, **k: None)
         decode = time.perf_counter() - started
-        rows.append({"path": "decode (PyAV, baseline loader)", "episodes": episodes, "wall_s": round(decode, 2),
-                     "episodes_per_min": round(episodes / decode * 60, 1)})
+        rows.append(
+            {
+                "path": "decode (PyAV, baseline loader)",
+                "episodes": episodes,
+                "wall_s": round(decode, 2),
+                "episodes_per_min": round(episodes / decode * 60, 1),
+            }
+        )
         both = collect + decode
-        rows.append({"path": "collect + decode", "episodes": episodes, "wall_s": round(both, 2),
-                     "episodes_per_min": round(episodes / both * 60, 1)})
+        rows.append(
+            {
+                "path": "collect + decode",
+                "episodes": episodes,
+                "wall_s": round(both, 2),
+                "episodes_per_min": round(episodes / both * 60, 1),
+            }
+        )
     return rows
 
 
@@ -98,7 +131,9 @@ def main() -> None:
             print(f"{r['path']:32s} skipped: {r['skipped']}")
             continue
         extra = f" {r['samples']:7d} samples {r['samples_per_s']:8.1f}/s" if "samples" in r else ""
-        print(f"{r['path']:32s} {r['episodes']:5d} episodes {r['wall_s']:8.2f} s {r['episodes_per_min']:8.1f} episodes/min{extra}")
+        print(
+            f"{r['path']:32s} {r['episodes']:5d} episodes {r['wall_s']:8.2f} s {r['episodes_per_min']:8.1f} episodes/min{extra}"
+        )
     last = [r for r in rows if "episodes_per_min" in r][-1]
     if last is not rows[0]:
         print(f"streamed samples: {rows[0]['episodes_per_min'] / last['episodes_per_min']:.1f}x {last['path']}")

@@ -55,7 +55,7 @@ def strip_markup(text):
     emphasis markers and HTML tags go."""
     out, last = [], 0
     for m in CODE_SPAN.finditer(text):
-        out.append(strip_inline(text[last:m.start()]))
+        out.append(strip_inline(text[last : m.start()]))
         out.append(m.group(2).strip())
         last = m.end()
     out.append(strip_inline(text[last:]))

@@ -153,8 +153,12 @@ def describe(topic: str, m) -> dict:
         return {"stamp": m.clock.sec * 1_000_000_000 + m.clock.nanosec}
     if isinstance(m, TFMessage):
         t = m.transforms[0]
-        return {"stamp": ns(t.header), "frame_id": t.header.frame_id, "child": t.child_frame_id,
-                "transforms": len(m.transforms)}
+        return {
+            "stamp": ns(t.header),
+            "frame_id": t.header.frame_id,
+            "child": t.child_frame_id,
+            "transforms": len(m.transforms),
+        }
     out = {"stamp": ns(m.header), "frame_id": m.header.frame_id}
     if isinstance(m, Odometry):
         out.update(child=m.child_frame_id, x=m.pose.pose.position.x, y=m.pose.pose.position.y)
@@ -179,14 +183,17 @@ def main() -> int:
     ap.add_argument("--domain", type=int, default=int(os.environ.get("ROS_DOMAIN_ID", "0") or 0))
     ap.add_argument("--seconds", type=float, default=120.0, help="give up after this long")
     ap.add_argument("--count", type=int, default=3, help="messages wanted of every topic")
-    ap.add_argument("--images", type=int, default=1,
-                    help="messages wanted of the camera topic (sent at most 30 a wall second)")
+    ap.add_argument(
+        "--images", type=int, default=1, help="messages wanted of the camera topic (sent at most 30 a wall second)"
+    )
     ap.add_argument("--qos", choices=["reliable", "best_effort"], default="reliable")
-    ap.add_argument("--no-read", action="store_true",
-                    help="subscribe, then never take a message (a stalled subscriber), for --seconds")
+    ap.add_argument(
+        "--no-read",
+        action="store_true",
+        help="subscribe, then never take a message (a stalled subscriber), for --seconds",
+    )
     args = ap.parse_args()
-    rel = (Policy.Reliability.Reliable(duration(seconds=1)) if args.qos == "reliable"
-           else Policy.Reliability.BestEffort)
+    rel = Policy.Reliability.Reliable(duration(seconds=1)) if args.qos == "reliable" else Policy.Reliability.BestEffort
     qos = Qos(rel, Policy.Durability.Volatile, Policy.History.KeepLast(50))
     dp = DomainParticipant(args.domain)
     readers = [(name, DataReader(dp, Topic(dp, name, ty), qos=qos)) for name, ty in TOPICS]

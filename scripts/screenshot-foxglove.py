@@ -170,7 +170,9 @@ def main() -> None:
     if trace is None:
         subprocess.run(
             [str(args.bin), "eval", "--episodes", "1", "--jobs", "1", "--trace", tmp.name],
-            cwd=ROOT, check=True, stdout=subprocess.DEVNULL,
+            cwd=ROOT,
+            check=True,
+            stdout=subprocess.DEVNULL,
         )
         trace = next(Path(tmp.name).glob("*.trace.json"))
 
@@ -178,9 +180,19 @@ def main() -> None:
     ws_port = free_port()
     log = open(Path(tmp.name) / "replay.log", "w+")
     replay = subprocess.Popen(
-        [str(args.bin), "replay", str(trace), "--foxglove", f"127.0.0.1:{ws_port}",
-         "--foxglove-wait", "--size", args.size],
-        cwd=ROOT, stdout=log, stderr=subprocess.STDOUT,
+        [
+            str(args.bin),
+            "replay",
+            str(trace),
+            "--foxglove",
+            f"127.0.0.1:{ws_port}",
+            "--foxglove-wait",
+            "--size",
+            args.size,
+        ],
+        cwd=ROOT,
+        stdout=log,
+        stderr=subprocess.STDOUT,
     )
     try:
         with sync_playwright() as p:
@@ -191,10 +203,7 @@ def main() -> None:
                 args=["--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--ignore-gpu-blocklist"],
             )
             page = browser.new_page(viewport={"width": 1280, "height": 720})
-            page.goto(
-                f"http://127.0.0.1:{http_port}/?ds=foxglove-websocket"
-                f"&ds.url=ws://127.0.0.1:{ws_port}"
-            )
+            page.goto(f"http://127.0.0.1:{http_port}/?ds=foxglove-websocket&ds.url=ws://127.0.0.1:{ws_port}")
             page.locator('[data-testid="sidebar-close-left"]').click(timeout=60_000)
             # The replay starts when the app connects and runs at real time: wait on its clock,
             # shown in the app bar as "ws://... kitchen-r / <sim seconds>".

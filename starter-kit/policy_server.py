@@ -155,8 +155,16 @@ def privileged(obs):
 
 
 def make_servicer(
-    pb2, pb2_grpc, policy, token, history=1, execute=0, name="starter-kit stand-still 0.2", max_concurrency=4,
-    privileged=False, cameras=(("base", 128, 128), ("gripper", 128, 128)),
+    pb2,
+    pb2_grpc,
+    policy,
+    token,
+    history=1,
+    execute=0,
+    name="starter-kit stand-still 0.2",
+    max_concurrency=4,
+    privileged=False,
+    cameras=(("base", 128, 128), ("gripper", 128, 128)),
 ):
     import grpc
 
@@ -173,8 +181,13 @@ def make_servicer(
             if request.protocol_version != PROTOCOL_VERSION:
                 logging.warning("worker speaks protocol %d, this server %d", request.protocol_version, PROTOCOL_VERSION)
             cams = [
-                pb2.CameraRequest(name=c[0], width=c[1], height=c[2], encoding=pb2.IMAGE_ENCODING_RAW_RGB8,
-                                  depth=bool(c[3]) if len(c) > 3 else False)
+                pb2.CameraRequest(
+                    name=c[0],
+                    width=c[1],
+                    height=c[2],
+                    encoding=pb2.IMAGE_ENCODING_RAW_RGB8,
+                    depth=bool(c[3]) if len(c) > 3 else False,
+                )
                 for c in cameras
             ]
             return pb2.PolicySpec(
@@ -244,7 +257,16 @@ def main():
 
 
 def serve(
-    listen, token, proto, threads, policy, history, execute, name=None, max_concurrency=4, privileged=False,
+    listen,
+    token,
+    proto,
+    threads,
+    policy,
+    history,
+    execute,
+    name=None,
+    max_concurrency=4,
+    privileged=False,
     cameras=None,
 ):
     """Serve `policy` (an object with `reset(episode_id, task_index, sub_task)` and

@@ -20,7 +20,8 @@ A PyTorch ``IterableDataset`` wraps it in a few lines (``gym_kitchen_r.torch_dat
 from __future__ import annotations
 
 import os
-from typing import Any, Iterator
+from collections.abc import Iterator
+from typing import Any
 
 import numpy as np
 

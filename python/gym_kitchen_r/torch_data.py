@@ -14,7 +14,8 @@ With ``num_workers=0`` (the default) the dataset's own simulator threads do the 
 
 from __future__ import annotations
 
-from typing import Any, Iterator
+from collections.abc import Iterator
+from typing import Any
 
 import numpy as np
 import torch

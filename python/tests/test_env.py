@@ -11,13 +11,12 @@ import math
 import os
 import subprocess
 
+import gym_kitchen_r
 import gymnasium as gym
 import numpy as np
 import pytest
-from gymnasium.utils.env_checker import check_env
-
-import gym_kitchen_r
 from gym_kitchen_r import KitchenREnv
+from gymnasium.utils.env_checker import check_env
 
 # The first 8 dev instructions: every kitchen, 2 to 3 times (CI time; the randomised test below adds 3).
 EPISODES = 8
@@ -127,7 +126,12 @@ def test_the_expert_through_the_env_is_the_eval_episode_task_by_task():
         got = info["episode"]
         assert got["sim_time"] == want["sim_time"], want["episode_id"]
         for g, w in zip(got["tasks"], want["tasks"], strict=True):
-            assert (g["index"], g["step"], g["success"], g["failure"]) == (w["index"], w["step"], w["success"], w["failure"])
+            assert (g["index"], g["step"], g["success"], g["failure"]) == (
+                w["index"],
+                w["step"],
+                w["success"],
+                w["failure"],
+            )
             assert g["sim_time"] == w["sim_time"], (want["episode_id"], g["index"])
         succeeded += sum(t["success"] for t in got["tasks"])
         assert info["is_success"] == all(t["success"] for t in want["tasks"])
@@ -177,15 +181,16 @@ def test_the_package_leaves_the_contracts_protobuf_namespace_alone():
     assert spec is None or spec.loader is None, f"a regular kitchen_r package is installed: {spec}"
 
 
-
 def test_the_readme_snippet_steps_the_expert_to_success():
     # The lines of docs/participant/python.md (once the README's), as a newcomer types them.
-    import gymnasium as gym, gym_kitchen_r  # noqa: E401,F401
+    import gymnasium as gym  # noqa: E401,F401
+
     env = gym.make("KitchenR/Plan-v0", expert=True)
     obs, info = env.reset(seed=0, options={"instruction": "dev-0001"})
     assert info["is_success"] is False  # nothing has succeeded yet (issue #38)
     done = False
-    while not done: obs, reward, done, _, info = env.step(info["expert_chunk"][0])  # noqa: E701
+    while not done:
+        obs, reward, done, _, info = env.step(info["expert_chunk"][0])  # noqa: E701
     assert info["is_success"] and len(info["episode"]["tasks"]) == len(info["episode"]["tasks"]) > 0
     env.close()
 
@@ -237,10 +242,17 @@ def test_randomise_gives_the_episodes_kitchen_r_episodes_generate_writes(tmp_pat
     eval --episodes-file`` runs it, and the draw differs from the unrandomised episode."""
     binary = os.environ.get("KITCHEN_R_BIN", "target/debug/kitchen-r")
     batch = tmp_path / "episodes.json"
-    subprocess.run([binary, "episodes", "generate", "--from-dataset", "--count", "3", "--seed", "5", "--out", str(batch)],
-                   check=True, capture_output=True)
-    out = subprocess.run([binary, "eval", "--episodes-file", str(batch), "--json", "--jobs", "1"],
-                         check=True, capture_output=True, text=True)
+    subprocess.run(
+        [binary, "episodes", "generate", "--from-dataset", "--count", "3", "--seed", "5", "--out", str(batch)],
+        check=True,
+        capture_output=True,
+    )
+    out = subprocess.run(
+        [binary, "eval", "--episodes-file", str(batch), "--json", "--jobs", "1"],
+        check=True,
+        capture_output=True,
+        text=True,
+    )
     report = json.loads(out.stdout)
     env = KitchenREnv(images=False, randomise=True, privileged=True)
     plain = KitchenREnv(images=False, privileged=True)

@@ -11,7 +11,6 @@ import os
 import subprocess
 
 import pytest
-
 from gym_kitchen_r import KitchenREnv
 from test_env import drive_expert
 
@@ -25,7 +24,19 @@ def test_the_physical_expert_through_the_env_is_the_physical_eval_episode():
     binary = os.environ.get("KITCHEN_R_BIN", "target/debug/kitchen-r")
     assert os.path.exists(binary), f"{binary} is missing: build it (cargo build) or set KITCHEN_R_BIN"
     out = subprocess.run(
-        [binary, "eval", "--policy", "builtin:oracle", "--episodes", "1", "--seed", "0", "--grasp", "physical", "--json"],
+        [
+            binary,
+            "eval",
+            "--policy",
+            "builtin:oracle",
+            "--episodes",
+            "1",
+            "--seed",
+            "0",
+            "--grasp",
+            "physical",
+            "--json",
+        ],
         check=True,
         capture_output=True,
         text=True,
@@ -39,6 +50,11 @@ def test_the_physical_expert_through_the_env_is_the_physical_eval_episode():
     got = drive_expert(env, want["episode_id"])["episode"]
     assert got["sim_time"] == want["sim_time"]
     for g, w in zip(got["tasks"], want["tasks"], strict=True):
-        assert (g["index"], g["step"], g["success"], g["failure"]) == (w["index"], w["step"], w["success"], w["failure"])
+        assert (g["index"], g["step"], g["success"], g["failure"]) == (
+            w["index"],
+            w["step"],
+            w["success"],
+            w["failure"],
+        )
         assert g["sim_time"] == w["sim_time"], g["index"]
     env.close()

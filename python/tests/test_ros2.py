@@ -19,7 +19,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from gym_kitchen_r import KitchenREnv
 
 WATCH = Path(__file__).resolve().parents[2] / "scripts" / "ros2-watch.py"
@@ -53,7 +52,10 @@ def subscriber(domain: int) -> subprocess.Popen:
     env = {k: v for k, v in os.environ.items() if k not in ("CYCLONEDDS_URI", "ROS_DOMAIN_ID")}
     proc = subprocess.Popen(
         [sys.executable, str(WATCH), "--domain", str(domain), "--count", "3", "--seconds", "60"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
     )
     line = proc.stderr.readline()
     assert line.strip() == "ready", f"the subscriber did not start: {line}{proc.stderr.read()}"
@@ -95,8 +97,12 @@ def test_ros2_publishes_typed_stamped_messages_and_changes_nothing(tmp_path, mon
     msgs = [json.loads(line) for line in out.splitlines() if line.startswith("{")]
     of = lambda topic: [m for m in msgs if m.get("topic") == topic]  # noqa: E731
     last_stamp = STEPS * 100_000_000 + 1
-    for topic, frame in [("/odom", "odom"), ("/tf", "odom"), ("/imu", "base_link"),
-                         ("/camera/base/image_raw", "base_optical_frame")]:
+    for topic, frame in [
+        ("/odom", "odom"),
+        ("/tf", "odom"),
+        ("/imu", "base_link"),
+        ("/camera/base/image_raw", "base_optical_frame"),
+    ]:
         got = of(topic)
         assert got, f"no {topic}: {out}"
         for m in got:

@@ -2,10 +2,9 @@
 whatever the thread count, shards split a collection without overlap, the samples are the
 expert's decisions with the stacked history a policy is sent, and bad arguments raise."""
 
+import gym_kitchen_r
 import numpy as np
 import pytest
-
-import gym_kitchen_r
 from gym_kitchen_r import ExpertSamples
 
 

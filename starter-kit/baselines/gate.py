@@ -87,7 +87,11 @@ def summarise(online, offline, train_log, track, gates, evaluated=None):
     for k in KINDS:
         ts = [t for t in tasks if kind_of(t["step"]) == k]
         s = sum(1 for t in ts if t["success"])
-        dists = [float(m.group(1)) for t in ts if not t["success"] and (m := DISTANCE.search(t.get("failure_reason") or t.get("failure") or ""))]
+        dists = [
+            float(m.group(1))
+            for t in ts
+            if not t["success"] and (m := DISTANCE.search(t.get("failure_reason") or t.get("failure") or ""))
+        ]
         reasons = {}
         for t in ts:
             if not t["success"]:
@@ -148,8 +152,24 @@ def combine(args, gates):
         onlines.append(json.loads((d / f"eval_{split}.json").read_text()))
         off = d / f"eval_{split}_offline.json"
         offlines.append(json.loads(off.read_text()) if off.exists() else None)
-        parts.append({"folder": str(d), **{k: s.get(k) for k in ("eval_split", "eval_instructions", "eval_seed", "held_out",
-                                                               "sr_by_kind", "tasks_by_kind", "sr_95_by_kind", "offline_mse")}})
+        parts.append(
+            {
+                "folder": str(d),
+                **{
+                    k: s.get(k)
+                    for k in (
+                        "eval_split",
+                        "eval_instructions",
+                        "eval_seed",
+                        "held_out",
+                        "sr_by_kind",
+                        "tasks_by_kind",
+                        "sr_95_by_kind",
+                        "offline_mse",
+                    )
+                },
+            }
+        )
     online = {"episodes": [e for o in onlines for e in o["episodes"]]}
     tasks = [t for e in online["episodes"] for t in e["tasks"]]
     online["overall"] = {"sr": sum(t["success"] for t in tasks) / len(tasks) if tasks else None}
@@ -173,8 +193,10 @@ def report(summary, res):
             log(f"{k}: no tasks")
             continue
         g = summary["gates"][k]
-        log(f"{k}: SR {sr:.3f} [{lo:.3f}, {hi:.3f}] over {summary['tasks_by_kind'][k]} tasks; "
-            f"gate {g['target']}: {'met' if g['met'] else 'MISSED'}")
+        log(
+            f"{k}: SR {sr:.3f} [{lo:.3f}, {hi:.3f}] over {summary['tasks_by_kind'][k]} tasks; "
+            f"gate {g['target']}: {'met' if g['met'] else 'MISSED'}"
+        )
     log(f"summary: {res / 'summary.json'}")
 
 
@@ -184,9 +206,11 @@ def wait_line(path, prefix, proc, timeout=300):
         if path.exists():
             for line in path.read_text(errors="replace").splitlines():
                 if prefix in line:
-                    return line[line.index(prefix) + len(prefix):].split()[0]
+                    return line[line.index(prefix) + len(prefix) :].split()[0]
         if proc.poll() is not None:
-            tail = "".join(p.read_text(errors="replace")[-2000:] for p in (path, path.with_suffix(".err")) if p.exists())
+            tail = "".join(
+                p.read_text(errors="replace")[-2000:] for p in (path, path.with_suffix(".err")) if p.exists()
+            )
             raise SystemExit(f"{proc.args!r} exited with {proc.returncode} before printing {prefix!r}:\n{tail}")
         time.sleep(0.2)
     raise SystemExit(f"no {prefix!r} from {proc.args!r} in {timeout} s; see {path}")
@@ -208,22 +232,37 @@ def main():
     ap.add_argument("--serve", help="command that serves the policy and prints `listening grpc=HOST:PORT`")
     ap.add_argument("--track", required=True, choices=sorted(GATES), help="the observation track the policy runs on")
     ap.add_argument("--out", required=True, help="results folder")
-    ap.add_argument("--episodes", type=int, default=60, help="episodes of the split's first N instructions (dataset order)")
-    ap.add_argument("--instructions", help="instead of --episodes: the 1-based inclusive range A-B of the split's instructions")
+    ap.add_argument(
+        "--episodes", type=int, default=60, help="episodes of the split's first N instructions (dataset order)"
+    )
+    ap.add_argument(
+        "--instructions", help="instead of --episodes: the 1-based inclusive range A-B of the split's instructions"
+    )
     ap.add_argument("--split", choices=("dev", "test"), default="dev", help="the split whose instructions are run")
     ap.add_argument("--ground-truth", help="the test split's plans (default assets/dataset/test_ground_truth.jsonl)")
     ap.add_argument("--seed", type=int, default=0, help="batch seed of the randomised episodes")
-    ap.add_argument("--held-out", action="store_true",
-                    help="record in summary.json that neither these instructions nor this seed trained or chose the policy")
-    ap.add_argument("--combine", nargs="+", metavar="DIR", help="sum these results folders into --out (no policy is run)")
+    ap.add_argument(
+        "--held-out",
+        action="store_true",
+        help="record in summary.json that neither these instructions nor this seed trained or chose the policy",
+    )
+    ap.add_argument(
+        "--combine", nargs="+", metavar="DIR", help="sum these results folders into --out (no policy is run)"
+    )
     ap.add_argument("--jobs", type=int, default=os.cpu_count(), help="parallel episodes")
     ap.add_argument("--bin", default=os.environ.get("KITCHEN_R_BIN", "target/release/kitchen-r"))
     ap.add_argument("--train-log", help="train_log.json of the run (training figures for summary.json)")
     ap.add_argument("--no-offline", action="store_true", help="skip the offline (MSE) evaluation")
-    ap.add_argument("--leaderboard", action="store_true", help="publish as a baseline row on a local server's dev board")
-    ap.add_argument("--leaderboard-episodes", type=int, default=20,
-                    help="dev instructions of the reference run (the server's workers also record each episode's "
-                    "video, so this run costs more than eval's)")
+    ap.add_argument(
+        "--leaderboard", action="store_true", help="publish as a baseline row on a local server's dev board"
+    )
+    ap.add_argument(
+        "--leaderboard-episodes",
+        type=int,
+        default=20,
+        help="dev instructions of the reference run (the server's workers also record each episode's "
+        "video, so this run costs more than eval's)",
+    )
     ap.add_argument("--gate", help="override the gate, e.g. navigation=0.9,pick=0.7,place=0.7")
     args = ap.parse_args()
     gates = dict(GATES[args.track])
@@ -235,10 +274,16 @@ def main():
         ap.error("--serve is required (or --combine)")
     lines = split_file(args.split, args.ground_truth).read_text().splitlines()
     lines = [ln for ln in lines if ln.strip()]
-    lo, hi = instruction_range(args.instructions, len(lines)) if args.instructions else (0, min(args.episodes, len(lines)))
+    lo, hi = (
+        instruction_range(args.instructions, len(lines)) if args.instructions else (0, min(args.episodes, len(lines)))
+    )
     # The batch seed the episodes were drawn with (eval's own "seed" is the run seed, 0).
-    evaluated = {"eval_split": args.split, "eval_instructions": f"{lo + 1}-{hi}", "eval_seed": args.seed,
-                 "held_out": args.held_out}
+    evaluated = {
+        "eval_split": args.split,
+        "eval_instructions": f"{lo + 1}-{hi}",
+        "eval_seed": args.seed,
+        "held_out": args.held_out,
+    }
     res = Path(args.out)
     res.mkdir(parents=True, exist_ok=True)
     work = Path(tempfile.mkdtemp(prefix="kr-gate-"))
@@ -247,24 +292,55 @@ def main():
     try:
         episodes, chosen = work / "episodes.json", work / "instructions.jsonl"
         chosen.write_text("\n".join(lines[lo:hi]) + "\n")
-        run([kr, "episodes", "generate", "--from-dataset", "--instructions", chosen, "--count", hi - lo, "--seed", args.seed,
-             "--out", episodes])
+        run(
+            [
+                kr,
+                "episodes",
+                "generate",
+                "--from-dataset",
+                "--instructions",
+                chosen,
+                "--count",
+                hi - lo,
+                "--seed",
+                args.seed,
+                "--out",
+                episodes,
+            ]
+        )
         serve_log = work / "serve.log"
-        p = subprocess.Popen(shlex.split(args.serve), stdout=open(serve_log, "w"), stderr=subprocess.STDOUT,
-                             start_new_session=True)
+        p = subprocess.Popen(
+            shlex.split(args.serve), stdout=open(serve_log, "w"), stderr=subprocess.STDOUT, start_new_session=True
+        )
         procs.append(p)
         addr = wait_line(serve_log, "listening grpc=", p)
         log(f"policy at {addr}")
         run([kr, "check-policy", f"http://{addr}"], res / "check_policy.txt")
         t0 = time.time()
-        run([kr, "eval", "--policy", f"http://{addr}", "--episodes-file", episodes, "--json", "--jobs", args.jobs],
-            res / f"eval_{args.split}.json")
+        run(
+            [kr, "eval", "--policy", f"http://{addr}", "--episodes-file", episodes, "--json", "--jobs", args.jobs],
+            res / f"eval_{args.split}.json",
+        )
         online = json.loads((res / f"eval_{args.split}.json").read_text())
         log(f"online: {hi - lo} episodes in {time.time() - t0:.0f} s")
         offline = None
         if not args.no_offline:
-            run([kr, "eval", "--policy", f"http://{addr}", "--mode", "offline", "--episodes-file", episodes, "--json",
-                 "--jobs", args.jobs], res / f"eval_{args.split}_offline.json")
+            run(
+                [
+                    kr,
+                    "eval",
+                    "--policy",
+                    f"http://{addr}",
+                    "--mode",
+                    "offline",
+                    "--episodes-file",
+                    episodes,
+                    "--json",
+                    "--jobs",
+                    args.jobs,
+                ],
+                res / f"eval_{args.split}_offline.json",
+            )
             offline = json.loads((res / f"eval_{args.split}_offline.json").read_text())
         train_log = json.loads(Path(args.train_log).read_text()) if args.train_log else None
         summary = summarise(online, offline, train_log, args.track, gates, evaluated)
@@ -291,14 +367,52 @@ def publish(kr, addr, args, res, work, procs):
     )
     out = d / "serve.out"
     env = dict(os.environ, KITCHEN_R_ADMIN_TOKEN=admin)
-    p = subprocess.Popen([str(kr), "serve", "--config", str(d / "server.toml")], stdout=open(out, "w"),
-                         stderr=open(d / "serve.err", "w"), env=env, start_new_session=True)
+    p = subprocess.Popen(
+        [str(kr), "serve", "--config", str(d / "server.toml")],
+        stdout=open(out, "w"),
+        stderr=open(d / "serve.err", "w"),
+        env=env,
+        start_new_session=True,
+    )
     procs.append(p)
     http = "http://" + wait_line(out, "http=", p)
-    run([kr, "submit", "policy", f"http://{addr}", "--split", "dev", "--episodes", args.leaderboard_episodes, "--reference",
-         "--token", admin, "--server", http, "--wait", "--json"], res / "submission.json")
-    run([kr, "leaderboard", "--track", "control", "--split", "dev", "--observations", args.track, "--format", "json",
-         "--server", http], res / "leaderboard_dev_control.json")
+    run(
+        [
+            kr,
+            "submit",
+            "policy",
+            f"http://{addr}",
+            "--split",
+            "dev",
+            "--episodes",
+            args.leaderboard_episodes,
+            "--reference",
+            "--token",
+            admin,
+            "--server",
+            http,
+            "--wait",
+            "--json",
+        ],
+        res / "submission.json",
+    )
+    run(
+        [
+            kr,
+            "leaderboard",
+            "--track",
+            "control",
+            "--split",
+            "dev",
+            "--observations",
+            args.track,
+            "--format",
+            "json",
+            "--server",
+            http,
+        ],
+        res / "leaderboard_dev_control.json",
+    )
 
 
 if __name__ == "__main__":

@@ -44,7 +44,7 @@ class Response:
         try:
             return json.loads(self.body.decode("utf-8"))
         except ValueError:
-            raise ApiError("the server's answer is not JSON")
+            raise ApiError("the server's answer is not JSON") from None
 
     def text(self):
         return self.body.decode("utf-8", "replace")
@@ -98,12 +98,10 @@ class Client:
                 status=e.code,
                 transient=e.code >= 500 or e.code == 429,
                 retry_after=retry_after,
-            )
+            ) from None
         except (urllib.error.URLError, OSError) as e:
             reason = getattr(e, "reason", e)
-            raise ApiError(
-                "cannot reach the server at %s: %s" % (self.server, reason), transient=True
-            )
+            raise ApiError("cannot reach the server at %s: %s" % (self.server, reason), transient=True) from e
 
     def get_json(self, path, token=None):
         return self.request("GET", path, token=token).json()

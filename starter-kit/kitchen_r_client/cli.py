@@ -45,14 +45,20 @@ class Failure(Exception):
 def _env_opt(parser, flag, env, help_, required=True):
     value = os.environ.get(env)
     parser.add_argument(
-        flag, default=value, required=required and not value,
-        help="%s (env %s)" % (help_, env), metavar=flag.lstrip("-").upper().replace("-", "_"))
+        flag,
+        default=value,
+        required=required and not value,
+        help="%s (env %s)" % (help_, env),
+        metavar=flag.lstrip("-").upper().replace("-", "_"),
+    )
 
 
 def _server(parser):
     parser.add_argument(
-        "--server", default=os.environ.get("KITCHEN_R_SERVER", DEFAULT_SERVER),
-        help="server base URL (env KITCHEN_R_SERVER, default %s)" % DEFAULT_SERVER)
+        "--server",
+        default=os.environ.get("KITCHEN_R_SERVER", DEFAULT_SERVER),
+        help="server base URL (env KITCHEN_R_SERVER, default %s)" % DEFAULT_SERVER,
+    )
 
 
 def _auth(parser, help_="team token (or the organiser token, which sees every submission)"):
@@ -62,7 +68,8 @@ def _auth(parser, help_="team token (or the organiser token, which sees every su
 
 def build_parser():
     p = argparse.ArgumentParser(
-        prog="kitchen-r-client", description="Kitchen-R participant client (no Rust build needed).")
+        prog="kitchen-r-client", description="Kitchen-R participant client (no Rust build needed)."
+    )
     p.add_argument("--version", action="version", version="%(prog)s " + __version__)
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
@@ -90,8 +97,13 @@ def build_parser():
     pol.add_argument("--split", required=True, choices=["dev", "test"])
     pol.add_argument("--plans", type=int, metavar="SUBMISSION_ID", help="integrated track: your plan submission")
     pol.add_argument("--episodes", type=int, metavar="N", help="dev only: the first N instructions")
-    _env_opt(pol, "--endpoint-token", "KITCHEN_R_POLICY_TOKEN",
-             "bearer token the workers send to your endpoint", required=False)
+    _env_opt(
+        pol,
+        "--endpoint-token",
+        "KITCHEN_R_POLICY_TOKEN",
+        "bearer token the workers send to your endpoint",
+        required=False,
+    )
     pol.add_argument("--reference", action="store_true", help="organiser: a reference (baseline) run")
     pol.add_argument("--wait", action="store_true", help="follow the run and print it when it ends")
     pol.add_argument("--timeout", type=_seconds, metavar="SECONDS", help="with --wait: give up after S seconds")
@@ -117,12 +129,20 @@ def build_parser():
     lb = sub.add_parser("leaderboard", help="print the ranking")
     lb.add_argument("--track", default="planning", choices=["planning", "control", "integrated"])
     lb.add_argument("--split", default="test", choices=["dev", "test"])
-    lb.add_argument("--observations", default="standard", choices=["standard", "privileged"],
-                    help="control and integrated: the board of runs whose policy received "
-                         "privileged observations (ranked apart), or the standard one")
-    lb.add_argument("--grasp-mode", default=None, choices=["abstract", "physical"],
-                    help="control and integrated: the board of runs evaluated in this grasp mode "
-                         "(ranked apart); default: the contest's")
+    lb.add_argument(
+        "--observations",
+        default="standard",
+        choices=["standard", "privileged"],
+        help="control and integrated: the board of runs whose policy received "
+        "privileged observations (ranked apart), or the standard one",
+    )
+    lb.add_argument(
+        "--grasp-mode",
+        default=None,
+        choices=["abstract", "physical"],
+        help="control and integrated: the board of runs evaluated in this grasp mode "
+        "(ranked apart); default: the contest's",
+    )
     lb.add_argument("--format", default="table", choices=["table", "json", "csv"])
     lb.add_argument("--json", action="store_true", help="same as --format json")
     _server(lb)
@@ -143,7 +163,7 @@ def cmd_submit_plans(a):
         with open(a.file, "rb") as f:
             body = f.read()
     except OSError as e:
-        raise Failure("cannot read %s: %s" % (a.file, e.strerror or e))
+        raise Failure("cannot read %s: %s" % (a.file, e.strerror or e)) from e
     client = Client(a.server, a.token, timeout=120.0)
     v = client.post_json("/api/v1/submissions/plans?split=" + a.split, body, "application/x-ndjson")
     if a.json:
@@ -175,13 +195,25 @@ def cmd_submit_policy(a):
         print(json.dumps(v))
         return 0
     sid = v.get("id")
-    print("submission %s accepted: %s episodes of %s instructions queued (%s, %s observations), policy: %s" % (
-        sid, v.get("episodes"), v.get("instructions"), a.split, v.get("observations", "standard"),
-        v.get("policy", "?")), file=sys.stderr)
+    print(
+        "submission %s accepted: %s episodes of %s instructions queued (%s, %s observations), policy: %s"
+        % (
+            sid,
+            v.get("episodes"),
+            v.get("instructions"),
+            a.split,
+            v.get("observations", "standard"),
+            v.get("policy", "?"),
+        ),
+        file=sys.stderr,
+    )
     if not a.wait:
         print(sid)
-        print("follow it with `kitchen-r-client submission wait %s` (or `submission show %s`, or %s)" % (
-            sid, sid, client.url("/submissions/%s" % sid)), file=sys.stderr)
+        print(
+            "follow it with `kitchen-r-client submission wait %s` (or `submission show %s`, or %s)"
+            % (sid, sid, client.url("/submissions/%s" % sid)),
+            file=sys.stderr,
+        )
         return 0
     snap = wait_for(client, sid, a.timeout)
     return finish(snap, a.server, a.json)
@@ -244,8 +276,9 @@ def wait_for(client, sid, timeout=None):
         if timeout is not None:
             left = timeout - (time.monotonic() - start)
             if left <= 0:
-                raise TimedOut("submission %s: not finished after %.0f s (last: %s)" % (
-                    sid, timeout, last or "no answer"))
+                raise TimedOut(
+                    "submission %s: not finished after %.0f s (last: %s)" % (sid, timeout, last or "no answer")
+                )
             sleep = min(sleep, left)
         time.sleep(sleep)
         interval = min(interval * 1.5, 15.0)
@@ -257,13 +290,17 @@ def cmd_leaderboard(a):
     if a.grasp_mode:
         observations += "&grasp_mode=%s" % a.grasp_mode
     path = "/api/v1/leaderboard?track=%s&split=%s%s&format=%s" % (
-        a.track, a.split, observations, "csv" if fmt == "csv" else "json")
+        a.track,
+        a.split,
+        observations,
+        "csv" if fmt == "csv" else "json",
+    )
     text = Client(a.server).request("GET", path).text()
     if fmt == "table":
         try:
             board = json.loads(text)
         except ValueError:
-            raise Failure("the server's answer is not JSON")
+            raise Failure("the server's answer is not JSON") from None
         view.print_leaderboard(board)
     elif fmt == "json":
         print(text)

@@ -55,9 +55,7 @@ def why_not_finished(view):
     return ""
 
 
-_RFC3339 = re.compile(
-    r"^(\d{4})-(\d\d)-(\d\d)[Tt](\d\d):(\d\d):(\d\d)(?:\.(\d+))?([Zz]|[+-]\d\d:\d\d)$"
-)
+_RFC3339 = re.compile(r"^(\d{4})-(\d\d)-(\d\d)[Tt](\d\d):(\d\d):(\d\d)(?:\.(\d+))?([Zz]|[+-]\d\d:\d\d)$")
 
 
 def parse_rfc3339_ms(t):
@@ -108,7 +106,11 @@ def progress_line(view, server_now_ms=None):
     if not isinstance(ev, dict):
         return st
     line = "%s: %s/%s episodes done, %s running" % (
-        st, _j(ev.get("episodes_done")), _j(ev.get("episodes_total")), _j(ev.get("episodes_running")))
+        st,
+        _j(ev.get("episodes_done")),
+        _j(ev.get("episodes_total")),
+        _j(ev.get("episodes_running")),
+    )
     if (ev.get("episodes_retrying") or 0) > 0:
         line += ", %s retrying" % _j(ev["episodes_retrying"])
     eta = eta_s(view, server_now_ms)
@@ -130,8 +132,10 @@ def scores(sc):
 
 def print_submission(view, server, server_now_ms=None, out=print):
     kind = "policy endpoint" if view.get("kind") == "policy" else "plan file"
-    out("submission %s: %s, %s split, team %s, created %s" % (
-        _j(view.get("id")), kind, _s(view.get("split")), _s(view.get("team")), _s(view.get("created_at"))))
+    out(
+        "submission %s: %s, %s split, team %s, created %s"
+        % (_j(view.get("id")), kind, _s(view.get("split")), _s(view.get("team")), _s(view.get("created_at")))
+    )
     out("page: %s/submissions/%s" % (server.rstrip("/"), _j(view.get("id"))))
     p = view.get("policy")
     if isinstance(p, dict):
@@ -194,8 +198,10 @@ def _print_evaluation(ev, server, out):
         else:
             result = "-"
         wall = (x.get("wall_ms") or 0) / 1000.0
-        out("  %-*s  %-7s  %-11s  %6.1fs  %s" % (
-            width, _s(x.get("key")), _s(x.get("mode")), result, wall, _j(x.get("attempt"))))
+        out(
+            "  %-*s  %-7s  %-11s  %6.1fs  %s"
+            % (width, _s(x.get("key")), _s(x.get("mode")), result, wall, _j(x.get("attempt")))
+        )
         _print_tasks(x, out)
         if isinstance(x.get("failure"), str):
             out("      failure: " + x["failure"])
@@ -220,8 +226,7 @@ def _print_tasks(x, out):
         # 1-based, as the web pages and videos count tasks; the JSON keeps the 0-based index.
         index = t.get("index")
         number = index + 1 if isinstance(index, int) else _j(index)
-        out("      task %-2s %-12s %s%s" % (
-            number, result, _s(t.get("step")), (": " + reason) if reason else ""))
+        out("      task %-2s %-12s %s%s" % (number, result, _s(t.get("step")), (": " + reason) if reason else ""))
 
 
 def _print_instructions(run, test, out):
@@ -237,8 +242,10 @@ def _print_instructions(run, test, out):
     out("  %-*s  %6s  correct steps" % (width, "instruction", "EM"))
     for r in rows:
         note = "  (no plan in the file)" if r.get("present") is False else ""
-        out("  %-*s  %6.4f  %s/%s%s" % (
-            width, _s(r.get("id")), r.get("em") or 0.0, _j(r.get("correct_steps")), _j(r.get("total_steps")), note))
+        out(
+            "  %-*s  %6.4f  %s/%s%s"
+            % (width, _s(r.get("id")), r.get("em") or 0.0, _j(r.get("correct_steps")), _j(r.get("total_steps")), note)
+        )
 
 
 _COLUMNS = {

@@ -28,14 +28,17 @@ class Dates(unittest.TestCase):
 
 
 class Progress(unittest.TestCase):
-    RUNNING = {"latest_run": {"created_at": "2026-11-22T23:00:00Z", "evaluation": {
-        "state": "running", "episodes_done": 2, "episodes_total": 8, "episodes_running": 2}}}
+    RUNNING = {
+        "latest_run": {
+            "created_at": "2026-11-22T23:00:00Z",
+            "evaluation": {"state": "running", "episodes_done": 2, "episodes_total": 8, "episodes_running": 2},
+        }
+    }
 
     def test_eta_is_the_finished_episodes_pace_times_the_episodes_left(self):
         now = view.parse_rfc3339_ms("2026-11-22T23:01:00Z")
         self.assertEqual(view.eta_s(self.RUNNING, now), 180.0)
-        self.assertTrue(view.progress_line(self.RUNNING, now).endswith(
-            "2/8 episodes done, 2 running, ETA 3m 00s"))
+        self.assertTrue(view.progress_line(self.RUNNING, now).endswith("2/8 episodes done, 2 running, ETA 3m 00s"))
 
     def test_states(self):
         self.assertEqual(view.state({"latest_run": {"scores": {}}}), "finished")
@@ -46,8 +49,7 @@ class Progress(unittest.TestCase):
 class Errors(unittest.TestCase):
     def test_message_code_and_request_id(self):
         body = json.dumps({"error": "submission 9 not found", "code": "not_found", "request_id": "abc"})
-        self.assertEqual(error_message(404, body),
-                         "submission 9 not found (HTTP 404) [code not_found, request id abc]")
+        self.assertEqual(error_message(404, body), "submission 9 not found (HTTP 404) [code not_found, request id abc]")
         self.assertEqual(error_message(502, ""), "the server answered HTTP 502")
 
     def test_unreachable_server_exits_1_with_a_message(self):
@@ -70,16 +72,49 @@ class Errors(unittest.TestCase):
 
 class Printing(unittest.TestCase):
     def test_dev_episode_rows_with_task_results_and_links(self):
-        v = {"id": 3, "kind": "policy", "split": "dev", "team": "t", "created_at": "x",
-             "latest_run": {"id": 4, "scores": {"sr": 0.5}, "evaluation": {
-                 "state": "finished", "episodes_done": 1, "episodes_total": 1, "episodes_running": 0,
-                 "failure_counts": [{"reason": "time limit of N s reached", "count": 1}],
-                 "episodes": [{"key": "dev-0001", "mode": "online", "success_rate": 0.5, "wall_ms": 1500,
-                               "attempt": 1, "video_url": "/media/v.mp4", "tasks": [
-                                   {"index": 0, "step": "pick the cup", "success": True, "completion_time_s": 3.0,
-                                    "failure_reason": ""},
-                                   {"index": 1, "step": "place the cup", "success": False,
-                                    "failure_reason": "time limit of 120 s reached"}]}]}}}
+        v = {
+            "id": 3,
+            "kind": "policy",
+            "split": "dev",
+            "team": "t",
+            "created_at": "x",
+            "latest_run": {
+                "id": 4,
+                "scores": {"sr": 0.5},
+                "evaluation": {
+                    "state": "finished",
+                    "episodes_done": 1,
+                    "episodes_total": 1,
+                    "episodes_running": 0,
+                    "failure_counts": [{"reason": "time limit of N s reached", "count": 1}],
+                    "episodes": [
+                        {
+                            "key": "dev-0001",
+                            "mode": "online",
+                            "success_rate": 0.5,
+                            "wall_ms": 1500,
+                            "attempt": 1,
+                            "video_url": "/media/v.mp4",
+                            "tasks": [
+                                {
+                                    "index": 0,
+                                    "step": "pick the cup",
+                                    "success": True,
+                                    "completion_time_s": 3.0,
+                                    "failure_reason": "",
+                                },
+                                {
+                                    "index": 1,
+                                    "step": "place the cup",
+                                    "success": False,
+                                    "failure_reason": "time limit of 120 s reached",
+                                },
+                            ],
+                        }
+                    ],
+                },
+            },
+        }
         lines = []
         view.print_submission(v, "http://s", out=lines.append)
         text = "\n".join(lines)
@@ -90,11 +125,34 @@ class Printing(unittest.TestCase):
 
     def test_a_removed_video_prints_its_note_where_the_link_was(self):
         note = "video removed to keep team t's videos within [video] team_max_bytes (2 GiB)"
-        v = {"id": 3, "kind": "policy", "split": "dev", "team": "t", "created_at": "x",
-             "latest_run": {"id": 4, "scores": {}, "evaluation": {
-                 "state": "finished", "episodes_done": 1, "episodes_total": 1, "episodes_running": 0,
-                 "failure_counts": [], "episodes": [{"key": "dev-0001", "mode": "online", "wall_ms": 1,
-                                                     "attempt": 1, "video_note": note, "tasks": []}]}}}
+        v = {
+            "id": 3,
+            "kind": "policy",
+            "split": "dev",
+            "team": "t",
+            "created_at": "x",
+            "latest_run": {
+                "id": 4,
+                "scores": {},
+                "evaluation": {
+                    "state": "finished",
+                    "episodes_done": 1,
+                    "episodes_total": 1,
+                    "episodes_running": 0,
+                    "failure_counts": [],
+                    "episodes": [
+                        {
+                            "key": "dev-0001",
+                            "mode": "online",
+                            "wall_ms": 1,
+                            "attempt": 1,
+                            "video_note": note,
+                            "tasks": [],
+                        }
+                    ],
+                },
+            },
+        }
         lines = []
         view.print_submission(v, "http://s", out=lines.append)
         self.assertIn("video: " + note, "\n".join(lines))

@@ -29,9 +29,8 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from gymnasium import spaces
-
 from gym_kitchen_r import STATE_FIELDS, KitchenREnv
+from gymnasium import spaces
 
 # The control rate of the episode runner and of the exported dataset (frames per second).
 FPS = 10
@@ -158,13 +157,8 @@ class KitchenRLeRobotEnv(gym.Env):
         self.action_space = self.inner.action_space
         self.observation_space = spaces.Dict(
             {
-                "pixels": spaces.Dict(
-                    {c: spaces.Box(0, 255, sizes[c] + (3,), np.uint8) for c in self.cameras}
-                ),
-                **{
-                    key: spaces.Box(-np.inf, np.inf, (len(fields),), np.float64)
-                    for key, fields in STATE_KEYS.items()
-                },
+                "pixels": spaces.Dict({c: spaces.Box(0, 255, sizes[c] + (3,), np.uint8) for c in self.cameras}),
+                **{key: spaces.Box(-np.inf, np.inf, (len(fields),), np.float64) for key, fields in STATE_KEYS.items()},
             }
         )
         self.task = ""

@@ -8,10 +8,9 @@ LeRobot's own ``make_env`` / ``preprocess_observation`` / ``add_envs_task`` on t
 import importlib.util
 
 import gymnasium as gym
+import lerobot_env_kitchen_r as plugin
 import numpy as np
 import pytest
-
-import lerobot_env_kitchen_r as plugin
 from gym_kitchen_r import STATE_FIELDS, KitchenREnv
 from lerobot_env_kitchen_r import GYM_ID, KitchenRLeRobotEnv
 
@@ -71,7 +70,16 @@ def test_state_keys_are_the_named_fields_of_gym_kitchen_r(env):
         np.testing.assert_array_equal(obs[key], expected)
     # The export's observation.state order: v, omega, x, y, z, qw, qx, qy, qz, gripper.
     assert plugin.AGENT_POS_FIELDS == (
-        "base_v", "base_w", "ee_x", "ee_y", "ee_z", "ee_qw", "ee_qx", "ee_qy", "ee_qz", "gripper"
+        "base_v",
+        "base_w",
+        "ee_x",
+        "ee_y",
+        "ee_z",
+        "ee_qw",
+        "ee_qx",
+        "ee_qy",
+        "ee_qz",
+        "gripper",
     )
 
 
@@ -172,7 +180,7 @@ def test_episode_length_truncates_as_a_failure():
     e = KitchenRLeRobotEnv(max_tasks=1, episode_length=3)
     try:
         obs, _ = e.reset(seed=0)
-        for i in range(3):
+        for _ in range(3):
             obs, _, terminated, truncated, info = e.step(hold(obs))
         assert truncated and not terminated and info["is_success"] is False
         assert e._max_episode_steps == 3

@@ -55,9 +55,11 @@ def main():
                         break
             print(f"{ins} task {ti} `{step}`: {'succeeded' if success else 'failed'} after {steps} steps")
             for t, p, e in rows[::4]:
-                print(f"  t={t * F.CONTROL_DT:5.1f}s  v,w policy {np.round(p[:2], 3)} expert {np.round(e[:2], 3)}"
-                      f" | hand policy {np.round(p[2:5], 2)} expert {np.round(e[2:5], 2)}"
-                      f" | gripper {p[9]:.2f} {e[9]:.2f}")
+                print(
+                    f"  t={t * F.CONTROL_DT:5.1f}s  v,w policy {np.round(p[:2], 3)} expert {np.round(e[:2], 3)}"
+                    f" | hand policy {np.round(p[2:5], 2)} expert {np.round(e[2:5], 2)}"
+                    f" | gripper {p[9]:.2f} {e[9]:.2f}"
+                )
     env.close()
 
 

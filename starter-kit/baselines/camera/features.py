@@ -53,6 +53,7 @@ def depth_u8(d):
 
 # Sub-task words ----------------------------------------------------------------------------
 
+
 def words(sentence):
     return re.findall(r"[a-z0-9]+", sentence.lower())
 
@@ -79,6 +80,7 @@ def encode(sentence, vocab_index):
 
 
 # State ------------------------------------------------------------------------------------
+
 
 def _frame_values(robot26, x, y, yaw):
     return list(robot26) + [x, y, math.sin(yaw), math.cos(yaw)]
@@ -157,6 +159,7 @@ def from_grpc(obs, task_time, depth=False):
 
 # Images -----------------------------------------------------------------------------------
 
+
 def resize_images(images, size):
     """uint8 images (..., H, W, 3) (numpy or torch, any device) to (..., size, size, 3) uint8
     torch, bilinear with antialiasing; the same call in training (on the training device) and
@@ -175,6 +178,7 @@ def resize_images(images, size):
 
 
 # Actions ----------------------------------------------------------------------------------
+
 
 def finish(chunk):
     """A predicted chunk (16x10) made valid: finite, unit quaternions, gripper in [0, 1]."""

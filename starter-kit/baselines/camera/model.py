@@ -16,24 +16,41 @@ one thread runs them through the network together.
 import io
 import threading
 
+import features as FT
 import numpy as np
 import torch
+from encoder import OUT_CHANNELS, Trunk
 from torch import nn
 from torch.nn import functional as F
-
-import features as FT
-from encoder import OUT_CHANNELS, Trunk
 
 FORMAT = "kitchen-r-camera-policy/1"
 MAX_BYTES = 16 * 2**20
 
 
 class CameraPolicy(nn.Module):
-    def __init__(self, vocab_size, image_size=96, d_model=256, layers=3, heads=4, grid=3, pretrained=False,
-                 aux=False, depth=False):
+    def __init__(
+        self,
+        vocab_size,
+        image_size=96,
+        d_model=256,
+        layers=3,
+        heads=4,
+        grid=3,
+        pretrained=False,
+        aux=False,
+        depth=False,
+    ):
         super().__init__()
-        self.config = {"vocab_size": vocab_size, "image_size": image_size, "d_model": d_model, "layers": layers,
-                       "heads": heads, "grid": grid, "aux": aux, "depth": depth}
+        self.config = {
+            "vocab_size": vocab_size,
+            "image_size": image_size,
+            "d_model": d_model,
+            "layers": layers,
+            "heads": heads,
+            "grid": grid,
+            "aux": aux,
+            "depth": depth,
+        }
         d = d_model
         self.trunk = Trunk(pretrained=pretrained)
         self.proj = nn.Conv2d(OUT_CHANNELS, d, 1)
@@ -43,8 +60,9 @@ class CameraPolicy(nn.Module):
         self.word = nn.Embedding(vocab_size, d, padding_idx=FT.PAD)
         self.word_pos = nn.Parameter(torch.randn(FT.MAX_WORDS, d) * 0.02)
         self.readout = nn.Parameter(torch.randn(2, d) * 0.02)  # readout token, state token's type
-        layer = nn.TransformerEncoderLayer(d, heads, 4 * d, dropout=0.0, activation="gelu", batch_first=True,
-                                           norm_first=True)
+        layer = nn.TransformerEncoderLayer(
+            d, heads, 4 * d, dropout=0.0, activation="gelu", batch_first=True, norm_first=True
+        )
         self.transformer = nn.TransformerEncoder(layer, layers, enable_nested_tensor=False)
         self.out = nn.Sequential(nn.LayerNorm(d), nn.Linear(d, FT.HORIZON * FT.ACTION_DIM))
         # The auxiliary goal head (train.py --aux-weight): trained, never read when serving.
@@ -116,12 +134,20 @@ def random_shift(x, pad):
 
 def save(path, model, vocab, meta):
     """fp16 weights (fp32 statistics), config, vocabulary and meta in one file (<= 16 MiB)."""
-    state = {k: (v.detach().cpu().half() if v.is_floating_point() and not k.endswith(("_mean", "_std", "running_var", "running_mean")) else v.detach().cpu())
-             for k, v in model.state_dict().items()}
+    state = {
+        k: (
+            v.detach().cpu().half()
+            if v.is_floating_point() and not k.endswith(("_mean", "_std", "running_var", "running_mean"))
+            else v.detach().cpu()
+        )
+        for k, v in model.state_dict().items()
+    }
     buf = io.BytesIO()
     torch.save({"format": FORMAT, "config": model.config, "state": state, "vocab": list(vocab), "meta": meta}, buf)
     if buf.tell() > MAX_BYTES:
-        raise ValueError(f"checkpoint is {buf.tell() / 2**20:.1f} MiB, over the 16 MiB limit: use a smaller --d-model/--layers")
+        raise ValueError(
+            f"checkpoint is {buf.tell() / 2**20:.1f} MiB, over the 16 MiB limit: use a smaller --d-model/--layers"
+        )
     with open(path, "wb") as fh:
         fh.write(buf.getvalue())
 
@@ -164,10 +190,12 @@ class Batcher:
         dev = next(self.model.parameters()).device
         top = max(1, self.max_batch - 1).bit_length()
         z = FT.RENDER_SIZE
-        x = (np.zeros((FT.views(self.model.config.get("depth", False)), FT.HISTORY, z, z, 3), np.uint8),
-             np.zeros(FT.STATE_DIM, np.float32),
-             np.zeros(FT.MAX_WORDS, np.int64))
-        for n in ([1 << k for k in range(top + 1)] if dev.type == "cuda" else [1]):
+        x = (
+            np.zeros((FT.views(self.model.config.get("depth", False)), FT.HISTORY, z, z, 3), np.uint8),
+            np.zeros(FT.STATE_DIM, np.float32),
+            np.zeros(FT.MAX_WORDS, np.int64),
+        )
+        for n in [1 << k for k in range(top + 1)] if dev.type == "cuda" else [1]:
             with self.lock:
                 self._run([{"x": x}] * n)
 

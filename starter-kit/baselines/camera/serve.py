@@ -61,14 +61,20 @@ def main():
     ap.add_argument("--listen", default="127.0.0.1:50051", help="HOST:PORT; port 0 picks a free port")
     ap.add_argument("--device", default="auto", help="auto (CUDA if available), cpu, cuda, ...")
     ap.add_argument("--execute", type=int, default=F.EXECUTE, help="actions of each chunk executed before the next Act")
-    ap.add_argument("--concurrency", type=int, default=16, help="Act calls the policy accepts at once (max_concurrency)")
+    ap.add_argument(
+        "--concurrency", type=int, default=16, help="Act calls the policy accepts at once (max_concurrency)"
+    )
     ap.add_argument("--token", default=os.environ.get("POLICY_TOKEN"), help="require this bearer token")
     ap.add_argument("--proto-dir", default=None, help="directory with kitchen_r/policy/v1/policy.proto")
     args = ap.parse_args()
     if not 1 <= args.execute <= kit.HORIZON:
         sys.exit(f"--execute must be between 1 and {kit.HORIZON}")
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(message)s")
-    device = torch.device("cuda" if args.device == "auto" and torch.cuda.is_available() else ("cpu" if args.device == "auto" else args.device))
+    device = torch.device(
+        "cuda"
+        if args.device == "auto" and torch.cuda.is_available()
+        else ("cpu" if args.device == "auto" else args.device)
+    )
     if device.type == "cpu":
         torch.set_num_threads(max(1, min(8, os.cpu_count() or 1)))
     runner = CameraRunner(args.checkpoint, device, max_batch=args.concurrency)

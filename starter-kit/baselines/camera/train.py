@@ -46,7 +46,6 @@ import features as F  # noqa: E402
 from common import sr_by_kind, train_instructions  # noqa: E402
 from model import Batcher, CameraPolicy, load, save  # noqa: E402
 
-
 COMPILED = {}  # id(model) -> its torch.compile wrapper (kept off the module: not in the state dict)
 
 
@@ -69,15 +68,20 @@ class Rows:
     def add(self, images, state, words, y, aux, aux_mask):
         """Raw rows (numpy; images at render size, resized here on the device)."""
         ims = F.resize_images(torch.from_numpy(np.stack(images)).to(self.device), self.size)
-        new = {"images": ims, "state": torch.from_numpy(np.stack(state)).to(self.device),
-               "words": torch.from_numpy(np.stack(words).astype(np.int16)).to(self.device),
-               "y": torch.from_numpy(np.stack(y).astype(np.float32)).to(self.device),
-               "aux": torch.from_numpy(np.stack(aux)).to(self.device),
-               "aux_mask": torch.from_numpy(np.stack(aux_mask)).to(self.device)}
+        new = {
+            "images": ims,
+            "state": torch.from_numpy(np.stack(state)).to(self.device),
+            "words": torch.from_numpy(np.stack(words).astype(np.int16)).to(self.device),
+            "y": torch.from_numpy(np.stack(y).astype(np.float32)).to(self.device),
+            "aux": torch.from_numpy(np.stack(aux)).to(self.device),
+            "aux_mask": torch.from_numpy(np.stack(aux_mask)).to(self.device),
+        }
         k = len(ims)
         if self.t is None or self.n + k > len(self.t["y"]):
             cap = max(self.n + k, int(1.25 * len(self.t["y"])) if self.t else self.capacity, 1024)
-            grown = {n: torch.empty((cap,) + tuple(v.shape[1:]), dtype=v.dtype, device=self.device) for n, v in new.items()}
+            grown = {
+                n: torch.empty((cap,) + tuple(v.shape[1:]), dtype=v.dtype, device=self.device) for n, v in new.items()
+            }
             if self.t is not None:
                 for n in grown:
                     grown[n][: self.n] = self.t[n][: self.n]
@@ -119,16 +123,25 @@ def expert_rows(rows, vocab_index, args, training_ids):
     deadline = t0 + args.collect_minutes * 60 if args.collect_minutes > 0 else math.inf
     first, staged, n_ep, episodes = {}, empty_rows(), -1, 0
     aux = args.aux_weight > 0
-    stream = ExpertSamples(episodes=args.episodes, workers=args.workers, seed=args.seed, images=True,
-                           history=F.HISTORY, randomise=True, max_tasks=args.max_tasks, privileged_observation=aux,
-                           depth=args.depth,
-                           instructions=training_ids)
+    stream = ExpertSamples(
+        episodes=args.episodes,
+        workers=args.workers,
+        seed=args.seed,
+        images=True,
+        history=F.HISTORY,
+        randomise=True,
+        max_tasks=args.max_tasks,
+        privileged_observation=aux,
+        depth=args.depth,
+        instructions=training_ids,
+    )
     for s in stream:
         start = first.setdefault((s["episode_index"], s["task_index"]), s["step"])
         ims, st = F.from_env(s, (s["step"] - start) * F.CONTROL_DT, args.depth)
         target = aux_of(s.get("privileged_observation"))
-        for lst, v in zip(staged, (ims, st, F.encode(s["sub_task"], vocab_index), np.asarray(s["action"]).reshape(-1),
-                                   *target)):
+        for lst, v in zip(
+            staged, (ims, st, F.encode(s["sub_task"], vocab_index), np.asarray(s["action"]).reshape(-1), *target)
+        ):
             lst.append(v)
         if len(staged[0]) >= 512:
             rows.add(*staged)
@@ -138,8 +151,10 @@ def expert_rows(rows, vocab_index, args, training_ids):
             episodes = n_ep  # episodes completed before this one
             if n_ep % max(1, args.episodes // 10) == 0:
                 el = time.time() - t0
-                log(f"expert episodes {n_ep}/{args.episodes}: {rows.n + len(staged[0])} rows, {el:.0f} s "
-                    f"({(rows.n + len(staged[0])) / max(el, 1e-9):.0f} rows/s)")
+                log(
+                    f"expert episodes {n_ep}/{args.episodes}: {rows.n + len(staged[0])} rows, {el:.0f} s "
+                    f"({(rows.n + len(staged[0])) / max(el, 1e-9):.0f} rows/s)"
+                )
             if time.time() > deadline:
                 log("collection budget spent")
                 break
@@ -148,14 +163,18 @@ def expert_rows(rows, vocab_index, args, training_ids):
     if staged[0]:
         rows.add(*staged)
     secs = time.time() - t0
-    log(f"expert data: {episodes} episodes, {rows.n} rows in {secs:.1f} s ({rows.n / max(secs, 1e-9):.0f} rows/s), "
-        f"{rows.nbytes() / 2**30:.2f} GiB on {rows.device}")
+    log(
+        f"expert data: {episodes} episodes, {rows.n} rows in {secs:.1f} s ({rows.n / max(secs, 1e-9):.0f} rows/s), "
+        f"{rows.nbytes() / 2**30:.2f} GiB on {rows.device}"
+    )
     return {"episodes": episodes, "rows": rows.n, "seconds": secs, "rows_per_s": rows.n / max(secs, 1e-9)}
 
 
 def make_optimizer(model, args):
-    groups = [{"params": model.head_parameters(), "base_lr": args.lr},
-              {"params": model.encoder_parameters(), "base_lr": args.lr * args.encoder_lr_scale}]
+    groups = [
+        {"params": model.head_parameters(), "base_lr": args.lr},
+        {"params": model.encoder_parameters(), "base_lr": args.lr * args.encoder_lr_scale},
+    ]
     return torch.optim.AdamW(groups, lr=args.lr, weight_decay=args.weight_decay, betas=(0.9, 0.98))
 
 
@@ -197,7 +216,9 @@ def fit(model, opt, rows, steps, minutes, peak, args, tag, device):
             last = time.time()
             loss_val = (total / count).item()
             el = time.time() - t0
-            log(f"{tag}: step {i}/{steps} loss {loss_val:.4f} lr {f * args.lr:.2e} ({el:.0f} s, {el / i * 1000:.0f} ms/step)")
+            log(
+                f"{tag}: step {i}/{steps} loss {loss_val:.4f} lr {f * args.lr:.2e} ({el:.0f} s, {el / i * 1000:.0f} ms/step)"
+            )
             total, count = torch.zeros((), device=device), 0
     if count:
         loss_val = (total / count).item()
@@ -223,12 +244,23 @@ def rollout(batcher, vocab_index, env, job, beta, rng, deadline, record=("move",
         wd = F.encode(obs["sub_task"], vocab_index)
         expert = info.get("expert_chunk")
         if expert is not None and obs["sub_task"].split()[0] in record:
-            for lst, v in zip(out, (ims, st, wd, np.asarray(expert, dtype=np.float32).reshape(-1),
-                                    *aux_of(info.get("privileged_observation")))):
+            for lst, v in zip(
+                out,
+                (
+                    ims,
+                    st,
+                    wd,
+                    np.asarray(expert, dtype=np.float32).reshape(-1),
+                    *aux_of(info.get("privileged_observation")),
+                ),
+            ):
                 lst.append(v)
         if beta > 0 and rng.random() < beta and (teacher is not None or expert is not None):
-            chunk = (teacher.chunk(obs, info, (steps - start) * F.CONTROL_DT) if teacher is not None
-                     else np.asarray(expert, dtype=np.float64))
+            chunk = (
+                teacher.chunk(obs, info, (steps - start) * F.CONTROL_DT)
+                if teacher is not None
+                else np.asarray(expert, dtype=np.float64)
+            )
         else:
             chunk = batcher.decide(ims, st, wd)
         for a in chunk[: F.EXECUTE]:
@@ -250,8 +282,14 @@ def run_round(batcher, vocab_index, jobs, args, seed, teacher=None):
     deadline = time.time() + args.rollout_minutes * 60 if args.rollout_minutes > 0 else math.inf
 
     def worker(i):
-        common = dict(images=True, depth=args.depth, history=F.HISTORY, expert=True, randomise=True,
-                      privileged_observation=args.aux_weight > 0 or teacher is not None)
+        common = dict(
+            images=True,
+            depth=args.depth,
+            history=F.HISTORY,
+            expert=True,
+            randomise=True,
+            privileged_observation=args.aux_weight > 0 or teacher is not None,
+        )
         if args.round_env == "task":
             env = KitchenRTaskEnv(task_time_limit=args.round_task_seconds, **common)
         else:
@@ -263,8 +301,18 @@ def run_round(batcher, vocab_index, jobs, args, seed, teacher=None):
                     if not queue:
                         break
                     job = queue.pop()
-                r, o, done = rollout(batcher, vocab_index, env, job, args.beta * 0.5 ** (seed - 1), rng, deadline,
-                                     tuple(args.dagger_kinds.split(",")), args.depth, teacher)
+                r, o, done = rollout(
+                    batcher,
+                    vocab_index,
+                    env,
+                    job,
+                    args.beta * 0.5 ** (seed - 1),
+                    rng,
+                    deadline,
+                    tuple(args.dagger_kinds.split(",")),
+                    args.depth,
+                    teacher,
+                )
                 with lock:
                     for a, b in zip(rows, r):
                         a.extend(b)
@@ -346,31 +394,56 @@ def main():
     ap.add_argument("--rounds", type=int, default=2, help="DAgger rounds")
     ap.add_argument("--round-episodes", type=int, default=64)
     ap.add_argument("--round-steps", type=int, default=4000, help="training steps after each round")
-    ap.add_argument("--aux-weight", type=float, default=0.0,
-                    help="weight of the auxiliary loss: the network also predicts the privileged goal (a move's "
-                    "approach point, a pick's object, a place's target, robot frame) from what it sees, during "
-                    "training only, so the encoder learns to localise; 0 (default, the measured run) leaves it out")
-    ap.add_argument("--init", help="start from this checkpoint (a run split over GPU leases; use another --seed "
-                    "for new expert episodes); its architecture and statistics are kept")
-    ap.add_argument("--instructions", default="1-100",
-                    help="dev instructions (1-based inclusive range) the expert episodes and DAgger rounds draw from; "
-                    "the rest are held out for evaluation")
-    ap.add_argument("--dagger-kinds", default="move",
-                    help="task kinds whose policy-driven decisions the expert labels (comma-separated: move, pick, "
-                    "place). Navigation only by default: labelling pick and place lowered both baselines' pick "
-                    "and place round by round (docs/measured/baseline-gates.md, run 3); with --round-env task the "
-                    "rounds run steps of these kinds")
-    ap.add_argument("--round-env", choices=("task", "plan"), default="task",
-                    help="DAgger episodes: single plan steps of the labelled kinds (KitchenR/Task-v0), or whole plans")
-    ap.add_argument("--round-task-seconds", type=float, default=60.0,
-                    help="with --round-env task: a step's time limit in the rounds (a drive that has not finished by "
-                    "then teaches little more)")
-    ap.add_argument("--beta", type=float, default=0.0,
-                    help="chance the teacher drives a decision in round 1 (halves each round)")
-    ap.add_argument("--teacher", default="expert",
-                    help="who drives the --beta share of the rounds' decisions: `expert`, or a privileged-track "
-                    "checkpoint (privileged/train.py's ckpt.pt; learning by cheating). The expert labels every "
-                    "decision either way")
+    ap.add_argument(
+        "--aux-weight",
+        type=float,
+        default=0.0,
+        help="weight of the auxiliary loss: the network also predicts the privileged goal (a move's "
+        "approach point, a pick's object, a place's target, robot frame) from what it sees, during "
+        "training only, so the encoder learns to localise; 0 (default, the measured run) leaves it out",
+    )
+    ap.add_argument(
+        "--init",
+        help="start from this checkpoint (a run split over GPU leases; use another --seed "
+        "for new expert episodes); its architecture and statistics are kept",
+    )
+    ap.add_argument(
+        "--instructions",
+        default="1-100",
+        help="dev instructions (1-based inclusive range) the expert episodes and DAgger rounds draw from; "
+        "the rest are held out for evaluation",
+    )
+    ap.add_argument(
+        "--dagger-kinds",
+        default="move",
+        help="task kinds whose policy-driven decisions the expert labels (comma-separated: move, pick, "
+        "place). Navigation only by default: labelling pick and place lowered both baselines' pick "
+        "and place round by round (docs/measured/baseline-gates.md, run 3); with --round-env task the "
+        "rounds run steps of these kinds",
+    )
+    ap.add_argument(
+        "--round-env",
+        choices=("task", "plan"),
+        default="task",
+        help="DAgger episodes: single plan steps of the labelled kinds (KitchenR/Task-v0), or whole plans",
+    )
+    ap.add_argument(
+        "--round-task-seconds",
+        type=float,
+        default=60.0,
+        help="with --round-env task: a step's time limit in the rounds (a drive that has not finished by "
+        "then teaches little more)",
+    )
+    ap.add_argument(
+        "--beta", type=float, default=0.0, help="chance the teacher drives a decision in round 1 (halves each round)"
+    )
+    ap.add_argument(
+        "--teacher",
+        default="expert",
+        help="who drives the --beta share of the rounds' decisions: `expert`, or a privileged-track "
+        "checkpoint (privileged/train.py's ckpt.pt; learning by cheating). The expert labels every "
+        "decision either way",
+    )
     ap.add_argument("--envs", type=int, default=os.cpu_count(), help="environments (threads) in DAgger rounds")
     ap.add_argument("--collect-minutes", type=float, default=0.0, help="wall budget of the expert stream (0: none)")
     ap.add_argument("--bc-minutes", type=float, default=0.0, help="wall budget of behaviour cloning (0: none)")
@@ -379,23 +452,35 @@ def main():
     ap.add_argument("--batch", type=int, default=256)
     ap.add_argument("--lr", type=float, default=3e-4, help="peak learning rate of the head")
     ap.add_argument("--encoder-lr-scale", type=float, default=0.1, help="the trunk's rate relative to the head's")
-    ap.add_argument("--round-lr-scale", type=float, default=0.5, help="peak of each DAgger round's cosine, relative to --lr")
+    ap.add_argument(
+        "--round-lr-scale", type=float, default=0.5, help="peak of each DAgger round's cosine, relative to --lr"
+    )
     ap.add_argument("--weight-decay", type=float, default=1e-4)
     ap.add_argument("--warmup", type=int, default=500)
     ap.add_argument("--shift", type=int, default=4, help="random-shift augmentation, pixels (0: off)")
     ap.add_argument("--image-size", type=int, default=96, help="training resolution (the cameras render 128)")
-    ap.add_argument("--depth", action="store_true",
-                    help="also read both cameras' depth (two more views: twice the image memory and trunk work)")
+    ap.add_argument(
+        "--depth",
+        action="store_true",
+        help="also read both cameras' depth (two more views: twice the image memory and trunk work)",
+    )
     ap.add_argument("--d-model", type=int, default=256)
     ap.add_argument("--layers", type=int, default=3)
     ap.add_argument("--max-tasks", type=int, default=0, help="only the first N plan steps of each episode (tests)")
     ap.add_argument("--no-pretrained", action="store_true", help="random trunk (no ImageNet weights)")
-    ap.add_argument("--compile", action="store_true",
-                    help="torch.compile the training forward (H100: 36 instead of 51 ms/step at batch 256, after ~60 s compiling)")
+    ap.add_argument(
+        "--compile",
+        action="store_true",
+        help="torch.compile the training forward (H100: 36 instead of 51 ms/step at batch 256, after ~60 s compiling)",
+    )
     ap.add_argument("--device", default="auto")
     args = ap.parse_args()
 
-    device = torch.device("cuda" if args.device == "auto" and torch.cuda.is_available() else ("cpu" if args.device == "auto" else args.device))
+    device = torch.device(
+        "cuda"
+        if args.device == "auto" and torch.cuda.is_available()
+        else ("cpu" if args.device == "auto" else args.device)
+    )
     if device.type == "cuda":
         # No cudnn.benchmark: on an H100 it autotuned ~50 s per new shape for the same step time.
         torch.backends.cuda.matmul.allow_tf32 = True
@@ -403,9 +488,14 @@ def main():
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(0)
-    logbook = {"args": vars(args), "device": str(device),
-               "hardware": torch.cuda.get_device_name() if device.type == "cuda" else "cpu",
-               "cpu_count": os.cpu_count(), "torch": torch.__version__, "rounds": []}
+    logbook = {
+        "args": vars(args),
+        "device": str(device),
+        "hardware": torch.cuda.get_device_name() if device.type == "cuda" else "cpu",
+        "cpu_count": os.cpu_count(),
+        "torch": torch.__version__,
+        "rounds": [],
+    }
     t_start = time.time()
 
     def write_log():
@@ -429,8 +519,10 @@ def main():
         if list(init_vocab) != list(vocab):
             sys.exit(f"--init {args.init}: its vocabulary differs from this checkout's dev vocabulary")
         if model.config.get("depth", False) != args.depth:
-            sys.exit(f"--init {args.init} was trained {'with' if model.config.get('depth') else 'without'} --depth: "
-                     "pass the same")
+            sys.exit(
+                f"--init {args.init} was trained {'with' if model.config.get('depth') else 'without'} --depth: "
+                "pass the same"
+            )
         if model.config["image_size"] != args.image_size:
             sys.exit(f"--init {args.init} was trained at --image-size {model.config['image_size']}: pass that")
         logbook["init"] = {"checkpoint": str(args.init), "meta": init_meta}
@@ -438,16 +530,34 @@ def main():
             sys.exit(f"--init {args.init} has no auxiliary head: train it afresh with --aux-weight, or leave that out")
     else:
         grid = max(1, math.ceil(args.image_size / 32))
-        model = CameraPolicy(len(vocab), args.image_size, args.d_model, args.layers, grid=grid,
-                             pretrained=not args.no_pretrained, aux=args.aux_weight > 0, depth=args.depth).to(device)
+        model = CameraPolicy(
+            len(vocab),
+            args.image_size,
+            args.d_model,
+            args.layers,
+            grid=grid,
+            pretrained=not args.no_pretrained,
+            aux=args.aux_weight > 0,
+            depth=args.depth,
+        ).to(device)
         model.set_statistics(rows.view("state"), rows.view("y"))
     if args.compile:
         COMPILED[id(model)] = torch.compile(model)
-    logbook["parameters"] = {"total": sum(p.numel() for p in model.parameters()),
-                             "encoder": sum(p.numel() for p in model.encoder_parameters())}
+    logbook["parameters"] = {
+        "total": sum(p.numel() for p in model.parameters()),
+        "encoder": sum(p.numel() for p in model.encoder_parameters()),
+    }
     opt = make_optimizer(model, args)
-    meta = lambda stage: {"stage": stage, "rows": rows.n, "expert_episodes": logbook["expert"]["episodes"],  # noqa: E731
-                          "hardware": logbook["hardware"], "render_size": F.RENDER_SIZE}
+
+    def meta(stage):
+        return {
+            "stage": stage,
+            "rows": rows.n,
+            "expert_episodes": logbook["expert"]["episodes"],
+            "hardware": logbook["hardware"],
+            "render_size": F.RENDER_SIZE,
+        }
+
     logbook["bc"] = fit(model, opt, rows, args.bc_steps, args.bc_minutes, 1.0, args, "bc", device)
     save(out / "ckpt.pt", model, vocab, meta("bc"))
     if device.type == "cuda":
@@ -471,19 +581,34 @@ def main():
         new, outcomes, (finished, cut) = run_round(batcher, vocab_index, jobs, args, r, teacher)
         roll_s = time.time() - t0
         sr = sr_by_kind(outcomes)
-        log(f"round {r}: policy drove {finished}/{args.round_episodes} episodes "
+        log(
+            f"round {r}: policy drove {finished}/{args.round_episodes} episodes "
             f"({cut} cut short at --rollout-minutes) in {roll_s:.0f} s, "
-            + ", ".join(f"{k} {v['success']}/{v['tasks']}" for k, v in sr.items()) + f"; {len(new[0])} new rows")
+            + ", ".join(f"{k} {v['success']}/{v['tasks']}" for k, v in sr.items())
+            + f"; {len(new[0])} new rows"
+        )
         before = rows.n
         for k in range(0, len(new[0]), 512):
             with batcher.lock:
                 rows.add(*(lst[k : k + 512] for lst in new))
         del new
         with batcher.lock:
-            fit_log = fit(model, opt, rows, args.round_steps, args.round_minutes, args.round_lr_scale, args, f"round {r}", device)
-        logbook["rounds"].append({"round": r, "episodes": finished, "episodes_cut_short": cut, "beta": args.beta * 0.5 ** (r - 1),
-                                  "rows_added": rows.n - before, "rows_total": rows.n,
-                                  "sr_while_driving": sr, "rollout_seconds": roll_s, **fit_log})
+            fit_log = fit(
+                model, opt, rows, args.round_steps, args.round_minutes, args.round_lr_scale, args, f"round {r}", device
+            )
+        logbook["rounds"].append(
+            {
+                "round": r,
+                "episodes": finished,
+                "episodes_cut_short": cut,
+                "beta": args.beta * 0.5 ** (r - 1),
+                "rows_added": rows.n - before,
+                "rows_total": rows.n,
+                "sr_while_driving": sr,
+                "rollout_seconds": roll_s,
+                **fit_log,
+            }
+        )
         save(out / "ckpt.pt", model, vocab, meta(f"dagger round {r}"))
         if device.type == "cuda":
             logbook["max_memory_gib"] = torch.cuda.max_memory_allocated() / 2**30
@@ -493,7 +618,9 @@ def main():
     logbook["rows"] = rows.n
     save(out / "ckpt.pt", model, vocab, {**meta("final"), "dagger_rounds": args.rounds})
     write_log()
-    log(f"done in {logbook['train_seconds']:.0f} s: {out / 'ckpt.pt'} ({(out / 'ckpt.pt').stat().st_size / 2**20:.1f} MiB)")
+    log(
+        f"done in {logbook['train_seconds']:.0f} s: {out / 'ckpt.pt'} ({(out / 'ckpt.pt').stat().st_size / 2**20:.1f} MiB)"
+    )
 
 
 if __name__ == "__main__":

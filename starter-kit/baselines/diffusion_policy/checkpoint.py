@@ -7,7 +7,6 @@ import os
 from pathlib import Path
 
 import torch
-
 from features import Normaliser
 from model import DiffusionPolicy
 

@@ -21,7 +21,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-
 from features import CAMERAS, HORIZON, build_vocab, encode_sentence, odometry_features, resize_rgb
 
 N_OBS = 2
@@ -107,9 +106,7 @@ def _available_memory():
 class LeRobotExport:
     """Rows, tasks and decoded images of (the first `max_episodes` episodes of) an export."""
 
-    def __init__(
-        self, path, image_size=96, max_episodes=None, workers=None, episodes=None, odometry=True, log=print
-    ):
+    def __init__(self, path, image_size=96, max_episodes=None, workers=None, episodes=None, odometry=True, log=print):
         import pyarrow.parquet as pq
 
         t0 = time.time()

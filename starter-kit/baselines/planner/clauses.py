@@ -36,7 +36,9 @@ class Clause:
 
     def words(self):
         """The plain words, pronouns included ("hold it")."""
-        return [x if isinstance(x, str) else x.word for x in self.items if isinstance(x, str) or getattr(x, "word", None)]
+        return [
+            x if isinstance(x, str) else x.word for x in self.items if isinstance(x, str) or getattr(x, "word", None)
+        ]
 
     def objects(self):
         return [x.name for x in self.items if isinstance(x, Obj)]
@@ -47,7 +49,7 @@ class Clause:
     def has(self, phrase):
         w = self.words()
         n = len(phrase)
-        return any(tuple(w[i:i + n]) == phrase for i in range(len(w) - n + 1))
+        return any(tuple(w[i : i + n]) == phrase for i in range(len(w) - n + 1))
 
     def __repr__(self):
         tags = [t for t in (self.sub, "prior" if self.prior else None) if t]
@@ -59,8 +61,8 @@ def connective_at(items, k):
     after it but punctuation) closes its clause instead of opening one."""
     for c in sorted(CONNECTIVES, key=len, reverse=True):
         n = len(c)
-        if tuple(x if isinstance(x, str) else None for x in items[k:k + n]) == c:
-            rest = items[k + n:k + n + 1]
+        if tuple(x if isinstance(x, str) else None for x in items[k : k + n]) == c:
+            rest = items[k + n : k + n + 1]
             if c[-1] == "that" and (not rest or rest[0] in PUNCT):
                 return 0
             return n
@@ -104,13 +106,21 @@ def split(items):
             while k < len(items) and items[k] in {"of", "that", "this", "all", "those", "it"}:
                 k += 1
             continue
-        if it in (BEFORE, AFTER) and k + 1 < len(items) and isinstance(items[k + 1], Obj) and (
-            k + 2 >= len(items) or items[k + 2] in PUNCT
+        if (
+            it in (BEFORE, AFTER)
+            and k + 1 < len(items)
+            and isinstance(items[k + 1], Obj)
+            and (k + 2 >= len(items) or items[k + 2] in PUNCT)
         ):
             cur.append(it)  # "move the fork before the apple": an order of deliveries
             k += 1
             continue
-        if it == "when" and cur == [] or it == "once" or (it in (BEFORE, AFTER) and not (k + 1 < len(items) and items[k + 1] == "that")):
+        if (
+            it == "when"
+            and cur == []
+            or it == "once"
+            or (it in (BEFORE, AFTER) and not (k + 1 < len(items) and items[k + 1] == "that"))
+        ):
             close()
             sub = "once" if it == "when" else it
             k += 1
@@ -140,9 +150,18 @@ def merge_object_lists(clauses):
     out = []
     for c in clauses:
         prev = out[-1] if out else None
-        if (prev is not None and prev.sentence == c.sentence and c.sub is None and not c.prior
-                and prev.objects() and not prev.zones() and c.items and isinstance(c.items[0], Obj)
-                and c.zones() and not any(w in VERBS for w in c.words())):
+        if (
+            prev is not None
+            and prev.sentence == c.sentence
+            and c.sub is None
+            and not c.prior
+            and prev.objects()
+            and not prev.zones()
+            and c.items
+            and isinstance(c.items[0], Obj)
+            and c.zones()
+            and not any(w in VERBS for w in c.words())
+        ):
             prev.items = prev.items + ["and"] + c.items
             prev.context = c.context
             continue
@@ -220,7 +239,11 @@ def says_first(c):
     if not any(c.has(m) for m in FIRST_MARKERS):
         return False
     words = c.items
-    k = next(i for i, x in enumerate(words) if isinstance(x, str) and x in {"first", "start", "begin", "starting", "beginning"})
+    k = next(
+        i
+        for i, x in enumerate(words)
+        if isinstance(x, str) and x in {"first", "start", "begin", "starting", "beginning"}
+    )
     mentions = [i for i, x in enumerate(words) if isinstance(x, (Zone, Obj))]
     if not mentions:
         return False

@@ -9,17 +9,29 @@ Step strings are the plan grammar's: `move to the <colour> zone`, `pick the <obj
 """
 
 from clauses import split
-from references import resolve
 from lexicon import (
-    CARRY, DESTINATION, MOVE, ONTO, ORDER_MARKERS, PICK, PLACE, PUT, REPLACE, SOURCE, SWAP, SWAP_PHRASES, VIA,
+    CARRY,
+    DESTINATION,
+    MOVE,
+    ONTO,
+    ORDER_MARKERS,
+    PICK,
+    PLACE,
+    PUT,
+    REPLACE,
+    SOURCE,
+    SWAP,
+    SWAP_PHRASES,
+    VIA,
     VIA_FOLLOWUP,
 )
 from mentions import Obj, Zone, ground
+from references import resolve
 
 
 def has(words, phrase):
     n = len(phrase)
-    return any(tuple(words[i:i + n]) == phrase for i in range(len(words) - n + 1))
+    return any(tuple(words[i : i + n]) == phrase for i in range(len(words) - n + 1))
 
 
 class World:
@@ -86,7 +98,7 @@ class World:
         for c in colours:
             self.move(c)
         self.steps.append(last)
-        self.robot = last[len("move to the "):-len(" zone")]
+        self.robot = last[len("move to the ") : -len(" zone")]
         return True
 
     def insert_vias(self, colours):
@@ -96,7 +108,7 @@ class World:
             return False
         dest = self.steps[k - 1]
         moves = ["move to the %s zone" % c for c in colours if "move to the %s zone" % c != dest]
-        self.steps[k - 1:k - 1] = moves
+        self.steps[k - 1 : k - 1] = moves
         self.last_place += len(moves)
         return True
 
@@ -199,7 +211,7 @@ def propagate_carry(clauses):
     """ "carry it to the counter, then the table, without letting go": the carry said at the
     end covers the earlier clauses of the sentence about the same object, unless they say to
     put it down."""
-    for i, c in enumerate(clauses):
+    for c in clauses:
         c.carry = carries(c)
     for i, c in enumerate(clauses):
         if not c.carry:
@@ -224,7 +236,7 @@ def interpret(w, clause, same_sentence):
     first_verb = None
     for k, it in enumerate(items):
         if isinstance(it, Obj):
-            plain = [x if isinstance(x, str) else None for x in items[max(0, k - 2):k]]
+            plain = [x if isinstance(x, str) else None for x in items[max(0, k - 2) : k]]
             if plain in (["instead", "of"], ["rather", "than"]):
                 continue  # "the cup on the table instead of the plate": not what moves
             if it.name not in objs:
@@ -338,8 +350,12 @@ def interpret(w, clause, same_sentence):
         # "... to the shelf and then on to the table": a second leg of the same delivery.
         lead = next(i for i, x in enumerate(items) if isinstance(x, Zone))
         linking = {"and", "then", "on", "to", "onto", "back", "again", "first", "next", "from", "there", "finally"}
-        again = (same_sentence and w.last_clause_delivered and any(r == "destination" for _, r in zones)
-                 and all(x in linking for x in items[:lead]))
+        again = (
+            same_sentence
+            and w.last_clause_delivered
+            and any(r == "destination" for _, r in zones)
+            and all(x in linking for x in items[:lead])
+        )
         if verb is None and (onto or from_there or again) and clause.context and not carry:
             w.deliver(clause.context, colours[-1], colours[:-1])
             return
@@ -365,8 +381,8 @@ def verb_class(word):
 def role(items, k, objs):
     """What a zone mention is to its clause: "via", "source", "locative" (right after an
     object: "the cup on the table") or "target"."""
-    before = [x if isinstance(x, str) else None for x in items[max(0, k - 3):k]]
-    if any(tuple(before[-len(v):]) == v for v in VIA):
+    before = [x if isinstance(x, str) else None for x in items[max(0, k - 3) : k]]
+    if any(tuple(before[-len(v) :]) == v for v in VIA):
         return "via"
     if before and before[-1] in SOURCE:
         return "source"

@@ -73,10 +73,15 @@ class LlmPlanner:
             msgs.append({"role": "assistant", "content": json.dumps({"plan": ex["plan"]})})
         if self.vision and image:
             url = "data:image/png;base64," + base64.b64encode(image).decode("ascii")
-            msgs.append({"role": "user", "content": [
-                {"type": "text", "text": instruction},
-                {"type": "image_url", "image_url": {"url": url}},
-            ]})
+            msgs.append(
+                {
+                    "role": "user",
+                    "content": [
+                        {"type": "text", "text": instruction},
+                        {"type": "image_url", "image_url": {"url": url}},
+                    ],
+                }
+            )
         else:
             msgs.append({"role": "user", "content": instruction})
         return msgs
@@ -95,8 +100,14 @@ class LlmPlanner:
     def complete(self, messages, scene):
         schema = {
             "type": "object",
-            "properties": {"plan": {"type": "array", "items": {"type": "string", "enum": valid_steps(scene)},
-                                    "minItems": 1, "maxItems": 16}},
+            "properties": {
+                "plan": {
+                    "type": "array",
+                    "items": {"type": "string", "enum": valid_steps(scene)},
+                    "minItems": 1,
+                    "maxItems": 16,
+                }
+            },
             "required": ["plan"],
             "additionalProperties": False,
         }
@@ -104,7 +115,10 @@ class LlmPlanner:
             "model": self.model,
             "messages": messages,
             "temperature": 0,
-            "response_format": {"type": "json_schema", "json_schema": {"name": "plan", "strict": True, "schema": schema}},
+            "response_format": {
+                "type": "json_schema",
+                "json_schema": {"name": "plan", "strict": True, "schema": schema},
+            },
         }
         try:
             answer = self.post(body)
@@ -117,7 +131,7 @@ class LlmPlanner:
         try:
             return answer["choices"][0]["message"]["content"] or ""
         except (KeyError, IndexError, TypeError):
-            raise LlmError("the answer has no choices[0].message.content")
+            raise LlmError("the answer has no choices[0].message.content") from None
 
     def post(self, body):
         self.stats["requests"] += 1
@@ -129,9 +143,9 @@ class LlmPlanner:
             with urllib.request.urlopen(req, timeout=self.timeout) as r:
                 return json.loads(r.read().decode("utf-8"))
         except urllib.error.HTTPError as e:
-            raise LlmError("HTTP %d from %s: %s" % (e.code, self.url, e.read()[:200].decode("utf-8", "replace")))
+            raise LlmError("HTTP %d from %s: %s" % (e.code, self.url, e.read()[:200].decode("utf-8", "replace"))) from e
         except (urllib.error.URLError, OSError, ValueError) as e:
-            raise LlmError("cannot use %s: %s" % (self.url, e))
+            raise LlmError("cannot use %s: %s" % (self.url, e)) from e
 
 
 def completions_url(url):

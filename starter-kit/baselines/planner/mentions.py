@@ -68,7 +68,7 @@ def expand_zone_lists(toks, colours):
                 start = j + 1
                 if start > 0 and out[start - 1] == "the":
                     start -= 1
-                out[start:i + 1] = repl
+                out[start : i + 1] = repl
                 i = start + len(repl)
                 continue
         i += 1
@@ -91,7 +91,7 @@ def ground(text, scene):
     i = 0
     while i < len(toks):
         for p, item in phrases:
-            if p and toks[i:i + len(p)] == p:
+            if p and toks[i : i + len(p)] == p:
                 out.append(item)
                 i += len(p)
                 break
@@ -117,7 +117,7 @@ def fuzzy_zone(toks, i, scene):
         return None
     best = None
     for length in range(2, 9):
-        span = toks[i:i + length]
+        span = toks[i : i + length]
         if len(span) < length or any(not t.isalpha() and t != "-" for t in span):
             break
         c = content(span)
@@ -129,8 +129,10 @@ def fuzzy_zone(toks, i, scene):
                 if not nc or not (nc & c & FURNITURE):
                     continue
                 score = len(c & nc) / len(nc) - 0.1 * len(c - nc)
-                if len(c & nc) / len(nc) >= 0.66 and len(c - nc) <= 1 and (
-                    best is None or (score, length) > (best[0], best[1])
+                if (
+                    len(c & nc) / len(nc) >= 0.66
+                    and len(c - nc) <= 1
+                    and (best is None or (score, length) > (best[0], best[1]))
                 ):
                     best = (score, length, colour)
     if best:
@@ -143,7 +145,7 @@ def ends_with(items, k, phrase):
     n = len(phrase)
     if k < n:
         return False
-    return tuple(items[k - n:k]) == phrase
+    return tuple(items[k - n : k]) == phrase
 
 
 def relative_places(items):
@@ -155,7 +157,7 @@ def relative_places(items):
             hold = ends_with(prev, k, ("on", "to")) or ends_with(prev, k, ("up", "to"))
             subject = k + 1 < len(items) and items[k + 1] in SUBJECT
             if not hold and not subject and any(ends_with(prev, k, r) for r in RELATIVE):
-                after = [x for x in items[k + 1:k + 4] if isinstance(x, str)]
+                after = [x for x in items[k + 1 : k + 4] if isinstance(x, str)]
                 original = any(w in ORIGINAL for w in after)
                 out.append(Zone("of", obj=it.name, original=original))
                 continue

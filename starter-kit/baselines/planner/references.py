@@ -18,8 +18,8 @@ def resolve(items):
     while k < len(items):
         it = items[k]
         plain = [x if isinstance(x, str) else None for x in items]
-        rest = tuple(plain[k:k + 3])
-        hit = next((p for p in sorted(ITS_PLACE, key=len, reverse=True) if rest[:len(p)] == p), None)
+        rest = tuple(plain[k : k + 3])
+        hit = next((p for p in sorted(ITS_PLACE, key=len, reverse=True) if rest[: len(p)] == p), None)
         if hit == ("instead",) and clause_has_zone(out):
             k += 1  # "put it on the red zone instead": the place is said
             continue
@@ -29,19 +29,19 @@ def resolve(items):
             out.append(z)
             k += len(hit)
             continue
-        same = next((p for p in SAME_PLACE if rest[:len(p)] == p), None)
-        if same and plain[k + len(same):k + len(same) + 1] != ["as"] and seen:
+        same = next((p for p in SAME_PLACE if rest[: len(p)] == p), None)
+        if same and plain[k + len(same) : k + len(same) + 1] != ["as"] and seen:
             ref = other_than_current(out, seen)
             if ref:
                 out.append(Zone("of", obj=ref))
                 k += len(same)
                 continue
-        if it == "where" and seen and plain[k + 1:k + 2] == ["you"]:
+        if it == "where" and seen and plain[k + 1 : k + 2] == ["you"]:
             # "where you picked it up", "where you found it": the object's starting place.
             j = next((i for i in range(k + 2, min(k + 6, len(plain))) if plain[i] in PRONOUNS), None)
             if j is not None:
                 out.append(Zone("of", obj=seen[-1][0], original=True))
-                k = j + 1 + (plain[j + 1:j + 2] == ["up"])
+                k = j + 1 + (plain[j + 1 : j + 2] == ["up"])
                 continue
         if isinstance(it, Obj):
             seen.append((it.name, len(out)))
@@ -52,7 +52,7 @@ def resolve(items):
         elif it == "there" and (last_zone is not None or seen):
             # "there": the place said last, else where the object said last is.
             out.append(last_zone if last_zone is not None else Zone("of", obj=seen[-1][0]))
-        elif it == "that" and tuple(plain[k + 1:k + 3]) == ("is", "where") and last_zone is not None:
+        elif it == "that" and tuple(plain[k + 1 : k + 3]) == ("is", "where") and last_zone is not None:
             out.append(last_zone)  # "wherever the plate is, that is where the cup goes"
             k += 3
             continue
@@ -60,11 +60,12 @@ def resolve(items):
             out.append(it)  # "come back without it": not a mention of what to move
         elif it in PRONOUNS and seen:
             relative = any(ends_with(plain, k, r) for r in RELATIVE) and not (
-                ends_with(plain, k, ("on", "to")) or ends_with(plain, k, ("up", "to")))
+                ends_with(plain, k, ("on", "to")) or ends_with(plain, k, ("up", "to"))
+            )
             if it == "one" and not relative:
                 out.append(it)
             elif relative:
-                after = [x for x in plain[k + 1:k + 4] if x]
+                after = [x for x in plain[k + 1 : k + 4] if x]
                 ref = seen[-1][0] if out and out[-1] == "where" else other_than_current(out, seen)
                 if ref:
                     out.append(Zone("of", obj=ref, original=any(a in ORIGINAL for a in after)))

@@ -24,26 +24,36 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 sys.path.insert(0, os.path.normpath(os.path.join(HERE, "..", "..")))  # starter-kit/: kitchen_r_client
 
-from kitchen_r_client.api import ApiError, Client  # noqa: E402
-
 import interpret  # noqa: E402
+from kitchen_r_client.api import ApiError, Client  # noqa: E402
 from scene import parse_brief  # noqa: E402
 from steps import check  # noqa: E402
 
 
 def args_parser():
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--server", default=os.environ.get("KITCHEN_R_SERVER", "http://127.0.0.1:8080"),
-                   help="the Kitchen-R server (KITCHEN_R_SERVER; default http://127.0.0.1:8080)")
+    p.add_argument(
+        "--server",
+        default=os.environ.get("KITCHEN_R_SERVER", "http://127.0.0.1:8080"),
+        help="the Kitchen-R server (KITCHEN_R_SERVER; default http://127.0.0.1:8080)",
+    )
     p.add_argument("--split", choices=["dev", "test"], required=True)
     p.add_argument("--out", required=True, help="plan file to write (JSON Lines)")
     p.add_argument("--images", help="also save each scene's top-down image here (DIR/<scene>.png)")
     p.add_argument("--limit", type=int, help="plan only the first N instructions")
-    p.add_argument("--explain", action="store_true", help="dev: print each instruction whose plan differs from the public one")
-    p.add_argument("--llm", metavar="URL", help="OpenAI-compatible endpoint (e.g. http://127.0.0.1:8000); default: the parser only")
+    p.add_argument(
+        "--explain", action="store_true", help="dev: print each instruction whose plan differs from the public one"
+    )
+    p.add_argument(
+        "--llm", metavar="URL", help="OpenAI-compatible endpoint (e.g. http://127.0.0.1:8000); default: the parser only"
+    )
     p.add_argument("--model", help="model name for --llm")
-    p.add_argument("--llm-key-env", default="OPENAI_API_KEY", metavar="VAR",
-                   help="environment variable holding the endpoint's API key, if it needs one (OPENAI_API_KEY)")
+    p.add_argument(
+        "--llm-key-env",
+        default="OPENAI_API_KEY",
+        metavar="VAR",
+        help="environment variable holding the endpoint's API key, if it needs one (OPENAI_API_KEY)",
+    )
     p.add_argument("--shots", type=int, default=6, help="in-context dev examples per request (6)")
     p.add_argument("--retries", type=int, default=2, help="re-asks after an invalid answer before using the parser (2)")
     p.add_argument("--vision", action="store_true", help="send the scene's top-down image with each request")
@@ -92,8 +102,16 @@ def main(argv=None):
     llm = None
     if a.llm:
         from llm import LlmPlanner
-        llm = LlmPlanner(a.llm, a.model, [d for d in dev if d.get("plan")], key=os.environ.get(a.llm_key_env),
-                         shots=a.shots, retries=a.retries, vision=a.vision)
+
+        llm = LlmPlanner(
+            a.llm,
+            a.model,
+            [d for d in dev if d.get("plan")],
+            key=os.environ.get(a.llm_key_env),
+            shots=a.shots,
+            retries=a.retries,
+            vision=a.vision,
+        )
 
     ems, invalid, how_counts = [], 0, {}
     with open(a.out, "w", encoding="utf-8") as out:
@@ -118,11 +136,18 @@ def main(argv=None):
             if d.get("plan"):
                 ems.append(instruction_em(plan, d["plan"]))
                 if a.explain and ems[-1] < 1:
-                    print("%s EM %.2f  %s\n   public %s\n   ours   %s" % (d["id"], ems[-1], d["instruction"],
-                          " | ".join(d["plan"]), " | ".join(plan)), file=sys.stderr)
+                    print(
+                        "%s EM %.2f  %s\n   public %s\n   ours   %s"
+                        % (d["id"], ems[-1], d["instruction"], " | ".join(d["plan"]), " | ".join(plan)),
+                        file=sys.stderr,
+                    )
     summary = "%d plans for %s written to %s in %.1f s (%s)" % (
-        len(items), a.split, a.out, time.time() - started,
-        ", ".join("%s %d" % kv for kv in sorted(how_counts.items())))
+        len(items),
+        a.split,
+        a.out,
+        time.time() - started,
+        ", ".join("%s %d" % kv for kv in sorted(how_counts.items())),
+    )
     if invalid:
         summary += "; %d do not execute symbolically" % invalid
     print(summary, file=sys.stderr)

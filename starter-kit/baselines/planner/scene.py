@@ -50,7 +50,7 @@ def parse_brief(scene_id, text):
     for line in text.splitlines():
         line = line.strip()
         if line.startswith("Zones:"):
-            for part in line[len("Zones:"):].strip().rstrip(".").split(";"):
+            for part in line[len("Zones:") :].strip().rstrip(".").split(";"):
                 m = ZONE_CLAUSE.match(part.strip())
                 if not m:
                     continue
@@ -60,7 +60,7 @@ def parse_brief(scene_id, text):
                     names = [n.strip() for n in re.split(r",? or ", called) if n.strip()]
                 zones[m.group(1)] = [n.lower() for n in names]
         elif line.startswith("Objects:"):
-            body = line[len("Objects:"):].strip().rstrip(".")
+            body = line[len("Objects:") :].strip().rstrip(".")
             for m in OBJECT_CLAUSE.finditer(body):
                 colour = m.group(2)
                 for name in re.split(r",? and |, ", m.group(1)):

@@ -29,16 +29,16 @@ def check(plan, scene, max_steps=64):
         if not isinstance(step, str) or step not in allowed:
             return "step %d %r is not one of the allowed steps" % (i, step)
         if step.startswith("move to the "):
-            robot = step[len("move to the "):-len(" zone")]
+            robot = step[len("move to the ") : -len(" zone")]
         elif step.startswith("pick the "):
-            obj = step[len("pick the "):]
+            obj = step[len("pick the ") :]
             if held is not None:
                 return "step %d picks the %s while holding the %s" % (i, obj, held)
             if loc.get(obj) != robot:
                 return "step %d picks the %s, which is not in the zone the robot is at" % (i, obj)
             held, loc[obj] = obj, None
         else:
-            obj = step[len("place the "):]
+            obj = step[len("place the ") :]
             if held != obj:
                 return "step %d places the %s, which the robot does not hold" % (i, obj)
             if robot is None:

@@ -21,6 +21,8 @@ import numpy as np
 KINDS = ("move", "pick", "place")
 ROBOT = 26
 FEATURES = ROBOT + 4 + 1 + 3 + 5 + 7 + 10
+# The task-time column (a model trained with `--no-task-time` reads it as 0).
+TIME_INDEX = ROBOT + 4
 HORIZON, ACTION_DIM = 16, 10
 TIME_SCALE = 60.0
 CONTROL_DT = 0.1

@@ -7,17 +7,22 @@ weights (fp32), the layer sizes and the statistics. A 4x512 network is 3.6 MiB, 
 """
 
 import torch
+from features import ACTION_DIM, FEATURES, HORIZON, TIME_INDEX
 from torch import nn
-
-from features import ACTION_DIM, FEATURES, HORIZON
 
 FORMAT = "kitchen-r-privileged-mlp/1"
 
 
 class PrivilegedMLP(nn.Module):
-    def __init__(self, width=512, depth=4, features=FEATURES):
+    def __init__(self, width=512, depth=4, features=FEATURES, task_time=True):
         super().__init__()
-        self.config = {"width": width, "depth": depth, "features": features}
+        # `task_time=False` (train.py --no-task-time): the task's time is read as 0, in training
+        # and serving alike (the checkpoint's config carries it; older checkpoints read it).
+        self.config = {"width": width, "depth": depth, "features": features, "task_time": task_time}
+        mask = torch.ones(features)
+        if not task_time:
+            mask[TIME_INDEX] = 0.0
+        self.register_buffer("input_mask", mask, persistent=False)
         layers, n = [], features
         for _ in range(depth):
             layers += [nn.Linear(n, width), nn.LayerNorm(width), nn.GELU()]
@@ -31,13 +36,14 @@ class PrivilegedMLP(nn.Module):
 
     def set_statistics(self, x, y):
         """Normalisation from training rows (std floored: one-hot and constant columns)."""
+        x = x * self.input_mask.to(x.device)
         self.x_mean.copy_(x.mean(0))
         self.x_std.copy_(x.std(0).clamp_min(1e-2))
         self.y_mean.copy_(y.mean(0))
         self.y_std.copy_(y.std(0).clamp_min(1e-3))
 
     def normalise_x(self, x):
-        return ((x - self.x_mean) / self.x_std).clamp(-10.0, 10.0)
+        return ((x * self.input_mask - self.x_mean) / self.x_std).clamp(-10.0, 10.0)
 
     def normalise_y(self, y):
         return (y - self.y_mean) / self.y_std

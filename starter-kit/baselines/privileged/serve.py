@@ -50,7 +50,9 @@ def main():
     ap.add_argument("--checkpoint", required=True, help="checkpoint written by train.py")
     ap.add_argument("--listen", default="127.0.0.1:50051", help="HOST:PORT; port 0 picks a free port")
     ap.add_argument("--execute", type=int, default=F.EXECUTE, help="actions of each chunk executed before the next Act")
-    ap.add_argument("--concurrency", type=int, default=16, help="Act calls the policy accepts at once (max_concurrency)")
+    ap.add_argument(
+        "--concurrency", type=int, default=16, help="Act calls the policy accepts at once (max_concurrency)"
+    )
     ap.add_argument("--token", default=os.environ.get("POLICY_TOKEN"), help="require this bearer token")
     ap.add_argument("--proto-dir", default=None, help="directory with kitchen_r/policy/v1/policy.proto")
     args = ap.parse_args()

@@ -59,7 +59,12 @@ def expert_rows(episodes, seed, workers, max_tasks=0, instructions=None):
     t0 = time.time()
     n_ep = -1
     for s in ExpertSamples(
-        episodes=episodes, workers=workers, images=False, privileged_observation=True, seed=seed, max_tasks=max_tasks,
+        episodes=episodes,
+        workers=workers,
+        images=False,
+        privileged_observation=True,
+        seed=seed,
+        max_tasks=max_tasks,
         instructions=instructions,
     ):
         key = (s["episode_index"], s["task_index"])
@@ -100,8 +105,9 @@ def rollout(driver, instruction, seed, env, record, beta, rng, label_cap=0):
     while not done:
         if obs["task_index"] != task:
             task, start, labelled = obs["task_index"], steps, 0
-        x = F.from_env(np.asarray(obs["state"]).reshape(-1, 29)[-1], info["privileged_observation"],
-                       (steps - start) * F.CONTROL_DT)
+        x = F.from_env(
+            np.asarray(obs["state"]).reshape(-1, 29)[-1], info["privileged_observation"], (steps - start) * F.CONTROL_DT
+        )
         expert = info.get("expert_chunk")
         kept = label_cap <= 0 or labelled < label_cap
         if expert is not None and kept and info["privileged_observation"]["goal"]["kind"] in record:
@@ -180,18 +186,36 @@ def main():
     ap.add_argument("--rounds", type=int, default=4, help="DAgger rounds")
     ap.add_argument("--round-episodes", type=int, default=200)
     ap.add_argument("--round-steps", type=int, default=10000, help="training steps after each round")
-    ap.add_argument("--instructions", default="1-100",
-                    help="dev instructions (1-based inclusive range) the expert episodes and DAgger rounds draw from; "
-                    "the rest are held out for evaluation")
-    ap.add_argument("--dagger-kinds", default="move",
-                    help="goal kinds whose policy-driven decisions the expert labels (comma-separated: move, pick, "
-                    "place). Navigation only by default: labelling pick and place lowered pick and place SR round "
-                    "by round, with the timed expert and with the closed-loop one alike "
-                    "(docs/measured/baseline-gates.md, run 3)")
-    ap.add_argument("--beta", type=float, default=0.0, help="chance the expert drives a decision in round 1 (halves each round)")
-    ap.add_argument("--label-cap", type=int, default=0,
-                    help="label at most this many decisions of each task in a round (0: all); a failing task "
-                    "otherwise adds up to 150 rows of the states it is stuck in")
+    ap.add_argument(
+        "--instructions",
+        default="1-100",
+        help="dev instructions (1-based inclusive range) the expert episodes and DAgger rounds draw from; "
+        "the rest are held out for evaluation",
+    )
+    ap.add_argument(
+        "--dagger-kinds",
+        default="move",
+        help="goal kinds whose policy-driven decisions the expert labels (comma-separated: move, pick, "
+        "place). Navigation only by default: labelling pick and place lowered pick and place SR round "
+        "by round, with the timed expert and with the closed-loop one alike "
+        "(docs/measured/baseline-gates.md, run 3)",
+    )
+    ap.add_argument(
+        "--beta", type=float, default=0.0, help="chance the expert drives a decision in round 1 (halves each round)"
+    )
+    ap.add_argument(
+        "--label-cap",
+        type=int,
+        default=0,
+        help="label at most this many decisions of each task in a round (0: all); a failing task "
+        "otherwise adds up to 150 rows of the states it is stuck in",
+    )
+    ap.add_argument(
+        "--no-task-time",
+        action="store_true",
+        help="read the task's time as 0 (an experiment: the expert's own data ties time to the "
+        "pick-and-place phase, and its labels for a learner's states no longer do)",
+    )
     ap.add_argument("--envs", type=int, default=os.cpu_count(), help="environments (threads) in DAgger rounds")
     ap.add_argument("--batch", type=int, default=1024)
     ap.add_argument("--lr", type=float, default=1e-3)
@@ -201,19 +225,28 @@ def main():
     ap.add_argument("--device", default="auto")
     args = ap.parse_args()
 
-    device = "cuda" if args.device == "auto" and torch.cuda.is_available() else ("cpu" if args.device == "auto" else args.device)
+    device = (
+        "cuda"
+        if args.device == "auto" and torch.cuda.is_available()
+        else ("cpu" if args.device == "auto" else args.device)
+    )
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(0)
-    logbook = {"args": vars(args), "device": device, "hardware": torch.cuda.get_device_name() if device == "cuda" else "cpu",
-               "cpu_count": os.cpu_count(), "rounds": []}
+    logbook = {
+        "args": vars(args),
+        "device": device,
+        "hardware": torch.cuda.get_device_name() if device == "cuda" else "cpu",
+        "cpu_count": os.cpu_count(),
+        "rounds": [],
+    }
     t_start = time.time()
 
     ids = train_instructions(args.instructions)
     logbook["instructions"] = {"split": "dev", "range": args.instructions, "count": len(ids)}
     X, Y, collect_s = expert_rows(args.episodes, args.seed, args.workers, args.max_tasks, ids)
     logbook["expert"] = {"episodes": args.episodes, "rows": len(X), "seconds": collect_s}
-    model = PrivilegedMLP(args.width, args.depth).to(device)
+    model = PrivilegedMLP(args.width, args.depth, task_time=not args.no_task_time).to(device)
     Xt, Yt = torch.tensor(X, device=device), torch.tensor(Y, device=device)
     model.set_statistics(Xt, Yt)
     total_steps = args.bc_steps + args.rounds * args.round_steps
@@ -225,7 +258,7 @@ def main():
 
     # Rollouts run on a CPU copy: one small forward per decision is faster there than a GPU
     # round trip, and the training copy stays where it is.
-    cpu_model = PrivilegedMLP(args.width, args.depth)
+    cpu_model = PrivilegedMLP(args.width, args.depth, task_time=not args.no_task_time)
     torch.set_num_threads(max(1, min(4, os.cpu_count() or 1)))
     for r in range(1, args.rounds + 1):
         cpu_model.load_state_dict({k: v.cpu() for k, v in model.state_dict().items()})
@@ -235,28 +268,52 @@ def main():
         t0 = time.time()
         beta = args.beta * 0.5 ** (r - 1)
         kinds = set(args.dagger_kinds.split(","))
-        xs, ys, outcomes = run_episodes(Driver(cpu_model), jobs, args.envs, kinds, beta, r, args.max_tasks,
-                                        args.label_cap)
+        xs, ys, outcomes = run_episodes(
+            Driver(cpu_model), jobs, args.envs, kinds, beta, r, args.max_tasks, args.label_cap
+        )
         roll_s = time.time() - t0
         sr = sr_by_kind(outcomes)
-        log(f"round {r}: policy drove {args.round_episodes} episodes in {roll_s:.0f} s, "
-            + ", ".join(f"{k} {v['success']}/{v['tasks']}" for k, v in sr.items()) + f"; {len(xs)} new rows")
+        log(
+            f"round {r}: policy drove {args.round_episodes} episodes in {roll_s:.0f} s, "
+            + ", ".join(f"{k} {v['success']}/{v['tasks']}" for k, v in sr.items())
+            + f"; {len(xs)} new rows"
+        )
         if xs:
             Xt = torch.cat([Xt, torch.tensor(np.stack(xs), device=device)])
             Yt = torch.cat([Yt, torch.tensor(np.stack(ys), device=device)])
         loss, fit_s = fit(model, opt, sched, Xt, Yt, args.round_steps, args.batch, f"round {r}")
-        logbook["rounds"].append({"round": r, "episodes": args.round_episodes, "beta": beta, "rows_added": len(xs),
-                                  "rows_total": len(Xt), "sr_while_driving": sr, "rollout_seconds": roll_s,
-                                  "loss": loss, "fit_seconds": fit_s})
+        logbook["rounds"].append(
+            {
+                "round": r,
+                "episodes": args.round_episodes,
+                "beta": beta,
+                "rows_added": len(xs),
+                "rows_total": len(Xt),
+                "sr_while_driving": sr,
+                "rollout_seconds": roll_s,
+                "loss": loss,
+                "fit_seconds": fit_s,
+            }
+        )
         save(out / "ckpt.pt", model, {"stage": f"dagger round {r}"})
         (out / "train_log.json").write_text(json.dumps(logbook, indent=1) + "\n")
 
     logbook["train_seconds"] = time.time() - t_start
     logbook["rows"] = len(Xt)
-    save(out / "ckpt.pt", model, {"stage": "final", "rows": len(Xt), "expert_episodes": args.episodes,
-                                  "dagger_episodes": args.rounds * args.round_episodes})
+    save(
+        out / "ckpt.pt",
+        model,
+        {
+            "stage": "final",
+            "rows": len(Xt),
+            "expert_episodes": args.episodes,
+            "dagger_episodes": args.rounds * args.round_episodes,
+        },
+    )
     (out / "train_log.json").write_text(json.dumps(logbook, indent=1) + "\n")
-    log(f"done in {logbook['train_seconds']:.0f} s: {out / 'ckpt.pt'} ({(out / 'ckpt.pt').stat().st_size / 2**20:.1f} MiB)")
+    log(
+        f"done in {logbook['train_seconds']:.0f} s: {out / 'ckpt.pt'} ({(out / 'ckpt.pt').stat().st_size / 2**20:.1f} MiB)"
+    )
 
 
 if __name__ == "__main__":

@@ -22,9 +22,8 @@ os.environ.setdefault("KITCHEN_R_ASSETS", str(REPO / "assets"))
 os.environ.setdefault("KITCHEN_R_CONFIGS", str(REPO / "configs"))
 
 try:
-    import torch  # noqa: F401
-
     import gym_kitchen_r  # noqa: F401
+    import torch  # noqa: F401
 except ImportError:  # pragma: no cover
     torch = None
 
@@ -39,20 +38,45 @@ def grpc_like(obs, step, episode="ep-0"):
         prev = s[19:29]
         return SimpleNamespace(
             step=step,
-            images=[SimpleNamespace(camera=c, width=128, height=128, data=np.ascontiguousarray(obs["images"][c][k]).tobytes())
-                    for c in ("base", "gripper")],
-            depth=[SimpleNamespace(camera=c, width=128, height=128,
-                                   data=np.ascontiguousarray(obs["depth"][c][k], dtype="<f4").tobytes())
-                   for c in ("base", "gripper")] if "depth" in obs else [],
-            robot=SimpleNamespace(base_x=s[0], base_y=s[1], base_yaw=s[2], base_v=s[3], base_omega=s[4],
-                                  arm_joints=list(s[5:11]), gripper=s[11], ee_pose=list(s[12:19])),
+            images=[
+                SimpleNamespace(
+                    camera=c, width=128, height=128, data=np.ascontiguousarray(obs["images"][c][k]).tobytes()
+                )
+                for c in ("base", "gripper")
+            ],
+            depth=[
+                SimpleNamespace(
+                    camera=c,
+                    width=128,
+                    height=128,
+                    data=np.ascontiguousarray(obs["depth"][c][k], dtype="<f4").tobytes(),
+                )
+                for c in ("base", "gripper")
+            ]
+            if "depth" in obs
+            else [],
+            robot=SimpleNamespace(
+                base_x=s[0],
+                base_y=s[1],
+                base_yaw=s[2],
+                base_v=s[3],
+                base_omega=s[4],
+                arm_joints=list(s[5:11]),
+                gripper=s[11],
+                ee_pose=list(s[12:19]),
+            ),
             previous_action=[] if not prev.any() else list(prev),
         )
 
     newest = frame(len(state) - 1)
-    return SimpleNamespace(history=[frame(k) for k in range(len(state) - 1)], episode_id=episode, step=step,
-                           task_index=obs["task_index"], sub_task=obs["sub_task"], **{k: getattr(newest, k) for k in
-                                                                                       ("images", "depth", "robot", "previous_action")})
+    return SimpleNamespace(
+        history=[frame(k) for k in range(len(state) - 1)],
+        episode_id=episode,
+        step=step,
+        task_index=obs["task_index"],
+        sub_task=obs["sub_task"],
+        **{k: getattr(newest, k) for k in ("images", "depth", "robot", "previous_action")},
+    )
 
 
 @unittest.skipIf(torch is None, "torch or gym_kitchen_r missing")
@@ -97,10 +121,39 @@ class CameraBaselineTest(unittest.TestCase):
         with tempfile.TemporaryDirectory() as d:
             # One DAgger round of one pick step (KitchenR/Task-v0, cut at 3 s): the closed-loop
             # expert labels the policy's states in a pick. With depth, which the served runner reads too.
-            cmd = [sys.executable, str(HERE / "train.py"), "--out", d, "--episodes", "2", "--bc-steps", "3",
-                   "--rounds", "1", "--round-episodes", "1", "--round-steps", "1", "--envs", "1",
-                   "--dagger-kinds", "pick", "--round-task-seconds", "3", "--instructions", "1-3",
-                   "--depth", "--max-tasks", "1", "--batch", "4", "--workers", "2", "--device", "cpu"]
+            cmd = [
+                sys.executable,
+                str(HERE / "train.py"),
+                "--out",
+                d,
+                "--episodes",
+                "2",
+                "--bc-steps",
+                "3",
+                "--rounds",
+                "1",
+                "--round-episodes",
+                "1",
+                "--round-steps",
+                "1",
+                "--envs",
+                "1",
+                "--dagger-kinds",
+                "pick",
+                "--round-task-seconds",
+                "3",
+                "--instructions",
+                "1-3",
+                "--depth",
+                "--max-tasks",
+                "1",
+                "--batch",
+                "4",
+                "--workers",
+                "2",
+                "--device",
+                "cpu",
+            ]
             subprocess.run(cmd, check=True, capture_output=True, timeout=600)
             logbook = json.loads((Path(d) / "train_log.json").read_text())
             self.assertEqual(logbook["instructions"], {"split": "dev", "range": "1-3", "count": 3})
@@ -130,11 +183,42 @@ class TeacherTest(unittest.TestCase):
         # round (--beta 1) while the expert labels them for the camera policy.
         teacher = REPO / "starter-kit/baselines/privileged/results/h200-2026-11-26/ckpt.pt"
         with tempfile.TemporaryDirectory() as d:
-            cmd = [sys.executable, str(HERE / "train.py"), "--out", d, "--episodes", "2", "--bc-steps", "2",
-                   "--rounds", "1", "--round-episodes", "1", "--round-steps", "1", "--envs", "1",
-                   "--dagger-kinds", "pick", "--round-task-seconds", "40", "--instructions", "1-3",
-                   "--teacher", str(teacher), "--beta", "1", "--max-tasks", "1", "--batch", "4",
-                   "--workers", "2", "--device", "cpu"]
+            cmd = [
+                sys.executable,
+                str(HERE / "train.py"),
+                "--out",
+                d,
+                "--episodes",
+                "2",
+                "--bc-steps",
+                "2",
+                "--rounds",
+                "1",
+                "--round-episodes",
+                "1",
+                "--round-steps",
+                "1",
+                "--envs",
+                "1",
+                "--dagger-kinds",
+                "pick",
+                "--round-task-seconds",
+                "40",
+                "--instructions",
+                "1-3",
+                "--teacher",
+                str(teacher),
+                "--beta",
+                "1",
+                "--max-tasks",
+                "1",
+                "--batch",
+                "4",
+                "--workers",
+                "2",
+                "--device",
+                "cpu",
+            ]
             subprocess.run(cmd, check=True, capture_output=True, timeout=900)
             logbook = json.loads((Path(d) / "train_log.json").read_text())
             self.assertEqual(logbook["teacher"]["checkpoint"], str(teacher))

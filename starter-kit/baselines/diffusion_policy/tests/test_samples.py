@@ -93,7 +93,6 @@ class Features(unittest.TestCase):
         self.assertTrue(((out[:, 9] >= 0) & (out[:, 9] <= 1)).all())
         self.assertTrue(np.isfinite(out).all())
 
-
     def test_the_deadband_zeroes_only_small_base_commands(self):
         chunk = np.zeros((3, 10))
         chunk[:, 0] = [0.005, -0.004, 0.05]

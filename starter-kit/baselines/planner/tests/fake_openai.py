@@ -44,9 +44,17 @@ class FakeOpenAI:
                 if status != 200:
                     self.answer(status, {"error": {"message": content}})
                     return
-                self.answer(200, {"id": "fake", "object": "chat.completion", "model": body.get("model"),
-                                  "choices": [{"index": 0, "finish_reason": "stop",
-                                               "message": {"role": "assistant", "content": content}}]})
+                self.answer(
+                    200,
+                    {
+                        "id": "fake",
+                        "object": "chat.completion",
+                        "model": body.get("model"),
+                        "choices": [
+                            {"index": 0, "finish_reason": "stop", "message": {"role": "assistant", "content": content}}
+                        ],
+                    },
+                )
 
             def answer(self, status, value):
                 data = json.dumps(value).encode("utf-8")

@@ -9,8 +9,12 @@ from llm import LlmPlanner, completions_url, parse_answer
 from steps import check, valid_steps
 
 EXAMPLES = [
-    {"id": "dev-1", "scene": "test_kitchen", "instruction": "Put the lemon on the round table.",
-     "plan": ["move to the amber zone", "pick the lemon", "move to the grey zone", "place the lemon"]},
+    {
+        "id": "dev-1",
+        "scene": "test_kitchen",
+        "instruction": "Put the lemon on the round table.",
+        "plan": ["move to the amber zone", "pick the lemon", "move to the grey zone", "place the lemon"],
+    },
     {"id": "dev-2", "scene": "other", "instruction": "Go to the blue zone.", "plan": ["move to the blue zone"]},
 ]
 PARSER = ["move to the teal zone", "pick the mug"]
@@ -84,7 +88,9 @@ class AnswerTest(unittest.TestCase):
 class CheckTest(unittest.TestCase):
     def test_grammar_and_symbolic_execution(self):
         s = scene()
-        self.assertIsNone(check(["move to the amber zone", "pick the lemon", "move to the teal zone", "place the lemon"], s))
+        self.assertIsNone(
+            check(["move to the amber zone", "pick the lemon", "move to the teal zone", "place the lemon"], s)
+        )
         self.assertIn("not one of the allowed", check(["move to the red zone"], s))
         self.assertIn("not in the zone", check(["move to the grey zone", "pick the lemon"], s))
         self.assertIn("does not hold", check(["move to the grey zone", "place the spoon"], s))

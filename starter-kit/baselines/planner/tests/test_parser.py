@@ -33,8 +33,10 @@ class GroundingTest(unittest.TestCase):
 
 class ClauseTest(unittest.TestCase):
     def clauses(self, text):
-        return [[x.colour if isinstance(x, Zone) else x.name if isinstance(x, Obj) else x for x in c.items]
-                for c in split(resolve(ground(text, scene())))]
+        return [
+            [x.colour if isinstance(x, Zone) else x.name if isinstance(x, Obj) else x for x in c.items]
+            for c in split(resolve(ground(text, scene())))
+        ]
 
     def test_and_between_mentions_stays_in_one_clause_and_before_a_verb_splits(self):
         self.assertEqual(len(self.clauses("Put the mug and the lemon on the grey zone.")), 1)
@@ -53,39 +55,82 @@ class ClauseTest(unittest.TestCase):
 
 class InterpretTest(unittest.TestCase):
     def test_delivery_adds_the_move_and_pick_the_plan_grammar_needs(self):
-        self.assertEqual(plan("Put the lemon on the round table.", scene()), [
-            "move to the amber zone", "pick the lemon", "move to the grey zone", "place the lemon"])
+        self.assertEqual(
+            plan("Put the lemon on the round table.", scene()),
+            ["move to the amber zone", "pick the lemon", "move to the grey zone", "place the lemon"],
+        )
 
     def test_carry_keeps_the_object_in_hand(self):
-        self.assertEqual(plan("Grab the spoon and take it with you to the workbench.", scene()), [
-            "move to the grey zone", "pick the spoon", "move to the amber zone"])
+        self.assertEqual(
+            plan("Grab the spoon and take it with you to the workbench.", scene()),
+            ["move to the grey zone", "pick the spoon", "move to the amber zone"],
+        )
 
     def test_swap_uses_the_first_objects_starting_place(self):
-        self.assertEqual(plan("Swap the lemon and the spoon.", scene()), [
-            "move to the amber zone", "pick the lemon", "move to the grey zone", "place the lemon",
-            "pick the spoon", "move to the amber zone", "place the spoon"])
+        self.assertEqual(
+            plan("Swap the lemon and the spoon.", scene()),
+            [
+                "move to the amber zone",
+                "pick the lemon",
+                "move to the grey zone",
+                "place the lemon",
+                "pick the spoon",
+                "move to the amber zone",
+                "place the spoon",
+            ],
+        )
 
     def test_stops_on_the_way(self):
-        self.assertEqual(plan("Carry the mug to the workbench by way of the round table.", scene()), [
-            "move to the teal zone", "pick the mug", "move to the grey zone", "move to the amber zone", "place the mug"])
+        self.assertEqual(
+            plan("Carry the mug to the workbench by way of the round table.", scene()),
+            [
+                "move to the teal zone",
+                "pick the mug",
+                "move to the grey zone",
+                "move to the amber zone",
+                "place the mug",
+            ],
+        )
 
     def test_its_place_is_where_the_object_before_it_started(self):
-        self.assertEqual(plan("Move the lemon to the teal zone and put the spoon in its place.", scene()), [
-            "move to the amber zone", "pick the lemon", "move to the teal zone", "place the lemon",
-            "move to the grey zone", "pick the spoon", "move to the amber zone", "place the spoon"])
+        self.assertEqual(
+            plan("Move the lemon to the teal zone and put the spoon in its place.", scene()),
+            [
+                "move to the amber zone",
+                "pick the lemon",
+                "move to the teal zone",
+                "place the lemon",
+                "move to the grey zone",
+                "pick the spoon",
+                "move to the amber zone",
+                "place the spoon",
+            ],
+        )
 
     def test_beside_it_refers_to_the_other_object(self):
-        self.assertEqual(plan("Take the lemon to the teal zone, once the spoon is sitting beside it.", scene()), [
-            "move to the grey zone", "pick the spoon", "move to the amber zone", "place the spoon",
-            "pick the lemon", "move to the teal zone", "place the lemon"])
+        self.assertEqual(
+            plan("Take the lemon to the teal zone, once the spoon is sitting beside it.", scene()),
+            [
+                "move to the grey zone",
+                "pick the spoon",
+                "move to the amber zone",
+                "place the spoon",
+                "pick the lemon",
+                "move to the teal zone",
+                "place the lemon",
+            ],
+        )
 
     def test_a_start_with_directive_orders_two_deliveries(self):
-        self.assertEqual(plan("Put the mug and the lemon on the grey zone; start with the lemon.", scene())[:2], [
-            "move to the amber zone", "pick the lemon"])
+        self.assertEqual(
+            plan("Put the mug and the lemon on the grey zone; start with the lemon.", scene())[:2],
+            ["move to the amber zone", "pick the lemon"],
+        )
 
     def test_a_move_to_where_the_robot_is_is_left_out(self):
-        self.assertEqual(plan("Go to the teal zone, then pick up the mug.", scene()), [
-            "move to the teal zone", "pick the mug"])
+        self.assertEqual(
+            plan("Go to the teal zone, then pick up the mug.", scene()), ["move to the teal zone", "pick the mug"]
+        )
 
 
 if __name__ == "__main__":

@@ -14,10 +14,20 @@ from support import BRIEF
 
 import run
 
-DEV = [{"id": "dev-0001", "scene": "test_kitchen", "instruction": "Put the lemon on the round table.",
-        "plan": ["move to the amber zone", "pick the lemon", "move to the grey zone", "place the lemon"]},
-       {"id": "dev-0002", "scene": "test_kitchen", "instruction": "Go to the workbench.",
-        "plan": ["move to the amber zone"]}]
+DEV = [
+    {
+        "id": "dev-0001",
+        "scene": "test_kitchen",
+        "instruction": "Put the lemon on the round table.",
+        "plan": ["move to the amber zone", "pick the lemon", "move to the grey zone", "place the lemon"],
+    },
+    {
+        "id": "dev-0002",
+        "scene": "test_kitchen",
+        "instruction": "Go to the workbench.",
+        "plan": ["move to the amber zone"],
+    },
+]
 TEST = [{"id": "test-0001", "scene": "test_kitchen", "instruction": "Take the mug to the bench under the window."}]
 
 
@@ -70,8 +80,15 @@ class RunTest(unittest.TestCase):
         images = os.path.join(self.dir, "img")
         code, lines, err = self.run_planner("--split", "test", "--images", images)
         self.assertEqual(code, 0, err)
-        self.assertEqual(lines, [{"id": "test-0001", "plan": [
-            "move to the teal zone", "pick the mug", "move to the amber zone", "place the mug"]}])
+        self.assertEqual(
+            lines,
+            [
+                {
+                    "id": "test-0001",
+                    "plan": ["move to the teal zone", "pick the mug", "move to the amber zone", "place the mug"],
+                }
+            ],
+        )
         self.assertIn("/api/v1/scenes/test_kitchen/topdown.png", self.kitchen.paths)
         self.assertTrue(os.path.exists(os.path.join(images, "test_kitchen.png")))
 

@@ -8,11 +8,14 @@ from scene import parse_brief
 class BriefTest(unittest.TestCase):
     def test_zones_names_and_objects_come_from_the_brief(self):
         s = scene()
-        self.assertEqual(s.zones, {
-            "teal": ["the pantry counter", "the counter by the door"],
-            "amber": ["the workbench", "the bench under the window"],
-            "grey": ["the round table", "the table in the corner"],
-        })
+        self.assertEqual(
+            s.zones,
+            {
+                "teal": ["the pantry counter", "the counter by the door"],
+                "amber": ["the workbench", "the bench under the window"],
+                "grey": ["the round table", "the table in the corner"],
+            },
+        )
         self.assertEqual(s.objects, {"mug": "teal", "green bottle": "teal", "lemon": "amber", "spoon": "grey"})
 
     def test_an_unambiguous_head_noun_names_its_object(self):

@@ -65,11 +65,22 @@ class FeaturesTest(unittest.TestCase):
             goal.place.target.extend(g["position"])
         o = pb2.Observation(
             step=130,
-            robot=pb2.RobotState(base_x=s[0], base_y=s[1], base_yaw=s[2], base_v=s[3], base_omega=s[4],
-                                 arm_joints=s[5:11], gripper=s[11], ee_pose=s[12:19]),
+            robot=pb2.RobotState(
+                base_x=s[0],
+                base_y=s[1],
+                base_yaw=s[2],
+                base_v=s[3],
+                base_omega=s[4],
+                arm_joints=s[5:11],
+                gripper=s[11],
+                ee_pose=s[12:19],
+            ),
             previous_action=s[19:29],
             privileged_observation=pb2.PrivilegedObservation(
-                base_x=p["base_pose"][0], base_y=p["base_pose"][1], base_yaw=p["base_pose"][2], goal=goal,
+                base_x=p["base_pose"][0],
+                base_y=p["base_pose"][1],
+                base_yaw=p["base_pose"][2],
+                goal=goal,
                 objects=[pb2.PrivilegedObject(name=x["name"], pose=x["pose"]) for x in p["objects"]],
             ),
         )
@@ -97,10 +108,39 @@ class TrainServeTest(unittest.TestCase):
         kr = kitchen_r_bin()
         with tempfile.TemporaryDirectory() as d:
             run = subprocess.run(
-                [sys.executable, str(BASE / "train.py"), "--out", d, "--episodes", "2", "--workers", "2",
-                 "--bc-steps", "5", "--rounds", "1", "--round-episodes", "1", "--round-steps", "5", "--envs", "1",
-                 "--batch", "32", "--width", "64", "--depth", "2", "--max-tasks", "1", "--device", "cpu"],
-                capture_output=True, text=True, timeout=600,
+                [
+                    sys.executable,
+                    str(BASE / "train.py"),
+                    "--out",
+                    d,
+                    "--episodes",
+                    "2",
+                    "--workers",
+                    "2",
+                    "--bc-steps",
+                    "5",
+                    "--rounds",
+                    "1",
+                    "--round-episodes",
+                    "1",
+                    "--round-steps",
+                    "5",
+                    "--envs",
+                    "1",
+                    "--batch",
+                    "32",
+                    "--width",
+                    "64",
+                    "--depth",
+                    "2",
+                    "--max-tasks",
+                    "1",
+                    "--device",
+                    "cpu",
+                ],
+                capture_output=True,
+                text=True,
+                timeout=600,
             )
             self.assertEqual(run.returncode, 0, run.stdout + run.stderr)
             ck = Path(d) / "ckpt.pt"
@@ -109,8 +149,8 @@ class TrainServeTest(unittest.TestCase):
             self.assertEqual(log["rounds"][0]["round"], 1)
             self.assertGreater(log["expert"]["rows"], 0)
 
-            from model import load
             import features as F
+            from model import load
 
             model, meta = load(ck)
             self.assertEqual(meta["stage"], "final")
@@ -120,7 +160,9 @@ class TrainServeTest(unittest.TestCase):
 
             serve = subprocess.Popen(
                 [sys.executable, str(BASE / "serve.py"), "--checkpoint", str(ck), "--listen", "127.0.0.1:0"],
-                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.STDOUT,
+                text=True,
             )
             try:
                 addr = None
@@ -132,8 +174,9 @@ class TrainServeTest(unittest.TestCase):
                     if "listening grpc=" in line:
                         addr = line.split("listening grpc=")[1].split()[0]
                 self.assertIsNotNone(addr, "serve.py did not print its address")
-                check = subprocess.run([kr, "check-policy", f"http://{addr}"], capture_output=True, text=True,
-                                       timeout=300)
+                check = subprocess.run(
+                    [kr, "check-policy", f"http://{addr}"], capture_output=True, text=True, timeout=300
+                )
                 self.assertEqual(check.returncode, 0, check.stdout + check.stderr)
                 self.assertIn("privileged", check.stdout)
                 self.assertNotIn("FAIL", check.stdout)
@@ -158,15 +201,42 @@ class HeldOutGateTest(unittest.TestCase):
         gate = [sys.executable, str(BASE.parent / "gate.py"), "--track", "privileged", "--bin", kitchen_r_bin()]
         with tempfile.TemporaryDirectory() as d:
             for split, rng in (("test", "2-2"), ("dev", "150-150")):
-                subprocess.run(gate + ["--out", f"{d}/{split}", "--split", split, "--instructions", rng, "--seed", "2",
-                                       "--held-out", "--no-offline", "--jobs", "2", "--serve", serve],
-                               check=True, capture_output=True, text=True, timeout=600)
+                subprocess.run(
+                    gate
+                    + [
+                        "--out",
+                        f"{d}/{split}",
+                        "--split",
+                        split,
+                        "--instructions",
+                        rng,
+                        "--seed",
+                        "2",
+                        "--held-out",
+                        "--no-offline",
+                        "--jobs",
+                        "2",
+                        "--serve",
+                        serve,
+                    ],
+                    check=True,
+                    capture_output=True,
+                    text=True,
+                    timeout=600,
+                )
             part = json.loads(Path(f"{d}/test/summary.json").read_text())
-            self.assertEqual((part["eval_split"], part["eval_instructions"], part["eval_seed"], part["held_out"]),
-                             ("test", "2-2", 2, True))
+            self.assertEqual(
+                (part["eval_split"], part["eval_instructions"], part["eval_seed"], part["held_out"]),
+                ("test", "2-2", 2, True),
+            )
             self.assertEqual(part["eval_episodes"], 1)
-            subprocess.run(gate + ["--out", f"{d}/all", "--combine", f"{d}/test", f"{d}/dev"], check=True,
-                           capture_output=True, text=True, timeout=60)
+            subprocess.run(
+                gate + ["--out", f"{d}/all", "--combine", f"{d}/test", f"{d}/dev"],
+                check=True,
+                capture_output=True,
+                text=True,
+                timeout=60,
+            )
             both = json.loads(Path(f"{d}/all/summary.json").read_text())
             self.assertTrue(both["held_out"])
             self.assertEqual(both["eval_episodes"], 2)
