@@ -45,7 +45,7 @@ pub(crate) struct OracleArgs {
     pub max_concurrency: u32,
     /// Answer every Act only after this many milliseconds, like a learned policy's inference
     /// (the oracle itself answers in microseconds); for measuring how workers cope with slow
-    /// policies (`scripts/bench-slow-policy.sh`). At most 60000.
+    /// policies (`benchmarks/bench-slow-policy.sh`). At most 60000.
     #[arg(long, value_name = "MS", default_value_t = 0,
           value_parser = clap::value_parser!(u64).range(0..=60_000))]
     pub delay_ms: u64,

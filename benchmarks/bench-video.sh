@@ -6,13 +6,13 @@
 # bytes; the rest of the difference is the extra camera renders (every control step instead of
 # every policy query).
 #
-#   KITCHEN_R_BIN=target/release/kitchen-r [POLICY=oracle|still|sweep] bash scripts/bench-video.sh [EPISODES]
+#   KITCHEN_R_BIN=target/release/kitchen-r [POLICY=oracle|still|sweep] bash benchmarks/bench-video.sh [EPISODES]
 #
 # POLICY=oracle (default): `kitchen-r policy oracle`, whose tasks end as soon as they succeed.
 # POLICY=still: the starter kit's policy (starter-kit/policy_server.py; needs
 # starter-kit/requirements.txt), which stands still, so every task runs to its time limit: the
 # most frames and encoding time an episode makes.
-# POLICY=sweep: scripts/sweep_policy.py, which also fails every task but keeps both cameras
+# POLICY=sweep: benchmarks/sweep_policy.py, which also fails every task but keeps both cameras
 # moving: the most bytes an episode makes, what storage budgets must plan for.
 # EPISODES (default 3): the first dev instructions. Everything listens on 127.0.0.1 and is
 # stopped on exit.

@@ -6,7 +6,7 @@
 # and the scaling efficiency, then a second run in which a worker is added mid-run and another
 # stopped with SIGTERM, and checks that no episode was lost or counted twice.
 #
-#   KITCHEN_R_BIN=target/release/kitchen-r bash scripts/bench-scale-out.sh [INSTRUCTIONS]
+#   KITCHEN_R_BIN=target/release/kitchen-r bash benchmarks/bench-scale-out.sh [INSTRUCTIONS]
 #
 # INSTRUCTIONS (default 8) dev instructions per run; with offline MSE on (the default) each
 # gives an online and an offline episode. Everything listens on 127.0.0.1 and every process is

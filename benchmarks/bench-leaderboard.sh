@@ -9,7 +9,7 @@
 # the leaderboard does not read them. The server is then started again and loaded with wrk on
 # loopback for a bounded time.
 #
-# Usage: scripts/bench-leaderboard.sh [DURATION_S=10] [CONNECTIONS=32]
+# Usage: benchmarks/bench-leaderboard.sh [DURATION_S=10] [CONNECTIONS=32]
 # Needs: wrk (apt-get install -y wrk), python3, curl. Honours CARGO_TARGET_DIR; KITCHEN_R_BIN=path
 # uses an already built binary instead of building the release one.
 set -euo pipefail

@@ -5,7 +5,7 @@
 # Both render two 128x128 RGB-D cameras for every policy query; the gRPC path also encodes them
 # and sends them over the socket. Prints episodes/min for each and their ratio.
 #
-#   KITCHEN_R_BIN=target/release/kitchen-r bash scripts/bench-network-tax.sh [EPISODES]
+#   KITCHEN_R_BIN=target/release/kitchen-r bash benchmarks/bench-network-tax.sh [EPISODES]
 set -euo pipefail
 bin=${KITCHEN_R_BIN:-target/release/kitchen-r}
 n=${1:-10}

@@ -8,7 +8,7 @@
 #         pip download --python-version 3.12 --only-binary=:all: --no-deps -d target/device/wheels \
 #             gymnasium cloudpickle farama-notifications typing-extensions
 #         strip -o /tmp/kitchen-r target/release/kitchen-r && xz -c /tmp/kitchen-r > target/device/kitchen-r.xz
-# There:  bash scripts/device-bench-python.sh      (figures in $OUT, or /tmp/kr-bench)
+# There:  bash benchmarks/device-bench-python.sh      (figures in $OUT, or /tmp/kr-bench)
 set -euo pipefail
 OUT="${OUT:-/tmp/kr-bench}"
 mkdir -p "$OUT"
@@ -18,7 +18,7 @@ chmod +x /tmp/kitchen-r
 export KITCHEN_R_ASSETS="$PWD/assets" KITCHEN_R_CONFIGS="$PWD/configs" RUST_LOG=warn
 CORES="$(nproc)"
 echo "== $CORES cores; $(python3 --version)"
-[ "${SAMPLES:-1}" = 0 ] || python3 scripts/bench_samples.py --episodes "${SAMPLE_EPISODES:-480}" --workers "$CORES" \
+[ "${SAMPLES:-1}" = 0 ] || python3 benchmarks/bench_samples.py --episodes "${SAMPLE_EPISODES:-480}" --workers "$CORES" \
   --collect "${COLLECT_EPISODES:-64}" --bin /tmp/kitchen-r --json "$OUT/samples.json" | tee "$OUT/samples.txt"
-python3 scripts/bench_python_env.py --episodes 6 --envs 2 --repeat "${REPEAT:-5}" --bin /tmp/kitchen-r | tee "$OUT/env_2.txt"
-python3 scripts/bench_python_env.py --episodes 6 --envs "$CORES" --bin /tmp/kitchen-r | tee "$OUT/env_$CORES.txt"
+python3 benchmarks/bench_python_env.py --episodes 6 --envs 2 --repeat "${REPEAT:-5}" --bin /tmp/kitchen-r | tee "$OUT/env_2.txt"
+python3 benchmarks/bench_python_env.py --episodes 6 --envs "$CORES" --bin /tmp/kitchen-r | tee "$OUT/env_$CORES.txt"

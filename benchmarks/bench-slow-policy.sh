@@ -6,7 +6,7 @@
 # `max_episodes` (8 per slot; an episode holds a core only while it simulates). Prints episodes
 # per minute of each and the ratio, and checks both runs scored exactly alike.
 #
-#   KITCHEN_R_BIN=target/release/kitchen-r bash scripts/bench-slow-policy.sh [INSTRUCTIONS] [DELAY_MS]
+#   KITCHEN_R_BIN=target/release/kitchen-r bash benchmarks/bench-slow-policy.sh [INSTRUCTIONS] [DELAY_MS]
 #
 # INSTRUCTIONS (default 8) dev instructions per run; with offline MSE on (the default) each gives
 # an online and an offline episode. Everything listens on 127.0.0.1 and is stopped on exit.

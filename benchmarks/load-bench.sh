@@ -22,9 +22,9 @@
 #
 # Defaults are the target: 20,000 submissions from 100 teams, 32 readers, 20 uploads/s for
 # 60 s. Arguments go to `kitchen-r bench load`, e.g.
-#   scripts/load-bench.sh --submissions 2000 --teams 20 --readers 8 --seconds 10
-#   scripts/load-bench.sh --json > load.json
-#   scripts/load-bench.sh --server http://127.0.0.1:8080   # a running server (KITCHEN_R_ADMIN_TOKEN)
+#   benchmarks/load-bench.sh --submissions 2000 --teams 20 --readers 8 --seconds 10
+#   benchmarks/load-bench.sh --json > load.json
+#   benchmarks/load-bench.sh --server http://127.0.0.1:8080   # a running server (KITCHEN_R_ADMIN_TOKEN)
 # See `kitchen-r bench load --help` for every flag. Honours CARGO_TARGET_DIR; KITCHEN_R_BIN=path
 # uses an already built binary instead of building the release one.
 set -euo pipefail

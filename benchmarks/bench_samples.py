@@ -1,6 +1,6 @@
 """Expert training data per minute: streamed samples against the LeRobot export path.
 
-    python3 scripts/bench_samples.py [--episodes N] [--workers W] [--collect M] [--bin BIN] [--json OUT]
+    python3 benchmarks/bench_samples.py [--episodes N] [--workers W] [--collect M] [--bin BIN] [--json OUT]
 
 1. ``gym_kitchen_r.ExpertSamples(episodes=N, workers=W)``: the expert over collection episodes
    0..N-1 (seed 0, the paper's randomisation), one sample per decision (every 8 control steps:

@@ -2,9 +2,9 @@
 """A legal policy that fails every task while keeping both cameras moving: the base creeps and
 turns, the hand sweeps side to side and the gripper opens and closes. Nearly static frames (the
 starter kit's stand-still policy) compress far better, so this is the bench's worst case for
-video bytes per episode (scripts/bench-video.sh, POLICY=sweep).
+video bytes per episode (benchmarks/bench-video.sh, POLICY=sweep).
 
-Run:  python3 scripts/sweep_policy.py --listen 127.0.0.1:0   (prints `listening grpc=HOST:PORT`)
+Run:  python3 benchmarks/sweep_policy.py --listen 127.0.0.1:0   (prints `listening grpc=HOST:PORT`)
 """
 
 import argparse

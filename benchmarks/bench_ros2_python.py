@@ -5,7 +5,7 @@ from the workers"): the expert through the first three dev instructions' first t
 ``scripts/ros2-watch.py`` reading every message; ``--rounds`` interleaved rounds, each mode in a
 fresh process (one publisher per process).
 
-    python3 scripts/bench_ros2_python.py [--rounds 3] [--no-images] [--domain 77]
+    python3 benchmarks/bench_ros2_python.py [--rounds 3] [--no-images] [--domain 77]
 
 Needs the ``gym_kitchen_r`` package (``pip install ./python``) and, for the subscriber,
 ``cyclonedds``. Publishes on loopback only, in ``--domain``.

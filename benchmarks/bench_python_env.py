@@ -1,6 +1,6 @@
 """What the Python environment costs over the Rust runner, and what a vector env gains.
 
-    python3 scripts/bench_python_env.py [--episodes N] [--bin target/release/kitchen-r]
+    python3 benchmarks/bench_python_env.py [--episodes N] [--bin target/release/kitchen-r]
 
 Three runs over the same first N dev instructions (run seed 0), the expert choosing every
 action and both 128x128 RGB cameras rendered at every control step in all three:

@@ -3,12 +3,12 @@
 server with local workers, then the wait from a first request of each episode's video to a
 playable file.
 
-    python3 scripts/bench-video-demand.py [--bin target/release/kitchen-r] [--episodes 6]
+    python3 benchmarks/bench-video-demand.py [--bin target/release/kitchen-r] [--episodes 6]
         [--policy oracle|still|sweep] [--videos on|off] [--ask 3] [--workers 2]
 
 1. Starts a policy on loopback (`oracle`: `kitchen-r policy oracle`, whose tasks end as soon as
    they succeed; `still`: the starter kit's stand-still policy and `sweep`:
-   scripts/sweep_policy.py, which fail every task so every task runs to its time limit: the
+   benchmarks/sweep_policy.py, which fail every task so every task runs to its time limit: the
    longest videos; both need `pip install -r starter-kit/requirements.txt`).
 2. Starts `kitchen-r serve --workers N` on a fresh SQLite file with `[video] enabled` as asked,
    registers the policy as an organiser reference run of the first EPISODES dev instructions,
@@ -70,7 +70,7 @@ def main():
         policy_cmd = {
             "oracle": [a.bin, "policy", "oracle", "--listen", "127.0.0.1:0", "--max-concurrency", "4"],
             "still": [sys.executable, str(ROOT / "starter-kit/policy_server.py"), "--listen", "127.0.0.1:0"],
-            "sweep": [sys.executable, str(ROOT / "scripts/sweep_policy.py"), "--listen", "127.0.0.1:0"],
+            "sweep": [sys.executable, str(ROOT / "benchmarks/sweep_policy.py"), "--listen", "127.0.0.1:0"],
         }[a.policy]
         endpoint = "http://" + ready(policy_cmd, "listening grpc=").split("=", 1)[1]
         line = ready([a.bin, "serve", "--workers", str(a.workers), "--config", str(work / "server.toml")], "listening ")
