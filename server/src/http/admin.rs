@@ -24,7 +24,6 @@ use tokio::io::AsyncReadExt;
 use super::extract::{ClientAddr, PathArg};
 use super::session;
 use crate::error::ServiceError;
-use crate::service::admin::{CSRF_SLOT, login_page};
 use crate::service::sessions::{Login, Role};
 use crate::service::{AppState, Caller};
 
@@ -193,12 +192,12 @@ async fn page(
     let csrf = session::csrf(&headers, COOKIE);
     match admin {
         Some(a) => {
-            let body = s.admin_page(a).await?.replacen(CSRF_SLOT, &csrf.field, 1);
+            let body = page::console(&s.admin_console(a).await?, &csrf.field);
             Ok(session::html_with(StatusCode::OK, body, &csrf))
         }
         None => Ok(session::html_with(
             StatusCode::UNAUTHORIZED,
-            login_page(None, &csrf.field),
+            page::login(None, &csrf.field),
             &csrf,
         )),
     }
@@ -230,7 +229,7 @@ struct CsrfForm {
 /// The login form again, with `message`, answered with `status`.
 fn login_again(headers: &HeaderMap, status: StatusCode, message: &str) -> Response {
     let csrf = session::csrf(headers, COOKIE);
-    session::html_with(status, login_page(Some(message), &csrf.field), &csrf)
+    session::html_with(status, page::login(Some(message), &csrf.field), &csrf)
 }
 
 /// `POST /admin/login` (form `token=...&csrf=...`): the organiser token opens a session.
@@ -299,5 +298,6 @@ async fn logout(
     ))
 }
 
+mod page;
 #[cfg(test)]
 mod tests;

@@ -91,7 +91,7 @@ pub(crate) fn csv(board: &Leaderboard) -> String {
     out
 }
 
-/// HTML-escape text (team names are untrusted); also used by the organiser's console page.
+/// HTML-escape text (team names are untrusted).
 pub(crate) fn escape(s: &str) -> String {
     s.replace('&', "&amp;")
         .replace('<', "&lt;")

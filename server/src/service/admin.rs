@@ -17,10 +17,6 @@
 //! Workers are known by their leases and recorded results (see [`crate::store::admin`]): a
 //! worker that has held no lease and reported nothing for [`WORKER_WINDOW_MS`] is not listed.
 
-mod page;
-
-pub(crate) use page::{CSRF_SLOT, login as login_page};
-
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
@@ -353,11 +349,6 @@ impl AppState {
             workers: self.admin_workers(admin).await?,
             runs: self.admin_runs(admin).await?,
         })
-    }
-
-    /// The console as an HTML page (every value escaped).
-    pub(crate) async fn admin_page(&self, admin: Organiser) -> Result<String, ServiceError> {
-        Ok(page::console(&self.admin_console(admin).await?))
     }
 
     /// Stop an active policy run and give its team the quota back.

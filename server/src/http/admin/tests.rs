@@ -109,7 +109,7 @@ async fn the_page_logs_in_with_a_strict_http_only_cookie() {
     let (status, headers, body) = call(&app, Request::get("/admin").body(Body::empty()).unwrap()).await;
     assert_eq!(status, StatusCode::UNAUTHORIZED);
     assert_eq!(headers[header::CONTENT_TYPE], "text/html; charset=utf-8");
-    assert!(String::from_utf8(body.clone()).unwrap().contains("name=token"));
+    assert!(String::from_utf8(body.clone()).unwrap().contains("name=\"token\""));
     assert_eq!(headers[header::CACHE_CONTROL], "no-store");
     assert!(headers.contains_key(header::CONTENT_SECURITY_POLICY));
 
@@ -254,7 +254,7 @@ async fn the_page_logs_in_with_a_strict_http_only_cookie() {
 fn run_row(page: &str, run: i64) -> &str {
     let runs = &page[page.find("<h2>Runs</h2>").expect("a runs section")..];
     let start = runs
-        .find(&format!("<tr><td class=n>{run}</td>"))
+        .find(&format!("<tr><td class=\"n\">{run}</td>"))
         .unwrap_or_else(|| panic!("no row of run {run} in {page}"));
     let row = &runs[start..];
     &row[..row.find("</tr>").unwrap()]
@@ -296,7 +296,7 @@ async fn the_console_names_each_runs_observation_track_in_json_and_on_the_page()
     assert_eq!(track(privileged.run_id), ("alpha", "privileged"), "{v:#}");
     assert_eq!(track(standard.run_id), ("bravo", "standard"), "{v:#}");
 
-    let page = f.state.admin_page(f.admin().await).await.unwrap();
+    let page = page::console(&f.state.admin_console(f.admin().await).await.unwrap(), "");
     assert!(page.contains("<th>Observations</th>"), "{page}");
     let row = run_row(&page, privileged.run_id);
     assert!(
@@ -308,4 +308,37 @@ async fn the_console_names_each_runs_observation_track_in_json_and_on_the_page()
         row.contains("<td>bravo</td>") && row.contains("<td>standard</td>"),
         "{row}"
     );
+}
+
+#[tokio::test]
+async fn the_console_page_escapes_what_others_wrote() {
+    let f = fixture(FakeProbe::ok(8), |c| c.quota.per_minute = 0).await;
+    for team in ["alpha", "bravo"] {
+        let token = f.team(team).await;
+        f.state
+            .register_policy(
+                &f.caller(&token).await,
+                f.request(kitchen_r_core::dataset::Split::Dev),
+            )
+            .await
+            .unwrap();
+    }
+    // Worker ids are the workers' own text: the page escapes them like every other value.
+    let w1 = "<i>w1</i>";
+    let held = f.lease(w1, 2).await;
+    let r = f.report(w1, &held[0], |_| true, 0.0);
+    f.state.report_result(f.worker().await, r).await.unwrap();
+    let page = page::console(
+        &f.state.admin_console(f.admin().await).await.unwrap(),
+        "<!--csrf-->",
+    );
+    assert!(page.contains("&lt;i&gt;w1&lt;/i&gt;"), "{page}");
+    assert!(!page.contains(w1), "worker ids are escaped");
+    assert!(page.contains("bravo") && page.contains(&held[1].episode_key));
+    assert!(
+        page.contains("<!--csrf--><button>Log out</button>"),
+        "the CSRF field goes in as markup"
+    );
+    let login = page::login(Some("<b>bad</b> token"), "");
+    assert!(login.contains("&lt;b&gt;bad&lt;/b&gt; token") && !login.contains("<b>bad</b>"));
 }
