@@ -109,7 +109,11 @@ async fn the_page_logs_in_with_a_strict_http_only_cookie() {
     let (status, headers, body) = call(&app, Request::get("/admin").body(Body::empty()).unwrap()).await;
     assert_eq!(status, StatusCode::UNAUTHORIZED);
     assert_eq!(headers[header::CONTENT_TYPE], "text/html; charset=utf-8");
-    assert!(String::from_utf8(body.clone()).unwrap().contains("name=\"token\""));
+    assert!(
+        String::from_utf8(body.clone())
+            .unwrap()
+            .contains("name=\"token\"")
+    );
     assert_eq!(headers[header::CACHE_CONTROL], "no-store");
     assert!(headers.contains_key(header::CONTENT_SECURITY_POLICY));
 
