@@ -1,10 +1,10 @@
 //! An episode driven one action at a time from outside: the Python environment's `step`.
 //!
-//! It is not a second runner. The episode runs in [`run_episode`](crate::runner::run_episode) on a thread of its own, with
-//! a relay as its policy: at every decision point the relay hands the decision out and waits
-//! for the next action, which it returns as a chunk that the runner executes one action of
-//! (`actions_executed_per_chunk = 1`). Task starts and ends, success checks, time limits,
-//! teleport on failure and the chunk rules (quaternion and gripper corrections, counted as
+//! It is not a second runner. The episode runs in [`run_episode`](crate::runner::run_episode) on a
+//! thread of its own, with a relay as its policy: at every decision point the relay hands the
+//! decision out and waits for the next action, which it returns as a chunk that the runner executes
+//! one action of (`actions_executed_per_chunk = 1`). Task starts and ends, success checks, time
+//! limits, teleport on failure and the chunk rules (quaternion and gripper corrections, counted as
 //! warnings) are therefore the leaderboard's own, and the same seed gives the same episode as
 //! `kitchen-r eval` and the workers.
 //!
@@ -575,10 +575,11 @@ const SPIN: Duration = Duration::from_millis(1);
 /// vector env's episodes on a machine with fewer cores than environments).
 const DRIVER_SPIN: Duration = Duration::from_millis(10);
 
-/// The driver answers a decision within a fraction of a millisecond (it converts the decision
-/// and hands back an action), and waking a sleeping thread costs about as much on a virtual
-/// machine: so the episode's thread polls for the answer for up to [`SPIN`], yielding its core
-/// between polls, before it sleeps. Timing only: what is received is the same.
+/// Receive from `rx`, polling for up to `spin` (yielding the core between polls) before sleeping.
+/// Each side answers the other within milliseconds (the driver converts a decision and hands back
+/// an action within a fraction of one, [`SPIN`]; a control step takes a few, [`DRIVER_SPIN`]), and
+/// waking a sleeping thread costs about as much on a virtual machine. Timing only: what is
+/// received is the same.
 fn recv_soon<T>(rx: &Receiver<T>, spin: Duration) -> Result<T, RecvError> {
     let started = Instant::now();
     loop {

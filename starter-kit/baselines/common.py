@@ -6,7 +6,8 @@ keep one definition each:
   phases are timed from a task's start);
 - `sr_by_kind`: success counts per task kind of the episodes a policy drove in training;
 - `instruction_range` / `train_instructions`: the `--instructions A-B` range a run trains on or a
-  gate evaluates (the dev instructions outside a training range stay held out).
+  gate evaluates (the dev instructions outside a training range stay held out);
+- `add_round_args`: the training scripts' `--instructions` and `--dagger-kinds`, one text each.
 """
 
 import re
@@ -68,3 +69,22 @@ def train_instructions(text):
         probe.close()
     lo, hi = instruction_range(text, len(ids))
     return ids[lo:hi]
+
+
+def add_round_args(ap):
+    """`--instructions` and `--dagger-kinds`, as both training scripts take them."""
+    ap.add_argument(
+        "--instructions",
+        default="1-100",
+        help="dev instructions (1-based inclusive range) the expert episodes and DAgger rounds draw from; "
+        "the rest are held out for evaluation",
+    )
+    ap.add_argument(
+        "--dagger-kinds",
+        default="move",
+        help="task kinds whose policy-driven decisions the expert labels (comma-separated: move, pick, "
+        "place). Navigation only by default: labelling pick and place lowered both baselines' pick and "
+        "place round by round, with the timed expert and with the closed-loop one alike "
+        "(docs/measured/baseline-gates.md, run 3); with the camera baseline's --round-env task the rounds "
+        "run steps of these kinds",
+    )

@@ -43,7 +43,7 @@ sys.path.insert(0, str(HERE))
 sys.path.insert(1, str(HERE.parent))  # baselines/, for common
 
 import features as F  # noqa: E402
-from common import sr_by_kind, train_instructions  # noqa: E402
+from common import add_round_args, sr_by_kind, train_instructions  # noqa: E402
 from model import Batcher, CameraPolicy, load, save  # noqa: E402
 
 COMPILED = {}  # id(model) -> its torch.compile wrapper (kept off the module: not in the state dict)
@@ -407,20 +407,7 @@ def main():
         help="start from this checkpoint (a run split over GPU leases; use another --seed "
         "for new expert episodes); its architecture and statistics are kept",
     )
-    ap.add_argument(
-        "--instructions",
-        default="1-100",
-        help="dev instructions (1-based inclusive range) the expert episodes and DAgger rounds draw from; "
-        "the rest are held out for evaluation",
-    )
-    ap.add_argument(
-        "--dagger-kinds",
-        default="move",
-        help="task kinds whose policy-driven decisions the expert labels (comma-separated: move, pick, "
-        "place). Navigation only by default: labelling pick and place lowered both baselines' pick "
-        "and place round by round (docs/measured/baseline-gates.md, run 3); with --round-env task the "
-        "rounds run steps of these kinds",
-    )
+    add_round_args(ap)
     ap.add_argument(
         "--round-env",
         choices=("task", "plan"),

@@ -38,7 +38,7 @@ sys.path.insert(0, str(HERE))
 sys.path.insert(1, str(HERE.parent))  # baselines/, for common
 
 import features as F  # noqa: E402
-from common import sr_by_kind, train_instructions  # noqa: E402
+from common import add_round_args, sr_by_kind, train_instructions  # noqa: E402
 from model import PrivilegedMLP, save  # noqa: E402
 
 
@@ -186,20 +186,7 @@ def main():
     ap.add_argument("--rounds", type=int, default=4, help="DAgger rounds")
     ap.add_argument("--round-episodes", type=int, default=200)
     ap.add_argument("--round-steps", type=int, default=10000, help="training steps after each round")
-    ap.add_argument(
-        "--instructions",
-        default="1-100",
-        help="dev instructions (1-based inclusive range) the expert episodes and DAgger rounds draw from; "
-        "the rest are held out for evaluation",
-    )
-    ap.add_argument(
-        "--dagger-kinds",
-        default="move",
-        help="goal kinds whose policy-driven decisions the expert labels (comma-separated: move, pick, "
-        "place). Navigation only by default: labelling pick and place lowered pick and place SR round "
-        "by round, with the timed expert and with the closed-loop one alike "
-        "(docs/measured/baseline-gates.md, run 3)",
-    )
+    add_round_args(ap)
     ap.add_argument(
         "--beta", type=float, default=0.0, help="chance the expert drives a decision in round 1 (halves each round)"
     )

@@ -121,39 +121,7 @@ class CameraBaselineTest(unittest.TestCase):
         with tempfile.TemporaryDirectory() as d:
             # One DAgger round of one pick step (KitchenR/Task-v0, cut at 3 s): the closed-loop
             # expert labels the policy's states in a pick. With depth, which the served runner reads too.
-            cmd = [
-                sys.executable,
-                str(HERE / "train.py"),
-                "--out",
-                d,
-                "--episodes",
-                "2",
-                "--bc-steps",
-                "3",
-                "--rounds",
-                "1",
-                "--round-episodes",
-                "1",
-                "--round-steps",
-                "1",
-                "--envs",
-                "1",
-                "--dagger-kinds",
-                "pick",
-                "--round-task-seconds",
-                "3",
-                "--instructions",
-                "1-3",
-                "--depth",
-                "--max-tasks",
-                "1",
-                "--batch",
-                "4",
-                "--workers",
-                "2",
-                "--device",
-                "cpu",
-            ]
+            cmd = tiny_round(d, "--bc-steps", "3", "--round-task-seconds", "3", "--depth")
             subprocess.run(cmd, check=True, capture_output=True, timeout=600)
             logbook = json.loads((Path(d) / "train_log.json").read_text())
             self.assertEqual(logbook["instructions"], {"split": "dev", "range": "1-3", "count": 3})
@@ -176,6 +144,17 @@ class CameraBaselineTest(unittest.TestCase):
             self.assertTrue(((chunk[:, 9] >= 0) & (chunk[:, 9] <= 1)).all())
 
 
+def tiny_round(out, *extra):
+    """A train.py run on the CPU small enough for CI: 2 expert episodes of dev 1-3, one DAgger
+    round of one pick step (KitchenR/Task-v0) labelled by the expert; `extra` sets the rest."""
+    return [
+        sys.executable, str(HERE / "train.py"), "--out", out, "--episodes", "2", "--rounds", "1",
+        "--round-episodes", "1", "--round-steps", "1", "--envs", "1", "--dagger-kinds", "pick",
+        "--instructions", "1-3", "--max-tasks", "1", "--batch", "4", "--workers", "2", "--device", "cpu",
+        *extra,
+    ]  # fmt: skip
+
+
 @unittest.skipIf(torch is None, "torch or gym_kitchen_r missing")
 class TeacherTest(unittest.TestCase):
     def test_a_privileged_teacher_drives_the_rounds_to_a_completed_pick(self):
@@ -183,42 +162,9 @@ class TeacherTest(unittest.TestCase):
         # round (--beta 1) while the expert labels them for the camera policy.
         teacher = REPO / "starter-kit/baselines/privileged/results/h200-2026-11-26/ckpt.pt"
         with tempfile.TemporaryDirectory() as d:
-            cmd = [
-                sys.executable,
-                str(HERE / "train.py"),
-                "--out",
-                d,
-                "--episodes",
-                "2",
-                "--bc-steps",
-                "2",
-                "--rounds",
-                "1",
-                "--round-episodes",
-                "1",
-                "--round-steps",
-                "1",
-                "--envs",
-                "1",
-                "--dagger-kinds",
-                "pick",
-                "--round-task-seconds",
-                "40",
-                "--instructions",
-                "1-3",
-                "--teacher",
-                str(teacher),
-                "--beta",
-                "1",
-                "--max-tasks",
-                "1",
-                "--batch",
-                "4",
-                "--workers",
-                "2",
-                "--device",
-                "cpu",
-            ]
+            cmd = tiny_round(
+                d, "--bc-steps", "2", "--round-task-seconds", "40", "--teacher", str(teacher), "--beta", "1"
+            )
             subprocess.run(cmd, check=True, capture_output=True, timeout=900)
             logbook = json.loads((Path(d) / "train_log.json").read_text())
             self.assertEqual(logbook["teacher"]["checkpoint"], str(teacher))
