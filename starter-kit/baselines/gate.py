@@ -30,7 +30,9 @@ Steps, each through the real binary (`--bin`):
 
 `--combine DIR...` sums the online (and offline) results of several such folders (for example
 the held-out dev instructions and the first 100 test instructions) into one `summary.json`, so a
-gate is judged on enough tasks of each kind, with each part's figures kept under `parts`.
+gate is judged on enough tasks of each kind, with each part's figures kept under `parts`; its
+`eval_split`, `eval_instructions` and `eval_seed` name the parts (`dev+test`, `dev 101-163, test
+1-100`, and their seed when they share one).
 """
 
 import argparse
@@ -178,11 +180,23 @@ def combine(args, gates):
     train_log = json.loads(Path(args.train_log).read_text()) if args.train_log else None
     evaluated = {"held_out": all(p["held_out"] for p in parts), "parts": parts}
     summary = summarise(online, offline, train_log, args.track, gates, evaluated)
-    summary["eval_seed"] = None
+    summary.update(combined_range(parts))
     res = Path(args.out)
     res.mkdir(parents=True, exist_ok=True)
     (res / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
     report(summary, res)
+
+
+def combined_range(parts):
+    """What a combined summary was evaluated on, named from its parts: `eval_split` ("dev+test"),
+    `eval_instructions` ("dev 101-163, test 1-100") and `eval_seed` (the parts' seed when they
+    share one, else None)."""
+    seeds = {p["eval_seed"] for p in parts}
+    return {
+        "eval_split": "+".join(dict.fromkeys(p["eval_split"] for p in parts)),
+        "eval_instructions": ", ".join(f"{p['eval_split']} {p['eval_instructions']}" for p in parts),
+        "eval_seed": seeds.pop() if len(seeds) == 1 else None,
+    }
 
 
 def report(summary, res):

@@ -240,6 +240,10 @@ class HeldOutGateTest(unittest.TestCase):
             both = json.loads(Path(f"{d}/all/summary.json").read_text())
             self.assertTrue(both["held_out"])
             self.assertEqual(both["eval_episodes"], 2)
+            self.assertEqual(
+                (both["eval_split"], both["eval_instructions"], both["eval_seed"]),
+                ("test+dev", "test 2-2, dev 150-150", 2),
+            )
             dev = json.loads(Path(f"{d}/dev/summary.json").read_text())
             for k in ("navigation", "pick", "place"):
                 self.assertEqual(both["tasks_by_kind"][k], part["tasks_by_kind"][k] + dev["tasks_by_kind"][k])
