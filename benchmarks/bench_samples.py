@@ -20,7 +20,6 @@ import argparse
 import json
 import os
 import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -89,8 +88,7 @@ def exported(binary: str, episodes: int, workers: int) -> list[dict]:
         except ImportError as e:
             rows.append({"path": "decode", "skipped": f"{e.name} is not installed"})
             return rows
-        sys.path.insert(0, str(REPO / "starter-kit" / "baselines" / "diffusion_policy"))
-        from dataset import LeRobotExport
+        from kitchen_r_baselines.diffusion_policy.dataset import LeRobotExport
 
         started = time.perf_counter()
         LeRobotExport(Path(out) / "lerobot", image_size=128, workers=workers, log=lambda *a, **k: None)

@@ -9,11 +9,10 @@ Run:  python3 benchmarks/sweep_policy.py --listen 127.0.0.1:0   (prints `listeni
 
 import argparse
 import math
-import sys
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "starter-kit"))
-import policy_server as kit  # noqa: E402
+# The starter kit's policy server, installed with the baselines
+# (pip install -e ./starter-kit -e ./starter-kit/baselines; scripts/test.sh's venv has it).
+import policy_server as kit
 
 
 class SweepPolicy(kit.StarterPolicy):

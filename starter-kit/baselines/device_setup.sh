@@ -14,6 +14,12 @@ if [ -n "$wheels" ]; then
   # shellcheck disable=SC2086
   python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site $wheels >/dev/null
 fi
+# The baselines' package, offline and instantly, as `pip install -e ./starter-kit -e ./starter-kit/baselines`
+# would give it: kitchen_r_baselines is this folder, with the starter kit's client and policy server.
+mkdir -p /tmp/site
+ln -sfn "$PWD/starter-kit/baselines" /tmp/site/kitchen_r_baselines
+ln -sfn "$PWD/starter-kit/kitchen_r_client" /tmp/site/kitchen_r_client
+ln -sf "$PWD/starter-kit/policy_server.py" /tmp/site/policy_server.py
 export PYTHONPATH=/tmp/site${PYTHONPATH:+:$PYTHONPATH}
 if [ -f target/device/kitchen-r.xz ]; then
   python3 -c "import lzma, shutil; shutil.copyfileobj(lzma.open('target/device/kitchen-r.xz'), open('/tmp/kitchen-r', 'wb'))"

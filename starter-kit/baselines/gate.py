@@ -35,6 +35,12 @@ gate is judged on enough tasks of each kind, with each part's figures kept under
 1-100`, and their seed when they share one).
 """
 
+if __name__ == "__main__" and not __package__:  # run as a file: hand over to the installed package's module
+    import runpy
+
+    runpy.run_module("kitchen_r_baselines.gate", run_name="__main__", alter_sys=True)
+    raise SystemExit
+
 import argparse
 import json
 import math
@@ -49,8 +55,7 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import instruction_range  # noqa: E402
+from .common import instruction_range
 
 KINDS = ("navigation", "pick", "place")
 GATES = {

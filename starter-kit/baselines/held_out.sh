@@ -24,6 +24,8 @@
 # PRIV_CKPT (evaluate these checkpoints instead of $RUN's), TRAIN [cam priv] (which baselines to
 # train), PRIV_JOBS [4] (the privileged gate's jobs: its gate runs beside the camera's, which takes
 # JOBS). On a machine of several GPUs, give each run its own with CUDA_VISIBLE_DEVICES and RUN.
+# Needs python3 with the baselines installed (pip install -e ./starter-kit -e "./starter-kit/baselines[control]"
+# and ./python; on a GPU machine of the developers' `device` tool, device_setup.sh links them).
 set -euo pipefail
 
 HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"

@@ -1,6 +1,6 @@
 """Unit tests of the participant client's parsing and printing (standard library unittest):
 
-    python3 -m unittest discover -s starter-kit/tests
+    pip install -e ./starter-kit && python3 -m unittest discover -s starter-kit/tests
 
 The end-to-end tests against a real server are in tests/e2e/participant_client.rs.
 """
@@ -8,14 +8,11 @@ The end-to-end tests against a real server are in tests/e2e/participant_client.r
 import io
 import json
 import os
-import sys
 import unittest
 from contextlib import redirect_stderr, redirect_stdout
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
-
-from kitchen_r_client import cli, view  # noqa: E402
-from kitchen_r_client.api import error_message  # noqa: E402
+from kitchen_r_client import cli, view
+from kitchen_r_client.api import error_message
 
 
 class Dates(unittest.TestCase):

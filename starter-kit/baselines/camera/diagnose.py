@@ -8,18 +8,19 @@ frame) and gripper.
     python3 diagnose.py --checkpoint ckpt.pt [--instructions 3] [--max-steps 400] [--device cpu]
 """
 
+if __name__ == "__main__" and not __package__:  # run as a file: hand over to the installed package's module
+    import runpy
+
+    runpy.run_module("kitchen_r_baselines.camera.diagnose", run_name="__main__", alter_sys=True)
+    raise SystemExit
+
 import argparse
-import sys
-from pathlib import Path
 
 import numpy as np
 import torch
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
-
-import features as F  # noqa: E402
-from model import Batcher, load  # noqa: E402
+from . import features as F
+from .model import Batcher, load
 
 
 def main():

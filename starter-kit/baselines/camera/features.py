@@ -23,6 +23,8 @@ import re
 
 import numpy as np
 
+from .. import observation
+
 CAMERAS = ("base", "gripper")
 HISTORY = 2
 RENDER_SIZE = 128
@@ -94,48 +96,24 @@ def state_vector(frames, task_time):
     return v
 
 
-def _pad_history(seq):
-    """The last HISTORY entries, padded at the front with the first one."""
-    seq = list(seq)[-HISTORY:]
-    return [seq[0]] * (HISTORY - len(seq)) + seq
-
-
 def from_env(obs, task_time, depth=False):
     """(images (views(depth), HISTORY, 128, 128, 3) uint8, state (STATE_DIM,)) of an environment
     observation or an `ExpertSamples` dict (`images`, `state` with STATE_FIELDS, and `depth`
     when asked for)."""
     s = np.asarray(obs["state"], dtype=np.float64).reshape(-1, 29)
     # STATE_FIELDS: odom 0-2, base_v 3, base_w 4, joints 5-10, gripper 11, ee 12-18, prev 19-28
-    frames = [_frame_values(r[3:29], r[0], r[1], r[2]) for r in _pad_history(s)]
+    frames = [_frame_values(r[3:29], r[0], r[1], r[2]) for r in observation.last(s, HISTORY)]
     ims = []
     for c in CAMERAS:
         a = np.asarray(obs["images"][c])
         a = a.reshape((-1,) + a.shape[-3:])
-        ims.append(np.stack(_pad_history(a)))
+        ims.append(np.stack(observation.last(a, HISTORY)))
     if depth:
         for c in CAMERAS:
             d = np.asarray(obs["depth"][c])
             d = d.reshape((-1,) + d.shape[-2:])
-            ims.append(depth_u8(np.stack(_pad_history(d))))
+            ims.append(depth_u8(np.stack(observation.last(d, HISTORY))))
     return np.stack(ims), state_vector(frames, task_time)
-
-
-def _image(frame, cam):
-    for im in frame.images:
-        if im.camera == cam:
-            if len(im.data) != im.width * im.height * 3:
-                raise ValueError(f"`{cam}` image is not RAW_RGB8 {im.width}x{im.height} (GetSpec asks for RAW_RGB8)")
-            return np.frombuffer(im.data, dtype=np.uint8).reshape(im.height, im.width, 3)
-    raise ValueError(f"observation has no `{cam}` image; the policy asked for cameras {CAMERAS}")
-
-
-def _depth(frame, cam):
-    for im in frame.depth:
-        if im.camera == cam:
-            if len(im.data) != im.width * im.height * 4:
-                raise ValueError(f"`{cam}` depth is not {im.width}x{im.height} float32")
-            return np.frombuffer(im.data, dtype="<f4").reshape(im.height, im.width)
-    raise ValueError(f"observation has no `{cam}` depth; the policy asked for depth from {CAMERAS}")
 
 
 def _grpc_frame_values(f):
@@ -150,10 +128,10 @@ def _grpc_frame_values(f):
 
 def from_grpc(obs, task_time, depth=False):
     """As `from_env`, from one gRPC `Observation` (history, then the observation itself)."""
-    frames = _pad_history(list(obs.history) + [obs])
-    views_ = [np.stack([_image(f, c) for f in frames]) for c in CAMERAS]
+    frames = observation.frames(obs, HISTORY)
+    views_ = [np.stack([observation.rgb(f, c) for f in frames]) for c in CAMERAS]
     if depth:
-        views_ += [depth_u8(np.stack([_depth(f, c) for f in frames])) for c in CAMERAS]
+        views_ += [depth_u8(np.stack([observation.depth(f, c) for f in frames])) for c in CAMERAS]
     return np.stack(views_), state_vector([_grpc_frame_values(f) for f in frames], task_time)
 
 

@@ -14,14 +14,15 @@ one thread runs them through the network together.
 """
 
 import io
-import threading
 
-import features as FT
 import numpy as np
 import torch
-from encoder import OUT_CHANNELS, Trunk
 from torch import nn
 from torch.nn import functional as F
+
+from ..batching import RequestBatcher
+from . import features as FT
+from .encoder import OUT_CHANNELS, Trunk
 
 FORMAT = "kitchen-r-camera-policy/1"
 MAX_BYTES = 16 * 2**20
@@ -162,31 +163,22 @@ def load(path, device="cpu"):
     return model, ck["vocab"], ck["meta"]
 
 
-class Batcher:
+class Batcher(RequestBatcher):
     """Runs concurrent `decide(images, state, words)` calls through `model` in batches of up to
-    `max_batch` (images at render size: resized here, on the model's device)."""
+    `max_batch` (images at render size: resized here, on the model's device); each caller gets
+    its chunk made valid (features.finish). `lock` is held while the weights run: DAgger holds it
+    to change them."""
 
     def __init__(self, model, max_batch=32, autocast=True):
         self.model = model
-        self.max_batch = max_batch
-        self.lock = threading.Lock()  # held while the weights change (DAgger) or run
-        self.cond = threading.Condition()
-        self.pending = []
         self.autocast = autocast
-        threading.Thread(target=self._loop, daemon=True).start()
+        super().__init__(self._decide, max_batch)
 
     def decide(self, images, state, words):
-        item = {"x": (images, state, words), "done": threading.Event()}
-        with self.cond:
-            self.pending.append(item)
-            self.cond.notify()
-        item["done"].wait()
-        if "error" in item:
-            raise item["error"]
-        return item["y"]
+        return self.submit((images, state, words))
 
     def warm_up(self):
-        """One forward of every batch shape `_run` pads to (on the CPU, of batch 1)."""
+        """One forward of every batch shape `_forward` pads to (on the CPU, of batch 1)."""
         dev = next(self.model.parameters()).device
         top = max(1, self.max_batch - 1).bit_length()
         z = FT.RENDER_SIZE
@@ -197,35 +189,21 @@ class Batcher:
         )
         for n in [1 << k for k in range(top + 1)] if dev.type == "cuda" else [1]:
             with self.lock:
-                self._run([{"x": x}] * n)
+                self._forward([x] * n)
 
-    def _loop(self):
-        while True:
-            with self.cond:
-                while not self.pending:
-                    self.cond.wait()
-                batch, self.pending = self.pending[: self.max_batch], self.pending[self.max_batch :]
-            try:
-                with self.lock:
-                    out = self._run(batch)
-                for it, y in zip(batch, out):
-                    it["y"] = FT.finish(y)
-            except Exception as e:  # noqa: BLE001 — reported to each waiting caller
-                for it in batch:
-                    it["error"] = e
-            for it in batch:
-                it["done"].set()
+    def _decide(self, inputs):
+        return [FT.finish(y) for y in self._forward(inputs)]
 
     @torch.no_grad()
-    def _run(self, batch):
+    def _forward(self, inputs):
         m = self.model
         dev = next(m.parameters()).device
         # Batches padded to a power of two: few shapes, so cuDNN's autotuning runs only a few times.
-        n = 1 << (len(batch) - 1).bit_length() if dev.type == "cuda" else len(batch)
-        items = [it["x"] for it in batch] + [batch[0]["x"]] * (n - len(batch))
+        n = 1 << (len(inputs) - 1).bit_length() if dev.type == "cuda" else len(inputs)
+        items = list(inputs) + [inputs[0]] * (n - len(inputs))
         ims = torch.from_numpy(np.stack([x[0] for x in items])).to(dev)
         ims = FT.resize_images(ims, m.config["image_size"])
         st = torch.from_numpy(np.stack([x[1] for x in items])).to(dev)
         wd = torch.from_numpy(np.stack([x[2] for x in items])).to(dev)
         with torch.autocast("cuda", dtype=torch.bfloat16, enabled=self.autocast and dev.type == "cuda"):
-            return m.chunk(ims, st, wd)[: len(batch)]
+            return m.chunk(ims, st, wd)[: len(inputs)]

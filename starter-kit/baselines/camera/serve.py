@@ -12,23 +12,21 @@ chunk. Concurrent Act calls run through the network in one batch (model.Batcher)
 `listening grpc=HOST:PORT` once it accepts calls.
 """
 
-import argparse
+if __name__ == "__main__" and not __package__:  # run as a file: hand over to the installed package's module
+    import runpy
+
+    runpy.run_module("kitchen_r_baselines.camera.serve", run_name="__main__", alter_sys=True)
+    raise SystemExit
+
 import logging
 import os
-import sys
-from pathlib import Path
 
 import torch
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
-sys.path.insert(1, str(HERE.parent.parent))  # starter-kit/, for policy_server
-sys.path.insert(2, str(HERE.parent))  # baselines/, for common
-
-import features as F  # noqa: E402
-import policy_server as kit  # noqa: E402
-from common import TaskClock  # noqa: E402
-from model import Batcher, load  # noqa: E402
+from .. import serving
+from ..common import TaskClock
+from . import features as F
+from .model import Batcher, load
 
 
 class CameraRunner:
@@ -55,43 +53,20 @@ class CameraRunner:
         return self.batcher.decide(*self.inputs(obs)).tolist()
 
 
-def main():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--checkpoint", required=True, help="checkpoint written by train.py")
-    ap.add_argument("--listen", default="127.0.0.1:50051", help="HOST:PORT; port 0 picks a free port")
-    ap.add_argument("--device", default="auto", help="auto (CUDA if available), cpu, cuda, ...")
-    ap.add_argument("--execute", type=int, default=F.EXECUTE, help="actions of each chunk executed before the next Act")
-    ap.add_argument(
-        "--concurrency", type=int, default=16, help="Act calls the policy accepts at once (max_concurrency)"
-    )
-    ap.add_argument("--token", default=os.environ.get("POLICY_TOKEN"), help="require this bearer token")
-    ap.add_argument("--proto-dir", default=None, help="directory with kitchen_r/policy/v1/policy.proto")
-    args = ap.parse_args()
-    if not 1 <= args.execute <= kit.HORIZON:
-        sys.exit(f"--execute must be between 1 and {kit.HORIZON}")
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(message)s")
-    device = torch.device(
-        "cuda"
-        if args.device == "auto" and torch.cuda.is_available()
-        else ("cpu" if args.device == "auto" else args.device)
-    )
+def main(argv=None):
+    args = serving.parse(serving.parser(__doc__.split("\n")[0], F.EXECUTE), argv)
+    device = serving.torch_device(args.device)
     if device.type == "cpu":
         torch.set_num_threads(max(1, min(8, os.cpu_count() or 1)))
     runner = CameraRunner(args.checkpoint, device, max_batch=args.concurrency)
     meta = runner.meta
     logging.info("checkpoint %s: %s; serving on %s", args.checkpoint, meta, device)
     size = int(meta.get("render_size", F.RENDER_SIZE))
-    kit.serve(
-        args.listen,
-        args.token,
-        args.proto_dir,
-        args.concurrency + 4,
+    serving.serve(
+        args,
         runner,
-        F.HISTORY,
-        args.execute,
+        history=F.HISTORY,
         name=f"camera baseline ({meta.get('stage')}, {meta.get('rows')} rows)",
-        max_concurrency=args.concurrency,
-        privileged=False,
         cameras=[(c, size, size, runner.model.config.get("depth", False)) for c in F.CAMERAS],
     )
 

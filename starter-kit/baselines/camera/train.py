@@ -25,6 +25,12 @@ comes first; the cosine follows whichever is further along. Progress lines go to
 drove, loss, seconds, hardware) and `ckpt.pt` is written after every phase.
 """
 
+if __name__ == "__main__" and not __package__:  # run as a file: hand over to the installed package's module
+    import runpy
+
+    runpy.run_module("kitchen_r_baselines.camera.train", run_name="__main__", alter_sys=True)
+    raise SystemExit
+
 import argparse
 import json
 import math
@@ -38,15 +44,12 @@ from pathlib import Path
 import numpy as np
 import torch
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
-sys.path.insert(1, str(HERE.parent))  # baselines/, for common
+from ..common import add_round_args, sr_by_kind, train_instructions
+from . import features as F
+from .model import Batcher, CameraPolicy, load, save
 
-import features as F  # noqa: E402
-from common import add_round_args, sr_by_kind, train_instructions  # noqa: E402
-from model import Batcher, CameraPolicy, load, save  # noqa: E402
-
-COMPILED = {}  # id(model) -> its torch.compile wrapper (kept off the module: not in the state dict)
+# id(model) -> its torch.compile wrapper (kept off the module: not in the state dict)
+COMPILED: dict[int, torch.nn.Module] = {}
 
 
 def log(msg):
@@ -331,25 +334,12 @@ class PrivilegedTeacher:
     """A privileged-track checkpoint (privileged/train.py) driving a share of the rounds'
     decisions: learning by cheating. Its features come from what the environment puts in
     `info["privileged_observation"]`, which only the rounds' environments are asked for; the
-    camera policy never sees it. The privileged baseline's modules are loaded under their own
-    names (both baselines call theirs `features`)."""
+    camera policy never sees it."""
 
     def __init__(self, path):
-        import importlib.util
+        from ..privileged import features, model
 
-        def module(name, file):
-            spec = importlib.util.spec_from_file_location(name, file)
-            m = importlib.util.module_from_spec(spec)
-            spec.loader.exec_module(m)
-            return m
-
-        here = HERE.parent / "privileged"
-        ours = sys.modules.get("features")
-        try:
-            self.F = sys.modules["features"] = module("privileged_features", here / "features.py")
-            model = module("privileged_model", here / "model.py")
-        finally:
-            sys.modules["features"] = ours
+        self.F = features
         # On the CPU: one small forward per decision beats a GPU round trip (as privileged/train.py).
         self.model, self.meta = model.load(path, "cpu")
         self.lock = threading.Lock()

@@ -7,8 +7,9 @@ import os
 from pathlib import Path
 
 import torch
-from features import Normaliser
-from model import DiffusionPolicy
+
+from .features import Normaliser
+from .model import DiffusionPolicy
 
 MAX_CHECKPOINT_BYTES = 16 * 2**20
 FORMAT = "kitchen-r-diffusion-policy/1"

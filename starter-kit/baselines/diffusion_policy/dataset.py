@@ -21,7 +21,8 @@ import time
 from pathlib import Path
 
 import numpy as np
-from features import CAMERAS, HORIZON, build_vocab, encode_sentence, odometry_features, resize_rgb
+
+from .features import CAMERAS, HORIZON, build_vocab, encode_sentence, odometry_features, resize_rgb
 
 N_OBS = 2
 
@@ -47,7 +48,7 @@ def find_root(path):
 
 
 # Shared images of the decode pool: set in the parent before forking, written by the workers.
-_SHARED = {}
+_SHARED: dict[str, np.ndarray] = {}
 
 
 def _decode_file(job):

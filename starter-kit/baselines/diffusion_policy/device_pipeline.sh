@@ -21,7 +21,8 @@
 #   INIT           start training from this checkpoint (train.py --init: fine-tune on new data) []
 #   STOP_AFTER     stop after this step (collect, train, check_policy, eval_online, eval_offline) []
 #   WORK           working directory                          [/tmp/kr-diffusion]
-#   PYTHON         python with torch, torchvision, pyarrow, av, grpcio(-tools, -health-checking) [python3]
+#   PYTHON         python with the baselines installed (pip install -e ./starter-kit -e "./starter-kit/baselines[control]":
+#                  torch, torchvision, pyarrow, av, grpcio(-tools, -health-checking)) [python3]
 #   KITCHEN_R_ASSETS, KITCHEN_R_CONFIGS                       [REPO/assets, REPO/configs]
 #
 # Every step logs to $WORK/pipeline.log (timestamped) and leaves its result in $WORK/results/

@@ -21,7 +21,8 @@ import math
 import torch
 import torch.nn as nn
 import torch.nn.functional as F
-from features import ACTION_DIM, CAMERAS, HORIZON, MAX_WORDS, state_dim
+
+from .features import ACTION_DIM, CAMERAS, HORIZON, MAX_WORDS, state_dim
 
 DEFAULT_CONFIG = {
     "image_size": 96,

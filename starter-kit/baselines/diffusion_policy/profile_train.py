@@ -8,6 +8,12 @@ No dataset is needed, so it can run while `kitchen-r collect` fills the cores. I
 per variant and, last, the train.py flags of the fastest (`best: --compile ...`).
 """
 
+if __name__ == "__main__" and not __package__:  # run as a file: hand over to the installed package's module
+    import runpy
+
+    runpy.run_module("kitchen_r_baselines.diffusion_policy.profile_train", run_name="__main__", alter_sys=True)
+    raise SystemExit
+
 import argparse
 import json
 import sys
@@ -16,9 +22,8 @@ from pathlib import Path
 
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from features import CAMERAS, HORIZON, MAX_WORDS, state_dim  # noqa: E402
-from model import DEFAULT_CONFIG, DiffusionPolicy  # noqa: E402
+from .features import CAMERAS, HORIZON, MAX_WORDS, state_dim
+from .model import DEFAULT_CONFIG, DiffusionPolicy
 
 VARIANTS = {
     "eager": [],

@@ -9,33 +9,23 @@ for both cameras at 128x128 RAW_RGB8 (the export's resolution), an observation h
 `--execute` actions per chunk. Concurrent Act calls are denoised together in one batch.
 """
 
-import argparse
+if __name__ == "__main__" and not __package__:  # run as a file: hand over to the installed package's module
+    import runpy
+
+    runpy.run_module("kitchen_r_baselines.diffusion_policy.serve", run_name="__main__", alter_sys=True)
+    raise SystemExit
+
 import hashlib
 import logging
-import os
 import sys
-import threading
-from pathlib import Path
 
 import numpy as np
 import torch
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
-sys.path.insert(1, str(HERE.parent.parent))  # starter-kit/, for policy_server
-
-import policy_server as kit  # noqa: E402
-from checkpoint import load_checkpoint  # noqa: E402
-from features import CAMERAS, deadband, encode_sentence, finish_actions, resize_rgb, state_of_robot  # noqa: E402
-
-
-def image_of(frame, cam):
-    for im in frame.images:
-        if im.camera == cam:
-            if len(im.data) != im.width * im.height * 3:
-                raise ValueError(f"`{cam}` image is not RAW_RGB8 {im.width}x{im.height} (GetSpec asks for RAW_RGB8)")
-            return np.frombuffer(im.data, dtype=np.uint8).reshape(im.height, im.width, 3)
-    raise ValueError(f"observation has no `{cam}` image; the policy asked for cameras {CAMERAS}")
+from .. import observation, serving
+from ..batching import RequestBatcher
+from .checkpoint import load_checkpoint
+from .features import CAMERAS, deadband, encode_sentence, finish_actions, resize_rgb, state_of_robot
 
 
 class DiffusionRunner:
@@ -48,20 +38,15 @@ class DiffusionRunner:
         self.cfg = self.model.config
         self.steps = steps
         self.deadband = deadband
-        self.max_batch = max_batch
-        self.cond = threading.Condition()
-        self.pending = []
-        threading.Thread(target=self._loop, daemon=True).start()
+        self.batcher = RequestBatcher(self._run, max_batch)
 
     def reset(self, episode_id, task_index, sub_task):
         pass  # no memory across Act calls: each observation carries its own history
 
     def features(self, obs):
-        frames = kit.frames(obs)
-        n = self.cfg["n_obs"]
-        frames = [frames[0]] * max(0, n - len(frames)) + frames[-n:]
+        frames = observation.frames(obs, self.cfg["n_obs"])
         size = self.cfg["image_size"]
-        images = {c: np.stack([resize_rgb(image_of(f, c), size) for f in frames]) for c in CAMERAS}
+        images = {c: np.stack([resize_rgb(observation.rgb(f, c), size) for f in frames]) for c in CAMERAS}
         odometry = self.cfg.get("odometry", False)
         state = np.array([state_of_robot(f.robot, odometry) for f in frames], dtype=np.float32)
         words = np.array(encode_sentence(obs.sub_task, self.vocab_index), dtype=np.int64)
@@ -71,76 +56,33 @@ class DiffusionRunner:
         return images, self.norm.state(state), words, noise
 
     def decide(self, obs):
-        item = {"x": self.features(obs), "done": threading.Event()}
-        with self.cond:
-            self.pending.append(item)
-            self.cond.notify()
-        item["done"].wait()
-        if "error" in item:
-            raise item["error"]
-        return item["y"].tolist()
-
-    def _loop(self):
-        while True:
-            with self.cond:
-                while not self.pending:
-                    self.cond.wait()
-                batch, self.pending = self.pending[: self.max_batch], self.pending[self.max_batch :]
-            try:
-                self._run(batch)
-            except Exception as e:  # noqa: BLE001 — reported to each waiting call
-                logging.exception("denoising failed")
-                for it in batch:
-                    it["error"] = e
-            for it in batch:
-                it["done"].set()
+        return self.batcher.submit(self.features(obs)).tolist()
 
     @torch.no_grad()
     def _run(self, batch):
+        """Denoise the chunks of a batch of `features` at once."""
         d = self.device
-        images = {c: torch.from_numpy(np.stack([it["x"][0][c] for it in batch])).to(d) for c in CAMERAS}
-        state = torch.from_numpy(np.stack([it["x"][1] for it in batch])).to(d)
-        words = torch.from_numpy(np.stack([it["x"][2] for it in batch])).to(d)
-        noise = torch.stack([it["x"][3] for it in batch])
+        images = {c: torch.from_numpy(np.stack([x[0][c] for x in batch])).to(d) for c in CAMERAS}
+        state = torch.from_numpy(np.stack([x[1] for x in batch])).to(d)
+        words = torch.from_numpy(np.stack([x[2] for x in batch])).to(d)
+        noise = torch.stack([x[3] for x in batch])
         out = self.model.sample(images, state, words, steps=self.steps, noise=noise).float().cpu().numpy()
-        for it, a in zip(batch, out):
-            it["y"] = finish_actions(deadband(self.norm.unaction(a), *self.deadband))
+        return [finish_actions(deadband(self.norm.unaction(a), *self.deadband)) for a in out]
 
 
-def main():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--checkpoint", required=True, help="checkpoint written by train.py")
-    ap.add_argument("--listen", default="127.0.0.1:50051", help="HOST:PORT; port 0 picks a free port")
-    ap.add_argument("--device", default="auto", help="auto (CUDA if available), cpu, cuda, ...")
+def main(argv=None):
+    ap = serving.parser(__doc__.split("\n")[0], execute=8)
     ap.add_argument("--steps", type=int, default=10, help="DDIM denoising steps per chunk (of the 100 training steps)")
-    ap.add_argument(
-        "--execute",
-        type=int,
-        default=8,
-        help="actions of each 16-action chunk executed before the next Act (contract v1.1)",
-    )
-    ap.add_argument(
-        "--concurrency", type=int, default=16, help="Act calls the policy accepts at once (max_concurrency)"
-    )
     ap.add_argument(
         "--deadband",
         default="0,0",
         help="V,OMEGA: base commands below V m/s and OMEGA rad/s are sent as 0 (e.g. 0.01,0.02); off by default",
     )
-    ap.add_argument("--token", default=os.environ.get("POLICY_TOKEN"), help="require this bearer token")
-    ap.add_argument("--proto-dir", default=None, help="directory with kitchen_r/policy/v1/policy.proto")
     ap.add_argument("--threads", type=int, default=None, help="gRPC threads (default: --concurrency + 4)")
-    args = ap.parse_args()
-    if not 1 <= args.execute <= kit.HORIZON:
-        sys.exit(f"--execute must be between 1 and {kit.HORIZON}")
+    args = serving.parse(ap, argv)
     if not 1 <= args.steps <= 100:
         sys.exit("--steps must be between 1 and 100")
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(message)s")
-    device = torch.device(
-        "cuda"
-        if args.device == "auto" and torch.cuda.is_available()
-        else ("cpu" if args.device == "auto" else args.device)
-    )
+    device = serving.torch_device(args.device)
     try:
         band = tuple(float(x) for x in args.deadband.split(","))
         if len(band) != 2 or min(band) < 0:
@@ -158,16 +100,12 @@ def main():
         device,
         args.steps,
     )
-    kit.serve(
-        args.listen,
-        args.token,
-        args.proto_dir,
-        args.threads or args.concurrency + 4,
+    serving.serve(
+        args,
         runner,
-        runner.cfg["n_obs"],
-        args.execute,
+        history=runner.cfg["n_obs"],
         name=f"diffusion-policy baseline ({meta.get('episodes')} episodes, {meta.get('steps')} steps)",
-        max_concurrency=args.concurrency,
+        threads=args.threads,
     )
 
 

@@ -10,6 +10,12 @@ the checkpoint (fp16 EMA weights, config, vocabulary, normalisation statistics; 
 every --save-every minutes and at the end, and `train_log.json` beside it.
 """
 
+if __name__ == "__main__" and not __package__:  # run as a file: hand over to the installed package's module
+    import runpy
+
+    runpy.run_module("kitchen_r_baselines.diffusion_policy.train", run_name="__main__", alter_sys=True)
+    raise SystemExit
+
 import argparse
 import copy
 import json
@@ -26,11 +32,10 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from checkpoint import MAX_CHECKPOINT_BYTES, load_checkpoint, save_checkpoint  # noqa: E402
-from dataset import LeRobotExport  # noqa: E402
-from features import CAMERAS, HORIZON, Normaliser  # noqa: E402
-from model import DEFAULT_CONFIG, DiffusionPolicy  # noqa: E402
+from .checkpoint import MAX_CHECKPOINT_BYTES, load_checkpoint, save_checkpoint
+from .dataset import LeRobotExport
+from .features import CAMERAS, HORIZON, Normaliser
+from .model import DEFAULT_CONFIG, DiffusionPolicy
 
 
 def pick_device(name):

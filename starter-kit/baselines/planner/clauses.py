@@ -14,8 +14,8 @@ Ordering, from how English marks time rather than from word order:
 - "Start with the cup" / "the cup first" reorders the deliveries it names.
 """
 
-from lexicon import AFTER, BEFORE, CONNECTIVES, END_MARKERS, FIRST_MARKERS, VERBS
-from mentions import Obj, Zone
+from .lexicon import AFTER, BEFORE, CONNECTIVES, END_MARKERS, FIRST_MARKERS, VERBS
+from .mentions import Obj, Zone
 
 PUNCT = {",", ";", ".", ":", "!", "?"}
 SEGMENT_END = {".", "!", "?", ";", ":"}

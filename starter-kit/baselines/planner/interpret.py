@@ -8,8 +8,8 @@ Step strings are the plan grammar's: `move to the <colour> zone`, `pick the <obj
 `place the <object>`.
 """
 
-from clauses import split
-from lexicon import (
+from .clauses import split
+from .lexicon import (
     CARRY,
     DESTINATION,
     MOVE,
@@ -25,8 +25,8 @@ from lexicon import (
     VIA,
     VIA_FOLLOWUP,
 )
-from mentions import Obj, Zone, ground
-from references import resolve
+from .mentions import Obj, Zone, ground
+from .references import resolve
 
 
 def has(words, phrase):

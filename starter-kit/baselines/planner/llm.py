@@ -17,7 +17,7 @@ import re
 import urllib.error
 import urllib.request
 
-from steps import check, valid_steps
+from .steps import check, valid_steps
 
 SYSTEM = """You are the task planner of a mobile manipulator in a kitchen.
 Turn the user's instruction into a plan: a JSON object {"plan": [step, ...]}.

@@ -9,7 +9,7 @@ wording ("the counter beside the fridge") still grounds.
 
 import re
 
-from lexicon import ORIGINAL, RELATIVE, SUBJECT
+from .lexicon import ORIGINAL, RELATIVE, SUBJECT
 
 STOP = {"the", "a", "an", "of", "to", "by", "on", "in", "at", "and", "with", "that", "this"}
 

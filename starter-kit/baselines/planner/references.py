@@ -4,8 +4,8 @@ being moved; "there" the place mentioned last; "its place" / "where it was" / "i
 starting place of the object mentioned before.
 """
 
-from lexicon import ITS_PLACE, ORIGINAL, PRONOUNS, RELATIVE, SAME_PLACE
-from mentions import Obj, Zone, ends_with
+from .lexicon import ITS_PLACE, ORIGINAL, PRONOUNS, RELATIVE, SAME_PLACE
+from .mentions import Obj, Zone, ends_with
 
 BOUNDARY = {",", ";", ".", ":", "!", "?", "then"}
 

@@ -14,20 +14,23 @@ the in-context examples, never the instruction being planned).
 Standard library only (Python >= 3.8).
 """
 
+if __name__ == "__main__" and not __package__:  # run as a file: hand over to the installed package's module
+    import runpy
+
+    runpy.run_module("kitchen_r_baselines.planner.run", run_name="__main__", alter_sys=True)
+    raise SystemExit
+
 import argparse
 import json
 import os
 import sys
 import time
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, HERE)
-sys.path.insert(0, os.path.normpath(os.path.join(HERE, "..", "..")))  # starter-kit/: kitchen_r_client
+from kitchen_r_client.api import ApiError, Client
 
-import interpret  # noqa: E402
-from kitchen_r_client.api import ApiError, Client  # noqa: E402
-from scene import parse_brief  # noqa: E402
-from steps import check  # noqa: E402
+from . import interpret
+from .scene import parse_brief
+from .steps import check
 
 
 def args_parser():
@@ -101,7 +104,7 @@ def main(argv=None):
 
     llm = None
     if a.llm:
-        from llm import LlmPlanner
+        from .llm import LlmPlanner
 
         llm = LlmPlanner(
             a.llm,

@@ -7,8 +7,9 @@ weights (fp32), the layer sizes and the statistics. A 4x512 network is 3.6 MiB, 
 """
 
 import torch
-from features import ACTION_DIM, FEATURES, HORIZON, TIME_INDEX
 from torch import nn
+
+from .features import ACTION_DIM, FEATURES, HORIZON, TIME_INDEX
 
 FORMAT = "kitchen-r-privileged-mlp/1"
 

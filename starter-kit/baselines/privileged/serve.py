@@ -10,23 +10,20 @@ asks for privileged observations and one 8x8 image it does not read, so the serv
 `listening grpc=HOST:PORT` once it accepts calls. One forward of a small MLP per Act, on CPU.
 """
 
-import argparse
+if __name__ == "__main__" and not __package__:  # run as a file: hand over to the installed package's module
+    import runpy
+
+    runpy.run_module("kitchen_r_baselines.privileged.serve", run_name="__main__", alter_sys=True)
+    raise SystemExit
+
 import logging
-import os
-import sys
-from pathlib import Path
 
 import torch
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
-sys.path.insert(1, str(HERE.parent.parent))  # starter-kit/, for policy_server
-sys.path.insert(2, str(HERE.parent))  # baselines/, for common
-
-import features as F  # noqa: E402
-import policy_server as kit  # noqa: E402
-from common import TaskClock  # noqa: E402
-from model import load  # noqa: E402
+from .. import serving
+from ..common import TaskClock
+from . import features as F
+from .model import load
 
 
 class PrivilegedRunner:
@@ -45,34 +42,17 @@ class PrivilegedRunner:
         return F.finish(chunk).tolist()
 
 
-def main():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--checkpoint", required=True, help="checkpoint written by train.py")
-    ap.add_argument("--listen", default="127.0.0.1:50051", help="HOST:PORT; port 0 picks a free port")
-    ap.add_argument("--execute", type=int, default=F.EXECUTE, help="actions of each chunk executed before the next Act")
-    ap.add_argument(
-        "--concurrency", type=int, default=16, help="Act calls the policy accepts at once (max_concurrency)"
-    )
-    ap.add_argument("--token", default=os.environ.get("POLICY_TOKEN"), help="require this bearer token")
-    ap.add_argument("--proto-dir", default=None, help="directory with kitchen_r/policy/v1/policy.proto")
-    args = ap.parse_args()
-    if not 1 <= args.execute <= kit.HORIZON:
-        sys.exit(f"--execute must be between 1 and {kit.HORIZON}")
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(message)s")
+def main(argv=None):
+    args = serving.parse(serving.parser(__doc__.split("\n")[0], F.EXECUTE, device=False), argv)
     torch.set_num_threads(1)
     runner = PrivilegedRunner(args.checkpoint)
     meta = runner.meta
     logging.info("checkpoint %s: %s", args.checkpoint, meta)
-    kit.serve(
-        args.listen,
-        args.token,
-        args.proto_dir,
-        args.concurrency + 4,
+    serving.serve(
+        args,
         runner,
-        1,
-        args.execute,
+        history=1,
         name=f"privileged MLP baseline ({meta.get('stage')}, {meta.get('rows')} rows)",
-        max_concurrency=args.concurrency,
         privileged=True,
         # The contract always sends a camera (no request means the default two); this policy
         # reads none, so it asks for the smallest image, which costs the worker nearly nothing.

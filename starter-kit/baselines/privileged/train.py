@@ -21,10 +21,15 @@ Progress lines go to stdout; `train_log.json` in `--out` keeps every round's fig
 SR per kind as the policy drove, loss, seconds) and `ckpt.pt` the final model.
 """
 
+if __name__ == "__main__" and not __package__:  # run as a file: hand over to the installed package's module
+    import runpy
+
+    runpy.run_module("kitchen_r_baselines.privileged.train", run_name="__main__", alter_sys=True)
+    raise SystemExit
+
 import argparse
 import json
 import os
-import sys
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -33,13 +38,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
-sys.path.insert(1, str(HERE.parent))  # baselines/, for common
-
-import features as F  # noqa: E402
-from common import add_round_args, sr_by_kind, train_instructions  # noqa: E402
-from model import PrivilegedMLP, save  # noqa: E402
+from ..common import add_round_args, sr_by_kind, train_instructions
+from . import features as F
+from .model import PrivilegedMLP, save
 
 
 def log(msg):

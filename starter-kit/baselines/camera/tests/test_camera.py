@@ -17,7 +17,6 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent.parent
 REPO = HERE.parent.parent.parent
-sys.path.insert(0, str(HERE))
 os.environ.setdefault("KITCHEN_R_ASSETS", str(REPO / "assets"))
 os.environ.setdefault("KITCHEN_R_CONFIGS", str(REPO / "configs"))
 
@@ -96,7 +95,7 @@ class CameraBaselineTest(unittest.TestCase):
         cls.observations = [(obs0, 0), (obs1, 8)]
 
     def test_features_env_equals_grpc_with_and_without_depth(self):
-        import features as F
+        from kitchen_r_baselines.camera import features as F
 
         for obs, step in self.observations:
             ims_e, st_e = F.from_env(obs, step * F.CONTROL_DT)
@@ -131,8 +130,7 @@ class CameraBaselineTest(unittest.TestCase):
             self.assertGreater(round1["rows_added"], 0)
             ck = Path(d) / "ckpt.pt"
             self.assertLessEqual(ck.stat().st_size, 16 * 2**20)
-            sys.path.insert(1, str(HERE.parent.parent))  # policy_server, for serve.py
-            from serve import CameraRunner
+            from kitchen_r_baselines.camera.serve import CameraRunner
 
             runner = CameraRunner(str(ck), "cpu")
             obs, step = self.observations[1]
@@ -175,7 +173,7 @@ class TeacherTest(unittest.TestCase):
 
 class AuxTargetTest(unittest.TestCase):
     def test_the_auxiliary_target_is_the_goal_its_kind_defines(self):
-        import features as F
+        from kitchen_r_baselines.camera import features as F
 
         v, m = F.aux_target({"goal": {"kind": "pick", "pose": [0.5, -0.6, 0.9, 1, 0, 0, 0]}})
         np.testing.assert_allclose(v[4:7], [0.5, -0.6, 0.9], rtol=0, atol=1e-6)

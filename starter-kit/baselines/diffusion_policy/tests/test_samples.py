@@ -1,15 +1,12 @@
 """What a training sample holds (timing, padding at task boundaries) and what leaves the policy
 (valid actions), without torch or a dataset on disk."""
 
-import sys
 import unittest
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from dataset import LeRobotExport  # noqa: E402
-from features import (  # noqa: E402
+from kitchen_r_baselines.diffusion_policy.dataset import LeRobotExport
+from kitchen_r_baselines.diffusion_policy.features import (
     MAX_WORDS,
     UNK,
     Normaliser,

@@ -5,8 +5,8 @@ import unittest
 from fake_openai import FakeOpenAI
 from support import BRIEF, scene
 
-from llm import LlmPlanner, completions_url, parse_answer
-from steps import check, valid_steps
+from kitchen_r_baselines.planner.llm import LlmPlanner, completions_url, parse_answer
+from kitchen_r_baselines.planner.steps import check, valid_steps
 
 EXAMPLES = [
     {

@@ -4,10 +4,10 @@ import unittest
 
 from support import scene
 
-from clauses import split
-from interpret import plan
-from mentions import Obj, Zone, ground
-from references import resolve
+from kitchen_r_baselines.planner.clauses import split
+from kitchen_r_baselines.planner.interpret import plan
+from kitchen_r_baselines.planner.mentions import Obj, Zone, ground
+from kitchen_r_baselines.planner.references import resolve
 
 
 def colours(items):

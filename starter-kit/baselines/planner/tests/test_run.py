@@ -12,7 +12,7 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from fake_openai import FakeOpenAI
 from support import BRIEF
 
-import run
+from kitchen_r_baselines.planner import run
 
 DEV = [
     {

@@ -2,7 +2,7 @@ import unittest
 
 from support import BRIEF, scene
 
-from scene import parse_brief
+from kitchen_r_baselines.planner.scene import parse_brief
 
 
 class BriefTest(unittest.TestCase):

@@ -16,8 +16,6 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 BASE = HERE.parent
 ROOT = BASE.parents[2]
-sys.path.insert(0, str(BASE))
-sys.path.insert(1, str(BASE.parent.parent))
 
 try:
     import torch  # noqa: F401
@@ -42,7 +40,7 @@ class FeaturesTest(unittest.TestCase):
     def test_training_and_serving_features_agree(self):
         """One decision of the environment, turned into the gRPC observation the worker would
         send, gives the same feature vector both ways."""
-        import features as F
+        from kitchen_r_baselines.privileged import features as F
         import policy_server as kit
         from gym_kitchen_r import KitchenREnv
 
@@ -90,7 +88,7 @@ class FeaturesTest(unittest.TestCase):
         self.assertGreater(np.abs(a[:2]).sum(), 0.0, "the base was moving 3 s into the task")
 
     def test_a_place_goal_carries_the_held_object_in_the_robot_frame(self):
-        import features as F
+        from kitchen_r_baselines.privileged import features as F
 
         base = (1.0, 2.0, np.pi / 2)
         held = [1.0, 3.0, 0.9, 1.0, 0.0, 0.0, 0.0]  # 1 m ahead of a base facing +y
@@ -149,8 +147,8 @@ class TrainServeTest(unittest.TestCase):
             self.assertEqual(log["rounds"][0]["round"], 1)
             self.assertGreater(log["expert"]["rows"], 0)
 
-            import features as F
-            from model import load
+            from kitchen_r_baselines.privileged import features as F
+            from kitchen_r_baselines.privileged.model import load
 
             model, meta = load(ck)
             self.assertEqual(meta["stage"], "final")

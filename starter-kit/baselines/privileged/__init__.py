@@ -1,0 +1,1 @@
+"""The privileged-track MLP baseline (README.md): train.py, serve.py."""
