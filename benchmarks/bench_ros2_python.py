@@ -18,6 +18,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 WATCH = Path(__file__).resolve().parent / "ros2-watch.py"
 
@@ -25,7 +26,7 @@ WATCH = Path(__file__).resolve().parent / "ros2-watch.py"
 def one(mode: str, images: bool, live_toml: str) -> None:
     from gym_kitchen_r import KitchenREnv
 
-    kw = {} if mode == "off" else {"ros2": True, "ros2_config": live_toml}
+    kw: dict[str, Any] = {} if mode == "off" else {"ros2": True, "ros2_config": live_toml}
     if mode == "subscriber":
         kw["ros2_wait"] = 30
     env = KitchenREnv(images=images, max_tasks=2, **kw)
@@ -79,6 +80,7 @@ def main() -> int:
                         stderr=subprocess.PIPE,
                         env=env,
                     )
+                    assert sub.stderr is not None
                     sub.stderr.readline()  # "ready"
                 cmd = [sys.executable, __file__, "--one", mode, "--live-toml", live_toml]
                 cmd += ["--no-images"] if args.no_images else []

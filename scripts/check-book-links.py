@@ -95,7 +95,7 @@ def lines_outside_code(path):
         yield no, line
 
 
-_anchor_cache = {}
+_anchor_cache: dict[object, set[str]] = {}
 
 
 def anchors_of(path):

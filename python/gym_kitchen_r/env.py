@@ -371,6 +371,7 @@ class KitchenRTaskEnv(KitchenREnv):
     """
 
     def _task(self, options: dict) -> int:
+        assert self.instruction is not None, "reset() picks the instruction before its task"
         plan = self.instruction["plan"]
         task = options.get("task")
         if task is None:

@@ -57,6 +57,7 @@ def subscriber(domain: int) -> subprocess.Popen:
         text=True,
         env=env,
     )
+    assert proc.stderr is not None
     line = proc.stderr.readline()
     assert line.strip() == "ready", f"the subscriber did not start: {line}{proc.stderr.read()}"
     return proc

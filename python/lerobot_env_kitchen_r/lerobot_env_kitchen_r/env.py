@@ -165,12 +165,13 @@ class KitchenRLeRobotEnv(gym.Env):
         self.task_description = ""
         self.instruction: dict | None = None
         self._steps = 0
+        self._task_index = 0
         self._ended = True
         self._last: dict | None = None
 
     def _camera_sizes(self) -> dict[str, tuple[int, int]]:
         images = self.inner.observation_space["images"]
-        return {name: tuple(int(v) for v in box.shape[:2]) for name, box in images.spaces.items()}
+        return {name: (int(box.shape[0]), int(box.shape[1])) for name, box in images.spaces.items()}
 
     # Conversions --------------------------------------------------------------------------
 
