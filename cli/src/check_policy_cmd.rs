@@ -15,8 +15,13 @@ use kitchen_r_sim::SensorsConfig;
 
 #[derive(Args, Debug)]
 pub(crate) struct CheckPolicyArgs {
-    /// The policy server, `http://HOST:PORT` or `https://HOST:PORT`.
+    /// The policy server: gRPC at `http://HOST:PORT` or `https://HOST:PORT`, or an openpi
+    /// WebSocket server at `ws://HOST:PORT` or `wss://HOST:PORT`.
     pub endpoint: String,
+    /// openpi (`ws://`) endpoints: the key map you will register, inline JSON or a JSON file;
+    /// without it the default keys.
+    #[arg(long, value_name = "JSON|FILE")]
+    pub key_map: Option<String>,
     /// Bearer token the policy server expects (sent as `authorization: Bearer <T>`).
     #[arg(long, env = "KITCHEN_R_POLICY_TOKEN", value_name = "T")]
     pub token: Option<String>,
@@ -71,7 +76,9 @@ pub(crate) fn check_policy(args: CheckPolicyArgs) -> anyhow::Result<()> {
         privileged_track: !args.standard_only,
         ..RemoteConfig::default()
     };
-    let report = check::check_policy(&args.endpoint, &creds, &cfg, &SimCamera::from_sensors(&sensors));
+    let key_map = crate::key_map_arg::text(args.key_map.as_deref())?;
+    let cameras = SimCamera::from_sensors(&sensors);
+    let report = check::check_policy(&args.endpoint, &creds, &cfg, &cameras, &key_map);
     for c in &report.checks {
         println!("{c}");
     }

@@ -20,9 +20,14 @@ use kitchen_r_worker::job::local::{
 #[derive(Args, Debug)]
 pub(crate) struct EvalArgs {
     /// Policy to evaluate: builtin:oracle (the privileged reference expert), or a policy server
-    /// at http://HOST:PORT or https://HOST:PORT, run exactly as the server's workers run it.
+    /// at http://HOST:PORT or https://HOST:PORT (gRPC), or ws://HOST:PORT or wss://HOST:PORT
+    /// (openpi WebSocket), run exactly as the server's workers run it.
     #[arg(long, default_value = "builtin:oracle")]
     policy: String,
+    /// openpi (`ws://`) endpoints: the key map, inline JSON or a JSON file; without it the
+    /// default keys.
+    #[arg(long, value_name = "JSON|FILE")]
+    key_map: Option<String>,
     /// Endpoint policies: online (SR, the policy drives) or offline (MSE, the expert drives and
     /// the policy predicts).
     #[arg(long, default_value = "online")]
@@ -98,7 +103,7 @@ pub(crate) fn eval(args: EvalArgs) -> anyhow::Result<()> {
         ),
         None => None,
     };
-    if args.policy.starts_with("http://") || args.policy.starts_with("https://") {
+    if kitchen_r_contract::Transport::of(&args.policy).is_some() {
         return eval_endpoint(args, &config, batch);
     }
     let policy: PolicyChoice = args.policy.parse()?;
@@ -198,7 +203,7 @@ pub(crate) fn print_kinds(by_kind: &std::collections::BTreeMap<String, Sr>, over
     }
 }
 
-/// `--policy http://…`: every instruction as the job the server would lease for it.
+/// `--policy http://…` or `ws://…`: every instruction as the job the server would lease for it.
 fn eval_endpoint(
     args: EvalArgs,
     config: &EvalConfig,
@@ -214,6 +219,7 @@ fn eval_endpoint(
         run: config.run_options(),
         teleport_on_failure: config.teleport_on_failure,
         bearer_token: args.token,
+        key_map: Some(crate::key_map_arg::text(args.key_map.as_deref())?),
         privileged: args.privileged,
         privileged_observations: None,
         jobs: args

@@ -19,6 +19,7 @@ mod dataset_cmd;
 mod episodes_cmd;
 mod eval_cmd;
 mod eval_record;
+mod key_map_arg;
 mod leaderboard_table;
 mod live_view;
 mod load_bench;

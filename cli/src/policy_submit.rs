@@ -1,4 +1,5 @@
-//! `kitchen-r submit policy ENDPOINT --split S [--plans ID]`: register a policy endpoint and,
+//! `kitchen-r submit policy ENDPOINT --split S [--plans ID] [--key-map JSON|FILE]`: register a
+//! policy endpoint (gRPC, or openpi WebSocket with its key map) and,
 //! with `--wait`, follow the run's progress until it has scores.
 
 use std::time::Duration;
@@ -12,9 +13,14 @@ use crate::submission_cmd;
 
 #[derive(Args, Debug)]
 pub(crate) struct PolicySubmitArgs {
-    /// The policy's gRPC endpoint, `http://HOST:PORT` or `https://HOST:PORT`, reachable from the
-    /// server and its workers.
+    /// The policy's endpoint, reachable from the server and its workers: gRPC at
+    /// `http://HOST:PORT` or `https://HOST:PORT`, or an openpi WebSocket server at
+    /// `ws://HOST:PORT` or `wss://HOST:PORT`.
     endpoint: String,
+    /// openpi (`ws://`) endpoints: the key map, inline JSON (`{"image_size": [128, 128]}`) or a
+    /// JSON file; without it the default keys (`observation/base_image`, ...).
+    #[arg(long, value_name = "JSON|FILE")]
+    key_map: Option<String>,
     /// Which split to evaluate on.
     #[arg(long, value_parser = ["dev", "test"])]
     split: String,
@@ -61,6 +67,9 @@ pub(crate) fn submit_policy(a: PolicySubmitArgs) -> anyhow::Result<()> {
     }
     if a.reference {
         body["reference"] = json!(true);
+    }
+    if let Some(k) = crate::key_map_arg::read(a.key_map.as_deref())? {
+        body["key_map"] = k;
     }
     runtime()?.block_on(async {
         let client = reqwest::Client::new();

@@ -12,11 +12,17 @@ pub(crate) struct WorkerProbe {
 }
 
 impl PolicyProbe for WorkerProbe {
-    fn probe(&self, url: &str, bearer: Option<&str>) -> BoxFuture<'static, Result<ProbedSpec, ProbeError>> {
+    fn probe(
+        &self,
+        url: &str,
+        bearer: Option<&str>,
+        key_map: Option<&str>,
+    ) -> BoxFuture<'static, Result<ProbedSpec, ProbeError>> {
         let (url, bearer) = (url.to_string(), bearer.map(str::to_string));
+        let key_map = key_map.unwrap_or_default().to_string();
         let (allow, remote) = (self.allow, self.remote.clone());
         Box::pin(async move {
-            match probe_for_registration(&url, bearer.as_deref(), &allow, &remote).await {
+            match probe_for_registration(&url, bearer.as_deref(), &key_map, &allow, &remote).await {
                 Ok(s) => Ok(ProbedSpec {
                     protocol_version: s.protocol_version,
                     max_concurrency: s.max_concurrency,
@@ -24,6 +30,7 @@ impl PolicyProbe for WorkerProbe {
                     observation_history: s.observation_history,
                     actions_executed_per_chunk: s.actions_executed_per_chunk,
                     privileged_observations: s.privileged_observations,
+                    key_map: s.key_map,
                 }),
                 Err(
                     e

@@ -9,84 +9,22 @@ use std::time::Instant;
 
 use kitchen_r_proto::POLICY_PROTOCOL_VERSION;
 use kitchen_r_proto::policy::v1 as pb;
-use kitchen_r_sim::Observation;
-use kitchen_r_sim::sensors::CameraImage;
-use kitchen_r_sim::types::Odometry;
 use tonic_health::pb::health_check_response::ServingStatus;
+
+mod openpi;
+mod report;
+mod synthetic;
+
+pub use report::{Check, Report, Verdict};
+use synthetic::synthetic;
 
 use crate::conn::{Conn, describe};
 use crate::convert::{self, CameraPlan, MAX_SIDE};
+use crate::endpoint::Transport;
 use crate::{Credentials, RemoteConfig, SimCamera, client, endpoint};
 use kitchen_r_episode::policy::{
     ChunkTolerance, Goal, HORIZON, PolicyInput, PolicySpec, PrivilegedObservation, check_chunk,
 };
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Verdict {
-    Pass,
-    Fail,
-    Skip,
-}
-
-/// One line of the report.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Check {
-    pub name: &'static str,
-    pub verdict: Verdict,
-    pub detail: String,
-}
-
-impl std::fmt::Display for Check {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let v = match self.verdict {
-            Verdict::Pass => "PASS",
-            Verdict::Fail => "FAIL",
-            Verdict::Skip => "SKIP",
-        };
-        write!(f, "{v}  {:<12} {}", self.name, self.detail)
-    }
-}
-
-/// Every check in order, with its verdict.
-#[derive(Debug, Clone, Default)]
-pub struct Report {
-    pub checks: Vec<Check>,
-}
-
-impl Report {
-    pub fn passed(&self) -> bool {
-        self.checks.iter().all(|c| c.verdict != Verdict::Fail)
-    }
-
-    /// The named check, if it ran.
-    pub fn get(&self, name: &str) -> Option<&Check> {
-        self.checks.iter().find(|c| c.name == name)
-    }
-
-    fn push(&mut self, name: &'static str, r: Result<String, String>) -> bool {
-        let ok = r.is_ok();
-        let (verdict, detail) = match r {
-            Ok(d) => (Verdict::Pass, d),
-            Err(d) => (Verdict::Fail, d),
-        };
-        self.checks.push(Check {
-            name,
-            verdict,
-            detail,
-        });
-        ok
-    }
-
-    fn skip_rest(&mut self, from: usize, because: &str) {
-        for name in &NAMES[from..] {
-            self.checks.push(Check {
-                name,
-                verdict: Verdict::Skip,
-                detail: format!("not run: {because}"),
-            });
-        }
-    }
-}
 
 /// Check names, in the order they run.
 pub(crate) const NAMES: [&str; 11] = [
@@ -103,8 +41,15 @@ pub(crate) const NAMES: [&str; 11] = [
     "large-image",
 ];
 
-/// Probe `endpoint`; never panics on what the endpoint does.
-pub fn check_policy(endpoint: &str, creds: &Credentials, cfg: &RemoteConfig, sim: &[SimCamera]) -> Report {
+/// Probe `endpoint`; never panics on what the endpoint does. `key_map` (JSON, empty for the
+/// convention) configures an openpi endpoint (`ws://`), whose checks are [`openpi::NAMES`].
+pub fn check_policy(
+    endpoint: &str,
+    creds: &Credentials,
+    cfg: &RemoteConfig,
+    sim: &[SimCamera],
+    key_map: &str,
+) -> Report {
     let mut report = Report::default();
     let rt = match tokio::runtime::Builder::new_current_thread().enable_all().build() {
         Ok(rt) => rt,
@@ -113,7 +58,19 @@ pub fn check_policy(endpoint: &str, creds: &Credentials, cfg: &RemoteConfig, sim
             return report;
         }
     };
-    rt.block_on(probe(&mut report, endpoint, creds, cfg, sim));
+    match Transport::of(endpoint) {
+        Some(Transport::Openpi) => {
+            rt.block_on(openpi::probe(&mut report, endpoint, creds, cfg, sim, key_map))
+        }
+        _ if !key_map.trim().is_empty() => {
+            report.push(
+                NAMES[0],
+                Err("a key map applies to ws:// and wss:// (openpi) endpoints only".into()),
+            );
+            report.skip(&NAMES[1..], "the endpoint is not usable");
+        }
+        _ => rt.block_on(probe(&mut report, endpoint, creds, cfg, sim)),
+    }
     report
 }
 
@@ -131,7 +88,7 @@ async fn probe(
         Ok(c) => c,
         Err(e) => {
             report.push(NAMES[0], Err(e));
-            return report.skip_rest(1, "the endpoint is not usable");
+            return report.skip(&NAMES[1..], "the endpoint is not usable");
         }
     };
     // Reachable: anything answered (even an error status), within the startup deadline.
@@ -146,7 +103,7 @@ async fn probe(
         _ => Ok(format!("{} answered", conn.endpoint.uri)),
     };
     if !report.push(NAMES[0], reachable) {
-        return report.skip_rest(1, "the endpoint is unreachable");
+        return report.skip(&NAMES[1..], "the endpoint is unreachable");
     }
     report.push(
         NAMES[1],
@@ -160,7 +117,7 @@ async fn probe(
         Ok(s) => s,
         Err(e) => {
             report.push(NAMES[2], Err(e.to_string()));
-            return report.skip_rest(3, "GetSpec failed");
+            return report.skip(&NAMES[3..], "GetSpec failed");
         }
     };
     let version = spec.protocol_version;
@@ -193,7 +150,7 @@ async fn probe(
         Ok(p) => p,
         Err(e) => {
             report.push(NAMES[4], Err(e));
-            return report.skip_rest(5, "the camera request is invalid");
+            return report.skip(&NAMES[5..], "the camera request is invalid");
         }
     };
     report.push(NAMES[4], Ok(describe_cameras(&plans)));
@@ -202,10 +159,10 @@ async fn probe(
     report.push(NAMES[5], v1_1.map(|(h, k)| describe_v1_1(h, k, cfg)));
     let track_ok = report.push(NAMES[6], describe_track(spec.privileged_observations, cfg));
     match client::check_spec(&spec, sim, cfg) {
-        Ok(_) if !track_ok => report.skip_rest(7, "this server would refuse the registration"),
+        Ok(_) if !track_ok => report.skip(&NAMES[7..], "this server would refuse the registration"),
         Ok((checked, _)) => acts(report, &mut conn, cfg, &plans, &checked).await,
-        Err(_) if !v1_1_ok => report.skip_rest(7, "the v1.1 fields are out of range"),
-        Err(_) => report.skip_rest(7, "the handshake failed"),
+        Err(_) if !v1_1_ok => report.skip(&NAMES[7..], "the v1.1 fields are out of range"),
+        Err(_) => report.skip(&NAMES[7..], "the handshake failed"),
     }
 }
 
@@ -261,7 +218,7 @@ async fn acts(
             .map(|()| "Reset accepted".into())
             .map_err(|e| e.to_string()),
     ) {
-        return report.skip_rest(8, "Reset failed");
+        return report.skip(&NAMES[8..], "Reset failed");
     }
     let deadline = cfg.call_deadline().as_secs_f64();
     let k = spec
@@ -345,35 +302,6 @@ fn synthetic_privileged() -> PrivilegedObservation {
             yaw: 1.5,
         },
         objects: Vec::new(),
-    }
-}
-
-/// A grey-gradient frame per camera at exactly the planned size (no resampling).
-fn synthetic(plans: &[CameraPlan], step: u64) -> Observation {
-    let images = plans
-        .iter()
-        .map(|p| {
-            let n = (p.width * p.height) as usize;
-            CameraImage {
-                name: p.name.clone(),
-                width: p.width,
-                height: p.height,
-                rgb: (0..n * 3).map(|i| (i / 3 % 251) as u8).collect(),
-                depth: vec![1.5; n],
-            }
-        })
-        .collect();
-    Observation {
-        time: step as f64 * 0.1,
-        images,
-        lidar: None,
-        odometry: Odometry {
-            pose: [0.0; 3],
-            velocity: [0.0; 2],
-        },
-        joints: [0.0; 6],
-        gripper: 1.0,
-        task: Some("move to the blue zone".into()),
     }
 }
 

@@ -12,7 +12,7 @@ use crate::SimCamera;
 use kitchen_r_episode::policy::{ACTION_DIM, PolicyError, Privileged, PrivilegedObject};
 
 pub(crate) use observation::{
-    action_from_wire, ee_pose_from_wire, frame_from_wire, observation, observation_from_wire,
+    action_from_wire, ee_pose_from_wire, encode_rgb, frame_from_wire, observation, observation_from_wire,
 };
 
 /// Largest side a policy may ask for (`policy.proto`).

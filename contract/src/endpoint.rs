@@ -2,8 +2,8 @@
 //! participants: without this check a registered `http://10.0.0.5:80` or `http://169.254.169.254`
 //! would make the evaluation platform probe its own private network (SSRF).
 //!
-//! An endpoint is `http://HOST:PORT` or `https://HOST:PORT`, nothing more (no path, no user
-//! info). Every address the host resolves to must be allowed; the worker then connects to the
+//! An endpoint is `http://HOST:PORT` or `https://HOST:PORT` (gRPC), or `ws://HOST:PORT` or
+//! `wss://HOST:PORT` (openpi WebSocket), nothing more (no path, no user info). Every address the host resolves to must be allowed; the worker then connects to the
 //! checked address itself, so a second DNS answer cannot swap in a refused one.
 
 use std::net::{IpAddr, Ipv4Addr, Ipv6Addr, SocketAddr, ToSocketAddrs};
@@ -76,7 +76,10 @@ impl NetworkKind {
 
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum EndpointError {
-    #[error("policy endpoint {endpoint:?} must look like http://HOST:PORT or https://HOST:PORT: {reason}")]
+    #[error(
+        "policy endpoint {endpoint:?} must look like http://HOST:PORT or https://HOST:PORT (gRPC), \
+         or ws://HOST:PORT or wss://HOST:PORT (openpi WebSocket): {reason}"
+    )]
     Malformed { endpoint: String, reason: String },
     #[error("policy endpoint host {host:?} does not resolve: {reason}")]
     Resolve { host: String, reason: String },
@@ -91,11 +94,40 @@ pub enum EndpointError {
     },
 }
 
+/// The wire a policy endpoint speaks, told by its URL's scheme.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Transport {
+    /// `http://`, `https://`: `kitchen_r.policy.v1.Policy` over gRPC.
+    Grpc,
+    /// `ws://`, `wss://`: openpi's WebSocket + msgpack-numpy protocol.
+    Openpi,
+}
+
+impl Transport {
+    /// The transport of `endpoint` by its scheme; `None` for any other scheme.
+    pub fn of(endpoint: &str) -> Option<Transport> {
+        parse_scheme(endpoint.trim()).map(|(t, _, _)| t)
+    }
+}
+
+/// `(transport, tls, rest)` of `endpoint`.
+fn parse_scheme(endpoint: &str) -> Option<(Transport, bool, &str)> {
+    [
+        ("http://", Transport::Grpc, false),
+        ("https://", Transport::Grpc, true),
+        ("ws://", Transport::Openpi, false),
+        ("wss://", Transport::Openpi, true),
+    ]
+    .into_iter()
+    .find_map(|(p, t, tls)| endpoint.strip_prefix(p).map(|rest| (t, tls, rest)))
+}
+
 /// A parsed, resolved and checked endpoint.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub(crate) struct Endpoint {
     /// As the participant wrote it, normalised to `scheme://host:port`.
     pub(crate) uri: String,
+    pub(crate) transport: Transport,
     pub(crate) tls: bool,
     /// Host name or address without brackets; the TLS server name and `:authority`.
     pub(crate) host: String,
@@ -104,18 +136,14 @@ pub(crate) struct Endpoint {
     pub(crate) addrs: Vec<SocketAddr>,
 }
 
-/// `scheme://host:port` split into (tls, host, port), with no network access.
-pub(crate) fn parse(endpoint: &str) -> Result<(bool, String, u16), EndpointError> {
+/// `scheme://host:port` split into (transport, tls, host, port), with no network access.
+pub(crate) fn parse(endpoint: &str) -> Result<(Transport, bool, String, u16), EndpointError> {
     let bad = |reason: &str| EndpointError::Malformed {
         endpoint: endpoint.to_string(),
         reason: reason.to_string(),
     };
-    let (tls, rest) = if let Some(r) = endpoint.strip_prefix("http://") {
-        (false, r)
-    } else if let Some(r) = endpoint.strip_prefix("https://") {
-        (true, r)
-    } else {
-        return Err(bad("the scheme must be http or https"));
+    let Some((transport, tls, rest)) = parse_scheme(endpoint) else {
+        return Err(bad("the scheme must be http, https, ws or wss"));
     };
     let rest = rest.strip_suffix('/').unwrap_or(rest);
     if rest.contains(['/', '?', '#', '@']) {
@@ -139,7 +167,7 @@ pub(crate) fn parse(endpoint: &str) -> Result<(bool, String, u16), EndpointError
     if port == 0 {
         return Err(bad("the port must be a number in 1..=65535"));
     }
-    Ok((tls, host.to_string(), port))
+    Ok((transport, tls, host.to_string(), port))
 }
 
 /// The configurable class of `ip`, or `None` for a public unicast address. An IPv6 address
@@ -322,7 +350,7 @@ pub(crate) fn class_range(ip: IpAddr) -> Option<&'static str> {
 
 /// Parse, resolve and check `endpoint`: every resolved address must be allowed.
 pub(crate) fn resolve(endpoint: &str, allowed: &AllowedNetworks) -> Result<Endpoint, EndpointError> {
-    let (tls, host, port) = parse(endpoint)?;
+    let (transport, tls, host, port) = parse(endpoint)?;
     let addrs: Vec<SocketAddr> = match host.parse::<IpAddr>() {
         Ok(ip) => vec![SocketAddr::new(ip, port)],
         Err(_) => (host.as_str(), port)
@@ -339,16 +367,23 @@ pub(crate) fn resolve(endpoint: &str, allowed: &AllowedNetworks) -> Result<Endpo
             reason: "no addresses".into(),
         });
     }
+    let scheme = match (transport, tls) {
+        (Transport::Grpc, false) => "http",
+        (Transport::Grpc, true) => "https",
+        (Transport::Openpi, false) => "ws",
+        (Transport::Openpi, true) => "wss",
+    };
     let shown = if host.contains(':') {
-        format!("{}://[{host}]:{port}", if tls { "https" } else { "http" })
+        format!("{scheme}://[{host}]:{port}")
     } else {
-        format!("{}://{host}:{port}", if tls { "https" } else { "http" })
+        format!("{scheme}://{host}:{port}")
     };
     for a in &addrs {
         allowed.check(&shown, a.ip())?;
     }
     Ok(Endpoint {
         uri: shown,
+        transport,
         tls,
         host,
         port,
@@ -366,15 +401,21 @@ mod tests {
 
     #[test]
     fn parses_the_accepted_forms_only() {
+        let g = Transport::Grpc;
         assert_eq!(
             parse("http://example.org:50051").unwrap(),
-            (false, "example.org".into(), 50051)
+            (g, false, "example.org".into(), 50051)
         );
         assert_eq!(
             parse("https://1.2.3.4:443/").unwrap(),
-            (true, "1.2.3.4".into(), 443)
+            (g, true, "1.2.3.4".into(), 443)
         );
-        assert_eq!(parse("http://[::1]:7").unwrap(), (false, "::1".into(), 7));
+        assert_eq!(parse("http://[::1]:7").unwrap(), (g, false, "::1".into(), 7));
+        let o = Transport::Openpi;
+        assert_eq!(parse("ws://h:8000").unwrap(), (o, false, "h".into(), 8000));
+        assert_eq!(parse("wss://[::1]:443/").unwrap(), (o, true, "::1".into(), 443));
+        assert_eq!(Transport::of(" wss://h:1"), Some(o));
+        assert_eq!(Transport::of("grpc://h:1"), None);
         for bad in [
             "grpc://h:1",
             "http://h",
@@ -383,6 +424,8 @@ mod tests {
             "http://h:1/path",
             "http://u@h:1",
             "http://:1",
+            "ws://h:1/path",
+            "ws://h",
             "h:1",
         ] {
             assert!(
@@ -482,5 +525,10 @@ mod tests {
         assert!(resolve("https://[fe80::1]:1", &all).is_ok());
         let e = resolve("https://localhost:443", &AllowedNetworks::default()).unwrap();
         assert!(e.tls && e.host == "localhost" && e.addrs.iter().all(|a| a.ip().is_loopback()));
+        // A WebSocket endpoint is checked by the same rules.
+        let err = resolve("ws://10.0.0.1:8000", &AllowedNetworks::default()).unwrap_err();
+        assert!(err.to_string().contains("ws://10.0.0.1:8000"), "{err}");
+        let e = resolve("wss://127.0.0.1:8000", &AllowedNetworks::default()).unwrap();
+        assert!(e.tls && e.transport == Transport::Openpi && e.uri == "wss://127.0.0.1:8000");
     }
 }

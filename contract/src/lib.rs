@@ -1,6 +1,7 @@
-//! The policy transport: a participant's `kitchen_r.policy.v1.Policy` gRPC endpoint seen as a
-//! [`Policy`](kitchen_r_episode::policy::Policy) the episode runner drives
-//! ([`client::RemotePolicy`]), any in-process policy served over the same contract
+//! The policy transport: a participant's endpoint seen as a
+//! [`Policy`](kitchen_r_episode::policy::Policy) the episode runner drives ([`Remote`]), whether
+//! it serves `kitchen_r.policy.v1.Policy` over gRPC ([`client::RemotePolicy`]) or openpi's
+//! WebSocket protocol ([`openpi`]); any in-process policy served over the gRPC contract
 //! ([`server::serve_policy`], behind `kitchen-r policy oracle`), and the conformance probe behind
 //! `kitchen-r check-policy` ([`check`]).
 //!
@@ -18,7 +19,9 @@ mod client;
 mod conn;
 mod convert;
 mod endpoint;
+pub mod openpi;
 pub mod probe;
+mod remote;
 pub mod server;
 
 use std::time::Duration;
@@ -26,7 +29,9 @@ use std::time::Duration;
 use serde::{Deserialize, Serialize};
 
 pub use client::RemotePolicy;
-pub use endpoint::{AllowedNetworks, EndpointError};
+pub use endpoint::{AllowedNetworks, EndpointError, Transport};
+pub use openpi::{KeyMap, OpenpiPolicy};
+pub use remote::Remote;
 
 /// Organiser-side limits of the policy transport (config section `[policy]`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -1,6 +1,8 @@
 //! The registration probe: before the server accepts a policy endpoint (and queues episodes
 //! for it), it checks what a worker will need: an allowed address, `grpc.health.v1` SERVING
-//! within the startup deadline, and a GetSpec answer this worker can drive. Each refusal says
+//! within the startup deadline, and a GetSpec answer this worker can drive; for an openpi
+//! endpoint (`ws://`), a usable key map, `/healthz` answering 200 and the metadata sent on
+//! connect. Each refusal says
 //! exactly what failed, because the participant sees it as the reason of a 4xx.
 //!
 //! Async and short (no Act call: that is `check-policy`'s job), so the server awaits it inside
@@ -13,8 +15,8 @@ use kitchen_r_proto::policy::v1 as pb;
 use kitchen_r_sim::SensorsConfig;
 
 use crate::conn::Conn;
-use crate::endpoint::{self, EndpointError, class_range};
-use crate::{AllowedNetworks, Credentials, RemoteConfig, RemoteError, SimCamera, client};
+use crate::endpoint::{self, EndpointError, Transport, class_range};
+use crate::{AllowedNetworks, Credentials, RemoteConfig, RemoteError, SimCamera, client, openpi};
 
 /// What the endpoint announced, accepted.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -35,6 +37,9 @@ pub struct ProbedSpec {
     pub privileged_observations: bool,
     /// One line for the participant: name, version, shape, cameras, concurrency.
     pub summary: String,
+    /// An openpi endpoint's key map, checked and spelt out in full (JSON): what the workers use.
+    /// `None` for gRPC.
+    pub key_map: Option<String>,
 }
 
 /// Why an endpoint was refused at registration.
@@ -107,14 +112,16 @@ fn sim_cameras() -> Result<Vec<SimCamera>, ProbeFailure> {
 
 /// Probe `url` as a worker would call it: allow-list (`allow`), health SERVING within
 /// `cfg.startup_deadline_s`, GetSpec (protocol version, horizon 16, action dim 10, cameras the
-/// simulator has). `cfg.allowed_networks` is ignored in favour of `allow`.
+/// simulator has); for `ws://` the key map (`key_map`, JSON, empty for the convention), health
+/// and metadata. `cfg.allowed_networks` is ignored in favour of `allow`.
 pub async fn probe_endpoint(
     url: &str,
     bearer: Option<&str>,
+    key_map: &str,
     allow: &AllowedNetworks,
     cfg: &RemoteConfig,
 ) -> Result<ProbedSpec, ProbeFailure> {
-    probe_with_cameras(url, bearer, allow, cfg, &sim_cameras()?, false).await
+    probe_with_cameras(url, bearer, key_map, allow, cfg, &sim_cameras()?, false).await
 }
 
 /// [`probe_endpoint`] as the server's registration runs it, where the caller is a participant
@@ -126,16 +133,18 @@ pub async fn probe_endpoint(
 pub async fn probe_for_registration(
     url: &str,
     bearer: Option<&str>,
+    key_map: &str,
     allow: &AllowedNetworks,
     cfg: &RemoteConfig,
 ) -> Result<ProbedSpec, ProbeFailure> {
-    probe_with_cameras(url, bearer, allow, cfg, &sim_cameras()?, true).await
+    probe_with_cameras(url, bearer, key_map, allow, cfg, &sim_cameras()?, true).await
 }
 
 /// [`probe_endpoint`] against an explicit camera set.
 async fn probe_with_cameras(
     url: &str,
     bearer: Option<&str>,
+    key_map: &str,
     allow: &AllowedNetworks,
     cfg: &RemoteConfig,
     cameras: &[SimCamera],
@@ -149,7 +158,13 @@ async fn probe_with_cameras(
         .map_err(|e| ProbeFailure::Internal(e.to_string()))??;
     let near = ep.addrs.iter().any(|a| endpoint::classify(a.ip()).is_some());
     let uri = ep.uri.clone();
-    let answer = handshake(ep, bearer, cfg, cameras).await;
+    let answer = match ep.transport {
+        Transport::Openpi => openpi_handshake(ep, bearer, key_map, cfg, cameras).await,
+        Transport::Grpc if !key_map.trim().is_empty() => Err(ProbeFailure::Handshake(format!(
+            "{uri}: a key map applies to ws:// and wss:// (openpi) endpoints only"
+        ))),
+        Transport::Grpc => handshake(ep, bearer, cfg, cameras).await,
+    };
     match answer {
         Err(
             ProbeFailure::Unreachable(_)
@@ -167,6 +182,39 @@ async fn probe_with_cameras(
     }
 }
 
+fn bearer_creds(bearer: Option<&str>) -> Credentials {
+    Credentials {
+        token: bearer.filter(|t| !t.is_empty()).map(str::to_string),
+        ca_pem: None,
+    }
+}
+
+/// An openpi endpoint: the key map checked, `/healthz` 200, metadata on connect.
+async fn openpi_handshake(
+    ep: endpoint::Endpoint,
+    bearer: Option<&str>,
+    key_map: &str,
+    cfg: &RemoteConfig,
+    cameras: &[SimCamera],
+) -> Result<ProbedSpec, ProbeFailure> {
+    let h = openpi::handshake(ep, &bearer_creds(bearer), cfg, cameras, key_map).await?;
+    let keys = h.keys().clone();
+    let spec = ProbedSpec {
+        endpoint: h.uri().to_string(),
+        // The worker speaks the contract for it: the adapter's version is ours.
+        protocol_version: kitchen_r_proto::POLICY_PROTOCOL_VERSION,
+        max_concurrency: keys.max_concurrency,
+        name: format!("openpi {}", h.uri()),
+        observation_history: 1,
+        actions_executed_per_chunk: keys.actions_executed_per_chunk.unwrap_or(0),
+        privileged_observations: false,
+        summary: h.summary(cfg),
+        key_map: Some(keys.to_json()),
+    };
+    h.close().await;
+    Ok(spec)
+}
+
 /// Health until SERVING, then GetSpec, checked against what the simulator can give.
 async fn handshake(
     ep: endpoint::Endpoint,
@@ -174,10 +222,7 @@ async fn handshake(
     cfg: &RemoteConfig,
     cameras: &[SimCamera],
 ) -> Result<ProbedSpec, ProbeFailure> {
-    let creds = Credentials {
-        token: bearer.filter(|t| !t.is_empty()).map(str::to_string),
-        ca_pem: None,
-    };
+    let creds = bearer_creds(bearer);
     let mut conn = Conn::new(ep, &creds, cfg)?;
     conn.wait_serving(cfg.startup_deadline()).await?;
     let spec = conn.get_spec(cfg).await?;
@@ -231,5 +276,6 @@ async fn handshake(
         actions_executed_per_chunk: spec.actions_executed_per_chunk,
         privileged_observations: spec.privileged_observations,
         summary,
+        key_map: None,
     })
 }

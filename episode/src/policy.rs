@@ -208,5 +208,7 @@ impl Policy for Unreachable {
 
 mod chunk;
 pub mod privileged;
+mod state;
 pub use chunk::{ChunkTolerance, Corrections, check_chunk};
 pub use privileged::{Goal, PrivilegedObservation, PrivilegedScope};
+pub use state::{STATE_FIELDS, state_vector};

@@ -5,7 +5,7 @@
 use kitchen_r_core::observations::PrivilegedScope;
 use kitchen_r_episode::driven::{Decision, Next, Progress};
 use kitchen_r_episode::policy::{
-    ACTION_DIM, Frame, Goal, Privileged, PrivilegedObject, PrivilegedObservation,
+    ACTION_DIM, Frame, Goal, Privileged, PrivilegedObject, PrivilegedObservation, state_vector,
 };
 use kitchen_r_episode::runner::TaskRecord;
 use kitchen_r_sim::sensors::CameraImage;
@@ -13,40 +13,8 @@ use kitchen_r_sim::{Observation, TaskTarget};
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyList};
 
-/// The robot state of a frame, in this order (`gym_kitchen_r.STATE_FIELDS`): odometry relative
-/// to the episode's start, base velocities, arm joints, gripper opening, hand pose in the base
-/// frame, previous action (zeros before the first one and after a teleport).
-pub(crate) const STATE_FIELDS: [&str; 29] = [
-    "odom_x",
-    "odom_y",
-    "odom_yaw",
-    "base_v",
-    "base_w",
-    "joint_0",
-    "joint_1",
-    "joint_2",
-    "joint_3",
-    "joint_4",
-    "joint_5",
-    "gripper",
-    "ee_x",
-    "ee_y",
-    "ee_z",
-    "ee_qw",
-    "ee_qx",
-    "ee_qy",
-    "ee_qz",
-    "prev_base_v",
-    "prev_base_w",
-    "prev_ee_x",
-    "prev_ee_y",
-    "prev_ee_z",
-    "prev_ee_qw",
-    "prev_ee_qx",
-    "prev_ee_qy",
-    "prev_ee_qz",
-    "prev_gripper",
-];
+/// The robot state of a frame (`gym_kitchen_r.STATE_FIELDS`): the standard state vector.
+pub(crate) use kitchen_r_episode::policy::STATE_FIELDS;
 
 /// One frame as the conversion reads it.
 #[derive(Clone, Copy)]
@@ -67,13 +35,7 @@ impl<'a> From<&'a Frame> for View<'a> {
 }
 
 fn state(v: &View<'_>, out: &mut Vec<f64>) {
-    let o = v.observation;
-    out.extend(o.odometry.pose);
-    out.extend(o.odometry.velocity);
-    out.extend(o.joints);
-    out.push(o.gripper);
-    out.extend(v.ee_pose);
-    out.extend(v.previous_action.copied().unwrap_or([0.0; ACTION_DIM]));
+    state_vector(v.observation, v.ee_pose, v.previous_action, out);
 }
 
 /// `{"images": {camera: (n, H, W, rgb bytes)}, "depth": {camera: (n, H, W, f32 bytes)},

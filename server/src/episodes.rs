@@ -40,6 +40,10 @@ pub(crate) struct EndpointSpec {
     pub quat_norm_tolerance: Option<f64>,
     #[serde(default)]
     pub gripper_margin: Option<f64>,
+    /// An openpi (`ws://`) endpoint's key map as checked at registration (JSON); absent for
+    /// gRPC endpoints.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub key_map: Option<String>,
 }
 
 /// One job: an episode to simulate and the policy to drive it.
@@ -117,6 +121,7 @@ impl JobSpec {
             min_actions_executed_per_chunk: e.min_actions_executed_per_chunk,
             quat_norm_tolerance: e.quat_norm_tolerance,
             gripper_margin: e.gripper_margin,
+            key_map: e.key_map.clone().unwrap_or_default(),
         }
     }
 }

@@ -157,6 +157,7 @@ impl Submissions for SubmissionsService {
             plans: (m.plans_submission_id != 0).then_some(m.plans_submission_id),
             episodes: m.episodes,
             reference: m.reference,
+            key_map: crate::service::policies::key_map_from_text(&m.key_map)?,
         };
         let done = self.state.register_policy(&caller, request).await?;
         Ok(Response::new(pb::RegisterPolicyResponse {

@@ -30,6 +30,9 @@ pub struct ProbedSpec {
     /// The policy asks for privileged observations (the privileged track); the server refuses
     /// it unless `control.privileged_track` is on.
     pub privileged_observations: bool,
+    /// An openpi (`ws://`) endpoint's key map as the probe checked it, every field spelt out
+    /// (JSON): stored with the endpoint and handed to the workers. `None` for gRPC.
+    pub key_map: Option<String>,
 }
 
 /// Why an endpoint was not accepted. Messages are shown to the participant as they are.
@@ -48,10 +51,16 @@ pub enum ProbeError {
 }
 
 /// Checks a participant's endpoint at registration. `bearer` is the token the evaluator will
-/// send to the endpoint. Implementations own the address allow-list (config
-/// `policy.allow_networks`), the deadlines and the transport.
+/// send to the endpoint; `key_map` an openpi endpoint's key map as the participant gave it
+/// (JSON). Implementations own the address allow-list (config `policy.allow_networks`), the
+/// deadlines and the transports.
 pub trait PolicyProbe: Send + Sync + 'static {
-    fn probe(&self, url: &str, bearer: Option<&str>) -> BoxFuture<'static, Result<ProbedSpec, ProbeError>>;
+    fn probe(
+        &self,
+        url: &str,
+        bearer: Option<&str>,
+        key_map: Option<&str>,
+    ) -> BoxFuture<'static, Result<ProbedSpec, ProbeError>>;
 }
 
 /// The probe of a server built without policy evaluation: refuses every registration.
@@ -59,7 +68,12 @@ pub trait PolicyProbe: Send + Sync + 'static {
 pub struct NoProbe;
 
 impl PolicyProbe for NoProbe {
-    fn probe(&self, _url: &str, _bearer: Option<&str>) -> BoxFuture<'static, Result<ProbedSpec, ProbeError>> {
+    fn probe(
+        &self,
+        _url: &str,
+        _bearer: Option<&str>,
+        _key_map: Option<&str>,
+    ) -> BoxFuture<'static, Result<ProbedSpec, ProbeError>> {
         Box::pin(async {
             Err(ProbeError::Unavailable(
                 "this server was started without policy evaluation: policy registration is disabled".into(),

@@ -34,6 +34,7 @@ impl FakeProbe {
                 observation_history: 0,
                 actions_executed_per_chunk: 0,
                 privileged_observations: false,
+                key_map: None,
             }),
             calls: AtomicUsize::new(0),
         })
@@ -64,7 +65,12 @@ impl FakeProbe {
 }
 
 impl PolicyProbe for FakeProbe {
-    fn probe(&self, _url: &str, _bearer: Option<&str>) -> BoxFuture<'static, Result<ProbedSpec, ProbeError>> {
+    fn probe(
+        &self,
+        _url: &str,
+        _bearer: Option<&str>,
+        _key_map: Option<&str>,
+    ) -> BoxFuture<'static, Result<ProbedSpec, ProbeError>> {
         self.calls.fetch_add(1, Ordering::SeqCst);
         let answer = self.answer.clone();
         Box::pin(async move { answer })
@@ -169,6 +175,7 @@ impl Fixture {
             plans: None,
             episodes: None,
             reference: false,
+            key_map: None,
         }
     }
 

@@ -3,7 +3,8 @@
     kitchen-r-client team create NAME                       (organiser token)
     kitchen-r-client submit plans FILE --split dev|test [--json]
     kitchen-r-client submit policy URL --split dev|test [--plans ID] [--episodes N]
-                     [--endpoint-token T] [--reference] [--wait [--timeout S]] [--json]
+                     [--endpoint-token T] [--key-map JSON|FILE] [--reference]
+                     [--wait [--timeout S]] [--json]
     kitchen-r-client submission show ID [--json]
     kitchen-r-client submission wait ID [--timeout S] [--json]
     kitchen-r-client leaderboard [--track T] [--split S] [--observations standard|privileged]
@@ -92,8 +93,17 @@ def build_parser():
     _auth(plans, "team token")
     plans.set_defaults(func=cmd_submit_plans)
 
-    pol = submit.add_parser("policy", help="register a gRPC policy endpoint for evaluation")
-    pol.add_argument("endpoint", help="http://HOST:PORT or https://HOST:PORT, reachable from the server")
+    pol = submit.add_parser("policy", help="register a policy endpoint (gRPC or openpi) for evaluation")
+    pol.add_argument(
+        "endpoint",
+        help="gRPC at http://HOST:PORT or https://HOST:PORT, or an openpi WebSocket server at "
+        "ws://HOST:PORT or wss://HOST:PORT, reachable from the server",
+    )
+    pol.add_argument(
+        "--key-map",
+        metavar="JSON|FILE",
+        help="openpi (ws://) endpoints: the key map, inline JSON or a JSON file (default: the documented keys)",
+    )
     pol.add_argument("--split", required=True, choices=["dev", "test"])
     pol.add_argument("--plans", type=int, metavar="SUBMISSION_ID", help="integrated track: your plan submission")
     pol.add_argument("--episodes", type=int, metavar="N", help="dev only: the first N instructions")
@@ -177,6 +187,24 @@ def cmd_submit_plans(a):
     return 0
 
 
+def _key_map(arg):
+    """A key map given inline (starting with `{`) or as a JSON file, as a dict."""
+    text = arg
+    if not arg.lstrip().startswith("{"):
+        try:
+            with open(arg) as f:
+                text = f.read()
+        except OSError as e:
+            raise Failure("reading the key map %s: %s" % (arg, e)) from e
+    try:
+        v = json.loads(text)
+    except ValueError as e:
+        raise Failure("--key-map is not JSON: %s" % e) from e
+    if not isinstance(v, dict):
+        raise Failure("--key-map must be a JSON object")
+    return v
+
+
 def cmd_submit_policy(a):
     if a.timeout is not None and not a.wait:
         raise Failure("--timeout needs --wait")
@@ -189,6 +217,8 @@ def cmd_submit_policy(a):
         body["token"] = a.endpoint_token
     if a.reference:
         body["reference"] = True
+    if a.key_map:
+        body["key_map"] = _key_map(a.key_map)
     client = Client(a.server, a.token)
     v = client.post_json("/api/v1/submissions/policies", body)
     if a.json and not a.wait:

@@ -25,6 +25,7 @@ mod live;
 mod load_bench;
 mod metrics;
 mod openapi;
+mod openpi;
 mod pages;
 mod participant_client;
 mod planning;

@@ -113,7 +113,8 @@ fn frame_to_wire(f: &Frame, cameras: &[CameraPlan]) -> Result<pb::Frame, PolicyE
     })
 }
 
-fn encode_rgb(img: &CameraImage, plan: &CameraPlan) -> Result<pb::Image, PolicyError> {
+/// One camera's colour image at the plan's size and encoding (resized with a triangle filter).
+pub(crate) fn encode_rgb(img: &CameraImage, plan: &CameraPlan) -> Result<pb::Image, PolicyError> {
     let resized;
     let rgb: &[u8] = if (img.width, img.height) == (plan.width, plan.height) {
         &img.rgb

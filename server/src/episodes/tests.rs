@@ -25,6 +25,7 @@ fn spec(mode: Mode, id: &str, plan: &[&str]) -> JobSpec {
             min_actions_executed_per_chunk: 0,
             quat_norm_tolerance: None,
             gripper_margin: None,
+            key_map: None,
         },
         place_targets: Vec::new(),
         grasp: kitchen_r_core::GraspMode::Abstract,

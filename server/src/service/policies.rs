@@ -35,12 +35,15 @@ pub(crate) const CONTROL_SCORER: &str = "control/1";
 
 const MAX_URL_CHARS: usize = 2048;
 const MAX_TOKEN_CHARS: usize = 4096;
+/// Longest key map accepted, as compact JSON (a full map is about 300 characters).
+const MAX_KEY_MAP_CHARS: usize = 4096;
 
 /// `POST /api/v1/submissions/policies` and `RegisterPolicy`.
 #[derive(Debug, Clone, PartialEq, Eq, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RegisterPolicy {
-    /// `http://host:port` or `https://host:port`.
+    /// `http://host:port` or `https://host:port` (gRPC), or `ws://host:port` or
+    /// `wss://host:port` (openpi WebSocket).
     pub endpoint: String,
     #[schema(value_type = crate::schema::SplitName)]
     pub split: Split,
@@ -56,6 +59,12 @@ pub(crate) struct RegisterPolicy {
     /// Organiser only: a reference (baseline) run.
     #[serde(default)]
     pub reference: bool,
+    /// openpi (`ws://`, `wss://`) endpoints only: the key map, a JSON object (`cameras`,
+    /// `image_size`, `state`, `prompt`, `actions`, `actions_executed_per_chunk`,
+    /// `max_concurrency`; every field optional, the defaults are the documented convention).
+    #[serde(default)]
+    #[schema(value_type = Option<Object>)]
+    pub key_map: Option<serde_json::Value>,
 }
 
 /// The answer to an accepted registration.
@@ -101,6 +110,9 @@ pub(crate) struct PolicyBody {
     /// them. Absent (false) in every body stored before the track existed.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub privileged_observations: bool,
+    /// An openpi endpoint's key map as the probe checked it (JSON); absent for gRPC.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub key_map: Option<String>,
 }
 
 /// The endpoint as the submission page shows it: everything but the token.
@@ -152,6 +164,7 @@ impl AppState {
         };
         let endpoint = validate_endpoint(&req.endpoint)?;
         let bearer = validate_bearer(req.token.as_deref())?;
+        let key_map = validate_key_map(&endpoint, req.key_map.as_ref())?;
         let instructions = self.run_instructions(req.split, req.episodes)?;
         if let Some(plans) = req.plans {
             self.check_linked_plans(&team, req.reference, req.split, plans)
@@ -160,7 +173,9 @@ impl AppState {
         if !req.reference {
             self.check_policy_quota(&team, req.split).await?;
         }
-        let probed = self.inner.probe.probe(&endpoint, bearer.as_deref()).await?;
+        let probed = (self.inner.probe)
+            .probe(&endpoint, bearer.as_deref(), key_map.as_deref())
+            .await?;
         if probed.protocol_version != kitchen_r_proto::POLICY_PROTOCOL_VERSION {
             return Err(ServiceError::ProbeFailed(format!(
                 "GetSpec announced protocol version {}, this server speaks {}",
@@ -177,7 +192,7 @@ impl AppState {
         // policy.proto: 0 is read as 1.
         let max_concurrency = probed.max_concurrency.max(1);
         let sealed = bearer.as_deref().map(|t| self.seal_token(t));
-        let endpoint_spec = self.endpoint_spec(&endpoint, sealed.clone());
+        let endpoint_spec = self.endpoint_spec(&endpoint, sealed.clone(), probed.key_map.clone());
         let scope = probed
             .privileged_observations
             .then(|| PrivilegedScope::for_split(req.split));
@@ -193,6 +208,7 @@ impl AppState {
             instructions: instructions.len(),
             offline_mse: cfg.control.offline_mse,
             privileged_observations: probed.privileged_observations,
+            key_map: probed.key_map.clone(),
         };
         let body = serde_json::to_string(&body).map_err(anyhow::Error::from)?;
         let scorer = format!("{CONTROL_SCORER}+{}", self.content().dataset_tag());
@@ -253,7 +269,7 @@ impl AppState {
         let episodes = (split == Split::Dev).then_some(body.instructions as u32);
         let instructions = self.run_instructions(split, episodes)?;
         let cfg = self.config();
-        let endpoint = self.endpoint_spec(&body.endpoint, body.token_sealed.clone());
+        let endpoint = self.endpoint_spec(&body.endpoint, body.token_sealed.clone(), body.key_map.clone());
         let scope = (body.privileged_observations).then(|| PrivilegedScope::for_split(split));
         let jobs = self.job_specs(instructions, &endpoint, body.reference, scope)?;
         let scorer = format!("{CONTROL_SCORER}+{}", self.content().dataset_tag());
@@ -292,7 +308,12 @@ impl AppState {
 
     /// Where a run's jobs call the policy, with the deadlines configured now; the token stays
     /// sealed until a job is leased.
-    fn endpoint_spec(&self, url: &str, sealed_bearer: Option<String>) -> EndpointSpec {
+    fn endpoint_spec(
+        &self,
+        url: &str,
+        sealed_bearer: Option<String>,
+        key_map: Option<String>,
+    ) -> EndpointSpec {
         let (p, c) = (&self.config().policy, &self.config().control);
         EndpointSpec {
             url: url.to_string(),
@@ -305,6 +326,7 @@ impl AppState {
             min_actions_executed_per_chunk: c.min_actions_executed_per_chunk,
             quat_norm_tolerance: Some(p.quat_norm_tolerance),
             gripper_margin: Some(p.gripper_margin),
+            key_map,
         }
     }
 
@@ -447,13 +469,17 @@ const MAX_OBSERVATION_HISTORY: u32 = 8;
 /// Actions per chunk (policy.proto); the largest execution count.
 const HORIZON: u32 = 16;
 
-/// `http://HOST:PORT` or `https://HOST:PORT`, trimmed; the probe does the real address check.
+/// The schemes an endpoint may have: gRPC, then openpi WebSocket.
+const SCHEMES: [&str; 4] = ["http://", "https://", "ws://", "wss://"];
+const OPENPI_SCHEMES: [&str; 2] = ["ws://", "wss://"];
+
+/// `http[s]://HOST:PORT` or `ws[s]://HOST:PORT`, trimmed; the probe does the real address check.
 fn validate_endpoint(url: &str) -> Result<String, ServiceError> {
     let url = url.trim();
     let refuse = |why: &str| Err(ServiceError::EndpointRefused(format!("{url:?} {why}")));
     if url.is_empty() {
         return Err(ServiceError::BadRequest(
-            "`endpoint` is required: http://HOST:PORT".into(),
+            "`endpoint` is required: http://HOST:PORT (gRPC) or ws://HOST:PORT (openpi)".into(),
         ));
     }
     if url.chars().count() > MAX_URL_CHARS {
@@ -462,16 +488,49 @@ fn validate_endpoint(url: &str) -> Result<String, ServiceError> {
     if url.chars().any(|c| c.is_whitespace() || c.is_control()) {
         return refuse("contains whitespace or control characters");
     }
-    let Some(rest) = url
-        .strip_prefix("http://")
-        .or_else(|| url.strip_prefix("https://"))
-    else {
-        return refuse("must start with http:// or https://");
+    let Some(rest) = SCHEMES.iter().find_map(|p| url.strip_prefix(p)) else {
+        return refuse("must start with http:// or https:// (gRPC), or ws:// or wss:// (openpi)");
     };
     if rest.is_empty() || rest.starts_with('/') {
         return refuse("has no host");
     }
     Ok(url.to_string())
+}
+
+/// The key map's compact JSON for the probe: an object, openpi endpoints only, size-capped.
+/// Its fields are the probe's to check (it knows the simulator's cameras).
+fn validate_key_map(
+    endpoint: &str,
+    key_map: Option<&serde_json::Value>,
+) -> Result<Option<String>, ServiceError> {
+    let Some(k) = key_map.filter(|k| !k.is_null()) else {
+        return Ok(None);
+    };
+    if !OPENPI_SCHEMES.iter().any(|p| endpoint.starts_with(p)) {
+        return Err(ServiceError::BadRequest(
+            "`key_map` applies to ws:// and wss:// (openpi) endpoints only".into(),
+        ));
+    }
+    if !k.is_object() {
+        return Err(ServiceError::BadRequest("`key_map` must be a JSON object".into()));
+    }
+    let text = k.to_string();
+    if text.chars().count() > MAX_KEY_MAP_CHARS {
+        return Err(ServiceError::BadRequest(format!(
+            "`key_map` must be at most {MAX_KEY_MAP_CHARS} characters of JSON"
+        )));
+    }
+    Ok(Some(text))
+}
+
+/// A key map as the gRPC request carries it (JSON text; empty for none).
+pub(crate) fn key_map_from_text(text: &str) -> Result<Option<serde_json::Value>, ServiceError> {
+    if text.trim().is_empty() {
+        return Ok(None);
+    }
+    serde_json::from_str(text)
+        .map(Some)
+        .map_err(|e| ServiceError::BadRequest(format!("`key_map` is not JSON: {e}")))
 }
 
 /// The endpoint's bearer token travels in an HTTP/2 header: visible ASCII only.

@@ -32,6 +32,7 @@ fn spec() -> JobSpec {
             min_actions_executed_per_chunk: 0,
             quat_norm_tolerance: None,
             gripper_margin: None,
+            key_map: None,
         },
         place_targets: vec![[0.5, -0.25, 0.9]],
         grasp: kitchen_r_core::GraspMode::Physical,

@@ -18,7 +18,7 @@ use super::cores::{Cores, YieldsCore};
 use super::path::PathHook;
 use super::spec;
 use super::{JobContext, JobError};
-use kitchen_r_contract::{Credentials, RemotePolicy, SimCamera};
+use kitchen_r_contract::{Credentials, Remote, SimCamera};
 use kitchen_r_episode::hooks::WrapHook;
 use kitchen_r_episode::offline::{OfflineOutcome, run_offline};
 use kitchen_r_episode::oracle::OraclePolicy;
@@ -277,7 +277,7 @@ fn run(
     let mut dead;
     let camera = SimCamera::from_sensors(&ctx.sensors);
     let connected = core
-        .without(|| RemotePolicy::connect(&ep.url, &creds, &remote_cfg, &camera))
+        .without(|| Remote::connect(&ep.url, &creds, &remote_cfg, &camera, &ep.key_map))
         .and_then(|p| match p.spec().privileged_observations && !granted {
             true => Err(standard_run_refusal(&ep.url)),
             false => Ok(p),
@@ -286,7 +286,7 @@ fn run(
         Ok(p) => {
             remote = p;
             remote.set_scene(&cfg.scene);
-            log.line(format!("policy {:?} connected", remote.wire_spec().name));
+            log.line(format!("policy {} connected", remote.describe()));
             timed = crate::metrics::Timed(&mut remote);
             &mut timed
         }

@@ -1,5 +1,5 @@
-//! `kitchen-r eval --policy http://HOST:PORT`: local evaluation of a policy endpoint through the
-//! workers' own path. Each instruction becomes the job the server would lease for it (same run
+//! `kitchen-r eval --policy http://HOST:PORT` (or `ws://HOST:PORT`, openpi): local evaluation of
+//! a policy endpoint through the workers' own path. Each instruction becomes the job the server would lease for it (same run
 //! seed, same settings, same episode key) and runs through [`execute_job_traced`], so the numbers a
 //! participant gets here are the numbers the leaderboard will show for the same settings.
 //!
@@ -46,6 +46,10 @@ pub struct LocalSettings {
     pub run: RunOptions,
     pub teleport_on_failure: bool,
     pub bearer_token: Option<String>,
+    /// An openpi endpoint's key map (JSON; empty or absent: the convention). Replaced by the
+    /// probe's checked, spelt-out map before the jobs are made, as a server stores it.
+    #[serde(default)]
+    pub key_map: Option<String>,
     /// Organiser reference runs only: hand the policy privileged state.
     pub privileged: bool,
     /// The privileged track: the scope of the privileged observations every job grants (set
@@ -186,6 +190,7 @@ pub(crate) fn local_job(ins: &Instruction, url: &str, s: &LocalSettings, remote:
             min_actions_executed_per_chunk: remote.min_actions_executed_per_chunk,
             quat_norm_tolerance: Some(s.run.chunk_tolerance.quat_norm),
             gripper_margin: Some(s.run.chunk_tolerance.gripper_margin),
+            key_map: s.key_map.clone().unwrap_or_default(),
         }),
         render: None,
     }
@@ -244,6 +249,7 @@ fn evaluate_endpoint_with(
     let probed = rt.block_on(probe_endpoint(
         url,
         s.bearer_token.as_deref(),
+        s.key_map.as_deref().unwrap_or_default(),
         &AllowedNetworks::ALL,
         &remote,
     ))?;
@@ -255,6 +261,7 @@ fn evaluate_endpoint_with(
             .then(|| PrivilegedScope::for_split(split))),
         // The jobs carry the mode, as a server's do; sim.toml's unless asked for another.
         grasp: Some(s.grasp.unwrap_or(ctx.sim.grasp.mode)),
+        key_map: probed.key_map.clone(),
         ..s.clone()
     };
     ctx.params.batch = batch;
@@ -428,6 +435,7 @@ mod tests {
             run: RunOptions::default(),
             teleport_on_failure: false,
             bearer_token: None,
+            key_map: None,
             privileged: false,
             privileged_observations: None,
             jobs: 1,

@@ -249,6 +249,7 @@ fn local_eval_of_an_endpoint_gives_the_workers_numbers() {
         },
         teleport_on_failure: true,
         bearer_token: None,
+        key_map: None,
         privileged: true,
         privileged_observations: None,
         jobs: 4,

@@ -20,7 +20,7 @@ fn probe(url: &str) -> Report {
         allowed_networks: AllowedNetworks::ALL,
         ..RemoteConfig::default()
     };
-    let r = check_policy(url, &Credentials::default(), &cfg, &cameras());
+    let r = check_policy(url, &Credentials::default(), &cfg, &cameras(), "");
     for c in &r.checks {
         eprintln!("{c}");
     }

@@ -32,6 +32,7 @@ fn a_good_endpoint_is_accepted_with_its_spec() {
         .block_on(probe_endpoint(
             &server.url(),
             Some("secret"),
+            "",
             &AllowedNetworks::default(),
             &cfg(),
         ))
@@ -50,6 +51,7 @@ fn a_private_address_is_refused_naming_the_class_and_the_key() {
         .block_on(probe_endpoint(
             "http://10.1.2.3:50051",
             None,
+            "",
             &AllowedNetworks::default(),
             &cfg(),
         ))
@@ -63,6 +65,7 @@ fn a_private_address_is_refused_naming_the_class_and_the_key() {
         .block_on(probe_endpoint(
             "ftp://x:1",
             None,
+            "",
             &AllowedNetworks::default(),
             &cfg(),
         ))
@@ -97,6 +100,7 @@ fn an_endpoint_not_serving_is_refused_with_its_status() {
         .block_on(probe_endpoint(
             &format!("http://{addr}"),
             None,
+            "",
             &AllowedNetworks::default(),
             &cfg(),
         ))
@@ -113,6 +117,7 @@ fn an_endpoint_not_serving_is_refused_with_its_status() {
         .block_on(probe_endpoint(
             &format!("http://{free}"),
             None,
+            "",
             &AllowedNetworks::default(),
             &cfg(),
         ))
@@ -131,6 +136,7 @@ fn a_bad_spec_is_refused_naming_the_field() {
         .block_on(probe_endpoint(
             &server.url(),
             None,
+            "",
             &AllowedNetworks::default(),
             &cfg(),
         ))
@@ -164,6 +170,7 @@ fn an_execution_count_outside_the_organisers_range_is_refused() {
         rt().block_on(probe_endpoint(
             &server.url(),
             None,
+            "",
             &AllowedNetworks::default(),
             &strict,
         ))
@@ -205,6 +212,7 @@ fn registration_says_only_unreachable_for_anything_near_the_evaluation_host() {
             .block_on(probe_for_registration(
                 &url,
                 None,
+                "",
                 &AllowedNetworks::default(),
                 &cfg(),
             ))

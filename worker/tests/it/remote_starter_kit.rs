@@ -77,7 +77,7 @@ fn the_starter_kit_passes_check_policy() {
         return;
     }
     let (_kit, url) = start(&[]);
-    let r = check_policy(&url, &Credentials::default(), &cfg(), &cameras());
+    let r = check_policy(&url, &Credentials::default(), &cfg(), &cameras(), "");
     for c in &r.checks {
         eprintln!("{c}");
     }
@@ -95,8 +95,8 @@ fn the_starter_kit_enforces_its_token() {
         token: Some("s3cret-token".into()),
         ca_pem: None,
     };
-    assert!(check_policy(&url, &good, &cfg(), &cameras()).passed());
-    let r = check_policy(&url, &Credentials::default(), &cfg(), &cameras());
+    assert!(check_policy(&url, &good, &cfg(), &cameras(), "").passed());
+    let r = check_policy(&url, &Credentials::default(), &cfg(), &cameras(), "");
     let c = r.get("protocol").unwrap();
     assert_eq!(c.verdict, Verdict::Fail);
     assert!(c.detail.contains("Unauthenticated"), "{c}");

@@ -106,6 +106,7 @@ async fn a_spec_outside_the_contract_ranges_is_refused_naming_field_and_range() 
                 observation_history: history,
                 actions_executed_per_chunk: execute,
                 privileged_observations: false,
+                key_map: None,
             }),
             calls: Default::default(),
         })
@@ -166,6 +167,7 @@ async fn probe_failures_are_clear_4xx_naming_what_failed() {
             observation_history: 0,
             actions_executed_per_chunk: 0,
             privileged_observations: false,
+            key_map: None,
         }),
         calls: Default::default(),
     });
