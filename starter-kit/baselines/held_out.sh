@@ -21,9 +21,11 @@
 # CAM_ARGS / PRIV_ARGS (extra train.py arguments; the privileged run is done before the camera
 # run's rounds start, so CAM_ARGS="--teacher $RUN/priv/ckpt.pt --beta B" lets it drive a share of
 # them), JOBS [16], DEVICE [cuda], CAM_CKPT /
-# PRIV_CKPT (evaluate these checkpoints instead of $RUN's), TRAIN [cam priv] (which baselines to
-# train), PRIV_JOBS [4] (the privileged gate's jobs: its gate runs beside the camera's, which takes
-# JOBS). On a machine of several GPUs, give each run its own with CUDA_VISIBLE_DEVICES and RUN.
+# PRIV_CKPT / DIFF_CKPT (evaluate these checkpoints instead of $RUN's), TRAIN [cam priv] (which
+# baselines to train: cam, priv, diff), PRIV_JOBS [4] (the privileged gate's jobs: its gate runs
+# beside the camera's, which takes JOBS). The diffusion baseline (TRAIN=diff, EVAL=diff) trains
+# through its own pipeline (diffusion_policy/device_pipeline.sh, STOP_AFTER=train) on episodes
+# of TRAIN_INSTRUCTIONS; DIFF_EPISODES [1000] and DIFF_MINUTES [10] set its data and time. On a machine of several GPUs, give each run its own with CUDA_VISIBLE_DEVICES and RUN.
 # Needs python3 with the baselines installed (pip install -e ./starter-kit -e "./starter-kit/baselines[control]"
 # and ./python; on a GPU machine of the developers' `device` tool, device_setup.sh links them).
 set -euo pipefail
@@ -61,12 +63,19 @@ train() {
     python3 "$HERE/privileged/train.py" --out "$RUN/priv" --instructions "$TRAIN_INSTRUCTIONS" --device "$DEVICE" \
       --workers "$JOBS" --envs "$JOBS" ${PRIV_ARGS:-} >"$RUN/priv.log" 2>&1 || say "privileged run failed (see priv.log)"
   fi
+  if [[ $want == *" diff "* ]]; then
+    say "diffusion baseline: dev $TRAIN_INSTRUCTIONS"
+    KR_BIN="${KITCHEN_R_BIN:-$REPO/target/release/kitchen-r}" WORK="$RUN/diff" STOP_AFTER=train TRAIN_INSTRUCTIONS="$TRAIN_INSTRUCTIONS" \
+      EPISODES="${DIFF_EPISODES:-1000}" TRAIN_MIN="${DIFF_MINUTES:-10}" DEVICE="$DEVICE" \
+      bash "$HERE/diffusion_policy/device_pipeline.sh" >"$RUN/diff.log" 2>&1 || say "diffusion run failed (see diff.log)"
+  fi
   if [ -n "$cam" ]; then wait $cam || { say "camera run failed (see cam.log)"; exit 1; }; fi
-  say "trained: $(ls -la "$RUN"/cam/ckpt.pt "$RUN"/priv/ckpt.pt 2>&1 | tr '\n' ' ')"
+  say "trained: $(ls -la "$RUN"/cam/ckpt.pt "$RUN"/priv/ckpt.pt "$RUN"/diff/results/ckpt.pt 2>&1 | tr '\n' ' ')"
 }
 
 CAM_CKPT="${CAM_CKPT:-$RUN/cam/ckpt.pt}"
 PRIV_CKPT="${PRIV_CKPT:-$RUN/priv/ckpt.pt}"
+DIFF_CKPT="${DIFF_CKPT:-$RUN/diff/results/ckpt.pt}"
 gate() {  # name track serve-command train-log jobs
   local name=$1 track=$2 serve=$3 log=$4 jobs=$5
   local out="$RUN/results/$name"
@@ -85,7 +94,9 @@ evaluate() {
              "$(dirname "$CAM_CKPT")/train_log.json" "$JOBS" & pids+=($!) ;;
       priv) { gate privileged privileged "python3 $HERE/privileged/serve.py --checkpoint $PRIV_CKPT --listen 127.0.0.1:0" \
              "$(dirname "$PRIV_CKPT")/train_log.json" "${PRIV_JOBS:-4}" || say "privileged gate failed"; } & pids+=($!) ;;
-      *) echo "EVAL=$which: use cam and/or priv" >&2; exit 2 ;;
+      diff) gate diffusion standard "python3 $HERE/diffusion_policy/serve.py --checkpoint $DIFF_CKPT --listen 127.0.0.1:0 --device $DEVICE --concurrency $JOBS" \
+             "$(dirname "$DIFF_CKPT")/train_log.json" "$JOBS" & pids+=($!) ;;
+      *) echo "EVAL=$which: use cam, priv and/or diff" >&2; exit 2 ;;
     esac
   done
   local failed=0

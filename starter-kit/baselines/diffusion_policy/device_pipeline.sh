@@ -11,6 +11,8 @@
 #   KR_BIN         the kitchen-r binary                       [REPO/target/release/kitchen-r]
 #   EPISODES       training episodes to collect (dev instructions, collect seed COLLECT_SEED) [1000]
 #   COLLECT_SEED   collection seed; eval uses seed 0, so a seed != 0 keeps eval episodes unseen [1]
+#   TRAIN_INSTRUCTIONS  collect only from these dev instructions (1-based inclusive range, e.g.
+#                  1-100), cycled, so the rest stay held out (held_out.sh's TRAIN=diff) [every one]
 #   TRAIN_MIN      training minutes                           [60]
 #   TRAIN_ARGS     extra train.py arguments (e.g. "--batch 128")               []
 #   DEVICE         torch device for training and serving       [cuda if available, else cpu]
@@ -108,7 +110,7 @@ await_line() {
   return 1
 }
 
-log "pipeline: KR_BIN=$KR_BIN EPISODES=$EPISODES COLLECT_SEED=$COLLECT_SEED TRAIN_MIN=$TRAIN_MIN EVAL_EPISODES=$EVAL_EPISODES DEVICE=$DEVICE WORK=$WORK cores=$(nproc)"
+log "pipeline: KR_BIN=$KR_BIN EPISODES=$EPISODES COLLECT_SEED=$COLLECT_SEED TRAIN_INSTRUCTIONS=${TRAIN_INSTRUCTIONS:-all} TRAIN_MIN=$TRAIN_MIN EVAL_EPISODES=$EVAL_EPISODES DEVICE=$DEVICE WORK=$WORK cores=$(nproc)"
 {
   uname -a
   nproc
@@ -119,7 +121,17 @@ log "pipeline: KR_BIN=$KR_BIN EPISODES=$EPISODES COLLECT_SEED=$COLLECT_SEED TRAI
 
 # 1. Collect the training set (oracle expert, LeRobot v3.0 export, both cameras, no depth).
 collect() {
-  "$KR_BIN" collect --episodes "$EPISODES" --seed "$COLLECT_SEED" --out "$WORK/collect" --format lerobot \
+  local which=(--episodes "$EPISODES")
+  if [ -n "${TRAIN_INSTRUCTIONS:-}" ]; then
+    # The range's instructions only, as a batch of episodes (randomised with the collection seed).
+    local first="${TRAIN_INSTRUCTIONS%-*}" last="${TRAIN_INSTRUCTIONS#*-}"
+    sed -n "${first},${last}p" "$KITCHEN_R_ASSETS/dataset/dev.jsonl" >"$WORK/train_instructions.jsonl"
+    [ -s "$WORK/train_instructions.jsonl" ] || die "TRAIN_INSTRUCTIONS=$TRAIN_INSTRUCTIONS selects no dev instruction"
+    "$KR_BIN" episodes generate --from-dataset --instructions "$WORK/train_instructions.jsonl" --count "$EPISODES" \
+      --seed "$COLLECT_SEED" --out "$WORK/train_episodes.json" 2>>"$WORK/collect.log" || die "episodes generate failed"
+    which=(--episodes-file "$WORK/train_episodes.json")
+  fi
+  "$KR_BIN" collect "${which[@]}" --seed "$COLLECT_SEED" --out "$WORK/collect" --format lerobot \
     --cameras base,gripper --no-depth --jobs "$(nproc)" --json >"$WORK/collect.json.part" 2>"$WORK/collect.log" &&
     mv "$WORK/collect.json.part" "$RES/collect.json"
 }
