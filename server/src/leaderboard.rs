@@ -1,5 +1,6 @@
-//! The leaderboard: ranking (from the store), its renderings (JSON, CSV, HTML; see [`render`])
-//! and a cache.
+//! The leaderboard: ranking (from the store), its data renderings (JSON, CSV; see [`render`])
+//! and a cache of rendered bodies. The HTML page is the HTTP adapter's; the service hands it a
+//! [`BoardPage`] and caches what it renders ([`RenderPage`]).
 //!
 //! Tracks: planning (EM desc), control (SR desc, then MSE asc) and integrated (M desc, then P
 //! asc; P may be +inf). Best entry per team, then earliest submission, then id; unscored or
@@ -16,8 +17,8 @@
 //! answered by default and shown first; the other mode's boards appear only when they hold runs
 //! (made before the organiser changed the setting), each row labelled.
 //!
-//! Below the service: this module holds the ranking types, the renderings and the cache; the
-//! service (`service/board.rs`) reads the store and fills them.
+//! Below the service: this module holds the ranking types, the data renderings and the cache;
+//! the service (`service/board.rs`) reads the store and fills them.
 //!
 //! Policy: rendered bodies are cached per (track, observations, split, format) and dropped on every write that
 //! can change a ranking (a new submission, a rescore, a policy run finishing), so reads under
@@ -124,6 +125,21 @@ pub(crate) struct Row {
     pub grasp_mode: Option<GraspMode>,
 }
 
+/// What the public page shows: boards of one split (see `AppState::leaderboard_page`), whether
+/// that split is the public test sample, and the contest's grasp mode (`[control] grasp`), which
+/// the page names and against which it labels boards of the other mode.
+#[derive(Debug, Clone)]
+pub(crate) struct BoardPage {
+    pub split: Split,
+    pub boards: Vec<Leaderboard>,
+    pub public_sample: bool,
+    pub contest: GraspMode,
+}
+
+/// How the HTTP adapter renders a [`BoardPage`] as HTML. The service calls it on a cache miss,
+/// so the page's bytes are cached and invalidated with the JSON and CSV bodies.
+pub(crate) type RenderPage = fn(&BoardPage) -> String;
+
 /// Key of a cached body: `None` track is the all-tracks page at `/`.
 pub(crate) type CacheKey = (Option<Track>, ObservationTrack, GraspMode, Split, Format);
 
@@ -172,4 +188,4 @@ pub(crate) fn ranked(rows: impl IntoIterator<Item = Row>) -> Vec<Row> {
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

@@ -5,12 +5,13 @@
 //! runs, leaderboard order) and its storage. It must not step physics (that is `sim`) nor parse
 //! command lines (that is the `kitchen-r` binary, which calls [`build`] then [`Server::run`]).
 //!
-//! Layout: [`service`] holds the rules; [`http`], [`grpc`] and [`grpc_worker`] are thin
-//! adapters; [`store`] is every SQL statement (including the job queue); [`plans`] parses and
-//! scores plan files; [`episodes`] defines policy-run episodes and their scoring; [`probe`] is
-//! the seam through which the binary supplies the policy endpoint probe; [`content`] holds the
-//! dataset; [`leaderboard`] the ranking types, renderings and cache; [`metrics`] the
-//! Prometheus recorder and metric names (a leaf: adapters and the service record into it).
+//! Layout: [`service`] holds the rules; [`http`] (the only place HTML is built, with maud),
+//! [`grpc`] and [`grpc_worker`] are thin adapters; [`store`] is every SQL statement (including
+//! the job queue); [`plans`] parses and scores plan files; [`episodes`] defines policy-run
+//! episodes and their scoring; [`probe`] is the seam through which the binary supplies the
+//! policy endpoint probe; [`content`] holds the dataset; [`leaderboard`] the ranking types, JSON
+//! and CSV and the cache; [`metrics`] the Prometheus recorder and metric names (a leaf: adapters
+//! and the service record into it).
 //!
 //! Imports go one way: adapters ([`http`], [`grpc`], [`grpc_worker`]) → [`service`] →
 //! [`store`], [`leaderboard`], [`content`], [`episodes`] → [`error`] → [`plans`] → the leaf

@@ -83,7 +83,7 @@ async fn a_physical_grasp_contest_names_its_mode_wherever_the_score_shows() {
         "{page}"
     );
     assert!(
-        page.contains("<h2 id=control>Control track — standard observations — physical grasp</h2>"),
+        page.contains("<h2 id=\"control\">Control track — standard observations — physical grasp</h2>"),
         "{page}"
     );
     let entry = text(&server, &format!("/leaderboard/control/dev/{id}")).await;

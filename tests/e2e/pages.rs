@@ -142,7 +142,7 @@ async fn a_team_logs_in_through_the_form_and_reads_its_team_and_submission_pages
     );
     assert!(page.contains("1.000000"), "{page}");
     assert!(
-        page.contains("<td class=n>10</td><td class=n>1</td><td class=n>9</td>"),
+        page.contains("<td class=\"n\">10</td><td class=\"n\">1</td><td class=\"n\">9</td>"),
         "{page}"
     );
     assert!(!page.contains("<script"), "{page}");

@@ -306,7 +306,7 @@ fn privileged_runs_get_what_their_split_allows_and_are_ranked_apart() {
         let page = text(&server, "/?split=dev").await;
         assert!(page.contains("Control track — standard observations"), "{page}");
         assert!(
-            page.contains("id=control-privileged>Control track — privileged observations"),
+            page.contains("id=\"control-privileged\">Control track — privileged observations"),
             "{page}"
         );
         assert!(

@@ -101,9 +101,9 @@ pub(super) async fn runs(State(s): State<AppState>, caller: Caller) -> Result<Re
     security(("organiser_token" = [])),
     responses(
         (status = 200, description = "Cancelled", body = crate::service::admin::Cancelled),
-        (status = 400, description = "The id is not a positive integer", body = super::error_body::ErrorBody),
-        (status = 404, description = "No such run", body = super::error_body::ErrorBody),
-        (status = 409, description = "The run is not active", body = super::error_body::ErrorBody),
+        (status = 400, description = "The id is not a positive integer", body = super::schemas::ErrorBody),
+        (status = 404, description = "No such run", body = super::schemas::ErrorBody),
+        (status = 409, description = "The run is not active", body = super::schemas::ErrorBody),
     )
 )]
 pub(super) async fn cancel(
@@ -124,9 +124,9 @@ pub(super) async fn cancel(
     security(("organiser_token" = [])),
     responses(
         (status = 200, description = "Requeued", body = crate::service::admin::Requeued),
-        (status = 400, description = "The id is not a positive integer", body = super::error_body::ErrorBody),
-        (status = 404, description = "No such run", body = super::error_body::ErrorBody),
-        (status = 409, description = "Nothing to requeue", body = super::error_body::ErrorBody),
+        (status = 400, description = "The id is not a positive integer", body = super::schemas::ErrorBody),
+        (status = 404, description = "No such run", body = super::schemas::ErrorBody),
+        (status = 409, description = "Nothing to requeue", body = super::schemas::ErrorBody),
     )
 )]
 pub(super) async fn requeue(

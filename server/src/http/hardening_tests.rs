@@ -2,8 +2,10 @@
 //! every HTML answer, CSV cells a spreadsheet would evaluate, plan-line fields dropped before
 //! storage and endpoint tokens absent from every answer.
 
+use axum::body::Body;
 use axum::body::to_bytes;
 use axum::http::Request;
+use axum::http::StatusCode;
 use tower::ServiceExt;
 
 use super::*;

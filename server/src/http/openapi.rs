@@ -13,14 +13,12 @@ use std::sync::OnceLock;
 
 use axum::http::{HeaderValue, header};
 use axum::response::{IntoResponse, Response};
-use serde::{Deserialize, Serialize};
 use utoipa::openapi::path::Operation;
-use utoipa::openapi::schema::{ObjectBuilder, Schema, SchemaType, Type};
 use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityScheme};
 use utoipa::openapi::{ContentBuilder, OpenApi as Document, RefOr, ResponseBuilder};
-use utoipa::{Modify, OpenApi, ToSchema};
+use utoipa::{Modify, OpenApi};
 
-pub(crate) use super::error_body::ErrorBody;
+use super::schemas::{ErrorBody, FlagParam, FormatParam, SplitParam, TrackParam};
 use crate::schema::SplitName;
 
 /// The security scheme of routes that take a team's token.
@@ -38,25 +36,25 @@ JSON: `{\"error\": message, \"code\": stable identifier, \"request_id\": ...}` (
 when reporting a problem). Send tokens as `Authorization: Bearer <token>`.",
     ),
     paths(
-        super::healthz,
-        super::metrics,
+        super::health::healthz,
+        super::health::metrics,
         openapi_json,
-        super::create_team,
-        super::rotate_team_token,
-        super::dataset_manifest,
-        super::dataset,
-        super::scenes,
-        super::scene,
-        super::topdown,
-        super::brief,
-        super::submit_plans,
-        super::register_policy,
-        super::submission,
-        super::episode_plot,
-        super::leaderboard,
-        super::rescore,
-        super::resimulate,
-        super::admin_stats,
+        super::organiser::create_team,
+        super::organiser::rotate_team_token,
+        super::dataset::dataset_manifest,
+        super::dataset::dataset,
+        super::dataset::scenes,
+        super::dataset::scene,
+        super::dataset::topdown,
+        super::dataset::brief,
+        super::submissions::submit_plans,
+        super::submissions::register_policy,
+        super::submissions::submission,
+        super::submissions::episode_plot,
+        super::leaderboard::leaderboard,
+        super::organiser::rescore,
+        super::organiser::resimulate,
+        super::organiser::admin_stats,
         super::admin::queue,
         super::admin::workers,
         super::admin::runs,
@@ -107,109 +105,6 @@ pub(super) async fn openapi_json() -> Response {
         document_json(),
     )
         .into_response()
-}
-
-/// A query parameter's values, and the empty string (as an HTML form sends an unset field),
-/// which means the default. utoipa's derive cannot name an empty enum value, hence by hand.
-fn choice_schema(values: &[&str], description: &str) -> RefOr<Schema> {
-    ObjectBuilder::new()
-        .schema_type(SchemaType::new(Type::String))
-        .enum_values(Some(values.iter().copied()))
-        .description(Some(description))
-        .into()
-}
-
-/// `track` of `GET /api/v1/leaderboard`.
-pub(crate) struct TrackParam;
-
-impl utoipa::PartialSchema for TrackParam {
-    fn schema() -> RefOr<Schema> {
-        choice_schema(
-            &["", "planning", "control", "integrated"],
-            "A ranked track; empty means `planning`.",
-        )
-    }
-}
-
-impl ToSchema for TrackParam {}
-
-/// An optional `split` query parameter.
-pub(crate) struct SplitParam;
-
-impl utoipa::PartialSchema for SplitParam {
-    fn schema() -> RefOr<Schema> {
-        choice_schema(&["", "dev", "test"], "A dataset split; empty means the default.")
-    }
-}
-
-impl ToSchema for SplitParam {}
-
-/// `format` of `GET /api/v1/leaderboard`.
-pub(crate) struct FormatParam;
-
-impl utoipa::PartialSchema for FormatParam {
-    fn schema() -> RefOr<Schema> {
-        choice_schema(
-            &["", "json", "csv", "html"],
-            "The answer's format; empty means `json`.",
-        )
-    }
-}
-
-impl ToSchema for FormatParam {}
-
-/// A yes/no query parameter as the handlers read it: `true`/`1`, `false`/`0`, or empty (no).
-pub(crate) struct FlagParam;
-
-impl utoipa::PartialSchema for FlagParam {
-    fn schema() -> RefOr<Schema> {
-        choice_schema(
-            &["", "true", "false", "1", "0"],
-            "Yes (`true`, `1`) or no (`false`, `0`, empty).",
-        )
-    }
-}
-
-impl ToSchema for FlagParam {}
-
-/// `GET /healthz`.
-#[derive(Debug, Serialize, ToSchema)]
-pub(crate) struct Health {
-    /// Always `ok`: the server answers.
-    #[schema(example = "ok")]
-    pub status: &'static str,
-}
-
-/// `GET /api/v1/dataset/manifest`.
-#[derive(Debug, Serialize, ToSchema)]
-pub(crate) struct DatasetManifest {
-    pub dev: DevSplitInfo,
-    pub test: crate::content::TestSetInfo,
-}
-
-/// The dev split: public, with its plans.
-#[derive(Debug, Serialize, ToSchema)]
-pub(crate) struct DevSplitInfo {
-    pub instructions: usize,
-    /// Always `public`.
-    #[schema(example = "public")]
-    pub plans: &'static str,
-}
-
-/// `POST /api/v1/teams`.
-#[derive(Debug, Deserialize, ToSchema)]
-#[allow(dead_code)] // read by `body_field`; the struct is the schema
-pub(crate) struct TeamRequest {
-    /// The team's name as shown on the leaderboard.
-    pub name: String,
-}
-
-/// `POST /api/v1/admin/resimulate`.
-#[derive(Debug, Deserialize, ToSchema)]
-#[allow(dead_code)] // read by `body_field`; the struct is the schema
-pub(crate) struct ResimulateRequest {
-    /// The policy submission to simulate again.
-    pub submission: i64,
 }
 
 /// Adds the security schemes and the error answers every route shares.

@@ -25,6 +25,7 @@ use axum::http::{HeaderMap, StatusCode};
 use axum::response::Response;
 use axum::routing::{get, post};
 use kitchen_r_core::dataset::Split;
+use maud::{Markup, html};
 use serde::Deserialize;
 
 use super::extract::{ClientAddr, PathArg, QueryArgs};
@@ -76,7 +77,7 @@ fn respond(
     status: StatusCode,
     title: &str,
     refresh: Option<u32>,
-    body: &str,
+    body: Markup,
 ) -> Response {
     let csrf = session::csrf(headers, TEAM_COOKIE);
     let viewer = match who {
@@ -91,11 +92,11 @@ fn respond(
 }
 
 fn not_found(headers: &HeaderMap, who: &Who, what: &str) -> Response {
-    let body = format!(
-        "<p>There is no {} here, or it is not yours to see.</p><p><a href=\"/team\">Your team page</a></p>",
-        layout::escape(what)
-    );
-    respond(headers, who, StatusCode::NOT_FOUND, "Not found", None, &body)
+    let body = html! {
+        p { "There is no " (what) " here, or it is not yours to see." }
+        p { a href="/team" { "Your team page" } }
+    };
+    respond(headers, who, StatusCode::NOT_FOUND, "Not found", None, body)
 }
 
 /// 303 to the login form, coming back to `next` afterwards.
@@ -115,7 +116,7 @@ async fn contest(
         StatusCode::OK,
         "Kitchen-R contest",
         None,
-        &home::body(&s),
+        home::body(&s),
     ))
 }
 
@@ -128,8 +129,9 @@ async fn team_page(
     let team = match &who {
         Who::Team(t) => t,
         Who::Organiser(_) => {
-            let body =
-                "<p>The organiser has no team. Teams' runs are on the <a href=\"/admin\">console</a>.</p>";
+            let body = html! {
+                p { "The organiser has no team. Teams' runs are on the " a href="/admin" { "console" } "." }
+            };
             return Ok(respond(&headers, &who, StatusCode::OK, "Team page", None, body));
         }
         Who::Nobody => return Ok(to_login("/team")),
@@ -143,7 +145,7 @@ async fn team_page(
         StatusCode::OK,
         &title,
         None,
-        &team::body(&quota, &subs),
+        team::body(&quota, &subs),
     ))
 }
 
@@ -153,7 +155,7 @@ fn login_page(headers: &HeaderMap, status: StatusCode, message: Option<&str>, ne
         "Team login",
         &Viewer::Nobody,
         None,
-        &team::login(message, &csrf.field, next),
+        team::login(message, &csrf.field, next),
     );
     session::html_with(status, page, &csrf)
 }
@@ -285,7 +287,7 @@ async fn submission_page(
         Err(ServiceError::NotFound { .. }) => return Ok(not_found(&headers, &who, "such submission")),
         Err(e) => return Err(e),
     };
-    // Showing an episode asks for its video: queue the renders the page would show (issue #26).
+    // Showing an episode asks for its video: queue the renders the page would show.
     if s.render_shown(&caller, id, &view).await? {
         view = s.get_submission(&caller, id).await?;
     }
@@ -300,7 +302,7 @@ async fn submission_page(
         (false, false) => None,
     };
     let body = submission::body(&view, eta.as_ref());
-    Ok(respond(&headers, &who, StatusCode::OK, &title, refresh, &body))
+    Ok(respond(&headers, &who, StatusCode::OK, &title, refresh, body))
 }
 
 async fn entry_page(
@@ -342,7 +344,7 @@ async fn entry_page(
     };
     let title = format!("{} on the {} leaderboard", row.team, track.as_str());
     let body = team::entry(track, split.as_str(), row);
-    Ok(respond(&headers, &who, StatusCode::OK, &title, None, &body))
+    Ok(respond(&headers, &who, StatusCode::OK, &title, None, body))
 }
 
 #[cfg(test)]

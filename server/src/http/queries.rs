@@ -3,7 +3,10 @@
 //! string, or a parameter given twice, is a 400 naming it; the values are checked where they are
 //! used, with the errors the API documents. Parameters a route does not know are ignored.
 
+use kitchen_r_core::dataset::Split;
 use serde::Deserialize;
+
+use crate::error::ServiceError;
 
 /// `GET /`: which split's boards the page shows.
 #[derive(Debug, Default, Deserialize)]
@@ -32,4 +35,15 @@ pub(crate) struct LeaderboardQuery {
 #[derive(Debug, Default, Deserialize)]
 pub(crate) struct LoginQuery {
     pub next: Option<String>,
+}
+
+/// A `split` parameter: `dev` or `test`; absent or empty is `default`, or a 400 without one.
+pub(super) fn split_param(value: Option<&String>, default: Option<Split>) -> Result<Split, ServiceError> {
+    match (value.map(String::as_str), default) {
+        (None | Some(""), Some(d)) => Ok(d),
+        (None | Some(""), None) => Err(ServiceError::BadRequest(
+            "the `split` query parameter is required: `dev` or `test`".into(),
+        )),
+        (Some(s), _) => s.parse().map_err(ServiceError::BadRequest),
+    }
 }

@@ -3,8 +3,11 @@
 
 use std::time::Duration;
 
+use axum::body::Body;
 use axum::body::to_bytes;
 use axum::http::Request;
+use axum::http::StatusCode;
+use bytes::Bytes;
 use serde_json::Value;
 use tower::ServiceExt;
 

@@ -1,6 +1,11 @@
+use axum::body::Body;
 use axum::body::to_bytes;
 use axum::http::Request;
+use axum::http::StatusCode;
+use bytes::Bytes;
+use kitchen_r_core::dataset::Split;
 use serde_json::Value;
+use serde_json::json;
 use tower::ServiceExt;
 
 use super::*;

@@ -1,11 +1,11 @@
 use kitchen_r_core::GraspMode;
 use kitchen_r_core::observations::ObservationTrack;
 
-use super::render::{csv, page};
+use super::render::csv;
 use super::*;
 use crate::testutil::{FakeProbe, fixture};
 
-fn board(team: &str) -> Leaderboard {
+pub(crate) fn board(team: &str) -> Leaderboard {
     Leaderboard {
         track: Track::Planning,
         observations: None,
@@ -59,15 +59,8 @@ fn csv_neutralises_cells_a_spreadsheet_would_evaluate() {
     assert_eq!(super::render::text_cell(""), "");
 }
 
-#[test]
-fn html_escapes_team_names() {
-    let page = page(Split::Test, &[board("<script>")], true, GraspMode::Abstract);
-    assert!(page.contains("public sample"), "{page}");
-    assert!(page.contains("&lt;script&gt;") && !page.contains("<script>"));
-}
-
 /// A control board of `observations` with one finished row.
-fn control_board(observations: ObservationTrack) -> Leaderboard {
+pub(crate) fn control_board(observations: ObservationTrack) -> Leaderboard {
     let mut b = board("team");
     b.track = Track::Control;
     b.observations = Some(observations);
@@ -95,27 +88,7 @@ fn policy_boards_name_their_observation_track_in_csv_and_html() {
          1,team,7,0.250000,0.500000,finished,false,2026-01-01T00:00:00Z,privileged,abstract\n"
     );
     assert!(csv(&control_board(ObservationTrack::Standard)).ends_with(",standard,abstract\n"));
-    let html = page(
-        Split::Dev,
-        &[control_board(ObservationTrack::Standard), privileged],
-        false,
-        GraspMode::Abstract,
-    );
-    assert!(
-        html.contains("<h2 id=control>Control track — standard observations — abstract grasp</h2>"),
-        "{html}"
-    );
-    assert!(
-        html.contains(
-            "<h2 id=control-privileged>Control track — privileged observations — abstract grasp</h2>"
-        ),
-        "{html}"
-    );
-    assert!(
-        html.contains("&amp;observations=privileged&amp;format=csv"),
-        "{html}"
-    );
-    assert!(html.contains("(privileged)</td>"), "{html}");
+    // The page's headings and links: `http/leaderboard/tests.rs`.
     // Planning keeps its CSV exactly.
     assert!(!csv(&board("a")).contains("observations"));
     assert!(!csv(&board("a")).contains("grasp"));
@@ -133,24 +106,7 @@ fn policy_boards_name_their_grasp_mode_and_another_mode_than_the_contests_is_lab
         "{}",
         csv(&physical)
     );
-    let boards = [control_board(ObservationTrack::Standard), physical];
-    let html = page(Split::Dev, &boards, false, GraspMode::Physical);
-    assert!(
-        html.contains("Grasp mode of this contest: <b>physical</b>"),
-        "{html}"
-    );
-    assert!(
-        html.contains("<h2 id=control>Control track — standard observations — physical grasp</h2>"),
-        "{html}"
-    );
-    // The abstract board is the other mode here: its own anchor, its rows and links say so.
-    assert!(
-        html.contains("<h2 id=control-abstract>Control track — standard observations — abstract grasp</h2>"),
-        "{html}"
-    );
-    assert!(html.contains("(abstract grasp)</td>"), "{html}");
-    assert!(html.contains("&amp;grasp_mode=abstract&amp;format=csv"), "{html}");
-    assert!(!html.contains("(physical grasp)</td>"), "{html}");
+    // The page's labels for another mode than the contest's: `http/leaderboard/tests.rs`.
 }
 
 #[test]
@@ -163,8 +119,14 @@ fn tracks_parse() {
 
 /// The dev split's standard-observation board of `track` as CSV bytes.
 async fn dev_csv(f: &crate::testutil::Fixture, track: Track) -> bytes::Bytes {
-    (f.state
-        .leaderboard_rendered(track, ObservationTrack::Standard, None, Split::Dev, Format::Csv))
+    (f.state.leaderboard_rendered(
+        track,
+        ObservationTrack::Standard,
+        None,
+        Split::Dev,
+        Format::Csv,
+        crate::http::leaderboard_page,
+    ))
     .await
     .unwrap()
 }
@@ -327,6 +289,7 @@ async fn control_and_integrated_order_with_baselines_and_infinite_p() {
                 None,
                 Split::Dev,
                 Format::Json,
+                crate::http::leaderboard_page,
             )
             .await
             .unwrap()
@@ -350,7 +313,14 @@ async fn control_and_integrated_order_with_baselines_and_infinite_p() {
         )),
         "{text}"
     );
-    let html = String::from_utf8(f.state.leaderboard_page(Split::Dev).await.unwrap().to_vec()).unwrap();
+    let html = String::from_utf8(
+        f.state
+            .leaderboard_page(Split::Dev, crate::http::leaderboard_page)
+            .await
+            .unwrap()
+            .to_vec(),
+    )
+    .unwrap();
     for needle in [
         "Planning track",
         "Control track",
@@ -631,16 +601,23 @@ async fn runs_are_ranked_with_their_own_grasp_mode_and_the_contests_is_the_defau
     let evaluation = view.latest_run.unwrap().evaluation.unwrap();
     assert_eq!(evaluation.grasp_mode, GraspMode::Physical);
 
-    let page = String::from_utf8(f.state.leaderboard_page(Split::Dev).await.unwrap().to_vec()).unwrap();
+    let page = String::from_utf8(
+        f.state
+            .leaderboard_page(Split::Dev, crate::http::leaderboard_page)
+            .await
+            .unwrap()
+            .to_vec(),
+    )
+    .unwrap();
     assert!(
         page.contains("Grasp mode of this contest: <b>physical</b>"),
         "{page}"
     );
     assert!(
-        page.contains("<h2 id=control>Control track — standard observations — physical grasp</h2>"),
+        page.contains("<h2 id=\"control\">Control track — standard observations — physical grasp</h2>"),
         "{page}"
     );
-    assert!(page.contains("<h2 id=control-abstract>"), "{page}");
+    assert!(page.contains("<h2 id=\"control-abstract\">"), "{page}");
     assert!(
         page.contains(&format!(">{old}</a> (abstract grasp)</td>")),
         "{page}"

@@ -1,5 +1,6 @@
 //! The leaderboard as the service answers it: rows from the store, ranked, rendered and cached
-//! ([`crate::leaderboard`] holds the types, renderings and cache).
+//! ([`crate::leaderboard`] holds the types, data renderings and cache). The HTML page is the
+//! HTTP adapter's: it passes its renderer ([`RenderPage`]) in, and the service caches the bytes.
 
 use bytes::Bytes;
 use kitchen_r_core::GraspMode;
@@ -8,7 +9,7 @@ use kitchen_r_core::observations::ObservationTrack;
 
 use super::{AppState, rfc3339};
 use crate::error::ServiceError;
-use crate::leaderboard::{Format, Leaderboard, Row, Track, ranked, render};
+use crate::leaderboard::{BoardPage, Format, Leaderboard, RenderPage, Row, Track, ranked, render};
 use crate::scores::Scores;
 use crate::store::board;
 
@@ -87,7 +88,8 @@ impl AppState {
         })
     }
 
-    /// The leaderboard rendered in `format`, from the cache when nothing was written since.
+    /// The leaderboard rendered in `format` (HTML by `html`, the adapter's page), from the cache
+    /// when nothing was written since.
     pub(crate) async fn leaderboard_rendered(
         &self,
         track: Track,
@@ -95,6 +97,7 @@ impl AppState {
         grasp: Option<GraspMode>,
         split: Split,
         format: Format,
+        html: RenderPage,
     ) -> Result<Bytes, ServiceError> {
         let contest = self.contest_grasp();
         let key = (Some(track), observations, grasp.unwrap_or(contest), split, format);
@@ -107,21 +110,32 @@ impl AppState {
         let body: Bytes = match format {
             Format::Json => serde_json::to_vec(&board).map_err(anyhow::Error::from)?.into(),
             Format::Csv => render::csv(&board).into(),
-            Format::Html => render::page(split, &[board], self.public_sample(), contest).into(),
+            Format::Html => html(&self.board_page(split, vec![board], contest)).into(),
         };
         cache.put(key, generation, &body);
         Ok(body)
     }
 
-    fn public_sample(&self) -> bool {
-        self.content().test_set.kind == crate::content::TestSetKind::PublicSample
+    /// `boards` of `split` with what the page says about them.
+    fn board_page(&self, split: Split, boards: Vec<Leaderboard>, contest: GraspMode) -> BoardPage {
+        BoardPage {
+            split,
+            boards,
+            public_sample: self.content().test_set.kind == crate::content::TestSetKind::PublicSample,
+            contest,
+        }
     }
 
     /// The public page at `/`: all three tracks of `split`, and the privileged boards of the
     /// policy tracks when this server runs the privileged track or they hold entries (from a
     /// time it did), all in the contest's grasp mode; then the policy boards of any other grasp
     /// mode that hold entries (runs made before the organiser changed `[control] grasp`).
-    pub(crate) async fn leaderboard_page(&self, split: Split) -> Result<Bytes, ServiceError> {
+    /// `html` renders them (the HTTP adapter's page); its bytes are cached.
+    pub(crate) async fn leaderboard_page(
+        &self,
+        split: Split,
+        html: RenderPage,
+    ) -> Result<Bytes, ServiceError> {
         let contest = self.contest_grasp();
         let key = (None, ObservationTrack::Standard, contest, split, Format::Html);
         let cache = self.leaderboard_cache();
@@ -152,7 +166,7 @@ impl AppState {
                 }
             }
         }
-        let body: Bytes = render::page(split, &boards, self.public_sample(), contest).into();
+        let body: Bytes = html(&self.board_page(split, boards, contest)).into();
         cache.put(key, generation, &body);
         Ok(body)
     }

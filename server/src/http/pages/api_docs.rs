@@ -5,15 +5,14 @@
 //! It walks the document as JSON (not utoipa's model) because that is the shape a reader of
 //! the document sees too; the HTML is built once and kept.
 
-use std::fmt::Write as _;
 use std::sync::OnceLock;
 
 use axum::extract::State;
 use axum::http::{HeaderMap, StatusCode};
 use axum::response::Response;
+use maud::{Markup, PreEscaped, html};
 use serde_json::Value;
 
-use super::layout::escape;
 use crate::error::ServiceError;
 use crate::http::openapi;
 use crate::service::{AppState, Caller};
@@ -32,31 +31,31 @@ pub(super) async fn page(
         StatusCode::OK,
         "API reference",
         None,
-        body(),
+        PreEscaped(body().to_string()),
     ))
 }
 
-/// The page's body, rendered once from the document.
+/// The page's body, rendered once from the document (and kept as markup maud built).
 fn body() -> &'static str {
     static BODY: OnceLock<String> = OnceLock::new();
     BODY.get_or_init(|| {
         let doc: Value = serde_json::from_str(openapi::document_json()).expect("the document is JSON");
-        render(&doc)
+        render(&doc).into_string()
     })
 }
 
-/// Markdown-ish text of the document (backticks) as HTML: escaped, `code` spans kept.
-fn prose(text: &str) -> String {
-    let mut out = String::new();
-    for (i, part) in text.split('`').enumerate() {
-        match i % 2 {
-            0 => out.push_str(&escape(part)),
-            _ => {
-                let _ = write!(out, "<code>{}</code>", escape(part));
-            }
+/// Markdown-ish text of the document (backticks) as HTML: the text escaped, `code` spans kept.
+fn prose(text: &str) -> Markup {
+    html! {
+        @for (i, part) in text.split('`').enumerate() {
+            @if i % 2 == 0 { (part) } @else { code { (part) } }
         }
     }
-    out
+}
+
+/// The text of `v`'s string field `key`, empty when absent.
+fn text<'a>(v: &'a Value, key: &str) -> &'a str {
+    v[key].as_str().unwrap_or("")
 }
 
 fn anchor(method: &str, path: &str) -> String {
@@ -67,55 +66,44 @@ fn anchor(method: &str, path: &str) -> String {
     format!("{method}{slug}")
 }
 
-pub(super) fn render(doc: &Value) -> String {
-    let mut out = String::new();
+pub(super) fn render(doc: &Value) -> Markup {
     let info = &doc["info"];
-    let _ = write!(
-        out,
-        "<p>{}</p><p>The machine-readable document: <a href=\"/api/v1/openapi.json\">/api/v1/openapi.json</a> \
-(OpenAPI {}, version {}). This page is rendered from it.</p>",
-        prose(info["description"].as_str().unwrap_or("")),
-        escape(doc["openapi"].as_str().unwrap_or("")),
-        escape(info["version"].as_str().unwrap_or("")),
-    );
-    security_section(&mut out, doc);
     let ops = operations(doc);
     // Contents, by tag.
-    let tags: Vec<(String, String)> = (doc["tags"].as_array().into_iter().flatten())
-        .map(|t| {
-            (
-                t["name"].as_str().unwrap_or("").to_string(),
-                t["description"].as_str().unwrap_or("").to_string(),
-            )
-        })
+    let tags: Vec<(&str, &str)> = (doc["tags"].as_array().into_iter().flatten())
+        .map(|t| (text(t, "name"), text(t, "description")))
         .collect();
-    out.push_str("<h2 id=contents>Operations</h2><table class=stack><tr><th>Method</th><th>Path</th><th>What</th></tr>");
-    for (tag, _) in &tags {
-        for (method, path, op) in ops.iter().filter(|(_, _, op)| first_tag(op) == tag) {
-            let _ = write!(
-                out,
-                "<tr><td><code>{}</code></td><td><a href=\"#{}\"><code>{}</code></a></td><td>{}</td></tr>",
-                method.to_uppercase(),
-                anchor(method, path),
-                escape(path),
-                prose(op["summary"].as_str().unwrap_or("")),
-            );
+    let tagged = |tag: &str| {
+        let tag = tag.to_string();
+        ops.iter().filter(move |(_, _, op)| first_tag(op) == tag)
+    };
+    html! {
+        p { (prose(text(info, "description"))) }
+        p {
+            "The machine-readable document: " a href="/api/v1/openapi.json" { "/api/v1/openapi.json" }
+            " (OpenAPI " (text(doc, "openapi")) ", version " (text(info, "version")) "). This page is rendered from it."
         }
-    }
-    out.push_str("</table>");
-    for (tag, description) in &tags {
-        let _ = write!(
-            out,
-            "<h2 id=\"tag-{0}\">{0}</h2><p>{1}</p>",
-            escape(tag),
-            prose(description)
-        );
-        for (method, path, op) in ops.iter().filter(|(_, _, op)| first_tag(op) == tag) {
-            operation(&mut out, method, path, op);
+        (security_section(doc))
+        h2 id="contents" { "Operations" }
+        table.stack {
+            tr { th { "Method" } th { "Path" } th { "What" } }
+            @for (tag, _) in &tags {
+                @for (method, path, op) in tagged(tag) {
+                    tr {
+                        td { code { (method.to_uppercase()) } }
+                        td { a href={ "#" (anchor(method, path)) } { code { (path) } } }
+                        td { (prose(text(op, "summary"))) }
+                    }
+                }
+            }
         }
+        @for (tag, description) in &tags {
+            h2 id={ "tag-" (tag) } { (tag) }
+            p { (prose(description)) }
+            @for (method, path, op) in tagged(tag) { (operation(method, path, op)) }
+        }
+        (schemas_section(doc))
     }
-    schemas_section(&mut out, doc);
-    out
 }
 
 fn first_tag(op: &Value) -> &str {
@@ -135,178 +123,153 @@ fn operations(doc: &Value) -> Vec<(&'static str, &str, &Value)> {
     ops
 }
 
-fn security_section(out: &mut String, doc: &Value) {
-    out.push_str("<h2 id=auth>Authentication</h2><table><tr><th>Scheme</th><th>How</th><th>What</th></tr>");
-    for (name, s) in doc["components"]["securitySchemes"]
+fn security_section(doc: &Value) -> Markup {
+    let schemes = doc["components"]["securitySchemes"]
         .as_object()
         .into_iter()
-        .flatten()
-    {
-        let _ = write!(
-            out,
-            "<tr><td><code>{}</code></td><td><code>Authorization: Bearer TOKEN</code></td><td>{}</td></tr>",
-            escape(name),
-            prose(s["description"].as_str().unwrap_or("")),
-        );
+        .flatten();
+    html! {
+        h2 id="auth" { "Authentication" }
+        table {
+            tr { th { "Scheme" } th { "How" } th { "What" } }
+            @for (name, s) in schemes {
+                tr { td { code { (name) } } td { code { "Authorization: Bearer TOKEN" } } td { (prose(text(s, "description"))) } }
+            }
+        }
     }
-    out.push_str("</table>");
 }
 
-fn operation(out: &mut String, method: &str, path: &str, op: &Value) {
-    let _ = write!(
-        out,
-        "<h3 id=\"{}\"><code>{} {}</code></h3><p><b>{}</b></p>",
-        anchor(method, path),
-        method.to_uppercase(),
-        escape(path),
-        prose(op["summary"].as_str().unwrap_or("")),
-    );
-    if let Some(d) = op["description"].as_str() {
-        let _ = write!(out, "<p>{}</p>", prose(d));
+fn yes_no(v: &Value) -> &'static str {
+    match v.as_bool() {
+        Some(true) => "yes",
+        _ => "no",
     }
-    let schemes: Vec<String> = (op["security"].as_array().into_iter().flatten())
+}
+
+fn operation(method: &str, path: &str, op: &Value) -> Markup {
+    let schemes: Vec<&String> = (op["security"].as_array().into_iter().flatten())
         .filter_map(|req| req.as_object())
-        .flat_map(|o| o.keys().map(|k| format!("<code>{}</code>", escape(k))))
+        .flat_map(|o| o.keys())
         .collect();
-    let _ = write!(
-        out,
-        "<p>Token: {}</p>",
-        match schemes.is_empty() {
-            true => "none".to_string(),
-            false => schemes.join(" or "),
+    html! {
+        h3 id=(anchor(method, path)) { code { (method.to_uppercase()) " " (path) } }
+        p { b { (prose(text(op, "summary"))) } }
+        @if let Some(d) = op["description"].as_str() { p { (prose(d)) } }
+        p {
+            "Token: "
+            @if schemes.is_empty() { "none" }
+            @for (i, k) in schemes.iter().enumerate() { @if i > 0 { " or " } code { (k) } }
         }
-    );
-    if let Some(params) = op["parameters"].as_array().filter(|p| !p.is_empty()) {
-        out.push_str("<div class=scroll><table><tr><th>Parameter</th><th>In</th><th>Type</th><th>Required</th><th>What</th></tr>");
-        for p in params {
-            let _ = write!(
-                out,
-                "<tr><td><code>{}</code></td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
-                escape(p["name"].as_str().unwrap_or("")),
-                escape(p["in"].as_str().unwrap_or("")),
-                type_of(&p["schema"]),
-                if p["required"].as_bool() == Some(true) {
-                    "yes"
-                } else {
-                    "no"
-                },
-                prose(p["description"].as_str().unwrap_or("")),
-            );
+        @if let Some(params) = op["parameters"].as_array().filter(|p| !p.is_empty()) {
+            div.scroll {
+                table {
+                    tr { th { "Parameter" } th { "In" } th { "Type" } th { "Required" } th { "What" } }
+                    @for p in params {
+                        tr {
+                            td { code { (text(p, "name")) } } td { (text(p, "in")) } td { (type_of(&p["schema"])) }
+                            td { (yes_no(&p["required"])) } td { (prose(text(p, "description"))) }
+                        }
+                    }
+                }
+            }
         }
-        out.push_str("</table></div>");
-    }
-    if let Some(body) = op.get("requestBody") {
-        let _ = write!(
-            out,
-            "<p>Request body{}: {}</p>",
-            if body["required"].as_bool() == Some(true) {
-                " (required)"
-            } else {
-                ""
-            },
-            content(&body["content"]),
-        );
-        if let Some(d) = body["description"].as_str() {
-            let _ = write!(out, "<p class=muted>{}</p>", prose(d));
+        @if let Some(body) = op.get("requestBody") {
+            p {
+                "Request body" @if body["required"].as_bool() == Some(true) { " (required)" } ": "
+                (content(&body["content"]))
+            }
+            @if let Some(d) = body["description"].as_str() { p.muted { (prose(d)) } }
+        }
+        div.scroll {
+            table {
+                tr { th { "Status" } th { "Meaning" } th { "Body" } }
+                @for (status, r) in op["responses"].as_object().into_iter().flatten() {
+                    tr { td { (status) } td { (prose(text(r, "description"))) } td { (content(&r["content"])) } }
+                }
+            }
         }
     }
-    out.push_str("<div class=scroll><table><tr><th>Status</th><th>Meaning</th><th>Body</th></tr>");
-    for (status, r) in op["responses"].as_object().into_iter().flatten() {
-        let _ = write!(
-            out,
-            "<tr><td>{}</td><td>{}</td><td>{}</td></tr>",
-            escape(status),
-            prose(r["description"].as_str().unwrap_or("")),
-            content(&r["content"]),
-        );
-    }
-    out.push_str("</table></div>");
 }
 
 /// `media type: schema` per content entry.
-fn content(content: &Value) -> String {
-    let parts: Vec<String> = (content.as_object().into_iter().flatten())
-        .map(|(media, c)| format!("<code>{}</code> {}", escape(media), type_of(&c["schema"])))
-        .collect();
-    match parts.is_empty() {
-        true => "–".into(),
-        false => parts.join("<br>"),
+fn content(content: &Value) -> Markup {
+    let parts: Vec<(&String, &Value)> = content.as_object().into_iter().flatten().collect();
+    html! {
+        @if parts.is_empty() { "–" }
+        @for (i, (media, c)) in parts.iter().enumerate() {
+            @if i > 0 { br; }
+            code { (media) } " " (type_of(&c["schema"]))
+        }
+    }
+}
+
+/// `items` joined by `sep`.
+fn joined(items: impl IntoIterator<Item = Markup>, sep: &str) -> Markup {
+    html! {
+        @for (i, item) in items.into_iter().enumerate() { @if i > 0 { (sep) } (item) }
     }
 }
 
 /// A schema in a few words: a link to a named schema, `array of …`, a type, or its variants.
-fn type_of(schema: &Value) -> String {
+fn type_of(schema: &Value) -> Markup {
     if let Some(r) = schema["$ref"].as_str() {
         let name = r.rsplit('/').next().unwrap_or(r);
-        return format!("<a href=\"#schema-{0}\">{0}</a>", escape(name));
+        return html! { a href={ "#schema-" (name) } { (name) } };
     }
     for key in ["oneOf", "anyOf", "allOf"] {
         if let Some(items) = schema[key].as_array() {
             let join = if key == "allOf" { " and " } else { " or " };
-            return items.iter().map(type_of).collect::<Vec<_>>().join(join);
+            return joined(items.iter().map(type_of), join);
         }
     }
     if let Some(values) = schema["enum"].as_array() {
-        return values
-            .iter()
-            .map(|v| format!("<code>{}</code>", escape(&v.to_string())))
-            .collect::<Vec<_>>()
-            .join(" | ");
+        return joined(values.iter().map(|v| html! { code { (v.to_string()) } }), " | ");
     }
     let types: Vec<&str> = match &schema["type"] {
         Value::String(t) => vec![t.as_str()],
         Value::Array(ts) => ts.iter().filter_map(Value::as_str).collect(),
         _ => vec![],
     };
-    let words: Vec<String> = types
-        .iter()
-        .map(|t| match *t {
-            "array" => format!("array of {}", type_of(&schema["items"])),
-            "object" if schema["additionalProperties"].is_object() => {
-                format!("map of {}", type_of(&schema["additionalProperties"]))
-            }
-            "string" if schema["format"] == "binary" => "bytes".into(),
-            t => escape(t),
-        })
-        .collect();
-    match words.is_empty() {
-        true => "any".into(),
-        false => words.join(" or "),
+    if types.is_empty() {
+        return html! { "any" };
     }
+    let words = types.into_iter().map(|t| match t {
+        "array" => html! { "array of " (type_of(&schema["items"])) },
+        "object" if schema["additionalProperties"].is_object() => {
+            html! { "map of " (type_of(&schema["additionalProperties"])) }
+        }
+        "string" if schema["format"] == "binary" => html! { "bytes" },
+        t => html! { (t) },
+    });
+    joined(words, " or ")
 }
 
-fn schemas_section(out: &mut String, doc: &Value) {
-    out.push_str("<h2 id=schemas>Schemas</h2>");
-    for (name, s) in doc["components"]["schemas"].as_object().into_iter().flatten() {
-        let _ = write!(out, "<h3 id=\"schema-{0}\">{0}</h3>", escape(name));
-        if let Some(d) = s["description"].as_str() {
-            let _ = write!(out, "<p>{}</p>", prose(d));
+fn schemas_section(doc: &Value) -> Markup {
+    let schemas = doc["components"]["schemas"].as_object().into_iter().flatten();
+    html! {
+        h2 id="schemas" { "Schemas" }
+        @for (name, s) in schemas {
+            h3 id={ "schema-" (name) } { (name) }
+            @if let Some(d) = s["description"].as_str() { p { (prose(d)) } }
+            @match s["properties"].as_object() {
+                None => { p { (type_of(s)) } }
+                Some(props) => {
+                    @let required: Vec<&str> = (s["required"].as_array().into_iter().flatten()).filter_map(Value::as_str).collect();
+                    div.scroll {
+                        table {
+                            tr { th { "Field" } th { "Type" } th { "Always there" } th { "What" } }
+                            @for (field, p) in props {
+                                tr {
+                                    td { code { (field) } } td { (type_of(p)) }
+                                    td { (if required.contains(&field.as_str()) { "yes" } else { "no" }) }
+                                    td { (prose(text(p, "description"))) }
+                                }
+                            }
+                        }
+                    }
+                }
+            }
         }
-        let Some(props) = s["properties"].as_object() else {
-            let _ = write!(out, "<p>{}</p>", type_of(s));
-            continue;
-        };
-        let required: Vec<&str> = (s["required"].as_array().into_iter().flatten())
-            .filter_map(Value::as_str)
-            .collect();
-        out.push_str(
-            "<div class=scroll><table><tr><th>Field</th><th>Type</th><th>Always there</th><th>What</th></tr>",
-        );
-        for (field, p) in props {
-            let _ = write!(
-                out,
-                "<tr><td><code>{}</code></td><td>{}</td><td>{}</td><td>{}</td></tr>",
-                escape(field),
-                type_of(p),
-                if required.contains(&field.as_str()) {
-                    "yes"
-                } else {
-                    "no"
-                },
-                prose(p["description"].as_str().unwrap_or("")),
-            );
-        }
-        out.push_str("</table></div>");
     }
 }
 
@@ -317,7 +280,7 @@ mod tests {
     #[test]
     fn the_page_lists_every_operation_of_the_document_with_its_responses() {
         let doc: Value = serde_json::from_str(openapi::document_json()).unwrap();
-        let html = render(&doc);
+        let html = render(&doc).into_string();
         for (method, path, op) in operations(&doc) {
             assert!(
                 html.contains(&format!("id=\"{}\"", anchor(method, path))),
@@ -336,7 +299,7 @@ mod tests {
 
     #[test]
     fn a_schema_is_named_in_a_few_words() {
-        let t = |v: Value| type_of(&v);
+        let t = |v: Value| type_of(&v).into_string();
         assert_eq!(
             t(serde_json::json!({"type": ["integer", "null"]})),
             "integer or null"

@@ -1,10 +1,11 @@
 //! The frame every participant page shares: head, small CSS, navigation. No script anywhere
 //! (the Content-Security-Policy of [`super::super::session::html`] allows none); pages that
-//! change while an evaluation runs reload themselves with `<meta http-equiv=refresh>`.
+//! change while an evaluation runs reload themselves with `<meta http-equiv=refresh>`. Pages are
+//! built with maud, which escapes every value; only the CSRF field (the session code renders it)
+//! goes in as markup.
 
-use std::fmt::Write as _;
+use maud::{DOCTYPE, Markup, PreEscaped, html};
 
-pub(super) use crate::leaderboard::render::escape;
 use crate::scores::fmt_score;
 
 /// At 40rem and narrower (phones, 375 px) the page never scrolls sideways: text cells wrap
@@ -38,23 +39,35 @@ pub(super) enum Viewer<'a> {
 }
 
 /// A whole page: `title`, the navigation, `body`; `refresh_s` reloads it while something runs.
-pub(super) fn page(title: &str, viewer: &Viewer<'_>, refresh_s: Option<u32>, body: &str) -> String {
-    let refresh = refresh_s.map_or_else(String::new, |s| format!("<meta http-equiv=refresh content={s}>"));
-    let who = match viewer {
-        Viewer::Nobody => "<a href=\"/team/login\">Team login</a>".to_string(),
-        Viewer::Team { name, csrf } => format!(
-            "<span>Team <b>{}</b></span><form method=post action=\"/team/logout\">{csrf}<button>Log out</button></form>",
-            escape(name)
-        ),
-        Viewer::Organiser => "<span>Organiser (<a href=\"/admin\">console</a>)</span>".to_string(),
-    };
-    format!(
-        "<!doctype html><html lang=en><head><meta charset=utf-8><title>{title} · Kitchen-R</title>\
-<meta name=viewport content=\"width=device-width,initial-scale=1\">{refresh}<style>{CSS}</style></head><body>\
-<nav><a href=\"/contest\">Contest</a><a href=\"/\">Leaderboard</a><a href=\"/team\">Team page</a>{who}</nav>\
-<h1>{title}</h1>{body}</body></html>",
-        title = escape(title),
-    )
+pub(super) fn page(title: &str, viewer: &Viewer<'_>, refresh_s: Option<u32>, body: Markup) -> String {
+    html! {
+        (DOCTYPE)
+        html lang="en" {
+            head {
+                meta charset="utf-8";
+                title { (title) " · Kitchen-R" }
+                meta name="viewport" content="width=device-width,initial-scale=1";
+                @if let Some(s) = refresh_s { meta http-equiv="refresh" content=(s); }
+                style { (PreEscaped(CSS)) }
+            }
+            body {
+                nav {
+                    a href="/contest" { "Contest" } a href="/" { "Leaderboard" } a href="/team" { "Team page" }
+                    @match viewer {
+                        Viewer::Nobody => { a href="/team/login" { "Team login" } }
+                        Viewer::Team { name, csrf } => {
+                            span { "Team " b { (name) } }
+                            form method="post" action="/team/logout" { (PreEscaped(csrf)) button { "Log out" } }
+                        }
+                        Viewer::Organiser => { span { "Organiser (" a href="/admin" { "console" } ")" } }
+                    }
+                }
+                h1 { (title) }
+                (body)
+            }
+        }
+    }
+    .into_string()
 }
 
 /// A score cell's text: six decimals, `inf`, or a dash when absent.
@@ -66,9 +79,8 @@ pub(super) fn score(v: Option<f64>) -> String {
 }
 
 /// A table of the scores that apply (EM, SR, MSE, M, P), with what each means.
-pub(super) fn scores_table(s: &crate::scores::Scores) -> String {
-    let mut out = String::from("<table><tr><th>Metric</th><th>Value</th><th>Meaning</th></tr>");
-    for (name, v, what) in [
+pub(super) fn scores_table(s: &crate::scores::Scores) -> Markup {
+    let rows = [
         ("EM", s.em, "plan steps exactly right (higher is better)"),
         (
             "SR",
@@ -82,17 +94,15 @@ pub(super) fn scores_table(s: &crate::scores::Scores) -> String {
         ),
         ("M", s.m, "mean of EM_j + SR_j per task (higher is better)"),
         ("P", s.p, "1/EM + mean task MSE (lower is better)"),
-    ] {
-        if v.is_some() {
-            let _ = write!(
-                out,
-                "<tr><td>{name}</td><td class=n>{}</td><td>{what}</td></tr>",
-                score(v)
-            );
+    ];
+    html! {
+        table {
+            tr { th { "Metric" } th { "Value" } th { "Meaning" } }
+            @for (name, v, what) in rows {
+                @if v.is_some() { tr { td { (name) } td.n { (score(v)) } td { (what) } } }
+            }
         }
     }
-    out.push_str("</table>");
-    out
 }
 
 /// A number of seconds as `1h 02m`, `3m 05s` or `42s`.

@@ -123,7 +123,7 @@ async fn login_sets_a_strict_http_only_cookie_and_forms_need_their_csrf_token() 
     let form = call(&app, get("/team/login?next=/submissions/1", "")).await;
     assert_eq!(form.status, StatusCode::OK);
     assert!(
-        form.body.contains("name=next value=\"/submissions/1\""),
+        form.body.contains("name=\"next\" value=\"/submissions/1\""),
         "{}",
         form.body
     );
@@ -239,7 +239,7 @@ async fn the_team_page_lists_its_own_submissions_and_quota_only() {
     // Quota: 5 a day on dev, one used, and when it resets.
     assert!(
         page.body
-            .contains("<td class=n>5</td><td class=n>1</td><td class=n>4</td>"),
+            .contains("<td class=\"n\">5</td><td class=\"n\">1</td><td class=\"n\">4</td>"),
         "{}",
         page.body
     );
@@ -332,7 +332,10 @@ async fn dev_runs_show_each_episode_and_test_runs_only_aggregates() {
     let cookies = login(&app, &token).await;
 
     let page = call(&app, get(&format!("/submissions/{dev}"), &cookies)).await;
-    assert!(page.body.contains("<meta http-equiv=refresh"), "queued: reloads");
+    assert!(
+        page.body.contains("<meta http-equiv=\"refresh\""),
+        "queued: reloads"
+    );
     assert!(page.body.contains("queued"), "{}", page.body);
     run_jobs(&f, 1).await;
     let page = call(&app, get(&format!("/submissions/{dev}"), &cookies)).await;
@@ -340,7 +343,7 @@ async fn dev_runs_show_each_episode_and_test_runs_only_aggregates() {
     run_jobs(&f, 8).await;
     let page = call(&app, get(&format!("/submissions/{dev}"), &cookies)).await;
     assert!(
-        !page.body.contains("http-equiv=refresh"),
+        !page.body.contains("http-equiv=\"refresh\""),
         "finished: {}",
         page.body
     );
@@ -414,7 +417,7 @@ async fn pages_render_without_script_and_the_leaderboard_links_public_summaries(
         "10 cm",
         "/api/v1/scenes/kitchen_a/topdown.png",
         "/api/v1/dataset/dev",
-        crate::leaderboard::render::INTEGRITY_RULES,
+        &crate::http::leaderboard::integrity_rules().into_string(),
     ] {
         assert!(home.body.contains(needle), "{needle}");
     }
@@ -473,9 +476,9 @@ async fn a_dev_episode_row_shows_its_path_plot_to_the_session_and_a_test_page_no
     let app = router(f.state.clone());
     let cookies = login(&app, &alpha).await;
     let page = call(&app, get(&format!("/submissions/{dev}"), &cookies)).await;
-    let prefix = format!("<img class=plot src=\"/submissions/{dev}/episodes/");
+    let prefix = format!("<img class=\"plot\" src=\"/submissions/{dev}/episodes/");
     let at = page.body.find(&prefix).unwrap_or_else(|| panic!("{}", page.body));
-    let src_start = at + "<img class=plot src=\"".len();
+    let src_start = at + "<img class=\"plot\" src=\"".len();
     let src: String = page.body[src_start..].chars().take_while(|c| *c != '"').collect();
     assert!(src.ends_with("/path.png"), "{src}");
     assert!(
