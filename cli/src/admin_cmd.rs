@@ -1,5 +1,5 @@
 //! `kitchen-r admin queue|workers|runs|cancel RUN|requeue RUN|backup FILE`: the organiser's
-//! console over the server's `/api/v1/admin` routes (issue #13 item 6). Human tables by
+//! console over the server's `/api/v1/admin` routes (docs/organiser-console.md). Human tables by
 //! default, the server's JSON with `--json`; a refused request exits non-zero with the
 //! server's own message.
 

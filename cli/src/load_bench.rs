@@ -1,4 +1,5 @@
-//! `kitchen-r bench load`: the deadline-hour load benchmark of the server (issue #12).
+//! `kitchen-r bench load`: the deadline-hour load benchmark of the server
+//! (docs/measured/load-benchmark.md).
 //!
 //! It starts this binary's own `serve` on loopback with a fresh database (or targets `--server`),
 //! creates T teams, seeds N plan submissions over HTTP, then for a fixed time runs R leaderboard

@@ -4,7 +4,8 @@
 //!
 //! A file of its own because every client command file (`client_cmd`, `policy_submit`,
 //! `submission_cmd`, `submission_view`, `submission_trace`, `admin_cmd`) needs it: held in
-//! `client_cmd` and `submission_view`, it made those files import each other (issue #29).
+//! `client_cmd` and `submission_view`, it made those files import each other (docs/contributing.md,
+//! import circles).
 
 use anyhow::{Context, bail};
 use clap::Args;

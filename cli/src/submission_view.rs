@@ -128,7 +128,7 @@ pub(crate) fn print(snap: &Snapshot, server: &ServerArgs) {
     }
     println!("run {}: {}", run["id"], progress_line(snap));
     println!("scores: {}", scores(&run["scores"]));
-    // A policy run's scores mean what its grasp mode made of the episodes (issue #27).
+    // A policy run's scores mean what its grasp mode made of the episodes.
     if let Some(g) = run["evaluation"]["grasp_mode"].as_str() {
         println!("grasp mode: {g}");
     }

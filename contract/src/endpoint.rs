@@ -455,7 +455,7 @@ mod tests {
             ("255.255.255.255", Some(NetworkKind::NotUnicast)),
             ("0.1.2.3", Some(NetworkKind::NotUnicast)),
             ("240.0.0.1", Some(NetworkKind::NotUnicast)),
-            // IPv6 carrying an IPv4 address is classified by it (issue #12's SSRF gaps).
+            // IPv6 carrying an IPv4 address is classified by it (an SSRF gap otherwise).
             ("::10.0.0.1", Some(NetworkKind::Private)),
             ("::127.0.0.1", Some(NetworkKind::Loopback)),
             ("::ffff:0:a00:1", Some(NetworkKind::Private)),

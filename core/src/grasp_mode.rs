@@ -1,5 +1,5 @@
-//! The grasp mode an episode runs in (issue #27): part of what a score means, so the server, the
-//! workers, the simulator and every page that shows a score name it the same way.
+//! The grasp mode an episode runs in (docs/twin/robot.md): part of what a score means, so the
+//! server, the workers, the simulator and every page that shows a score name it the same way.
 
 use serde::{Deserialize, Serialize};
 

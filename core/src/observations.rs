@@ -1,5 +1,6 @@
-//! The two observation tracks of the control and integrated boards (issue #25): **standard**
-//! (the paper's observation: cameras, sub-task, robot state relative to the episode start) and
+//! The two observation tracks of the control and integrated boards
+//! (docs/participant/privileged.md): **standard** (the paper's observation: cameras, sub-task,
+//! robot state relative to the episode start) and
 //! **privileged** (a run whose policy asked for, and received, privileged observations: the
 //! robot's pose in the scene frame, the current task's goal, key objects' poses). Runs of the
 //! two are ranked apart and every place that shows a policy's score names its track.

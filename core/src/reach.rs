@@ -1,7 +1,7 @@
 //! The arm's reach for place targets: a conservative rule, computed from the robot description
-//! (`assets/robots/`, issue #27), that the dataset generator applies to every place spot it draws and
-//! that [`check_plan`](crate::dataset::symbolic::check_plan) applies to committed targets, so
-//! every generated instruction is executable by the oracle (DESIGN, Feasibility).
+//! (`assets/robots/`, docs/twin/robot.md), that the dataset generator applies to every place spot
+//! it draws and that [`check_plan`](crate::dataset::symbolic::check_plan) applies to committed
+//! targets, so every generated instruction is executable by the oracle (DESIGN, Feasibility).
 //!
 //! The oracle places top-down (`kitchen_r_sim::oracle::manip`): it lets an object go with the
 //! tool centre point (TCP) [`RELEASE_HEIGHT`] above the object's grasp point at the target, the

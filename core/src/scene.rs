@@ -10,8 +10,8 @@ use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, BTreeSet};
 
 use crate::catalogue::{Catalogue, Role};
-// Defined beside the catalogue's colour variants (so the catalogue need not import the scene,
-// issue #29) and still named here, where scene files use it.
+// Defined beside the catalogue's colour variants (so the catalogue need not import the scene)
+// and still named here, where scene files use it.
 pub use crate::catalogue::Rgb;
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

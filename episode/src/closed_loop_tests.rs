@@ -1,5 +1,5 @@
-//! The closed-loop expert (issue #38 item 1): from states the oracle's own plan never visits (the
-//! arm pushed off its path, the base driven away, mid-task) it plans again from the state and
+//! The closed-loop expert (docs/twin/oracle.md): from states the oracle's own plan never visits
+//! (the arm pushed off its path, the base driven away, mid-task) it plans again from the state and
 //! completes the task; undisturbed it never re-plans, so its own episodes are unchanged.
 
 use kitchen_r_core::dataset::{Instruction, Split};
@@ -165,7 +165,7 @@ fn from_disturbed_states_the_expert_replans_and_completes_picks_and_places() {
     }
 }
 
-/// Task-v0 starts (issue #38): a fresh expert, put where the expert stood at a task's start
+/// Task-v0 starts: a fresh expert, put where the expert stood at a task's start
 /// (`expert_starts`), completes that task alone, as `KitchenR/Task-v0` runs it; among them the
 /// two the issue found failing (dev-0005 task 3, "place the apple"; dev-0020 task 5, a pick).
 #[test]
@@ -231,10 +231,10 @@ impl Learner for Lagging {
     }
 }
 
-/// What DAgger needs of the expert (issue #38): a learner that lags it is labelled with the way
-/// on from where it is. Driven by a hand at 40 % of the asked speed, the expert's labels still
-/// take every sampled pick and place to success. Re-planned from the task's start instead (the
-/// hand sent home, the base squared up again, the approach from above: the expert before
+/// What DAgger needs of the expert (docs/twin/oracle.md): a learner that lags it is labelled with
+/// the way on from where it is. Driven by a hand at 40 % of the asked speed, the expert's labels
+/// still take every sampled pick and place to success. Re-planned from the task's start instead
+/// (the hand sent home, the base squared up again, the approach from above: the expert before
 /// `TaskCtl::resume`), the same labels completed 0 of these 5 picks, at 40 % and at 25 %: each
 /// re-plan undid the progress the lagging hand had made. And the labels are the way on from the
 /// hand, not the plan's clock: at most 3.6 cm ahead of it, where the plan's own clock (before

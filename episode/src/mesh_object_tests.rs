@@ -1,5 +1,5 @@
-//! An object from a glTF 2.0, OBJ or STL mesh (issue #27 item 3) with catalogue changes only: the
-//! cup's cylinder replaced by a mesh file of the same cup, and the oracle completes a dev
+//! An object from a glTF 2.0, OBJ or STL mesh (docs/twin/scenes.md) with catalogue changes only:
+//! the cup's cylinder replaced by a mesh file of the same cup, and the oracle completes a dev
 //! instruction that picks and places it. Here because the oracle policy lives in this crate.
 
 use std::f64::consts::TAU;

@@ -1,4 +1,4 @@
-//! Robots from description files (issue #27 item 1): a robot other than the shipped one, named by
+//! Robots from description files (docs/twin/robot.md): a robot other than the shipped one, named by
 //! `[robot] file` alone, is what the twin builds and the oracle completes a dev instruction with.
 //! An MJCF robot (`tests/robots/long_arm.xml`: smaller base, arm mounted elsewhere, longer links)
 //! and a URDF variant of the shipped robot. Here rather than in `sim` because the oracle policy

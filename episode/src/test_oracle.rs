@@ -40,7 +40,7 @@ pub(crate) fn assert_oracle_completes(assets: &Assets, cfg: &EpisodeConfig, ins:
     let out = run_episode(&mut sim, &mut oracle, &run, None, &mut ()).unwrap();
     assert_eq!(out.tasks.len(), ins.plan.len());
     assert!(out.tasks.iter().all(|t| t.success), "{}: {:?}", ins.id, out.tasks);
-    // Undisturbed, the state never leaves the oracle's plan (issue #38): it never re-plans.
+    // Undisturbed, the state never leaves the oracle's plan: it never re-plans.
     assert_eq!(
         oracle.replans(),
         0,

@@ -1,5 +1,5 @@
-//! Episode traces (issue #26): what reproduces an online episode exactly, so its video can be
-//! rendered later, on demand, instead of during evaluation.
+//! Episode traces (docs/twin/replay.md): what reproduces an online episode exactly, so its video
+//! can be rendered later, on demand, instead of during evaluation.
 //!
 //! Episodes are bit-reproducible: the simulator is deterministic and the runner's decisions
 //! depend only on the episode's configuration, the run's options and what the policy answered.
@@ -79,7 +79,7 @@ pub struct TraceRun {
     pub privileged_observations: Option<PrivilegedScope>,
     pub chunk_tolerance: ChunkTolerance,
     pub max_consecutive_timeouts: u32,
-    /// The simulator's grasp mode (issue #27): a replay runs in it whatever its own
+    /// The simulator's grasp mode (docs/twin/robot.md): a replay runs in it whatever its own
     /// `[grasp] mode` says. Absent from traces recorded before it existed, which ran the
     /// abstract grasp, and left out of abstract traces so older builds still replay them (a
     /// physical trace is refused by a build that does not know the field, never replayed in the

@@ -1,4 +1,4 @@
-//! A scene read from `.usda` (issue #27 item 3): kitchen_a exported by `kitchen-r sim export
+//! A scene read from `.usda` (docs/twin/scenes.md): kitchen_a exported by `kitchen-r sim export
 //! --usd` and named by a scene file (`usd = "…"`, `scale`) reads back as the same scene, passes
 //! the same content checks as the TOML scenes, and the oracle completes a whole dev instruction
 //! in it. Here rather than in `sim` because the oracle policy lives in this crate.

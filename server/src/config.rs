@@ -204,7 +204,8 @@ pub struct ControlConfig {
     /// split only what the sub-task names) and is then ranked on the privileged boards. Off, a
     /// registration that asks is refused, naming this key.
     pub privileged_track: bool,
-    /// The grasp mode every policy episode runs in (issue #27): `abstract` (the default) or
+    /// The grasp mode every policy episode runs in (docs/twin/robot.md): `abstract` (the default)
+    /// or
     /// `physical`. Sent with every job (it overrides the workers' `[grasp] mode`), stored with
     /// each run and shown with every control score; boards rank the runs of one mode together.
     pub grasp: GraspMode,
@@ -514,7 +515,7 @@ mod tests {
         let c = Config::default();
         c.validate().unwrap();
         assert_eq!(c.quota.test_per_day, 5);
-        // Every split is bounded by default (issue #12: an unlimited dev split filled the disk).
+        // Every split is bounded by default: an unlimited dev split filled the disk.
         assert_eq!((c.quota.dev_per_day, c.quota.per_minute), (200, 20));
     }
 

@@ -35,8 +35,8 @@ impl WorkerService {
 /// A leased job on the wire; whether to record a video is the server's `[video]` setting now,
 /// not stored with the job, so the organiser can turn it off for queued work too. `test` says
 /// the episode is of the test split (recorded only with `[video] test_split`). The video is
-/// always wanted on demand (issue #26): the worker uploads the trace, and a render job makes
-/// the video when it is first asked for. Live ROS 2 publishing (`[live] ros2`) is likewise
+/// always wanted on demand (docs/contest/video.md): the worker uploads the trace, and a render job
+/// makes the video when it is first asked for. Live ROS 2 publishing (`[live] ros2`) is likewise
 /// decided here at lease, and never for a test-split episode: its topics would show the hidden
 /// plan's sub-tasks and where the robot was sent.
 fn job(j: LeasedJob, (video, live): (&VideoConfig, &LiveConfig), store_ok: bool, test: bool) -> pb::Job {

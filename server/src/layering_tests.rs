@@ -1,6 +1,6 @@
-//! The crate doc's import rule, checked on the source text (issue #29): adapters → service →
-//! store → leaf types. Textual on purpose: `crate::` paths are how this crate names its modules,
-//! so a string search finds every import a reviewer would, without a parser.
+//! The crate doc's import rule, checked on the source text (docs/contributing.md): adapters →
+//! service → store → leaf types. Textual on purpose: `crate::` paths are how this crate names its
+//! modules, so a string search finds every import a reviewer would, without a parser.
 //!
 //! Tests are exempt (a test of the service may drive the HTTP router): test files (`tests.rs`,
 //! `*_tests.rs`, `tests/`, `testutil.rs`, this file) and inline `#[cfg(test)] mod … { … }`

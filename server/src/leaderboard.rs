@@ -7,13 +7,14 @@
 //! failed entries last. Organiser reference runs are baseline rows (`baseline: true`, no rank):
 //! each one is shown, none is a team's best.
 //!
-//! The control and integrated tracks have a standard and a privileged board (issue #25): runs
-//! whose policy received privileged observations are ranked only among themselves, and every
-//! rendering names the board (`observations` in JSON, a CSV column, the page's headings).
+//! The control and integrated tracks have a standard and a privileged board
+//! (docs/participant/privileged.md): runs whose policy received privileged observations are ranked
+//! only among themselves, and every rendering names the board (`observations` in JSON, a CSV
+//! column, the page's headings).
 //!
-//! Those two boards exist once per grasp mode (issue #27): a run is ranked only among runs of
-//! the grasp mode it ran in, and every policy rendering names the mode (`grasp_mode` in JSON, the
-//! CSV's last column, the page's headings). The contest's mode (`[control] grasp`) is the board
+//! Those two boards exist once per grasp mode (docs/twin/robot.md): a run is ranked only among runs
+//! of the grasp mode it ran in, and every policy rendering names the mode (`grasp_mode` in JSON,
+//! the CSV's last column, the page's headings). The contest's mode (`[control] grasp`) is the board
 //! answered by default and shown first; the other mode's boards appear only when they hold runs
 //! (made before the organiser changed the setting), each row labelled.
 //!

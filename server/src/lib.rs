@@ -18,7 +18,7 @@
 //! modules [`scores`], [`schema`], [`clock`], [`states`], [`config`]. Nothing below the service
 //! imports the service or an adapter (tests aside), and nothing outside an adapter imports one:
 //! schema stand-ins the OpenAPI document needs live with the domain types ([`scores`],
-//! [`schema`]), never as an import of [`http`] from the domain (issue #29).
+//! [`schema`]), never as an import of [`http`] from the domain.
 //! `layering_tests` checks this on the source text, and the workspace's `import_circles` test
 //! (`tests/import_circles.rs`, over every crate) that no two files import each other round a
 //! circle, which states when a parent module and its children count.

@@ -1,5 +1,5 @@
-//! Where the robot went (issue #15): the path a worker reported with an online episode, checked
-//! and stored with the result, and drawn on demand over the scene's top-down map.
+//! Where the robot went (docs/reference/pages.md): the path a worker reported with an online
+//! episode, checked and stored with the result, and drawn on demand over the scene's top-down map.
 
 use kitchen_r_core::scoring::TaskOutcome;
 use kitchen_r_core::topdown::{PathPlot, PlotGoal};

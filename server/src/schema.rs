@@ -3,7 +3,7 @@
 //! one point their derive here (`#[schema(value_type = crate::schema::SplitName)]`).
 //!
 //! Why here and not in `http::openapi`: the domain types (leaderboard, service answers) derive
-//! their schemas, and the domain must not import the HTTP adapter (issue #29; the rule is in the
+//! their schemas, and the domain must not import the HTTP adapter (the rule is in the
 //! crate doc). A leaf module: it imports nothing of this crate.
 
 use serde::{Deserialize, Serialize};
@@ -25,7 +25,7 @@ pub(crate) enum ObservationsName {
     Privileged,
 }
 
-/// The grasp mode a policy run's episodes ran in (`kitchen_r_core::GraspMode`, issue #27):
+/// The grasp mode a policy run's episodes ran in (`kitchen_r_core::GraspMode`, docs/twin/robot.md):
 /// part of what a control score means.
 #[derive(Debug, Clone, Copy, Serialize, Deserialize, ToSchema)]
 #[serde(rename_all = "lowercase")]

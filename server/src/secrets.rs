@@ -1,4 +1,4 @@
-//! Secrets at rest: a policy endpoint's bearer token is stored sealed (issue 23), never as
+//! Secrets at rest: a policy endpoint's bearer token is stored sealed, never as
 //! plain text, so a copied database or backup does not hand out participants' credentials.
 //!
 //! Policy:

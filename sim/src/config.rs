@@ -83,8 +83,9 @@ impl Default for ArticulationConfig {
     }
 }
 
-/// `[robot]`: which robot the twin builds (issue #27). [`Assets::load`](crate::Assets::load)
-/// reads it from `configs/sim.toml`, so the spawner, the controller and the oracle all get it.
+/// `[robot]`: which robot the twin builds (docs/twin/robot.md).
+/// [`Assets::load`](crate::Assets::load) reads it from `configs/sim.toml`, so the spawner, the
+/// controller and the oracle all get it.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct RobotConfig {
@@ -108,8 +109,8 @@ impl RobotConfig {
     }
 }
 
-/// `[grasp]`: how the gripper holds objects (issue #27). The organiser's contest setting, when
-/// a job carries one, overrides this file's.
+/// `[grasp]`: how the gripper holds objects (docs/twin/robot.md). The organiser's contest setting,
+/// when a job carries one, overrides this file's.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(default, deny_unknown_fields)]
 pub struct GraspConfig {

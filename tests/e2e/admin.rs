@@ -1,5 +1,5 @@
-//! The organiser's console end to end (issue #13 item 6): `kitchen-r admin backup` against a
-//! live server that keeps taking uploads, and a second server started on the copy serving the
+//! The organiser's console end to end (docs/organiser-console.md): `kitchen-r admin backup` against
+//! a live server that keeps taking uploads, and a second server started on the copy serving the
 //! same leaderboards and submissions; the admin CLI's tables, JSON and errors.
 
 use std::process::Command;

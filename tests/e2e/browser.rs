@@ -2,8 +2,8 @@
 //! Python (`tests/browser/check_pages.py`) against the real `kitchen-r serve` after a small
 //! policy evaluation: a team's dev run of a policy that stands still (every task fails, with
 //! its reason, and is recorded) and the organiser's reference run of the oracle (tasks done).
-//! Videos are rendered on demand from the episodes' traces (issue #26): the test asks for each
-//! and waits (bounded) until all are rendered before the browser looks.
+//! Videos are rendered on demand from the episodes' traces (docs/contest/video.md): the test asks
+//! for each and waits (bounded) until all are rendered before the browser looks.
 //!
 //! The script opens every page as a visitor, as the team (logged in through the form) and as
 //! the organiser (through the console's form), at 1280 px and at 375 px, and fails on console
@@ -161,7 +161,7 @@ fn every_page_renders_cleanly_with_playing_videos_in_chromium_at_desktop_and_375
             assert_eq!(view["latest_run"]["evaluation"]["state"], "finished", "{view:#}");
             assert_eq!(online_episodes(&view), EPISODES, "{view:#}");
         }
-        // Videos are rendered on demand (issue #26): ask for each and wait until all are stored,
+        // Videos are rendered on demand: ask for each and wait until all are stored,
         // so the pages show one playing `<video>` per episode.
         for (id, who) in [(ids[0], token.as_str()), (ids[1], ADMIN)] {
             rendered(&server, id, who).await;

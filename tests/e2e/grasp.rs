@@ -1,4 +1,4 @@
-//! The grasp mode end to end (issue #27): the organiser's `[control] grasp` reaches every
+//! The grasp mode end to end (docs/twin/robot.md): the organiser's `[control] grasp` reaches every
 //! episode a real `kitchen-r serve` hands its workers, and every place that shows the run's
 //! control score names the mode: the registration and submission answers, the leaderboard's
 //! JSON, CSV and page, and the entry's public summary. An unknown mode stops the server at start,

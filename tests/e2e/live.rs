@@ -1,4 +1,4 @@
-//! The Foxglove live view through the real binary (issue #28): `eval --foxglove` serves the
+//! The Foxglove live view through the real binary (docs/twin/live.md): `eval --foxglove` serves the
 //! episode on loopback, a client speaking the Foxglove WebSocket protocol as Lichtblick does
 //! gets the channel list with `ros2msg` schemas, subscribes, and decodes the CDR messages'
 //! stamps and frames while the episode runs; the run's results are those of a run without it.

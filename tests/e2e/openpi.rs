@@ -1,4 +1,5 @@
-//! openpi WebSocket endpoints end to end (issue #40, item 1): a policy served by openpi's own
+//! openpi WebSocket endpoints end to end (docs/participant/openpi.md): a policy served by openpi's
+//! own
 //! `WebsocketPolicyServer` (PyPI `openpi-server` 0.1.0, `openpi-client` 0.1.2: the script
 //! `tests/openpi/policy_server.py`) passes `check-policy ws://…`, is registered with a team token
 //! and scored by the real server and workers; and every way such a policy can misbehave (it

@@ -1,4 +1,5 @@
-//! The privileged-information track end to end (issue #25, item 1): `kitchen-r serve` with
+//! The privileged-information track end to end (docs/participant/privileged.md): `kitchen-r serve`
+//! with
 //! `control.privileged_track = true`, a participant's policy whose GetSpec asks for privileged
 //! observations and logs what it receives, a standard policy beside it, and the boards.
 //!

@@ -1,5 +1,5 @@
-//! Replay on demand (issue #26) through the real binary: `eval --trace` writes one trace per
-//! episode, `replay --check-only` reproduces it bit for bit, `replay --video` writes the MP4
+//! Replay on demand (docs/twin/replay.md) through the real binary: `eval --trace` writes one trace
+//! per episode, `replay --check-only` reproduces it bit for bit, `replay --video` writes the MP4
 //! `eval --record` would, `replay --mcap/--frames` record it at any camera and resolution, and a
 //! tampered trace is refused without writing anything.
 

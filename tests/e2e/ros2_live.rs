@@ -1,4 +1,4 @@
-//! Live ROS 2 topics over real DDS through the real binary (issue #28): `eval --ros2` and
+//! Live ROS 2 topics over real DDS through the real binary (docs/twin/live.md): `eval --ros2` and
 //! `replay --ros2` publish the episode with RustDDS, and a subscriber on another DDS
 //! implementation, Eclipse Cyclone DDS (the PyPI `cyclonedds` wheel, driven by
 //! scripts/ros2-watch.py), reads typed `sensor_msgs/Imu`, `nav_msgs/Odometry`,

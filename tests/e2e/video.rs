@@ -1,4 +1,4 @@
-//! Episode videos end to end (issue #15 item 1, issue #26 item 1): `kitchen-r serve` with
+//! Episode videos end to end (docs/contest/video.md): `kitchen-r serve` with
 //! in-process workers runs a team's small dev policy run; each episode's trace is recorded by the
 //! worker and uploaded over the worker gRPC service; the video is rendered from it by a worker
 //! when first asked for, stored, and served with byte ranges to the team, never to another
@@ -112,7 +112,7 @@ fn tamper_stored_result(db: &std::path::Path, key: &str) {
         .unwrap());
 }
 
-/// Videos on demand (issue #26): the dev run stores traces, not videos; asking for a video
+/// Videos on demand: the dev run stores traces, not videos; asking for a video
 /// renders it (202 with progress, then the MP4 with ranges, to the team only); a replay that
 /// disagrees with the stored result is refused and says so; the trace is downloadable (API and
 /// CLI) and replays locally; test-split traces and videos are the organiser's only.
@@ -326,7 +326,7 @@ fn a_dev_episode_video_is_rendered_on_demand_served_with_ranges_to_its_team_only
 }
 
 /// A page as the team's browser gets it (session cookie).
-/// Pre-rendering (issue #26, `[video] prerender = "failed"`, the default): a dev episode that
+/// Pre-rendering (`[video] prerender = "failed"`, the default): a dev episode that
 /// failed its task has its video rendered once no evaluation job waits, before anyone asks;
 /// the first request gets the MP4 at once, and it plays.
 #[test]

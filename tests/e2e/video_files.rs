@@ -1,4 +1,4 @@
-//! Video files on disk across a crash (issue 23, "no leaked files"): the real server, an
+//! Video files on disk across a crash ("no leaked files"): the real server, an
 //! on-disk database, and the worker protocol spoken by hand. An upload cut by `kill -9` leaves a
 //! partial file in the videos' `tmp/`, which the restarted server removes before it listens; an
 //! episode's video uploaded again deletes the file the replaced link named.

@@ -1,4 +1,4 @@
-//! Operating the workers (issue #13 items 4, 8 and 10), every part a real process on loopback:
+//! Operating the workers (docs/control-track-worker.md), every part a real process on loopback:
 //! a `kitchen-r worker` stopped with SIGTERM mid-episode drains (its running episode is released
 //! and another worker takes it at once, long before the lease would expire), leasing shares the
 //! slots across teams (a later small run is not starved by a big slow one), and the settings of

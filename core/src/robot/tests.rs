@@ -13,7 +13,7 @@ fn bits(d: &RobotDesc) -> String {
 }
 
 /// The URDF and its sidecar say exactly what the retired `assets/robot.toml` said, so every
-/// episode is bit-identical to the ones before the URDF (issue #27).
+/// episode is bit-identical to the ones before the URDF (docs/twin/robot.md).
 #[test]
 fn the_shipped_urdf_is_the_retired_robot_toml_bit_for_bit() {
     let urdf = RobotDesc::load(&shipped()).unwrap();

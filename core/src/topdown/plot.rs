@@ -1,7 +1,7 @@
-//! Where the robot went (issue #15): an episode's paths drawn over the scene's top-down image.
-//! The base path is one colour per task, the key object's path a thin dark line, each task's
-//! goal a ring of its tolerance radius in the task's colour, where the episode started a dot, and
-//! where a failed task ended a cross in the task's colour with a dark outline.
+//! Where the robot went (docs/reference/pages.md): an episode's paths drawn over the scene's
+//! top-down image. The base path is one colour per task, the key object's path a thin dark line,
+//! each task's goal a ring of its tolerance radius in the task's colour, where the episode started
+//! a dot, and where a failed task ended a cross in the task's colour with a dark outline.
 
 use image::codecs::png::PngEncoder;
 use image::{ExtendedColorType, ImageEncoder, Rgb, RgbImage};

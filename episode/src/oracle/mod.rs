@@ -116,8 +116,8 @@ impl OraclePolicy {
     }
 
     /// How often this oracle planned again from the measured state because it had left the
-    /// plan (issue #38): never in its own undisturbed episodes, at every step a learner drives
-    /// differently when it labels them.
+    /// plan (docs/twin/oracle.md): never in its own undisturbed episodes, at every step a learner
+    /// drives differently when it labels them.
     pub fn replans(&self) -> u64 {
         self.replans
     }

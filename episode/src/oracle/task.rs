@@ -91,9 +91,9 @@ struct Anchor {
 }
 
 /// How far the measured state may stray from what the controller commanded before the oracle
-/// re-plans from the state (issue #38). Its own runs stay inside these: the arm lags its blended
-/// target by up to about 6 cm (a transport), the base stands still while it manipulates; the
-/// dev and test splits run to the bit as they did before the check.
+/// re-plans from the state (docs/twin/oracle.md). Its own runs stay inside these: the arm lags its
+/// blended target by up to about 6 cm (a transport), the base stands still while it manipulates;
+/// the dev and test splits run to the bit as they did before the check.
 pub(super) mod tolerance {
     /// Tool position against the commanded pose, m: outside the slow phases at the object.
     pub(in crate::oracle) const TOOL: f64 = 0.10;
@@ -188,12 +188,13 @@ impl TaskCtl {
     /// tool away from its commanded pose (a lagging or pushed arm), the base moved off the pose
     /// a manipulation was planned from, the object moved before the grasp, the object not in
     /// the hand when the plan carries it, or the machine ended with the task undone. The oracle
-    /// then plans again from the state (issue #38): its action depends on where the robot and
+    /// then plans again from the state: its action depends on where the robot and
     /// the object are, not on how long ago the task started.
     pub(super) fn off_plan(&self, m: &Measured<'_>) -> Option<&'static str> {
         use tolerance as tol;
         // The physical grasp keeps its timed plan: its articulated arm lags a blend by more than
-        // the tolerances and its "held" flickers with the finger contacts (issue #41's mode).
+        // the tolerances and its "held" flickers with the finger contacts (the physical grasp,
+        // docs/twin/robot.md).
         if self.physical {
             return None;
         }
@@ -234,7 +235,7 @@ impl TaskCtl {
         }
     }
 
-    /// Hold the plan's clock back to the hand a learner drove (issue #38): the arm's prelude and
+    /// Hold the plan's clock back to the hand a learner drove: the arm's prelude and
     /// the pick-and-place machine run on their own clocks, which a lagging learner's hand does
     /// not keep up with; left running, the label at a state would be the plan's pose and gripper
     /// of some seconds later (fingers closing above an object the hand has not reached). The
@@ -264,7 +265,7 @@ impl TaskCtl {
         }
     }
 
-    /// Plan again from the measured state without going back to the task's start (issue #38):
+    /// Plan again from the measured state without going back to the task's start:
     /// the hand is not sent home and the base not squared up again unless it strayed far, and a
     /// hand already in the column over the work goes on down rather than back up. A learner
     /// that lags its expert by a few centimetres is then labelled with the way on from where it

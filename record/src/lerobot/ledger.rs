@@ -1,7 +1,8 @@
 //! What the `.collect/episodes.jsonl` ledger records of each episode, the features every
 //! episode must share, and where a global file number lies. A file of its own because the
 //! dataset ([`super::dataset`]) writes these and the metadata ([`super::meta`]) is rebuilt from
-//! them: held in `dataset`, they made `dataset` and `meta` import each other (issue #29).
+//! them: held in `dataset`, they made `dataset` and `meta` import each other (docs/contributing.md,
+//! import circles).
 
 use serde::{Deserialize, Serialize};
 

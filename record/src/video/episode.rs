@@ -1,6 +1,6 @@
-//! The episode video (issue #15): every camera of every control step (0.1 s, the control
-//! rate), side by side with a caption bar ([`super::caption`]), encoded as the episode runs into
-//! one H.264 MP4 that browsers play inline.
+//! The episode video (docs/contest/video.md): every camera of every control step (0.1 s, the
+//! control rate), side by side with a caption bar ([`super::caption`]), encoded as the episode runs
+//! into one H.264 MP4 that browsers play inline.
 //!
 //! Frames are encoded as they come, with one second held back: when a task ends, its held
 //! frames are captioned with the outcome (`SUCCESS at 14.2 s`, `FAILED: <reason>`), so a viewer
@@ -24,8 +24,9 @@ pub const FPS: u32 = 10;
 /// Encoder settings of episode videos: H.264 at 60 kbit/s, a key frame every 5 s for seeking.
 /// H.264 because a failing policy's episode runs every task to its time limit (6,000–7,200
 /// frames), which AV1 took 78–121 s to encode here and H.264 encodes about twelve times faster
-/// (issue #26), so a requested video plays within the 30 s a viewer waits. 60 kbit/s: measured
-/// on 888 oracle frames, about 0.74 KB a frame with the caption sharp (the AV1 videos' size:
+/// (docs/measured/video.md), so a requested video plays within the 30 s a viewer waits. 60 kbit/s:
+/// measured on 888 oracle frames, about 0.74 KB a frame with the caption sharp (the AV1 videos'
+/// size:
 /// 0.66 KB), where the base QP takes 1.3 KB; a still scene takes 0.14 KB a frame. The AV1 knobs
 /// stay as they were measured (quantizer 160) for a build that switches back.
 pub const SETTINGS: VideoSettings = VideoSettings {

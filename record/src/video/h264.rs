@@ -1,8 +1,8 @@
 //! The H.264 encoder: RGB8 → YUV 4:2:0 (the same conversion as AV1's) → Cisco's OpenH264,
 //! built from source by the `openh264` crate.
 //!
-//! About twelve times faster than rav1e on our small frames (issue #26), which is what lets a
-//! failing policy's ten-minute episode video render within a request's patience and LeRobot
+//! About twelve times faster than rav1e on our small frames (docs/measured/video.md), which is what
+//! lets a failing policy's ten-minute episode video render within a request's patience and LeRobot
 //! export keep up with the simulator. The settings make the stream a pure function of the
 //! frames, as the episodes are:
 //! - rate control either off (every frame at OpenH264's base QP 26, with its adaptive

@@ -1,5 +1,5 @@
-//! `[live]`: episodes published live while workers run them (issue #28). The organiser decides
-//! centrally: the setting travels to the workers with every leased job
+//! `[live]`: episodes published live while workers run them (docs/twin/live.md). The organiser
+//! decides centrally: the setting travels to the workers with every leased job
 //! (`EpisodeSpec.live_ros2`), and only with dev-split jobs: a test-split episode is never
 //! published, whatever this says, since its plan and goals are the hidden answers.
 

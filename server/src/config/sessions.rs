@@ -121,8 +121,8 @@ impl SessionConfig {
         let header = self.client_address_header.as_str();
         match (self.trusted_proxy_hops, header) {
             (0, "") => Ok(()),
-            // Before issue #37 the header alone was trusted (its first, client-written entry):
-            // refuse that setting rather than silently count every client as the proxy.
+            // Before `trusted_proxies` the header alone was trusted (its first, client-written
+            // entry): refuse that setting rather than silently count every client as the proxy.
             (0, _) => invalid(
                 "sessions.client_address_header",
                 "is read only behind trusted proxies: set `trusted_proxy_hops` to the number \
@@ -218,7 +218,8 @@ mod tests {
 
     #[test]
     fn the_removed_overall_cap_is_refused_by_name_saying_what_to_do() {
-        // The [sessions] table of the config file shipped before issue #37.
+        // The [sessions] table of the config file shipped before `trusted_proxies` and the login
+        // limits.
         let old = "[sessions]\nfailures_per_minute_per_address = 10\nfailures_per_minute = 120\n\
                    client_address_header = \"\"\n";
         let dir = tempfile::tempdir().unwrap();

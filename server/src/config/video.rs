@@ -1,4 +1,4 @@
-//! `[video]`: episode videos (issue #15), rendered on demand from traces (issue #26). The
+//! `[video]`: episode videos, rendered on demand from traces (docs/contest/video.md). The
 //! organiser decides centrally: the setting travels to the workers with every leased job
 //! (`EpisodeSpec.record_video`, `video_on_demand`, `video_max_bytes`).
 

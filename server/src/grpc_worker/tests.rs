@@ -218,7 +218,7 @@ async fn reference_runs_reach_workers_as_privileged() {
     assert!(jobs.iter().all(|j| j.episode.as_ref().unwrap().privileged));
 }
 
-/// `[live] ros2` (issue #28) reaches the workers with the online dev-split jobs only: never
+/// `[live] ros2` (docs/twin/live.md) reaches the workers with the online dev-split jobs only: never
 /// with a test-split job (its topics would show the hidden plan), nor an offline one; and with
 /// the setting off, with none.
 #[tokio::test]

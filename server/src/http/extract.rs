@@ -110,11 +110,11 @@ impl FromRequestParts<AppState> for ClientAddr {
 /// it received the request from to the `forwarded` header (`x-forwarded-for` style: the values
 /// of every occurrence of the header, in order, each a comma-separated list).
 ///
-/// Policy (issue #37): the client is the rightmost address no trusted proxy vouches for. The
-/// list is the header's entries followed by `peer`; `peer` is the nearest proxy (hop 1) and
-/// each trusted proxy's entry is the address it received from, so the client is the entry
-/// `hops` places left of `peer`. Entries further left were written by the client or untrusted
-/// proxies and are never read, so forging them changes nothing. A list shorter than `hops + 1`
+/// Policy (docs/reference/pages.md, trusted proxies): the client is the rightmost address no
+/// trusted proxy vouches for. The list is the header's entries followed by `peer`; `peer` is the
+/// nearest proxy (hop 1) and each trusted proxy's entry is the address it received from, so the
+/// client is the entry `hops` places left of `peer`. Entries further left were written by the
+/// client or untrusted proxies and are never read, so forging them changes nothing. A list shorter than `hops + 1`
 /// (fewer proxies than configured) gives its leftmost entry, the farthest hop known.
 /// - `hops == 0`: `peer`; the header is not read at all.
 /// - The chosen entry may be an IP address, optionally with a port (`1.2.3.4:5`, `[::1]:5`);

@@ -1,4 +1,4 @@
-//! Route tests of issue 23's loose ends, through the real router: page security headers on
+//! Route tests of an outside review's loose ends, through the real router: page security headers on
 //! every HTML answer, CSV cells a spreadsheet would evaluate, plan-line fields dropped before
 //! storage and endpoint tokens absent from every answer.
 

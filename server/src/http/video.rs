@@ -1,11 +1,12 @@
-//! Episode videos over HTTP (issue #15), with byte ranges so a `<video>` element can seek:
+//! Episode videos over HTTP (docs/contest/video.md), with byte ranges so a `<video>` element can
+//! seek:
 //!
 //! - `GET /api/v1/submissions/{id}/episodes/{key}/video.mp4`: bearer token (own team on dev;
 //!   organiser on dev and test);
 //! - `GET /submissions/{id}/episodes/{key}/video.mp4`: the same by the page's cookie session
 //!   (a `<video src>` cannot send a bearer header), like the path plot's page route.
 //!
-//! Videos on demand (issue #26): an episode with a stored trace and no video yet queues a render
+//! Videos on demand: an episode with a stored trace and no video yet queues a render
 //! when its video is asked for and answers `202 Accepted` with `Retry-After` and
 //! `{"status": "queued" | "rendering", "progress": 0..1}` until the video is stored; a render
 //! that failed (the replay disagreed with the stored result) answers `409` with

@@ -3,7 +3,7 @@
 //!
 //! A file of its own because both the pages ([`super::pages`]) and the video route
 //! ([`super::video`]) need it, and the pages route to the video: held in `pages`, it made the
-//! two import each other (issue #29).
+//! two import each other (docs/contributing.md, import circles).
 
 use axum::http::HeaderMap;
 

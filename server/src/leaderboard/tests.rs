@@ -419,10 +419,10 @@ async fn a_policy_dodging_its_mse_episodes_ranks_below_an_honest_one() {
     }
 }
 
-/// The boards are maintained by each write (issue #12: a read after a write must not recompute
-/// from every submission). After plan uploads on both splits, a test policy run that makes later
-/// test plans unranked, finished and active runs and a rescore, every board read equals what a
-/// rebuild from all submissions gives.
+/// The boards are maintained by each write (docs/measured/load-benchmark.md: a read after a write
+/// must not recompute from every submission). After plan uploads on both splits, a test policy run
+/// that makes later test plans unranked, finished and active runs and a rescore, every board read
+/// equals what a rebuild from all submissions gives.
 #[tokio::test]
 async fn maintained_boards_equal_a_rebuild_after_every_kind_of_write() {
     let f = fixture(FakeProbe::ok(8), |c| {

@@ -1,5 +1,5 @@
-//! The organiser's console (issue #13 item 6): the queue by state with the oldest queued job's
-//! age and each team's share, the workers with their last heartbeat and current episodes, the
+//! The organiser's console (docs/organiser-console.md): the queue by state with the oldest queued
+//! job's age and each team's share, the workers with their last heartbeat and current episodes, the
 //! policy runs with progress and an ETA, stuck and failed jobs with their reasons; cancelling
 //! and requeueing a run; and a consistent copy of the live database.
 //!

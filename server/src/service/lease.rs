@@ -3,7 +3,7 @@
 //! A file of its own because the queue enforces the bounds while the metrics
 //! ([`super::metrics`]) and the gRPC stack's time budget read them, and both lease kinds answer
 //! heartbeats alike: held in `jobs`, these made `jobs` import each of `metrics` and `renders`
-//! and be imported back (issue #29).
+//! and be imported back (docs/contributing.md, import circles).
 
 /// Most jobs one Lease call hands out, and the longest it is held open.
 pub(crate) const MAX_JOBS_PER_LEASE: u32 = 64;

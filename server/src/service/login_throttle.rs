@@ -3,9 +3,9 @@
 //! token is even looked at while its address's bucket is empty, so a guesser gains nothing by
 //! sending more; a correct token costs nothing.
 //!
-//! Policy (issue #37): there is no bucket for all addresses together. Team tokens are 256-bit,
-//! so an overall cap protects no token; it only let anyone with many addresses make every valid
-//! login answer 429. One address's failures never delay another address's logins, with one
+//! Policy (docs/reference/pages.md): there is no bucket for all addresses together. Team tokens are
+//! 256-bit, so an overall cap protects no token; it only let anyone with many addresses make every
+//! valid login answer 429. One address's failures never delay another address's logins, with one
 //! exception bounded by memory: past [`MAX_ADDRESSES`] remembered addresses, the least spent
 //! buckets are forgotten (a forgotten bucket is a full one again).
 //!

@@ -7,7 +7,7 @@
 //! instruction at a time). And the aggregate appears only once the run has ended: while a test
 //! run is in progress a participant sees how far it got (episodes done, running, total, ETA)
 //! and nothing else, because two views a moment apart that differ by one episode would give
-//! that episode's failure kinds by subtraction (issue #23: an outside review polled every
+//! that episode's failure kinds by subtraction (docs/integrity.md; an outside review polled every
 //! 0.25 s and differenced 134 of 151 increments to single episodes). Dev runs show everything,
 //! live: per-episode, per-task results and logs.
 

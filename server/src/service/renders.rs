@@ -1,5 +1,5 @@
-//! Videos rendered on demand (issue #26): an online episode's trace is stored instead of its
-//! video, and the video is rendered from it by a simulation worker when first asked for (the
+//! Videos rendered on demand (docs/contest/video.md): an online episode's trace is stored instead
+//! of its video, and the video is rendered from it by a simulation worker when first asked for (the
 //! server never steps physics).
 //!
 //! Policy:

@@ -1,5 +1,4 @@
-//! Policy endpoints' bearer tokens at rest (issue 23; the cipher and key file are
-//! [`crate::secrets`]).
+//! Policy endpoints' bearer tokens at rest (the cipher and key file are [`crate::secrets`]).
 //!
 //! Policy: a token is sealed before anything is stored (the submission's body holds
 //! `token_sealed`, each job's spec `endpoint.bearer_token_sealed`), opened only when a job is

@@ -1,4 +1,4 @@
-//! Browser sessions of the pages (issue #23): a login checks a token once and opens a
+//! Browser sessions of the pages (docs/reference/pages.md): a login checks a token once and opens a
 //! server-side session; the browser's cookie holds only the session's random id.
 //!
 //! Policy:

@@ -1,6 +1,6 @@
-//! Bounded media storage (issue 23, issue #37): per-team and total byte budgets (`[video]
-//! team_max_bytes`, `total_max_bytes`) over videos and traces together, and no file left on
-//! disk that nothing links.
+//! Bounded media storage (docs/contest/video.md, budgets): per-team and total byte budgets
+//! (`[video] team_max_bytes`, `total_max_bytes`) over videos and traces together, and no file left
+//! on disk that nothing links.
 //!
 //! Policy: an upload's announced size (a video's or a trace's) is booked before a byte is
 //! written; what to evict for it, fairly between teams, is `crate::store::budget`'s rule. A

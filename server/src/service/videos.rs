@@ -1,6 +1,6 @@
-//! Episode videos (issue #15): stored by content, linked to (run, episode), served to whoever may
-//! see the episode, and deleted after `[video] retention_days` or when a storage budget needs
-//! the room (issue 23).
+//! Episode videos (docs/contest/video.md): stored by content, linked to (run, episode), served to
+//! whoever may see the episode, and deleted after `[video] retention_days` or when a storage budget
+//! needs the room.
 //!
 //! Storage policy: a file is named by the sha256 of its bytes, `<dir>/<aa>/<sha256>.mp4`, so
 //! identical uploads are stored once. An upload is written to `<dir>/tmp/` while hashed and
@@ -11,7 +11,7 @@
 //! budget (`crate::service::video_budget`), and by the sweep, which deletes rows past retention.
 //! The server is the only writer of its video directory (one replica).
 //!
-//! Videos on demand (issue #26): workers upload each episode's trace instead of its video
+//! Videos on demand: workers upload each episode's trace instead of its video
 //! (`<dir>/traces/<aa>/<sha256>.json.gz`, rows in `episode_traces`, the same retention), and the
 //! video is rendered from it by a worker when first asked for ([`traces`],
 //! `crate::service::renders`); the rendered file is then stored and linked as any video.
@@ -236,7 +236,7 @@ pub(crate) async fn sweeper(state: AppState, mut stop: tokio::sync::watch::Recei
     }
 }
 
-mod incoming;
+pub(crate) mod incoming;
 #[cfg(test)]
 pub(crate) mod tests;
 mod traces;

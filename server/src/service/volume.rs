@@ -1,5 +1,5 @@
-//! The start-up check that the storage budgets fit their volume (issue #37): a total budget
-//! larger than the free space of the disk the video directory is on would let the disk fill
+//! The start-up check that the storage budgets fit their volume (docs/contest/video.md): a total
+//! budget larger than the free space of the disk the video directory is on would let the disk fill
 //! before any budget acts. The server warns, or refuses to start under `strict`.
 
 use std::path::Path;

@@ -1,5 +1,5 @@
-//! The organiser's console SQL (issue #13 item 6): what the queue, the workers and the runs look
-//! like now, and the two operations on a run: cancel and requeue.
+//! The organiser's console SQL (docs/organiser-console.md): what the queue, the workers and the
+//! runs look like now, and the two operations on a run: cancel and requeue.
 //!
 //! Workers are not registered anywhere: a worker is known by the leases it holds
 //! (`jobs.lease_owner`, `jobs.updated_at` moves at every lease and heartbeat) and by the results

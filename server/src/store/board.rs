@@ -14,7 +14,7 @@
 //! among themselves (`observations = 'privileged'`, a team's best with `entry` = -1), never
 //! against standard runs; every older body has no such field and is standard.
 //!
-//! Likewise per grasp mode (issue #27): a policy run's mode is its latest scoring run's
+//! Likewise per grasp mode (docs/twin/robot.md): a policy run's mode is its latest scoring run's
 //! `grasp_mode`, and runs of one mode are ranked only among themselves (`grasp_mode` column; a
 //! team's best physical entries take `entry` -2 standard, -3 privileged). The organiser's contest
 //! mode (`[control] grasp`) picks the board shown first; the store itself has no favourite.

@@ -1,5 +1,5 @@
-//! The storage budgets' accounting (issue 23, issue #37): the bytes of stored videos AND traces,
-//! per team and in all, and which rows an upload evicts to make room. The files are
+//! The storage budgets' accounting (docs/contest/video.md, budgets): the bytes of stored videos AND
+//! traces, per team and in all, and which rows an upload evicts to make room. The files are
 //! `crate::service`'s; this module only decides, in one write transaction per upload.
 //!
 //! Policy (`[video] team_max_bytes`, `total_max_bytes`):

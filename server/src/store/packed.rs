@@ -1,6 +1,7 @@
-//! How plan files and per-instruction results are stored: zstd-compressed (issue #12, storage
-//! per submission). A 163-line dev plan file shrinks about tenfold; per-instruction results are
-//! one compressed JSON array of `[id, present, correct_steps, total_steps]` per run.
+//! How plan files and per-instruction results are stored: zstd-compressed
+//! (docs/measured/load-benchmark.md, storage per submission). A 163-line dev plan file shrinks
+//! about tenfold; per-instruction results are one compressed JSON array of `[id, present,
+//! correct_steps, total_steps]` per run.
 
 use sqlx::FromRow;
 
@@ -18,7 +19,7 @@ pub(crate) fn unpack(blob: &[u8]) -> sqlx::Result<Vec<u8>> {
     zstd::stream::decode_all(blob).map_err(|e| sqlx::Error::Decode(Box::new(e)))
 }
 
-/// An episode's path (issue #15) as compressed JSON.
+/// An episode's path (its plot: docs/reference/pages.md) as compressed JSON.
 pub(crate) fn pack_path(path: &kitchen_r_core::topdown::PathPlot) -> Vec<u8> {
     pack(&serde_json::to_vec(path).expect("an episode path serialises"))
 }

@@ -1,5 +1,5 @@
-//! Video renders' rows (`video_renders`, issue #26): a queue of its own beside `jobs`, leased to
-//! workers only when no evaluation job waits (`crate::service::renders`).
+//! Video renders' rows (`video_renders`; docs/contest/video.md): a queue of its own beside `jobs`,
+//! leased to workers only when no evaluation job waits (`crate::service::renders`).
 
 use sqlx::sqlite::SqlitePool;
 

@@ -1,5 +1,5 @@
-//! Episode traces' rows (`episode_traces`, issue #26): which stored trace file (by sha256) is
-//! which (run, episode)'s, and the retention sweep's deletes. The files are
+//! Episode traces' rows (`episode_traces`; docs/contest/video.md): which stored trace file (by
+//! sha256) is which (run, episode)'s, and the retention sweep's deletes. The files are
 //! `crate::service::videos`'.
 //!
 //! A row with a `note` is a trace removed to keep a storage budget (`super::budget`): no file,

@@ -1,6 +1,6 @@
-//! The physical grasp mode's arm (issue #27): the arm as a rapier multibody whose revolute joints
-//! are driven by motors from the RMP controller's integrated targets, and a parallel gripper whose
-//! fingers are prismatic joints with force-limited motors, so only friction holds an object.
+//! The physical grasp mode's arm (docs/twin/robot.md): the arm as a rapier multibody whose revolute
+//! joints are driven by motors from the RMP controller's integrated targets, and a parallel gripper
+//! whose fingers are prismatic joints with force-limited motors, so only friction holds an object.
 //!
 //! Like the paper's articulation controller: RMPflow's joint accelerations are integrated into
 //! position and velocity targets (`rmp.rs`, unchanged) and each joint's motor servos to them

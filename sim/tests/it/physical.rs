@@ -1,6 +1,6 @@
-//! The physical grasp mode (issue #27): the articulated arm follows the controller, friction
-//! between force-limited fingers lifts an object, opening the gripper drops it, and two runs of
-//! the same commands give the same bits.
+//! The physical grasp mode (docs/twin/robot.md): the articulated arm follows the controller,
+//! friction between force-limited fingers lifts an object, opening the gripper drops it, and two
+//! runs of the same commands give the same bits.
 
 use kitchen_r_core::GraspMode;
 use kitchen_r_sim::config::SimConfig;

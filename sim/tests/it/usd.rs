@@ -1,4 +1,4 @@
-//! Scenes as USD (issue #27 item 3): every committed scene exports as `.usda` whose structure is
+//! Scenes as USD (docs/twin/scenes.md): every committed scene exports as `.usda` whose structure is
 //! sound (balanced, one Xform per body, deterministic), and Pixar's own USD (`usd-core`, in
 //! scripts/test-requirements.txt) opens it with the prim counts, transforms and box sizes the
 //! twin uses.

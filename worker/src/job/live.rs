@@ -1,5 +1,5 @@
-//! `EpisodeSpec.live_ros2` (the server's `[live] ros2`, issue #28): the worker publishes the
-//! episodes of the jobs that ask for it as live ROS 2 topics, with kitchen-r-live's
+//! `EpisodeSpec.live_ros2` (the server's `[live] ros2`, docs/twin/live.md): the worker publishes
+//! the episodes of the jobs that ask for it as live ROS 2 topics, with kitchen-r-live's
 //! [`Ros2Episodes`] (what `kitchen-r eval --ros2` publishes) and the domain, network and QoS of
 //! its own `configs/live.toml` `[ros2]`.
 //!

@@ -1,6 +1,6 @@
-//! Where the robot went (issue #15): the base's and the key object's paths of an online episode,
-//! sampled every few control steps, with each task's goal and where the task ended, for the
-//! episode's top-down plot.
+//! Where the robot went (its plot: docs/reference/pages.md): the base's and the key object's paths
+//! of an online episode, sampled every few control steps, with each task's goal and where the task
+//! ended, for the episode's top-down plot.
 
 use kitchen_r_proto::worker::v1 as pb;
 use kitchen_r_sim::{Action, Sim, StepInfo, TaskTarget};

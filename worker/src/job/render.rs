@@ -1,5 +1,5 @@
-//! Render jobs (issue #26, "replay on demand"): the server keeps an online episode's trace
-//! instead of its video, and when the video is first asked for it hands a worker a render job
+//! Render jobs ("replay on demand", docs/contest/video.md): the server keeps an online episode's
+//! trace instead of its video, and when the video is first asked for it hands a worker a render job
 //! (`Job.render`) at the lowest priority. The worker replays the trace into the episode video
 //! (the recorder `eval --record` uses, as a hook on the replay), heartbeats the render's
 //! progress, and uploads the MP4 through `UploadVideo`, which completes the render. The trace

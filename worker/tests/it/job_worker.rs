@@ -583,10 +583,10 @@ fn a_recorded_episode_video_is_uploaded_in_chunks_after_its_report() {
     assert!(log.contains("video: 20 frames"), "{log}");
 }
 
-/// Videos on demand (issue #26): a job that wants its video on demand uploads its trace, not a
-/// video, after its report; a render job of that trace uploads the video (marked `render`) with
-/// its progress heartbeated; a render job whose stored result disagrees with the replay is
-/// reported failed and uploads nothing.
+/// Videos on demand (docs/contest/video.md): a job that wants its video on demand uploads its
+/// trace, not a video, after its report; a render job of that trace uploads the video (marked
+/// `render`) with its progress heartbeated; a render job whose stored result disagrees with the
+/// replay is reported failed and uploads nothing.
 #[test]
 fn an_on_demand_episode_uploads_its_trace_and_a_render_job_makes_its_video_or_refuses() {
     let rt = tokio::runtime::Runtime::new().unwrap();
@@ -639,7 +639,7 @@ fn an_on_demand_episode_uploads_its_trace_and_a_render_job_makes_its_video_or_re
         episode_key: "dev-0001".into(),
         episode: None,
         policy: None,
-        // Named, not carried (issue #37): the worker fetches it with FetchTrace, in chunks.
+        // Named, not carried: the worker fetches it with FetchTrace, in chunks.
         render: Some(pb::RenderJob {
             trace_gz: Vec::new(),
             expected,

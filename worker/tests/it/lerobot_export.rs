@@ -1,4 +1,4 @@
-//! `collect --format lerobot` read by outside readers (issue #14, items 4 and 6): pyarrow/pandas
+//! `collect --format lerobot` read by outside readers (docs/twin/collect.md): pyarrow/pandas
 //! check every field LeRobot v3.0 requires, Hugging Face `datasets` loads the Parquet files the
 //! way LeRobot does, and PyAV decodes the videos (`tests/read_lerobot.py`), across two runs of the same `--out` (the second resumes and adds
 //! a file); where `lerobot` itself is installed, `LeRobotDataset` loads it and a DataLoader

@@ -1,5 +1,5 @@
-//! `EpisodeSpec.live_ros2` (the server's `[live] ros2`, issue #28): a job that asks for it is
-//! published live as ROS 2 topics over DDS, which a subscriber on another DDS implementation,
+//! `EpisodeSpec.live_ros2` (the server's `[live] ros2`, docs/twin/live.md): a job that asks for it
+//! is published live as ROS 2 topics over DDS, which a subscriber on another DDS implementation,
 //! Eclipse Cyclone DDS (the PyPI `cyclonedds` wheel driven by scripts/ros2-watch.py, as in
 //! tests/e2e/ros2_live.rs), reads typed and stamped; the same job without it (how the server
 //! leases every test-split job: `grpc_worker::tests::live_ros2_is_sent_with_online_dev_jobs_only`)

@@ -1,6 +1,7 @@
-//! Login throttling that cannot be turned against users (issue #37): failed logins are limited
-//! per client address only, and the client address is the rightmost one no trusted proxy vouches
-//! for. Through the router, then through the real server (`Server::run`) on 127.0.0.1:0.
+//! Login throttling that cannot be turned against users (docs/reference/pages.md): failed logins
+//! are limited per client address only, and the client address is the rightmost one no trusted
+//! proxy vouches for. Through the router, then through the real server (`Server::run`) on
+//! 127.0.0.1:0.
 
 use std::net::{IpAddr, SocketAddr};
 

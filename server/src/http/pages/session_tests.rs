@@ -1,5 +1,5 @@
-//! Sessions are sessions (issue #23): the cookie is no credential, logout and token rotation
-//! end a session on the server, sessions expire, and failed logins are throttled.
+//! Sessions are sessions (docs/reference/pages.md): the cookie is no credential, logout and token
+//! rotation end a session on the server, sessions expire, and failed logins are throttled.
 
 use axum::body::Body;
 use axum::http::{Request, header};
@@ -47,7 +47,7 @@ async fn the_session_cookie_holds_no_credential_and_logout_ends_the_session_on_t
         "a logged-out cookie still opens the team page"
     );
     assert_eq!(after.headers[header::LOCATION], "/team/login?next=/team");
-    // A cookie holding the token itself (as sessions before issue #23 did) is no session.
+    // A cookie holding the token itself (as the first sessions did) is no session.
     let old_style = format!("{TEAM_COOKIE}={}", hex::encode(&token));
     assert_eq!(
         call(&app, get("/team", &old_style)).await.status,

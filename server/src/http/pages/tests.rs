@@ -360,7 +360,7 @@ async fn dev_runs_show_each_episode_and_test_runs_only_aggregates() {
     run_jobs(&f, 3).await;
     let page = call(&app, get(&format!("/submissions/{test}"), &cookies)).await;
     assert_eq!(page.status, StatusCode::OK);
-    // In progress: progress only (issue #23), and the page says when the aggregate comes.
+    // In progress: progress only (docs/integrity.md), and the page says when the aggregate comes.
     assert!(!page.body.contains("Failures by kind"), "{}", page.body);
     assert!(page.body.contains("appear once, when it ends"), "{}", page.body);
     let run = f

@@ -1,4 +1,4 @@
-//! Episode traces on disk (issue #26): stored by content beside the videos
+//! Episode traces on disk (docs/contest/video.md): stored by content beside the videos
 //! (`<dir>/traces/<aa>/<sha256>.json.gz`), linked to (run, episode) in `episode_traces`, served
 //! to whoever may see the episode's video, and deleted once no row names them. Placing,
 //! linking and deleting a trace file take the videos' file lock (`turn`), so a file is never

@@ -190,7 +190,7 @@ async fn a_start_removes_partial_uploads_and_files_no_episode_links() {
     std::fs::create_dir_all(dir.join("tmp")).unwrap();
     std::fs::write(dir.join("tmp/123-456-0.part"), b"half a vid").unwrap();
     let stray = store_file(&dir, b"placed, never linked").await;
-    // A trace placed but never linked goes too (issue #26).
+    // A trace placed but never linked goes too.
     let stray_trace = trace_path(&dir, &"ab".repeat(32));
     std::fs::create_dir_all(stray_trace.parent().unwrap()).unwrap();
     std::fs::write(&stray_trace, b"\x1f\x8b").unwrap();
