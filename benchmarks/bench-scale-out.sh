@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Scale-out of the control track (issue #13 item 7): the server with no simulation slots of its
+# Scale-out of the control track (docs/control-track-worker.md): the server with no simulation slots of its
 # own (`serve --workers 0`) and K standalone `kitchen-r worker` processes (one slot and one
 # episode at a time each, so K counts simulation processes) evaluate
 # the oracle reference run over gRPC on loopback. Prints episodes per minute for K = 1 and K = 2

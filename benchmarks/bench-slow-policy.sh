@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# A waiting episode does not hold a core (issue #13 item 9): one standalone worker with 2 slots
+# A waiting episode does not hold a core (docs/control-track-worker.md): one standalone worker with 2 slots
 # evaluates the oracle reference run against a policy that answers every Act after DELAY_MS
 # (default 50, like a learned policy's inference), first holding one episode per slot (how
 # workers ran before: an episode kept its slot while it waited), then with the default

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""What videos on demand cost (issue #26; docs/measured/video.md): a dev run through the real
+"""What videos on demand cost (docs/measured/video.md): a dev run through the real
 server with local workers, then the wait from a first request of each episode's video to a
 playable file.
 

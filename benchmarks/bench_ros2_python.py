@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""What ``KitchenREnv(ros2=True)`` costs a step (issue #28; docs/twin/live.md, "From Python and
+"""What ``KitchenREnv(ros2=True)`` costs a step (docs/twin/live.md, "From Python and
 from the workers"): the expert through the first three dev instructions' first two tasks, each
 ``env.step`` timed alone, with ros2 off, on with no subscriber, and on with
 ``scripts/ros2-watch.py`` reading every message; ``--rounds`` interleaved rounds, each mode in a

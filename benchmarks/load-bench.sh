@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Deadline-hour load benchmark of the server (issue #12): `kitchen-r bench load` on a release build.
+# Deadline-hour load benchmark of the server (docs/measured/load-benchmark.md): `kitchen-r bench load`
+# on a release build.
 #
 # What it measures, all on loopback and bounded in time:
 #   1. It starts the release `kitchen-r serve` itself on 127.0.0.1 with free ports, a fresh SQLite

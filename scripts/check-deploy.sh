@@ -131,7 +131,7 @@ else:
     for name in ("KITCHEN_R_ADMIN_TOKEN", "KITCHEN_R_WORKER_TOKEN"):
         if "secretKeyRef" not in env.get(name, {}).get("valueFrom", {}):
             errors.append(f"{name} must come from a Secret")
-    # The storage budgets (issue #37) must fit the volume the videos and traces live on, with
+    # The storage budgets (docs/contest/video.md) must fit the volume the videos and traces live on, with
     # room for the database: the total at most 85 % of the volume, the team's at most the total.
     units = {"Ki": 1 << 10, "Mi": 1 << 20, "Gi": 1 << 30, "Ti": 1 << 40}
     data = [v for v in vcts if v["metadata"]["name"] == "data"]

@@ -36,7 +36,7 @@ if command -v nasm >/dev/null 2>&1; then
 fi
 section "cargo test --workspace"
 cargo test --workspace --locked "${features[@]}" "$@"
-# The Python package (python/, issue #24): built from source with cargo through maturin, then its
+# The Python package (python/, docs/participant/python.md): built from source with cargo through maturin, then its
 # tests, which compare the expert stepped from Python with the binary the Rust tests just built.
 section "the Python package: pip install ./python, then python/tests"
 # Built in the dev profile (dependencies optimised, as the tests above): it reuses what
@@ -45,13 +45,13 @@ section "the Python package: pip install ./python, then python/tests"
 MATURIN_PEP517_ARGS="--profile dev" \
   python3 -m pip install --quiet --disable-pip-version-check --no-build-isolation -c scripts/test-constraints.txt ./python
 KITCHEN_R_BIN=target/debug/kitchen-r python3 -m pytest -q python/tests
-# The LeRobot env plugin (python/lerobot_env_kitchen_r, issue #24 item 5): pure Python, installed
+# The LeRobot env plugin (python/lerobot_env_kitchen_r, docs/participant/lerobot.md): pure Python, installed
 # offline over the package just built; its tests need no LeRobot (those that do are skipped).
 section "the LeRobot env plugin: pip install ./python/lerobot_env_kitchen_r, then its tests"
 python3 -m pip install --quiet --disable-pip-version-check --no-build-isolation --no-deps \
   ./python/lerobot_env_kitchen_r
 python3 -m pytest -q python/lerobot_env_kitchen_r/tests
-# The control baselines trained from live simulators (issue #25): a few CPU training steps on
+# The control baselines trained from live simulators (docs/measured/baseline-gates.md): a few CPU training steps on
 # streamed expert samples each; the privileged checkpoint reloads, serves over gRPC and passes
 # check-policy; training and serving compute the same features.
 # The planner's and the diffusion policy's own tests run inside cargo's (tests/e2e/baseline_*.rs).

@@ -1,4 +1,4 @@
-"""The gymnasium environment (issue #24): it passes gymnasium's checker, is deterministic, refuses
+"""The gymnasium environment (docs/participant/python.md): it passes gymnasium's checker, is deterministic, refuses
 bad input with Python exceptions, and the expert stepped through it is the episode
 ``kitchen-r eval --policy builtin:oracle`` runs, task by task and bit for bit in sim time.
 
@@ -187,7 +187,7 @@ def test_the_readme_snippet_steps_the_expert_to_success():
 
     env = gym.make("KitchenR/Plan-v0", expert=True)
     obs, info = env.reset(seed=0, options={"instruction": "dev-0001"})
-    assert info["is_success"] is False  # nothing has succeeded yet (issue #38)
+    assert info["is_success"] is False  # nothing has succeeded yet
     done = False
     while not done:
         obs, reward, done, _, info = env.step(info["expert_chunk"][0])  # noqa: E701

@@ -1,4 +1,4 @@
-"""The grasp mode from Python (issue #27): ``KitchenREnv(grasp_mode="physical")`` steps the same
+"""The grasp mode from Python (docs/twin/robot.md): ``KitchenREnv(grasp_mode="physical")`` steps the same
 physical twin as ``kitchen-r eval --grasp physical``, task by task and bit for bit in sim time,
 and a mode that does not exist is refused naming the two that do.
 

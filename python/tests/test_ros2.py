@@ -1,4 +1,4 @@
-"""``KitchenREnv(ros2=True)`` (issue #28): each step is published live as ROS 2 topics over DDS,
+"""``KitchenREnv(ros2=True)`` (docs/twin/live.md): each step is published live as ROS 2 topics over DDS,
 and a subscriber on another DDS implementation, Eclipse Cyclone DDS (the ``cyclonedds`` wheel,
 driven by ``scripts/ros2-watch.py`` as in ``tests/e2e/ros2_live.rs``), reads typed messages with
 sim-time stamps and ROS frame ids; observations and rewards are those of the same steps with

@@ -1,4 +1,4 @@
-"""Expert samples from parallel simulators (issue #24): the same seed gives the same samples
+"""Expert samples from parallel simulators (docs/participant/python.md): the same seed gives the same samples
 whatever the thread count, shards split a collection without overlap, the samples are the
 expert's decisions with the stacked history a policy is sent, and bad arguments raise."""
 

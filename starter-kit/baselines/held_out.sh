@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The control baselines trained on part of the dev split and measured on episodes nothing in
-# their training saw (issue #38's gates). Two stages, each a separate GPU lease if need be:
+# their training saw (docs/measured/baseline-gates.md). Two stages, each a separate GPU lease if need be:
 #
 #   STAGE=train bash starter-kit/baselines/held_out.sh   # camera + privileged runs -> $RUN/{cam,priv}
 #   STAGE=eval  bash starter-kit/baselines/held_out.sh   # both gates on the held-out episodes -> $RUN/results

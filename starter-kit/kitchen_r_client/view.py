@@ -154,7 +154,7 @@ def print_submission(view, server, server_now_ms=None, out=print):
         return
     out("run %s: %s" % (_j(run.get("id")), progress_line(view, server_now_ms)))
     out("scores: " + scores(run.get("scores")))
-    # A policy run's scores mean what its grasp mode made of the episodes (issue #27).
+    # A policy run's scores mean what its grasp mode made of the episodes.
     evaluation = run.get("evaluation")
     if isinstance(evaluation, dict) and isinstance(evaluation.get("grasp_mode"), str):
         out("grasp mode: " + evaluation["grasp_mode"])

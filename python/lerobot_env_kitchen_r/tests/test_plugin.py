@@ -1,4 +1,4 @@
-"""The LeRobot env plugin (issue #24, item 5) without LeRobot: the adapter's observation keys,
+"""The LeRobot env plugin (docs/participant/lerobot.md) without LeRobot: the adapter's observation keys,
 shapes and dtypes, ``is_success``, the gym id, determinism for a seed, the instruction and seed
 choices, and its refusals. The tests marked ``lerobot`` need LeRobot and are skipped without it
 (CI does not install LeRobot or torch for them); they check the ``kitchen_r`` env config and

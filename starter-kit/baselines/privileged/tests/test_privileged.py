@@ -190,7 +190,7 @@ if __name__ == "__main__":
 @unittest.skipUnless(HAVE_TORCH, "torch is not installed")
 class HeldOutGateTest(unittest.TestCase):
     def test_the_gate_runs_a_test_split_range_and_combines_folders(self):
-        # gate.py's held-out path (issue #38): a range of the test split from the organiser's
+        # gate.py's held-out path (docs/measured/baseline-gates.md): a range of the test split from the organiser's
         # ground truth, recorded in summary.json, then summed with --combine.
         import json
 
