@@ -396,7 +396,9 @@ mod stack_tests {
         assert_eq!(status, "Internal: internal error (request id req-7)");
     }
 
-    #[tokio::test]
+    /// On tokio's paused clock: the budgets and the slow handler are timers, nothing real is
+    /// waited for (the stack is called in process, no socket, no database).
+    #[tokio::test(start_paused = true)]
     async fn a_call_past_its_budget_is_unavailable_but_a_long_poll_lease_is_not_cut() {
         let cfg = Config {
             request_timeout_ms: 100,
