@@ -8,11 +8,12 @@
 //!
 //! Each subcommand is one variant of [`DatasetCommand`] and one function below.
 
+use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::{Args, Subcommand};
-use kitchen_r_core::dataset::{self, GenerateOptions, templates};
+use kitchen_r_core::dataset::{self, GenerateOptions, language, templates};
 
 #[path = "audit_cmd.rs"]
 mod audit_cmd;
@@ -42,6 +43,13 @@ enum DatasetCommand {
         /// file's digest and not the seed.
         #[arg(long, value_name = "FILE")]
         phrasings: Option<PathBuf>,
+        /// Language features of the test split: `all`, `none`, or some of relational,pronouns,
+        /// implicit,order,distractors (docs/private-test-set.md). Each test instruction is then
+        /// composed from the phrase book (assets/language.toml, with the lists of a `[language]`
+        /// table in --phrasings replacing its own) and kept only if exactly one plan fits it; the
+        /// dev split never changes [default: all with --phrasings, none without].
+        #[arg(long, value_name = "LIST", value_parser = language::parse_features)]
+        language: Option<BTreeSet<language::Feature>>,
     },
     /// Leak and feasibility audit of a test set: public-phrasing share, the EM of a
     /// template-inversion attack built from public material, test plans shared with dev and,
@@ -56,12 +64,19 @@ pub(crate) fn dataset(args: DatasetArgs) -> anyhow::Result<()> {
             out,
             assets,
             phrasings,
-        } => generate(seed, &out, assets, phrasings.as_deref()),
+            language,
+        } => generate(seed, &out, assets, phrasings.as_deref(), language),
         DatasetCommand::Audit(args) => audit_cmd::audit(args),
     }
 }
 
-fn generate(seed: u64, out: &Path, assets: Option<PathBuf>, phrasings: Option<&Path>) -> anyhow::Result<()> {
+fn generate(
+    seed: u64,
+    out: &Path,
+    assets: Option<PathBuf>,
+    phrasings: Option<&Path>,
+    language: Option<BTreeSet<language::Feature>>,
+) -> anyhow::Result<()> {
     let assets = assets.unwrap_or_else(kitchen_r_core::assets::assets_dir);
     let private = match phrasings {
         Some(path) => {
@@ -83,11 +98,36 @@ fn generate(seed: u64, out: &Path, assets: Option<PathBuf>, phrasings: Option<&P
             repo.display()
         );
     }
-    let options = GenerateOptions { seed, private };
+    // New language is on by default for private sets only: public samples stay as they were.
+    let language = language.unwrap_or_else(|| match private {
+        Some(_) => language::Feature::ALL.into_iter().collect(),
+        None => BTreeSet::new(),
+    });
+    let options = GenerateOptions {
+        seed,
+        private,
+        language,
+    };
     let ds = dataset::generate_with(&options, &assets)
         .with_context(|| format!("generating from {}", assets.display()))?;
     dataset::write(&ds, out).with_context(|| format!("writing {}", out.display()))?;
     let m = &ds.manifest;
+    if let Some(l) = &m.language {
+        let features: Vec<&str> = l.features.iter().map(|f| f.as_str()).collect();
+        let rejected: Vec<String> = l.rejected.iter().map(|(r, n)| format!("{n} {r}")).collect();
+        println!(
+            "language ({}): {} test instructions composed, {} kept their template phrasing; \
+             renderings refused by the uniqueness checker: {}",
+            features.join(", "),
+            l.composed,
+            l.template_phrased,
+            if rejected.is_empty() {
+                "none".to_string()
+            } else {
+                rejected.join(", ")
+            }
+        );
+    }
     match &m.private_phrasings {
         // The seed is a secret of a private set: not echoed into terminals or logs.
         Some(p) => println!(

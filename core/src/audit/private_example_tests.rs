@@ -31,6 +31,7 @@ fn example_private_phrasings_keep_the_public_attack_under_the_limit() {
     let options = GenerateOptions {
         seed: SEED,
         private: Some(private),
+        ..GenerateOptions::default()
     };
     let set = generate_with(&options, &assets).unwrap();
     let dir = std::env::temp_dir().join(format!("kitchen-r-private-example-{}", std::process::id()));

@@ -240,6 +240,7 @@ fn generated_private_set_passes_the_phrasing_checks() {
     let options = GenerateOptions {
         seed: 77,
         private: Some(private),
+        ..GenerateOptions::default()
     };
     let dir = scratch("private");
     write(&generate_with(&options, &assets()).unwrap(), &dir).unwrap();

@@ -15,17 +15,20 @@
 //! vets. Only vectors and `BTreeMap`s are iterated and all randomness comes from one
 //! [`SplitMix64`], so the same seed gives the same bytes.
 
-use std::collections::BTreeSet;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
+use super::language::{self, Feature, Lexicon};
 use super::rng::SplitMix64;
 use super::symbolic::plan_targets_with;
 use super::templates::{Binding, PrivatePhrasings, Template, fill_places, load_templates, start_zone_var};
 use super::{
-    DEV_INSTRUCTIONS, Dataset, DatasetKind, Instruction, Manifest, PublicInstruction, TOTAL_INSTRUCTIONS,
+    DEV_INSTRUCTIONS, Dataset, DatasetKind, Instruction, LanguageSummary, Manifest, PublicInstruction,
+    TOTAL_INSTRUCTIONS,
 };
 use crate::ContentError;
 use crate::catalogue::Catalogue;
+use crate::plan::parse_plan;
 use crate::reach::ArmReach;
 use crate::scene::Scene;
 
@@ -38,19 +41,26 @@ const ATTEMPTS: usize = 600;
 /// Substitutions tried in the drawn scene before the next scene is tried.
 const SCENE_ATTEMPTS: usize = 100;
 
-/// What to generate: the seed, and for a private set the phrasings its test split uses.
+/// What to generate: the seed, for a private set the phrasings its test split uses, and the
+/// language features its test split is composed with.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct GenerateOptions {
     pub seed: u64,
     /// Private phrasings ([`super::templates::load_private_phrasings`]); `Some` makes a
     /// [`DatasetKind::Private`] set whose manifest omits the seed.
     pub private: Option<PrivatePhrasings>,
+    /// Language features of the test split ([`super::language`]); empty: template phrasings
+    /// only (what every public sample has). The CLI turns them all on for private sets.
+    pub language: BTreeSet<Feature>,
 }
 
 impl GenerateOptions {
     /// A public sample from `seed`.
     pub fn public(seed: u64) -> GenerateOptions {
-        GenerateOptions { seed, private: None }
+        GenerateOptions {
+            seed,
+            ..GenerateOptions::default()
+        }
     }
 }
 
@@ -102,6 +112,18 @@ pub fn generate_with(options: &GenerateOptions, assets: &Path) -> Result<Dataset
         rng.shuffle(&mut round);
         order.extend(round);
     }
+    // The phrase book is read only when features are on, so public samples need no such file.
+    let lexicon = match (
+        options.language.is_empty(),
+        options.private.as_ref().and_then(PrivatePhrasings::lexicon),
+    ) {
+        (true, _) => None,
+        (false, private) => {
+            let public = language::load_lexicon(&assets.join("language.toml"))?;
+            Some(private.map_or_else(|| public.clone(), |p| public.overlay(p)))
+        }
+    };
+    let mut tally = Tally::default();
     let mut used_texts: BTreeSet<(String, String)> = BTreeSet::new();
     let mut all = Vec::with_capacity(TOTAL_INSTRUCTIONS);
     for (k, &t) in order.iter().take(TOTAL_INSTRUCTIONS).enumerate() {
@@ -115,18 +137,41 @@ pub fn generate_with(options: &GenerateOptions, assets: &Path) -> Result<Dataset
         let first = rng.below(scenes.len());
         let found = (0..ATTEMPTS).find_map(|n| {
             let scene = &scenes[(first + n / SCENE_ATTEMPTS) % scenes.len()];
-            let inst = instantiate(template, phrasings, scene, &catalogue, &arm, &mut rng)?;
+            let mut inst = instantiate(template, phrasings, scene, &catalogue, &arm, &mut rng)?;
+            let mut composed = false;
+            if k >= DEV_INSTRUCTIONS
+                && let Some(lexicon) = &lexicon
+                && let Some(text) = compose_checked(
+                    &inst,
+                    scene,
+                    &catalogue,
+                    lexicon,
+                    &options.language,
+                    &mut rng,
+                    &mut tally,
+                )
+            {
+                inst.instruction = text;
+                composed = true;
+            }
             used_texts
                 .insert((scene.id.clone(), inst.instruction.clone()))
-                .then_some(inst)
+                .then_some((inst, composed))
         });
-        let mut inst = found.ok_or_else(|| ContentError::Invalid {
+        let (mut inst, composed) = found.ok_or_else(|| ContentError::Invalid {
             path: templates_path.clone(),
             message: format!(
                 "template {:?} found no new executable substitution in {ATTEMPTS} tries",
                 template.id
             ),
         })?;
+        if k >= DEV_INSTRUCTIONS && lexicon.is_some() {
+            *(if composed {
+                &mut tally.composed
+            } else {
+                &mut tally.template_phrased
+            }) += 1;
+        }
         inst.id = if k < DEV_INSTRUCTIONS {
             format!("dev-{:04}", k + 1)
         } else {
@@ -148,6 +193,7 @@ pub fn generate_with(options: &GenerateOptions, assets: &Path) -> Result<Dataset
             dev: all.len(),
             test: test.len(),
             private_phrasings: private,
+            language: lexicon.is_some().then(|| tally.summary(&options.language)),
         },
         dev: all,
         test,
@@ -206,6 +252,49 @@ fn instantiate(
         template: template.id.clone(),
         place_targets,
     })
+}
+
+/// What the composer did over the test split, for the manifest and the audit.
+#[derive(Debug, Default)]
+struct Tally {
+    rejected: BTreeMap<String, usize>,
+    composed: usize,
+    template_phrased: usize,
+}
+
+impl Tally {
+    fn summary(&self, features: &BTreeSet<Feature>) -> LanguageSummary {
+        LanguageSummary {
+            features: features.iter().copied().collect(),
+            composed: self.composed,
+            template_phrased: self.template_phrased,
+            rejected: self.rejected.clone(),
+        }
+    }
+}
+
+/// The instruction said by the composer, drawing renderings until the checker finds exactly
+/// the instruction's plan (refusals counted by reason); `None` after [`language::ATTEMPTS`].
+fn compose_checked(
+    inst: &Instruction,
+    scene: &Scene,
+    catalogue: &Catalogue,
+    lexicon: &Lexicon,
+    features: &BTreeSet<Feature>,
+    rng: &mut SplitMix64,
+    tally: &mut Tally,
+) -> Option<String> {
+    let steps = parse_plan(&inst.plan).ok()?;
+    for _ in 0..language::ATTEMPTS {
+        let (text, meaning) = language::compose(&steps, scene, lexicon, features, rng)?;
+        let reason = match language::check(&meaning, scene, catalogue) {
+            Ok(plan) if plan == inst.plan => return Some(text),
+            Ok(_) => "another plan than the template's",
+            Err(r) => r.reason(),
+        };
+        *tally.rejected.entry(reason.to_string()).or_default() += 1;
+    }
+    None
 }
 
 /// Write `dev.jsonl`, `test.jsonl`, `test_ground_truth.jsonl` and `manifest.json` into `out_dir`

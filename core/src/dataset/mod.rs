@@ -6,7 +6,8 @@
 //! - `test_ground_truth.jsonl`: test ground truth ([`Instruction`] records), held by the server
 //!   and never served.
 //! - `manifest.json`: [`Manifest`] (kind, counts, generator version; the seed of a public
-//!   sample; the digest of the private phrasings of a private set).
+//!   sample; the digest of the private phrasings of a private set; what the language composer
+//!   did, when it ran).
 //!
 //! Ids are `dev-NNNN` and `test-NNNN`. The generator ([`generate()`]) is deterministic: the same
 //! seed gives byte-identical files ([`write()`]); `assets/dataset/` holds the output for
@@ -25,6 +26,7 @@
 use std::path::Path;
 
 mod generate;
+pub mod language;
 mod rng;
 mod sha256;
 pub mod symbolic;
@@ -171,6 +173,21 @@ pub struct Manifest {
     /// Present exactly for a private set.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub private_phrasings: Option<PrivatePhrasingsSummary>,
+    /// Present when the test split was composed with language features ([`language`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub language: Option<LanguageSummary>,
+}
+
+/// What the composer did over a test split: its features, how many instructions it said, how
+/// many kept their template phrasing (no rendering passed the checker), and the renderings the
+/// uniqueness checker refused, by reason. Counts only: never a text.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LanguageSummary {
+    pub features: Vec<language::Feature>,
+    pub composed: usize,
+    pub template_phrased: usize,
+    pub rejected: std::collections::BTreeMap<String, usize>,
 }
 
 impl Manifest {

@@ -11,7 +11,8 @@
 //!
 //! A *private phrasings* file ([`load_private_phrasings`]) has the same schema without `plan`:
 //! extra phrasings for some templates, kept outside the repository by an organiser, that replace
-//! the public ones in the test split of a private test set.
+//! the public ones in the test split of a private test set; its optional `[language]` table
+//! replaces lists of the composer's phrase book ([`super::language`]).
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
@@ -19,6 +20,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use super::TEMPLATE_COUNT;
+use super::language::Lexicon;
 use crate::ContentError;
 use crate::plan::Step;
 
@@ -303,6 +305,9 @@ pub fn load_templates(path: &Path) -> Result<Vec<Template>, ContentError> {
 struct PrivateFile {
     #[serde(rename = "template", default)]
     templates: Vec<PrivateEntry>,
+    /// Lists that replace the public phrase book's ([`super::language::Lexicon::overlay`]).
+    #[serde(default)]
+    language: Option<Lexicon>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -318,6 +323,7 @@ struct PrivateEntry {
 #[derive(Clone, PartialEq, Eq)]
 pub struct PrivatePhrasings {
     by_template: BTreeMap<String, Vec<String>>,
+    lexicon: Option<Lexicon>,
     sha256: String,
 }
 
@@ -342,6 +348,9 @@ impl PrivatePhrasings {
         let file: PrivateFile = toml::from_str(text).map_err(|e| e.to_string())?;
         if file.templates.is_empty() {
             return Err("no [[template]] entries".into());
+        }
+        if let Some(l) = &file.language {
+            l.validate(false).map_err(|m| format!("[language]: {m}"))?;
         }
         let mut by_template = BTreeMap::new();
         for entry in file.templates {
@@ -379,6 +388,7 @@ impl PrivatePhrasings {
         }
         Ok(PrivatePhrasings {
             by_template,
+            lexicon: file.language,
             sha256: super::sha256::sha256_hex(text.as_bytes()),
         })
     }
@@ -386,6 +396,11 @@ impl PrivatePhrasings {
     /// The private phrasings of template `id`, if the file has any.
     pub fn for_template(&self, id: &str) -> Option<&[String]> {
         self.by_template.get(id).map(Vec::as_slice)
+    }
+
+    /// The file's `[language]` lists, if it has them.
+    pub fn lexicon(&self) -> Option<&Lexicon> {
+        self.lexicon.as_ref()
     }
 
     /// Template ids that have private phrasings, sorted.

@@ -249,6 +249,7 @@ fn private_options(seed: u64) -> GenerateOptions {
     GenerateOptions {
         seed,
         private: Some(private),
+        ..GenerateOptions::default()
     }
 }
 
