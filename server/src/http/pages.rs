@@ -18,6 +18,7 @@ mod home;
 mod layout;
 mod submission;
 mod team;
+pub(super) mod words;
 
 use axum::Router;
 use axum::extract::{Form, State};

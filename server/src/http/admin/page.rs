@@ -6,17 +6,8 @@
 
 use maud::{DOCTYPE, Markup, PreEscaped, html};
 
+use crate::http::pages::words::duration;
 use crate::service::admin::{Console, JobView};
-
-/// A number of seconds as `1h 02m`, `3m 05s` or `42s`.
-fn duration(s: f64) -> String {
-    let s = s.max(0.0).round() as u64;
-    match s {
-        0..60 => format!("{s}s"),
-        60..3600 => format!("{}m {:02}s", s / 60, s % 60),
-        _ => format!("{}h {:02}m", s / 3600, (s % 3600) / 60),
-    }
-}
 
 fn opt(v: Option<&str>) -> &str {
     v.unwrap_or("–")

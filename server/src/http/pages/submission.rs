@@ -9,7 +9,8 @@
 use kitchen_r_core::observations::ObservationTrack;
 use maud::{Markup, html};
 
-use super::layout::{duration, score, scores_table};
+use super::layout::{score, scores_table};
+use super::words::duration;
 use crate::service::portal::Eta;
 use crate::service::{EpisodeView, PolicyRunView, SubmissionView};
 
