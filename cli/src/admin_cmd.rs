@@ -59,6 +59,41 @@ enum AdminCommand {
         #[arg(long)]
         force: bool,
     },
+    /// Replay every stored trace of a policy run here, bit for bit, and check each replay
+    /// against the result the server stored; any disagreement marks the run unverified on the
+    /// console (exit status 1).
+    Verify {
+        /// The run id (`admin runs` lists them).
+        run: i64,
+    },
+    /// Run N of a policy run's episodes again against the same endpoint, as the workers ran
+    /// them, and report the difference from the stored results with 95 % Wilson intervals.
+    Reevaluate {
+        /// The run id.
+        run: i64,
+        /// How many of the run's episodes to run again (the first N in key order).
+        #[arg(long)]
+        episodes: usize,
+    },
+    /// Write the contest archive (.tar.zst): dataset with the hidden test answers, configs,
+    /// teams without secrets, submissions, runs, scores and traces, with a sha256 manifest.
+    Export {
+        /// Where to write the archive.
+        #[arg(long)]
+        out: PathBuf,
+        /// Include the stored episode videos (they can be rendered again from the traces).
+        #[arg(long)]
+        videos: bool,
+        /// Replace OUT if it exists.
+        #[arg(long)]
+        force: bool,
+    },
+    /// Load a contest archive into this server, which must be empty; the archive is checked
+    /// against its sha256 manifest first and refused whole if anything was altered.
+    Import {
+        /// The archive `admin export` wrote.
+        archive: PathBuf,
+    },
 }
 
 pub(crate) fn admin(args: AdminArgs) -> anyhow::Result<()> {
@@ -68,6 +103,19 @@ pub(crate) fn admin(args: AdminArgs) -> anyhow::Result<()> {
     let server = ServerArgs {
         server: args.server.clone(),
     };
+    match &args.command {
+        AdminCommand::Verify { run } => return crate::verify_cmd::verify(&server, &token, *run, args.json),
+        AdminCommand::Reevaluate { run, episodes } => {
+            return crate::reevaluate_cmd::reevaluate(&server, &token, *run, *episodes, args.json);
+        }
+        AdminCommand::Export { out, videos, force } => {
+            return crate::archive_cmd::export(&server, &token, out, *videos, *force);
+        }
+        AdminCommand::Import { archive } => {
+            return crate::archive_cmd::import(&server, &token, archive, args.json);
+        }
+        _ => {}
+    }
     let client = reqwest::Client::new();
     runtime()?.block_on(async {
         let get = |path: &str| client.get(url(&server, path)).bearer_auth(&token);
@@ -110,6 +158,10 @@ pub(crate) fn admin(args: AdminArgs) -> anyhow::Result<()> {
                     );
                 })
             }
+            AdminCommand::Verify { .. }
+            | AdminCommand::Reevaluate { .. }
+            | AdminCommand::Export { .. }
+            | AdminCommand::Import { .. } => unreachable!("handled above"),
         }
         Ok(())
     })

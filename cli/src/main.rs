@@ -11,6 +11,7 @@
 #![allow(rustdoc::broken_intra_doc_links, rustdoc::invalid_html_tags)]
 
 mod admin_cmd;
+mod archive_cmd;
 mod check_policy_cmd;
 mod client_cmd;
 mod clock_parse;
@@ -26,6 +27,7 @@ mod load_bench;
 mod policy_cmd;
 mod policy_submit;
 mod probe_glue;
+mod reevaluate_cmd;
 mod replay_cmd;
 mod serve_cmd;
 mod server_client;
@@ -33,6 +35,7 @@ mod sim_cmd;
 mod submission_cmd;
 mod submission_trace;
 mod submission_view;
+mod verify_cmd;
 mod worker_cmd;
 
 use clap::{Parser, Subcommand};

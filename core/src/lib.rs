@@ -15,6 +15,7 @@ pub mod dataset;
 pub mod describe;
 pub mod error;
 pub mod grasp_mode;
+pub mod interval;
 pub mod layout;
 pub mod metrics;
 pub mod observations;

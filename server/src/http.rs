@@ -1,6 +1,7 @@
 //! The HTTP adapter (axum): routes of docs/reference/http-api.md, one file per API tag
 //! ([`health`], [`dataset`], [`submissions`] with [`video`], [`leaderboard`], [`organiser`] with
-//! the console [`admin`]) and the participant [`pages`]; this file assembles the router.
+//! the console [`admin`] and [`verification`]: verify, re-evaluate, the contest archive) and the
+//! participant [`pages`]; this file assembles the router.
 //!
 //! Handlers only extract, call one service function and shape the answer; every rule is in
 //! [`crate::service`]. Errors are always JSON (`{"error", "code", "request_id", ...}`): unknown
@@ -36,6 +37,7 @@ mod schemas;
 mod session;
 pub(crate) mod stack;
 mod submissions;
+mod verification;
 mod video;
 mod viewer;
 
@@ -52,6 +54,8 @@ pub(crate) fn router(state: AppState) -> Router {
         .merge(submissions::routes())
         .merge(leaderboard::routes())
         .merge(organiser::routes())
+        // Verification, re-evaluation (see `verification`).
+        .merge(verification::routes())
         // The organiser's console: admin API and the `/admin` page (see `admin`).
         .merge(admin::quick_routes())
         // The participant pages: contest home, team login, team and submission pages.
@@ -64,7 +68,10 @@ pub(crate) fn router(state: AppState) -> Router {
     // Registration probes the endpoint first, within its own budget.
     let probing = submissions::probing_routes();
     // Organiser-only work whose length grows with the contest (rescore, backup): no budget.
-    let unbounded = organiser::unbounded_routes().merge(admin::unbounded_routes());
+    let unbounded = organiser::unbounded_routes()
+        .merge(admin::unbounded_routes())
+        // The contest archive, exported and imported.
+        .merge(verification::unbounded_routes());
     let routes = stack::with_timeout(quick, cfg.request_timeout())
         .merge(stack::with_timeout(probing, cfg.registration_timeout()))
         .merge(unbounded)

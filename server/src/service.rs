@@ -17,12 +17,15 @@
 //! - [`rescore`]: the organiser's rescoring of every stored submission;
 //! - [`secrets`]: endpoint tokens sealed at rest, opened for workers, sealed at start-up;
 //! - [`admin`]: the organiser's console (queue, workers, runs; cancel, requeue, backup);
+//! - [`archive`]: the contest archive, exported and imported whole (issue #42);
+//! - [`verification`]: replay verdicts on runs and the material to verify and re-evaluate them;
 //! - [`video_budget`]: the video storage budgets and the files nothing links any more;
 //! - [`videos`]: episode videos and traces stored by content, served, swept after retention.
 //!
 //! This file holds only the shared state and its accessors.
 
 pub(crate) mod admin;
+pub(crate) mod archive;
 pub(crate) mod auth;
 mod board;
 pub(crate) mod jobs;
@@ -40,6 +43,7 @@ mod secrets;
 pub(crate) mod sessions;
 mod submissions;
 mod teams;
+pub(crate) mod verification;
 mod video_budget;
 pub(crate) mod videos;
 pub(crate) mod volume;

@@ -16,6 +16,7 @@
 //! [`portal`] (reads of the participant pages).
 
 pub(crate) mod admin;
+pub(crate) mod archive;
 pub(crate) mod board;
 pub(crate) mod budget;
 mod compact;
@@ -27,6 +28,7 @@ pub(crate) mod runs;
 pub(crate) mod secrets;
 pub(crate) mod sessions;
 pub(crate) mod traces;
+pub(crate) mod verification;
 pub(crate) mod videos;
 
 use std::path::Path;
