@@ -78,7 +78,7 @@ impl Default for ArticulationConfig {
             finger_friction: 1.0,
             contact_frequency: 120.0,
             solver_iterations: 1,
-            pgs_iterations: 4,
+            pgs_iterations: 8,
         }
     }
 }
@@ -89,9 +89,32 @@ impl Default for ArticulationConfig {
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct RobotConfig {
-    /// A URDF (`.urdf`) or MJCF (`.xml`) description with its sidecar TOML beside it, relative to
-    /// the assets directory or absolute.
+    /// A URDF (`.urdf`) or MJCF (`.xml`) description with its sidecar TOML beside it, or a
+    /// mounting sidecar (`.toml`, e.g. `configs/robots/robosuite/panda.toml`), relative to the
+    /// assets directory or absolute. `KITCHEN_R_ROBOT` and `kitchen-r eval --robot` override it.
     pub file: PathBuf,
+}
+
+/// The robot file a command line chose (`--robot`), over `KITCHEN_R_ROBOT` and the config.
+static ROBOT_OVERRIDE: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+
+/// Make every [`SimConfig::load_default`] of this process build the robot `file` (a command's
+/// `--robot` flag); `false` if another was set before.
+pub fn override_robot(file: PathBuf) -> bool {
+    ROBOT_OVERRIDE.set(file).is_ok()
+}
+
+impl RobotConfig {
+    /// The config's robot with the command line's or `KITCHEN_R_ROBOT`'s choice applied (flags
+    /// over environment over file).
+    fn layered(mut self) -> RobotConfig {
+        if let Some(f) = ROBOT_OVERRIDE.get() {
+            self.file = f.clone();
+        } else if let Some(f) = std::env::var_os("KITCHEN_R_ROBOT").filter(|f| !f.is_empty()) {
+            self.file = PathBuf::from(f);
+        }
+        self
+    }
 }
 
 impl Default for RobotConfig {
@@ -209,11 +232,13 @@ impl SimConfig {
     /// `configs/sim.toml` when present, else the defaults.
     pub fn load_default() -> Result<SimConfig, SimError> {
         let path = configs_dir().join("sim.toml");
-        if path.is_file() {
-            SimConfig::load(&path)
+        let mut config = if path.is_file() {
+            SimConfig::load(&path)?
         } else {
-            Ok(SimConfig::default())
-        }
+            SimConfig::default()
+        };
+        config.robot = config.robot.layered();
+        Ok(config)
     }
 
     pub fn validate(&self) -> Result<(), SimError> {

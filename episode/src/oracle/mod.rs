@@ -13,6 +13,7 @@
 //! driver used for trajectory collection and for the expert trajectories MSE compares against.
 
 mod arm;
+mod grasp;
 mod headroom;
 mod task;
 
@@ -93,6 +94,9 @@ pub struct OraclePolicy {
     grasp: GraspMode,
     /// How often the measured state left the plan and the oracle planned again from it.
     replans: u64,
+    /// Half the fingers' length along the approach axis, m: how far the fingertips reach below
+    /// the TCP (the physical grasp keeps them off the surface an object stands on).
+    finger_reach: f64,
 }
 
 impl OraclePolicy {
@@ -112,6 +116,7 @@ impl OraclePolicy {
             images: true,
             grasp: SimConfig::load_default().map_or(GraspMode::Abstract, |c| c.grasp.mode),
             replans: 0,
+            finger_reach: assets.robot.gripper.finger_length / 2.0,
         }
     }
 
@@ -218,10 +223,14 @@ impl OraclePolicy {
         let pose = object.map(|o| iso(&o.pose));
         let tool_world = kitchen_r_sim::oracle::manip::base_isometry(p.base_pose) * iso(&p.ee_pose);
         let held = object.is_some_and(|o| p.held.as_deref() == Some(o.name.as_str()));
+        let model = object.and_then(|o| self.catalogue.model(&o.model).cloned());
         World {
             object: pose,
             held_in_tool: pose.filter(|_| held).map(|o| tool_world.inverse() * o),
-            model: object.and_then(|o| self.catalogue.model(&o.model).cloned()),
+            model: match self.grasp {
+                GraspMode::Physical => model.map(|m| grasp::physical_grasp(m, self.finger_reach)),
+                GraspMode::Abstract => model,
+            },
         }
     }
 
