@@ -31,8 +31,8 @@ impl<T: AsyncRead + AsyncWrite + Send + Unpin> Io for T {}
 
 /// Longest `/healthz` answer head read.
 const HEALTH_HEAD: usize = 4096;
-/// Characters of a text message (openpi's traceback) quoted in a reason.
-const QUOTED: usize = 400;
+/// Characters of a text message (openpi's traceback) quoted in a reason: its last ones.
+const QUOTED: usize = 200;
 
 /// Where and how to connect; cheap to clone, kept to reconnect after a failed call.
 #[derive(Clone)]
@@ -254,12 +254,15 @@ async fn next_binary(ws: &mut WebSocketStream<Box<dyn Io>>, cap: usize) -> Resul
         match ws.next().await {
             Some(Ok(Message::Binary(b))) => return Ok(b.to_vec()),
             Some(Ok(Message::Text(t))) => {
+                // A traceback ends with the exception: quote the end, which a stored reason
+                // (cut at 512 characters) keeps.
                 let t = t.as_str().trim();
-                let quoted: String = t.chars().take(QUOTED).collect();
-                let more = if t.chars().count() > QUOTED { "…" } else { "" };
+                let n = t.chars().count();
+                let quoted: String = t.chars().skip(n.saturating_sub(QUOTED)).collect();
+                let cut = if n > QUOTED { "…" } else { "" };
                 return Err(format!(
                     "the server sent a text message instead of msgpack (openpi servers send a \
-                     Python traceback this way when the policy raised): {quoted}{more}"
+                     Python traceback this way when the policy raised): {cut}{quoted}"
                 ));
             }
             Some(Ok(Message::Close(f))) => {
