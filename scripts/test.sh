@@ -28,6 +28,11 @@ if ! command -v chromium >/dev/null 2>&1; then
     "install it with: apt-get install -y --no-install-recommends chromium" >&2
   if [ "${CI:-}" = "true" ]; then exit 1; fi
 fi
+# robosuite 1.5.2's robot descriptions (the robosuite arms' tests, docs/twin/robot.md): the PyPI
+# wheel unpacked under target/robosuite, never into the repository.
+section "robosuite's robot descriptions (scripts/robosuite-assets.sh)"
+ROBOSUITE_ASSETS="$(bash scripts/robosuite-assets.sh)"
+export ROBOSUITE_ASSETS
 # rav1e's assembly (AV1 encoding 2.3x faster, identical bytes) where nasm is installed:
 # optional and detected, so a machine with only the Rust toolchain runs the same tests.
 features=()

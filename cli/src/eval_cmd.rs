@@ -87,11 +87,21 @@ pub(crate) struct EvalArgs {
     /// for its jobs [default: configs/sim.toml's `[grasp] mode`]. Named in the report.
     #[arg(long, value_name = "MODE")]
     grasp: Option<GraspMode>,
+    /// The robot to evaluate with: a URDF or MJCF description (its sidecar beside it) or a
+    /// mounting sidecar such as configs/robots/robosuite/panda.toml [default: configs/sim.toml's
+    /// `[robot] file`, or KITCHEN_R_ROBOT]; a relative name is relative to the working directory
+    #[arg(long, value_name = "FILE")]
+    robot: Option<PathBuf>,
     #[command(flatten)]
     live: crate::live_view::LiveArgs,
 }
 
 pub(crate) fn eval(args: EvalArgs) -> anyhow::Result<()> {
+    if let Some(file) = &args.robot {
+        // Absolute, so the assets directory does not change what a relative name means here.
+        let file = std::path::absolute(file).with_context(|| format!("resolving {}", file.display()))?;
+        kitchen_r_sim::override_robot(file);
+    }
     let config = match &args.config {
         Some(p) => EvalConfig::load(p).with_context(|| format!("reading {}", p.display()))?,
         None => EvalConfig::load_default()?,

@@ -35,7 +35,7 @@ pub mod types;
 pub mod usd_export;
 pub mod world;
 
-pub use config::{RobotConfig, SensorsConfig, SimConfig};
+pub use config::{RobotConfig, SensorsConfig, SimConfig, override_robot};
 pub use episode::{EpisodeConfig, ObjectPlacement};
 pub use error::SimError;
 pub use generator::EpisodeParams;

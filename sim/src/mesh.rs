@@ -39,6 +39,9 @@ pub struct MeshData {
     pub triangles: Vec<[u32; 3]>,
     /// Bounding box size (m).
     pub size: [f64; 3],
+    /// Where the bounding box's centre was in the file's frame (m, scaled): a robot link's
+    /// mesh is placed back there.
+    pub center: [f64; 3],
     /// The convex hull it collides and renders as.
     pub hull: SharedShape,
     /// The triangle mesh static furniture collides and renders as, built on first use (its BVH
@@ -114,6 +117,28 @@ pub fn load_scenes(scenes: &[Scene]) -> Result<(), SimError> {
             let Some(m) = &f.mesh else { continue };
             let what = format!("scene {:?}, furniture {:?}: outer box", s.id, f.id);
             load_sized(&m.file, m.scale, f.scaled_size(), &what)?;
+        }
+    }
+    Ok(())
+}
+
+/// Read every mesh of a robot description's links and hand (uniform scales only).
+pub fn load_robot(robot: &kitchen_r_core::robot::RobotDesc) -> Result<(), SimError> {
+    let shapes = robot
+        .arm
+        .joints
+        .iter()
+        .flat_map(|j| j.shapes.iter())
+        .chain(&robot.arm.hand_shapes);
+    for s in shapes {
+        if let kitchen_r_core::robot::Geometry::Mesh { file, scale } = &s.geometry {
+            if scale[1] != scale[0] || scale[2] != scale[0] {
+                return Err(mesh_error(
+                    file,
+                    format!("scale {scale:?}: the twin scales a robot mesh uniformly; give one value thrice"),
+                ));
+            }
+            load(&file.to_string_lossy(), scale[0])?;
         }
     }
     Ok(())
@@ -289,6 +314,7 @@ fn centred(path: &Path, mut vertices: Vec<[f64; 3]>, triangles: Vec<[u32; 3]>) -
         .ok_or_else(|| bad("the mesh is flat: it has no convex hull".into()))?;
     Ok(MeshData {
         size: [0, 1, 2].map(|k| hi[k] - lo[k]),
+        center,
         vertices,
         triangles,
         hull,

@@ -46,6 +46,7 @@ impl Assets {
         let scenes = Scene::load_all(&dir.join("scenes"), &catalogue)?;
         crate::mesh::load_scenes(&scenes)?;
         let robot = RobotDesc::load(&robot.path(dir))?;
+        crate::mesh::load_robot(&robot)?;
         Ok(Assets {
             scenes,
             catalogue,

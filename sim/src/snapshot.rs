@@ -86,7 +86,16 @@ impl Sim {
             }
         }
         let d = &self.dynamic;
-        for v in d.robot.arm.q.iter().chain(d.robot.arm.qd.iter()) {
+        // The arm's own joints only: the unused slots of a six-joint arm's vectors stay out.
+        let dof = self.robot.arm.dof;
+        for v in d
+            .robot
+            .arm
+            .q
+            .iter()
+            .take(dof)
+            .chain(d.robot.arm.qd.iter().take(dof))
+        {
             h.u64(v.to_bits());
         }
         for v in [d.robot.v, d.robot.omega, d.robot.opening] {

@@ -1,37 +1,37 @@
 //! From a description's tree of frames to [`RobotDesc`]: the serial chain from the base frame to
-//! the tool frame must be fixed joints and exactly six revolute joints, every frame on it parallel
-//! to the base frame at the zero configuration (translations only), so the joint origins reach the
-//! kinematics as the file writes them.
+//! the tool frame must be fixed joints and six or seven revolute joints. Frames on it may be
+//! rotated (URDF `rpy`, MJCF `quat`/`euler`/`axisangle`) and joints turn about any axis; where
+//! none is rotated the joint origins reach the kinematics exactly as the file writes them.
 //!
 //! Where the twin's parts are found:
 //! - base: the frames fixed to the base frame hold one cylinder (the body, standing on the base
 //!   centre) and one box (the arm's column); their masses add up to the base's mass;
-//! - arm: joint i's child frame holds a capsule or cylinder whose radius is link i's;
+//! - arm: joint i's child frame holds a capsule or cylinder whose radius is link i's, or else
+//!   its shapes (meshes, boxes...) on it and the frames fixed to it are link i's;
 //! - hand: the frames fixed to the last arm link hold one box (the palm, on the last joint's x
 //!   axis) and are the parents of two prismatic finger joints (`lower` 0, `upper` half the widest
 //!   gap) whose child frames hold each a box (length, thickness, height);
 //! - tool: the tool frame lies on the last joint's +x axis (`tcp_offset` from it).
 
+use super::frame::Frame;
+use super::shapes::{fixed_frames, link_shapes, rgb};
 use super::sidecar::Sidecar;
 use super::tree::{Geom, JointKind, Shape, Tree, add};
-use super::{ArmDesc, Axis, BaseDesc, GripperDesc, JointDesc, RobotDesc};
-
-/// Colour of a part whose file gives none.
-const GREY: [f32; 3] = [0.5, 0.5, 0.5];
+use super::{ArmDesc, Axis, BaseDesc, GripperDesc, JointDesc, MAX_ARM_JOINTS, RobotDesc};
 
 /// The serial chain from the base frame to the tool frame: the mount (base frame to the first
-/// joint), the six joints, and the tool offset from the last joint.
-struct Chain<'a> {
-    mount: [f64; 3],
-    arm: Vec<ArmJoint<'a>>,
-    tcp: [f64; 3],
+/// joint), the arm's joints, and the tool's transform from the last joint.
+pub(crate) struct Chain<'a> {
+    pub mount: Frame,
+    pub arm: Vec<ArmJoint<'a>>,
+    pub tcp: Frame,
 }
 
-/// One revolute joint of the arm: its child frame, the joint, its origin from the previous joint.
-struct ArmJoint<'a> {
-    child: usize,
-    joint: &'a super::tree::Joint,
-    origin: [f64; 3],
+/// One revolute joint of the arm: its child frame, the joint, its frame from the previous joint.
+pub(crate) struct ArmJoint<'a> {
+    pub child: usize,
+    pub joint: &'a super::tree::Joint,
+    pub origin: Frame,
 }
 
 pub(crate) fn assemble(t: &Tree, s: &Sidecar) -> Result<RobotDesc, String> {
@@ -48,30 +48,52 @@ pub(crate) fn assemble(t: &Tree, s: &Sidecar) -> Result<RobotDesc, String> {
         "the tool frame (between the fingertips, x out of them)",
     )?;
     let Chain { mount, arm, tcp } = walk(t, base, tool)?;
+    let next: Vec<usize> = arm.iter().map(|a| a.child).collect();
     let joints = arm
         .iter()
         .enumerate()
-        .map(|(i, a)| joint(t, s, i, a))
+        .map(|(i, a)| joint(t, &s.arm, i, a, &next))
         .collect::<Result<Vec<_>, _>>()?;
-    if tcp[1] != 0.0 || tcp[2] != 0.0 || tcp[0] <= 0.0 {
+    if tcp.q.is_some() || tcp.t[1] != 0.0 || tcp.t[2] != 0.0 || tcp.t[0] <= 0.0 {
         return Err(format!(
-            "{} sits at {tcp:?} from the last arm joint's frame: the tool frame must lie on that frame's +x \
-             axis (y = z = 0, x > 0)",
-            t.frame(tool)
+            "{} sits at {:?} from the last arm joint's frame: the tool frame must lie on that frame's +x \
+             axis (y = z = 0, x > 0), unrotated (or mount the arm and its gripper from a sidecar of their \
+             own: docs/twin/robot.md)",
+            t.frame(tool),
+            tcp.t
         ));
     }
-    let arm_color = rgb(capsule(t, arm[0].child)?.color);
-    let gripper = hand(t, s, arm[5].child, tcp[0])?;
+    let arm_color = link_colour(t, arm[0].child);
+    let gripper = hand(t, s, arm[arm.len() - 1].child, tcp.t[0])?;
     Ok(RobotDesc {
         base: base_desc(t, s, base)?,
         arm: ArmDesc {
-            mount,
+            mount: mount.t,
+            mount_rotation: mount.q,
             home: s.arm.home.clone(),
             color: arm_color,
             joints,
+            flange: None,
+            hand_shapes: Vec::new(),
         },
         gripper,
     })
+}
+
+/// The colour of a link: its capsule's, or its first coloured shape's.
+pub(crate) fn link_colour(t: &Tree, link: usize) -> [f32; 3] {
+    match capsule(t, link) {
+        Ok(g) => rgb(g.color),
+        Err(_) => rgb(first_colour(t, link)),
+    }
+}
+
+/// The first colour a geom of `link` (or a frame fixed to it) gives.
+pub(crate) fn first_colour(t: &Tree, link: usize) -> Option<[f64; 4]> {
+    fixed_frames(t, link, &[])
+        .iter()
+        .flat_map(|(l, _)| t.links[*l].geoms.iter())
+        .find_map(|g| g.color)
 }
 
 fn named(t: &Tree, name: &str, key: &str, what: &str) -> Result<usize, String> {
@@ -83,8 +105,9 @@ fn named(t: &Tree, name: &str, key: &str, what: &str) -> Result<usize, String> {
     })
 }
 
-/// The mount, the six revolute joints and the tool offset along the chain from `base` to `tool`.
-fn walk(t: &Tree, base: usize, tool: usize) -> Result<Chain<'_>, String> {
+/// The mount, the arm's revolute joints and the tool's transform along the chain from `base` to
+/// `tool`.
+pub(crate) fn walk(t: &Tree, base: usize, tool: usize) -> Result<Chain<'_>, String> {
     let mut path = vec![tool];
     while *path.last().unwrap_or(&base) != base {
         let at = path[path.len() - 1];
@@ -100,34 +123,27 @@ fn walk(t: &Tree, base: usize, tool: usize) -> Result<Chain<'_>, String> {
         }
     }
     path.reverse();
-    let (mut acc, mut mount, mut arm) = ([0.0; 3], [0.0; 3], Vec::new());
+    let (mut acc, mut mount, mut arm) = (Frame::IDENTITY, Frame::IDENTITY, Vec::new());
     for &child in &path[1..] {
         let Some((_, j)) = &t.links[child].parent else {
             continue;
         };
-        if j.rotated {
-            return Err(format!(
-                "<joint name=\"{}\"> turns its child frame: from the base frame to the tool frame every frame \
-                 must be parallel to the base frame at the zero configuration; set its rotation to zero and \
-                 give the axis in the base frame's directions",
-                j.name
-            ));
-        }
+        let own = Frame::new(j.origin, j.rotation);
         match j.kind {
-            JointKind::Fixed => acc = add(acc, j.origin),
+            JointKind::Fixed => acc = acc.then(&own),
             JointKind::Revolute => {
                 let before = if arm.is_empty() {
                     mount = acc;
-                    [0.0; 3]
+                    Frame::IDENTITY
                 } else {
                     acc
                 };
                 arm.push(ArmJoint {
                     child,
                     joint: j,
-                    origin: add(before, j.origin),
+                    origin: before.then(&own),
                 });
-                acc = [0.0; 3];
+                acc = Frame::IDENTITY;
             }
             JointKind::Prismatic | JointKind::Other(_) => {
                 return Err(format!(
@@ -139,10 +155,10 @@ fn walk(t: &Tree, base: usize, tool: usize) -> Result<Chain<'_>, String> {
             }
         }
     }
-    if arm.len() != 6 {
+    if !(6..=MAX_ARM_JOINTS).contains(&arm.len()) {
         let names: Vec<&str> = arm.iter().map(|a| a.joint.name.as_str()).collect();
         return Err(format!(
-            "the chain from {} to {} has {} revolute joints {names:?}; the twin's arm has exactly 6",
+            "the chain from {} to {} has {} revolute joints {names:?}; the twin's arm has 6 or 7",
             t.frame(base),
             t.frame(tool),
             arm.len()
@@ -160,45 +176,67 @@ fn kind_name(k: JointKind) -> &'static str {
     }
 }
 
-fn joint(t: &Tree, s: &Sidecar, i: usize, a: &ArmJoint<'_>) -> Result<JointDesc, String> {
+/// Arm joint `i`; `next` holds every arm joint's child frame (a link's shapes stop there).
+pub(crate) fn joint(
+    t: &Tree,
+    s: &super::sidecar::Arm,
+    i: usize,
+    a: &ArmJoint<'_>,
+    next: &[usize],
+) -> Result<JointDesc, String> {
     let j = a.joint;
     let at = |what: &str| format!("<joint name=\"{}\">: {what}", j.name);
     let axis = match j.axis {
         [1.0, 0.0, 0.0] => Axis::X,
         [0.0, 1.0, 0.0] => Axis::Y,
         [0.0, 0.0, 1.0] => Axis::Z,
-        other => {
-            return Err(at(&format!(
-                "axis {other:?}: an arm joint turns about +x, +y or +z of its frame (\"1 0 0\", \"0 1 0\" or \"0 0 1\")"
-            )));
+        v => {
+            let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+            if !(n > 1e-9) {
+                return Err(at(&format!("axis {v:?}: give a non-zero axis")));
+            }
+            Axis::Along(v.map(|c| c / n))
         }
     };
     let limits = j
         .limits
         .ok_or_else(|| at("no joint limits: give lower and upper (URDF <limit>, MJCF range)"))?;
     let from_side = |v: &Option<Vec<f64>>| v.as_ref().and_then(|v| v.get(i).copied());
-    let max_velocity = j.velocity.or_else(|| from_side(&s.arm.max_velocity)).ok_or_else(|| {
+    let max_velocity = j.velocity.or_else(|| from_side(&s.max_velocity)).ok_or_else(|| {
         at("no velocity limit: give URDF <limit velocity>, or max_velocity in the sidecar's [arm] (one per joint)")
     })?;
-    let effort = j.effort.or_else(|| from_side(&s.arm.effort)).ok_or_else(|| {
+    let effort = j.effort.or_else(|| from_side(&s.effort)).ok_or_else(|| {
         at("no effort limit: give URDF <limit effort>, or effort in the sidecar's [arm] (one per joint)")
     })?;
     let masses = fixed_to(t, a.child)
         .into_iter()
         .filter_map(|(l, _)| t.links[l].mass);
     let mass = masses.reduce(|x, y| x + y).filter(|m| *m > 0.0);
+    let (link_radius, shapes) = match capsule(t, a.child) {
+        Ok(g) => match g.shape {
+            Shape::Capsule { radius, .. } | Shape::Cylinder { radius, .. } => (radius, Vec::new()),
+            _ => unreachable!("capsule() returns capsules and cylinders"),
+        },
+        Err(no_capsule) => {
+            let set = fixed_frames(t, a.child, next);
+            let shapes = link_shapes(t, &set, &Frame::IDENTITY, first_colour(t, a.child))?;
+            if shapes.is_empty() {
+                return Err(no_capsule);
+            }
+            (0.0, shapes)
+        }
+    };
     Ok(JointDesc {
         name: j.name.clone(),
-        origin: a.origin,
+        origin: a.origin.t,
+        rotation: a.origin.q,
         axis,
         limits,
         max_velocity,
         effort,
         mass,
-        link_radius: match capsule(t, a.child)?.shape {
-            Shape::Capsule { radius } | Shape::Cylinder { radius, .. } => radius,
-            _ => unreachable!("capsule() returns capsules and cylinders"),
-        },
+        link_radius,
+        shapes,
     })
 }
 
@@ -210,8 +248,8 @@ fn capsule(t: &Tree, link: usize) -> Result<&Geom, String> {
         .find(|g| matches!(g.shape, Shape::Capsule { .. } | Shape::Cylinder { .. }))
         .ok_or_else(|| {
             format!(
-                "{} has no capsule or cylinder {}: the twin draws each arm link as a capsule of that radius from \
-                 its joint to the next",
+                "{} has no capsule or cylinder {} and no other shape: the twin draws each arm link as a capsule \
+                 of that radius from its joint to the next, or as its own shapes (meshes, boxes...)",
                 t.frame(link),
                 t.geom_tag
             )
@@ -369,8 +407,4 @@ fn hand(t: &Tree, s: &Sidecar, last: usize, tcp: f64) -> Result<GripperDesc, Str
         release_threshold: g.release_threshold,
         color: rgb(palm.color),
     })
-}
-
-fn rgb(c: Option<[f64; 4]>) -> [f32; 3] {
-    c.map_or(GREY, |c| [c[0] as f32, c[1] as f32, c[2] as f32])
 }

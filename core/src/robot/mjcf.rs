@@ -2,14 +2,17 @@
 //! resolves `<default>` classes, `<include>` and degree angles). Bodies are frames; a body's one
 //! hinge or slide joint (at the body's origin) joins it to its parent, a body without one is fixed
 //! to it; a site is a frame fixed to its body. MJCF gives geoms half sizes: they are doubled here.
-//! Joints carry no velocity or effort limit in MJCF; the sidecar's `[arm]` gives them.
+//! Joints carry no velocity or effort limit in MJCF; the sidecar's `[arm]` gives them. A hinge
+//! without a `range` turns freely: the twin gives it ±2π. Mesh geoms name `<asset><mesh>` files
+//! (resolved against the file's `meshdir`); a geom collides when its `contype` or `conaffinity`
+//! is non-zero, and takes its colour from its `rgba` or its material's.
 
 use std::path::Path;
 
 use mjcf_rs::body::{GeomType, JointType};
 use mjcf_rs::glam::DQuat;
 
-use super::tree::{Geom, Joint, JointKind, Link, Shape, Tree};
+use super::tree::{Geom, IDENTITY, Joint, JointKind, Link, Shape, Tree};
 use crate::ContentError;
 
 pub(crate) fn tree(path: &Path) -> Result<Tree, ContentError> {
@@ -19,6 +22,8 @@ pub(crate) fn tree(path: &Path) -> Result<Tree, ContentError> {
     };
     let model =
         mjcf_rs::Model::from_file(path).map_err(|e| invalid(format!("not a valid MJCF file: {e}")))?;
+    let dir = path.parent().unwrap_or(Path::new("."));
+    let mut meshes = Vec::new();
     let mut links = Vec::new();
     // Where each body went in `links` (its named sites follow it).
     let mut at = Vec::new();
@@ -30,11 +35,20 @@ pub(crate) fn tree(path: &Path) -> Result<Tree, ContentError> {
             (None, 0) => "world".into(),
             (None, _) => format!("body{id}"),
         };
-        let pose = |p: &mjcf_rs::Pose| (p.translation.to_array(), p.rotation != DQuat::IDENTITY);
-        let (origin, rotated) = pose(&b.pose);
+        let pose = |p: &mjcf_rs::Pose| {
+            let q = p.rotation;
+            let rotation = if q == DQuat::IDENTITY {
+                IDENTITY
+            } else {
+                [q.w, q.x, q.y, q.z]
+            };
+            (p.translation.to_array(), rotation)
+        };
+        let (origin, rotation) = pose(&b.pose);
+        let rotated = rotation != IDENTITY;
         let moving: Vec<_> = b.joints.iter().filter(|j| j.type_ != JointType::Free).collect();
         let joint = match moving.as_slice() {
-            [] => Joint::fixed(format!("{name} (fixed to its parent)"), origin, rotated),
+            [] => Joint::fixed(format!("{name} (fixed to its parent)"), origin, rotation),
             [j] => {
                 let jname = j.name.clone().unwrap_or_else(|| format!("{name}'s joint"));
                 if j.pos != [0.0; 3] {
@@ -54,8 +68,12 @@ pub(crate) fn tree(path: &Path) -> Result<Tree, ContentError> {
                     },
                     origin,
                     rotated,
+                    rotation,
                     axis: j.axis,
-                    limits: j.range,
+                    limits: j.range.or(match j.type_ {
+                        JointType::Hinge => Some([-std::f64::consts::TAU, std::f64::consts::TAU]),
+                        _ => None,
+                    }),
                     velocity: None,
                     effort: None,
                 }
@@ -71,15 +89,33 @@ pub(crate) fn tree(path: &Path) -> Result<Tree, ContentError> {
             .geoms
             .iter()
             .map(|g| {
-                let (origin, rotated) = pose(&g.pose);
-                Geom {
-                    shape: shape(g),
+                let (origin, rotation) = pose(&g.pose);
+                let material = || model.assets.material(g.material.as_deref()?)?.rgba;
+                let shape = match (&g.type_, &g.mesh) {
+                    (GeomType::Mesh, Some(m)) => {
+                        let mesh = model.assets.mesh(m).ok_or_else(|| {
+                            invalid(format!("<geom mesh=\"{m}\">: no <mesh name=\"{m}\"> in <asset>"))
+                        })?;
+                        let file = model.resolve_mesh_file(mesh, dir).ok_or_else(|| {
+                            invalid(format!(
+                                "<mesh name=\"{m}\"> has no file: inline meshes are not read"
+                            ))
+                        })?;
+                        meshes.push((file, mesh.scale));
+                        Shape::Mesh(meshes.len() - 1)
+                    }
+                    _ => shape(g),
+                };
+                Ok(Geom {
+                    shape,
                     origin,
-                    rotated,
-                    color: g.rgba,
-                }
+                    rotated: rotation != IDENTITY,
+                    rotation,
+                    collides: g.contype != 0 || g.conaffinity != 0,
+                    color: g.rgba.or_else(material),
+                })
             })
-            .collect();
+            .collect::<Result<Vec<_>, ContentError>>()?;
         let parent = match entry.parent {
             Some(p) => Some((
                 *at.get(p)
@@ -98,12 +134,12 @@ pub(crate) fn tree(path: &Path) -> Result<Tree, ContentError> {
         let body_index = links.len() - 1;
         for s in &b.sites {
             let Some(site) = &s.name else { continue };
-            let (origin, rotated) = pose(&s.pose);
+            let (origin, rotation) = pose(&s.pose);
             links.push(Link {
                 name: site.clone(),
                 parent: Some((
                     body_index,
-                    Joint::fixed(format!("{site} (site)"), origin, rotated),
+                    Joint::fixed(format!("{site} (site)"), origin, rotation),
                 )),
                 geoms: Vec::new(),
                 mass: None,
@@ -114,6 +150,7 @@ pub(crate) fn tree(path: &Path) -> Result<Tree, ContentError> {
         links,
         frame_tag: "body",
         geom_tag: "geom",
+        meshes,
     })
 }
 
@@ -125,8 +162,11 @@ fn shape(g: &mjcf_rs::body::Geom) -> Shape {
             radius: s[0],
             length: 2.0 * s[1],
         },
-        GeomType::Capsule => Shape::Capsule { radius: s[0] },
-        GeomType::Sphere => Shape::Other("sphere"),
+        GeomType::Capsule => Shape::Capsule {
+            radius: s[0],
+            length: 2.0 * s[1],
+        },
+        GeomType::Sphere => Shape::Sphere { radius: s[0] },
         _ => Shape::Other("other"),
     }
 }

@@ -9,13 +9,22 @@
 //! the gripper's thresholds.
 //!
 //! Frames: the robot base frame has its origin at the base's centre on the floor, x forward, y
-//! left, z up. At the zero configuration every arm joint frame is parallel to the base frame (each
-//! joint's origin is a pure translation) and turns about its own +x, +y or +z. The tool frame (the
-//! tool centre point, between the fingertips) lies on the last joint's x axis: x = approach
+//! left, z up. Each arm joint's frame is its parent's moved by `origin` and turned by `rotation`
+//! (none for the shipped robot, whose joint frames are all parallel to the base frame at zero),
+//! and the joint turns about `axis` of its own frame. The hand frame hangs from the last joint's
+//! frame (by `flange`, none for the shipped robot); the tool frame (the tool centre point,
+//! between the fingertips) lies `tcp_offset` along the hand frame's x axis: x = approach
 //! direction, y = closing axis of the fingers.
+//!
+//! Two ways to describe a robot: one URDF or MJCF file with the twin's base, arm and hand in it
+//! and its sidecar beside it ([`chain`]), or a sidecar that mounts an arm file and a gripper file
+//! as the field ships them on the twin's base ([`mounted`], e.g. robosuite's arms).
 
 mod chain;
+mod frame;
 mod mjcf;
+mod mounted;
+mod shapes;
 pub mod sidecar;
 mod tree;
 mod urdf;
@@ -60,10 +69,68 @@ pub struct BaseDesc {
 #[serde(deny_unknown_fields)]
 pub struct ArmDesc {
     pub mount: [f64; 3],
+    /// Rotation of the first joint's parent frame against the base frame, `w, x, y, z` (`None`:
+    /// parallel to it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mount_rotation: Option<[f64; 4]>,
     pub home: Vec<f64>,
     pub color: [f32; 3],
     #[serde(rename = "joint")]
     pub joints: Vec<JointDesc>,
+    /// The hand frame in the last joint's frame (`None`: the last joint's frame itself).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub flange: Option<PoseDesc>,
+    /// Shapes fixed to the hand beyond the palm and fingers (a gripper file's meshes), in the
+    /// last joint's frame.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub hand_shapes: Vec<LinkShape>,
+}
+
+/// A rigid transform: translation, then rotation `w, x, y, z`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PoseDesc {
+    pub xyz: [f64; 3],
+    pub quat: [f64; 4],
+}
+
+/// A shape of an arm link in its joint's frame (mesh links; the shipped arm's links are
+/// capsules of `link_radius` instead).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LinkShape {
+    pub geometry: Geometry,
+    pub pose: PoseDesc,
+    pub color: [f32; 3],
+    /// Whether it collides; otherwise it is only drawn.
+    pub collides: bool,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase", deny_unknown_fields)]
+pub enum Geometry {
+    /// A mesh file (STL, OBJ, glTF) with its per-axis scale; collides and renders as its convex
+    /// hull.
+    Mesh {
+        file: PathBuf,
+        scale: [f64; 3],
+    },
+    /// Full sizes.
+    Box {
+        size: [f64; 3],
+    },
+    /// Along z.
+    Cylinder {
+        radius: f64,
+        length: f64,
+    },
+    Capsule {
+        radius: f64,
+        length: f64,
+    },
+    Sphere {
+        radius: f64,
+    },
 }
 
 /// A revolute joint about one axis of its (zero-configuration) frame.
@@ -73,6 +140,10 @@ pub struct JointDesc {
     pub name: String,
     /// Offset from the previous joint's frame (or the mount) at zero configuration.
     pub origin: [f64; 3],
+    /// Rotation of this joint's frame against the previous one at zero configuration, `w, x, y,
+    /// z` (`None`: parallel).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rotation: Option<[f64; 4]>,
     pub axis: Axis,
     /// `[lower, upper]` in radians.
     pub limits: [f64; 2],
@@ -85,16 +156,23 @@ pub struct JointDesc {
     /// inertials); `None` where the description gives none. The physical grasp mode's arm uses it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mass: Option<f64>,
-    /// Radius of the capsule from this joint to the next one (or to the palm).
+    /// Radius of the capsule from this joint to the next one (or to the palm); unused where
+    /// `shapes` are given.
     pub link_radius: f64,
+    /// The link's own shapes in this joint's frame (mesh links); empty: the capsule.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub shapes: Vec<LinkShape>,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+/// A joint axis in its own frame.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Axis {
     X,
     Y,
     Z,
+    /// Any other direction (unit length).
+    Along([f64; 3]),
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -120,7 +198,24 @@ impl Axis {
             Axis::X => [1.0, 0.0, 0.0],
             Axis::Y => [0.0, 1.0, 0.0],
             Axis::Z => [0.0, 0.0, 1.0],
+            Axis::Along(v) => v,
         }
+    }
+}
+
+/// The most arm joints the twin drives (a redundant 7-joint arm).
+pub const MAX_ARM_JOINTS: usize = 7;
+
+/// The tree of frames of a URDF or MJCF file, by its extension.
+fn description_tree(path: &Path) -> Result<tree::Tree, ContentError> {
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
+    match ext.to_ascii_lowercase().as_str() {
+        "urdf" => urdf::tree(path),
+        "xml" | "mjcf" => mjcf::tree(path),
+        _ => Err(ContentError::Invalid {
+            path: path.to_path_buf(),
+            message: format!("unknown robot format {ext:?}: name a URDF (.urdf) or MJCF (.xml, .mjcf) file"),
+        }),
     }
 }
 
@@ -136,22 +231,20 @@ pub fn resolve(assets: &Path, file: &Path) -> PathBuf {
 
 impl RobotDesc {
     /// Load and validate a robot from a URDF (`.urdf`) or MJCF (`.xml`, `.mjcf`) file and its
-    /// sidecar (the same path with `.toml`).
+    /// sidecar (the same path with `.toml`), or from a mounting sidecar (`.toml`) that names an
+    /// arm file and a gripper file ([`mounted`]).
     pub fn load(path: &Path) -> Result<RobotDesc, ContentError> {
         let invalid = |message: String| ContentError::Invalid {
             path: path.to_path_buf(),
             message,
         };
         let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
-        let tree = match ext.to_ascii_lowercase().as_str() {
-            "urdf" => urdf::tree(path)?,
-            "xml" | "mjcf" => mjcf::tree(path)?,
-            _ => {
-                return Err(invalid(format!(
-                    "unknown robot format {ext:?}: name a URDF (.urdf) or MJCF (.xml, .mjcf) file"
-                )));
-            }
-        };
+        if ext.eq_ignore_ascii_case("toml") {
+            let desc = mounted::load(path)?;
+            desc.validate().map_err(invalid)?;
+            return Ok(desc);
+        }
+        let tree = description_tree(path)?;
         let side = sidecar::Sidecar::load(path)?;
         let desc = chain::assemble(&tree, &side).map_err(invalid)?;
         desc.validate().map_err(invalid)?;
@@ -165,8 +258,11 @@ impl RobotDesc {
 
     /// What the twin needs of any robot beyond what the mapping checks.
     pub fn validate(&self) -> Result<(), String> {
-        if self.arm.joints.len() != 6 {
-            return Err(format!("the arm needs 6 joints, got {}", self.arm.joints.len()));
+        if !(6..=MAX_ARM_JOINTS).contains(&self.arm.joints.len()) {
+            return Err(format!(
+                "the arm needs 6 or 7 revolute joints, got {}",
+                self.arm.joints.len()
+            ));
         }
         if self.arm.home.len() != self.arm.joints.len() {
             return Err("[arm] home in the sidecar needs one value per arm joint".into());

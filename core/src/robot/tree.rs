@@ -1,7 +1,10 @@
 //! What a URDF or MJCF file says that the twin reads, in one shape: a tree of frames (URDF links,
 //! MJCF bodies and sites), each joined to its parent by a joint, with collision geometry and a
-//! colour. Positions are kept as the file writes them (no rotation is applied): the mapping in
-//! `chain` refuses rotated frames, so the numbers reach the kinematics unchanged.
+//! colour. Positions are kept as the file writes them, rotations beside them as unit quaternions
+//! (`w, x, y, z`), so a chain without rotations reaches the kinematics with the file's numbers
+//! unchanged.
+
+use std::path::PathBuf;
 
 /// A frame of the description.
 #[derive(Debug, Clone)]
@@ -31,6 +34,8 @@ pub(crate) struct Joint {
     pub origin: [f64; 3],
     /// Whether the frame is also rotated against its parent (URDF `rpy`, MJCF `quat`/`euler`...).
     pub rotated: bool,
+    /// That rotation, `w, x, y, z` (identity when not `rotated`).
+    pub rotation: [f64; 4],
     pub axis: [f64; 3],
     /// `[lower, upper]` (rad or m).
     pub limits: Option<[f64; 2]>,
@@ -42,12 +47,13 @@ pub(crate) struct Joint {
 
 impl Joint {
     /// A frame fixed to its parent (an MJCF body without a joint, or a site).
-    pub(super) fn fixed(name: String, origin: [f64; 3], rotated: bool) -> Joint {
+    pub(super) fn fixed(name: String, origin: [f64; 3], rotation: [f64; 4]) -> Joint {
         Joint {
             name,
             kind: JointKind::Fixed,
             origin,
-            rotated,
+            rotated: rotation != IDENTITY,
+            rotation,
             axis: [1.0, 0.0, 0.0],
             limits: None,
             velocity: None,
@@ -66,9 +72,19 @@ pub(crate) enum Shape {
     },
     Capsule {
         radius: f64,
+        /// Between the end caps' centres.
+        length: f64,
     },
+    Sphere {
+        radius: f64,
+    },
+    /// A mesh file (index into [`Tree::meshes`]).
+    Mesh(usize),
     Other(&'static str),
 }
+
+/// The unit quaternion of no rotation, `w, x, y, z`.
+pub(crate) const IDENTITY: [f64; 4] = [1.0, 0.0, 0.0, 0.0];
 
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Geom {
@@ -76,6 +92,11 @@ pub(crate) struct Geom {
     /// Centre in the frame.
     pub origin: [f64; 3],
     pub rotated: bool,
+    /// `w, x, y, z`.
+    pub rotation: [f64; 4],
+    /// Whether it collides (URDF `<collision>`; MJCF `contype` or `conaffinity` non-zero), or
+    /// is drawn only.
+    pub collides: bool,
     /// `rgba` (URDF: the link's visual colour; MJCF: the geom's own).
     pub color: Option<[f64; 4]>,
 }
@@ -88,6 +109,8 @@ pub(crate) struct Tree {
     /// `body`/`geom` (MJCF), for error messages.
     pub frame_tag: &'static str,
     pub geom_tag: &'static str,
+    /// Mesh files the geoms name: path and scale.
+    pub meshes: Vec<(PathBuf, [f64; 3])>,
 }
 
 impl Tree {

@@ -1,9 +1,11 @@
 //! URDF to the description tree, read with `urdf-rs`. Links are frames, joints join them;
 //! collision geometry gives the shapes, and the link's first coloured visual (its own material or
-//! one named at the top of the file) the colour of every shape of the link.
+//! one named at the top of the file) the colour of every shape of the link. Mesh files are named
+//! relative to the URDF file (`package://` is not resolved).
 
 use std::path::Path;
 
+use super::frame::rpy;
 use super::tree::{Geom, Joint, JointKind, Link, Shape, Tree};
 use crate::ContentError;
 
@@ -18,6 +20,8 @@ pub(crate) fn tree(path: &Path) -> Result<Tree, ContentError> {
     })?;
     let robot =
         urdf_rs::read_from_string(&text).map_err(|e| invalid(format!("not a valid URDF file: {e}")))?;
+    let dir = path.parent().unwrap_or(Path::new("."));
+    let mut meshes = Vec::new();
     let mut links: Vec<Link> = robot
         .links
         .iter()
@@ -34,9 +38,11 @@ pub(crate) fn tree(path: &Path) -> Result<Tree, ContentError> {
                     .collision
                     .iter()
                     .map(|c| Geom {
-                        shape: shape(&c.geometry),
+                        shape: shape(&c.geometry, dir, &mut meshes),
                         origin: c.origin.xyz.0,
                         rotated: c.origin.rpy.0 != [0.0; 3],
+                        rotation: rpy(c.origin.rpy.0),
+                        collides: true,
                         color,
                     })
                     .collect(),
@@ -78,6 +84,7 @@ pub(crate) fn tree(path: &Path) -> Result<Tree, ContentError> {
                 kind,
                 origin: j.origin.xyz.0,
                 rotated: j.origin.rpy.0 != [0.0; 3],
+                rotation: rpy(j.origin.rpy.0),
                 axis: j.axis.xyz.0,
                 limits: moving.then_some([lim.lower, lim.upper]),
                 velocity: (moving && lim.velocity > 0.0).then_some(lim.velocity),
@@ -89,18 +96,25 @@ pub(crate) fn tree(path: &Path) -> Result<Tree, ContentError> {
         links,
         frame_tag: "link",
         geom_tag: "collision",
+        meshes,
     })
 }
 
-fn shape(g: &urdf_rs::Geometry) -> Shape {
+fn shape(g: &urdf_rs::Geometry, dir: &Path, meshes: &mut Vec<(std::path::PathBuf, [f64; 3])>) -> Shape {
     match g {
         urdf_rs::Geometry::Box { size } => Shape::Box(size.0),
         urdf_rs::Geometry::Cylinder { radius, length } => Shape::Cylinder {
             radius: *radius,
             length: *length,
         },
-        urdf_rs::Geometry::Capsule { radius, .. } => Shape::Capsule { radius: *radius },
-        urdf_rs::Geometry::Sphere { .. } => Shape::Other("sphere"),
-        urdf_rs::Geometry::Mesh { .. } => Shape::Other("mesh"),
+        urdf_rs::Geometry::Capsule { radius, length } => Shape::Capsule {
+            radius: *radius,
+            length: *length,
+        },
+        urdf_rs::Geometry::Sphere { radius } => Shape::Sphere { radius: *radius },
+        urdf_rs::Geometry::Mesh { filename, scale } => {
+            meshes.push((dir.join(filename), scale.map_or([1.0; 3], |s| s.0)));
+            Shape::Mesh(meshes.len() - 1)
+        }
     }
 }

@@ -17,8 +17,7 @@ use nalgebra::{Isometry3, Vector3};
 use rapier3d::prelude::*;
 
 use super::desc::RobotDesc;
-use super::kinematics::DOF;
-use super::{FINGERS, PALM, Robot, RobotState, collider};
+use super::{FINGERS, Robot, RobotState, collider, links};
 use crate::config::ArticulationConfig;
 use crate::convert::{iso_to_pose, pose_to_iso, vec_to_glam};
 use crate::material::{Material, Materials, Owner};
@@ -34,7 +33,7 @@ const MOUNT_MASS: f32 = 0.5;
 #[derive(Debug, Clone)]
 pub struct Articulation {
     pub mount: RigidBodyHandle,
-    pub joints: [MultibodyJointHandle; DOF],
+    pub joints: Vec<MultibodyJointHandle>,
     /// Finger bodies (left, right) and their prismatic joints.
     pub finger_bodies: [RigidBodyHandle; 2],
     pub finger_joints: [MultibodyJointHandle; 2],
@@ -63,7 +62,7 @@ impl Robot {
     ) -> (Robot, RobotState) {
         let (mut robot, state) = Robot::spawn(world, mats, desc, start);
         // The abstract arm's links and fingers make way for the articulated ones.
-        for h in robot.bodies.links {
+        for h in std::mem::take(&mut robot.bodies.links) {
             world.remove_body(h);
         }
         let p = &mut world.integration_parameters;
@@ -91,28 +90,23 @@ impl Robot {
         let mut arm_colliders = Vec::new();
         let mut parent = mount;
         let mut joints = Vec::new();
-        let links: [RigidBodyHandle; DOF] = std::array::from_fn(|i| {
+        let dof = robot.arm.dof;
+        let mut links = Vec::new();
+        for i in 0..dof {
             let h = world.insert_body(
                 RigidBodyBuilder::dynamic()
                     .pose(iso_to_pose(&(base_iso * fk.joints[i])))
                     .gravity_scale(0.0)
                     .can_sleep(false),
             );
-            let end = if i + 1 < DOF {
-                robot.arm.origins[i + 1]
-            } else {
-                Vector3::x() * (g.tcp_offset - g.palm_back)
-            };
-            let r = desc.arm.joints[i].link_radius as f32;
-            let shape = SharedShape::capsule(vec_to_glam(&Vector3::zeros()), vec_to_glam(&end), r);
             let mass = desc.arm.joints[i].mass.unwrap_or(DEFAULT_LINK_MASS);
-            let co = collider(shape, i as u32 + 1, arm_mat, false).mass(mass as f32);
-            arm_colliders.push((world.insert_collider(co, Some(h)), i));
-            if i == DOF - 1 {
-                let ps = g.palm_size.map(|v| v as f32 / 2.0);
-                let palm = collider(SharedShape::cuboid(ps[0], ps[1], ps[2]), PALM, grip_mat, false)
-                    .translation(vec_to_glam(&Vector3::new(g.tcp_offset - g.palm_back, 0.0, 0.0)))
-                    .mass(0.1);
+            let link = links::link_colliders(desc, &robot.arm, i, arm_mat, mats);
+            let each = mass as f32 / link.len() as f32;
+            for co in link {
+                arm_colliders.push((world.insert_collider(co.mass(each), Some(h)), i));
+            }
+            if i == dof - 1 {
+                let palm = links::palm(desc, &robot.arm, grip_mat).mass(0.1);
                 arm_colliders.push((world.insert_collider(palm, Some(h)), i));
             }
             let anchor = if i == 0 {
@@ -121,7 +115,7 @@ impl Robot {
                 robot.arm.origins[i]
             };
             let lim = [robot.arm.lower[i] as f32, robot.arm.upper[i] as f32];
-            let joint = RevoluteJointBuilder::new(vec_to_glam(&robot.arm.axes[i]))
+            let mut joint = RevoluteJointBuilder::new(vec_to_glam(&robot.arm.axes[i]))
                 .local_anchor1(vec_to_glam(&anchor))
                 .limits(lim)
                 .motor_position(
@@ -129,16 +123,28 @@ impl Robot {
                     config.joint_stiffness as f32,
                     config.joint_damping as f32,
                 )
-                .motor_max_force(desc.arm.joints[i].effort as f32);
+                .motor_max_force(desc.arm.joints[i].effort as f32)
+                .build();
+            let mount = if i == 0 { robot.arm.mount_rotation } else { None };
+            let fixed = match (mount, robot.arm.rotations[i]) {
+                (Some(m), Some(r)) => Some(m * r),
+                (m, r) => m.or(r),
+            };
+            if let Some(fixed) = fixed {
+                // A turned joint frame: the parent's joint frame is the child's turned by it.
+                let f2 = pose_to_iso(&joint.data.local_frame2);
+                let f1 = Isometry3::from_parts(nalgebra::Translation3::from(anchor), fixed * f2.rotation);
+                joint.data.set_local_frame1(iso_to_pose(&f1));
+            }
             let handle = world
                 .insert_multibody_joint(parent, h, joint)
                 .expect("a chain of new bodies is a valid multibody");
             set_coordinate(world, handle, state.arm.q[i] as f32);
             joints.push(handle);
             parent = h;
-            h
-        });
-        let last = links[DOF - 1];
+            links.push(h);
+        }
+        let last = links[dof - 1];
         let tcp = Isometry3::translation(g.tcp_offset, 0.0, 0.0);
         let travel = finger_travel(desc, state.opening);
         let lim = [finger_travel(desc, 0.0), finger_travel(desc, g.max_opening)];
@@ -146,8 +152,7 @@ impl Robot {
         let mut finger_joints = Vec::new();
         for (k, s) in [1.0f64, -1.0].into_iter().enumerate() {
             let axis = Vector3::y() * s;
-            let pose =
-                base_iso * fk.joints[DOF - 1] * tcp * nalgebra::Translation3::from(axis * f64::from(travel));
+            let pose = base_iso * fk.hand * tcp * nalgebra::Translation3::from(axis * f64::from(travel));
             let body = world.insert_body(
                 RigidBodyBuilder::dynamic()
                     .pose(iso_to_pose(&pose))
@@ -187,7 +192,7 @@ impl Robot {
         robot.bodies.arm_colliders = arm_colliders;
         robot.bodies.articulation = Some(Articulation {
             mount,
-            joints: joints.try_into().expect("one joint per link"),
+            joints,
             finger_bodies,
             finger_joints: finger_joints.try_into().expect("two fingers"),
             config: config.clone(),
@@ -222,8 +227,12 @@ impl Robot {
 
     /// The measured TCP in the world: the last link's pose (not the targets' forward kinematics).
     pub(super) fn measured_tcp(&self, world: &PhysicsWorld) -> Isometry3<f64> {
-        let last = pose_to_iso(world.bodies[self.bodies.links[DOF - 1]].position());
-        last * nalgebra::Translation3::new(self.desc.gripper.tcp_offset, 0.0, 0.0)
+        let last = pose_to_iso(world.bodies[self.bodies.links[self.arm.dof - 1]].position());
+        let hand = match &self.arm.flange {
+            Some(f) => last * f,
+            None => last,
+        };
+        hand * nalgebra::Translation3::new(self.desc.gripper.tcp_offset, 0.0, 0.0)
     }
 
     /// The measured gap between the fingers' inner faces (m).

@@ -1,21 +1,34 @@
 //! Forward kinematics and the geometric Jacobian of the arm, in the robot base frame (nalgebra,
 //! f64). The physics engine never computes these: the arm's links are placed from this model.
+//!
+//! Six or seven joints: joint-space vectors hold [`MAX_DOF`] values, of which the arm's
+//! [`ArmModel::dof`] are its joints; the rest stay zero and every loop stops at `dof`. A joint
+//! frame is its parent's moved by the joint's origin, turned by its fixed rotation where the
+//! description gives one (the shipped arm's joints have none, and compute exactly as before
+//! rotations were read), then turned about its axis by the joint value.
 
-use nalgebra::{Isometry3, Matrix6, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Quaternion, SMatrix, Translation3, UnitQuaternion, Vector3};
 
-use super::desc::RobotDesc;
+use super::desc::{PoseDesc, RobotDesc};
 
-/// Number of arm joints.
-pub const DOF: usize = 6;
+/// The most arm joints (a redundant arm's seven).
+pub const MAX_DOF: usize = kitchen_r_core::robot::MAX_ARM_JOINTS;
 
-/// Joint-space vector.
-pub type JointVec = nalgebra::SVector<f64, DOF>;
+/// Joint-space vector: the arm's joints first, zeros after them.
+pub type JointVec = nalgebra::SVector<f64, MAX_DOF>;
+
+/// The TCP's geometric Jacobian: rows 0..3 linear, 3..6 angular; columns past the arm's joints
+/// are zero.
+pub type Jacobian = SMatrix<f64, 6, MAX_DOF>;
 
 /// Result of forward kinematics at one configuration.
 #[derive(Debug, Clone)]
 pub struct ArmFk {
-    /// Frame of each joint (after its rotation), base frame.
-    pub joints: [Isometry3<f64>; DOF],
+    /// Frame of each joint (after its rotation), base frame; past the arm's joints, the last
+    /// joint's frame again.
+    pub joints: [Isometry3<f64>; MAX_DOF],
+    /// The hand frame (palm and fingers hang from it), base frame.
+    pub hand: Isometry3<f64>,
     /// Tool centre point frame, base frame.
     pub tcp: Isometry3<f64>,
 }
@@ -23,45 +36,86 @@ pub struct ArmFk {
 /// The arm's kinematic model, extracted once from the description.
 #[derive(Debug, Clone)]
 pub struct ArmModel {
+    /// Number of joints (6 or 7).
+    pub dof: usize,
     pub mount: Vector3<f64>,
-    pub origins: [Vector3<f64>; DOF],
-    pub axes: [Vector3<f64>; DOF],
+    pub mount_rotation: Option<UnitQuaternion<f64>>,
+    pub origins: [Vector3<f64>; MAX_DOF],
+    pub rotations: [Option<UnitQuaternion<f64>>; MAX_DOF],
+    pub axes: [Vector3<f64>; MAX_DOF],
     pub lower: JointVec,
     pub upper: JointVec,
     pub max_velocity: JointVec,
     pub tcp_offset: f64,
+    /// The hand frame in the last joint's frame (`None`: that frame itself).
+    pub flange: Option<Isometry3<f64>>,
+}
+
+/// A unit quaternion from `w, x, y, z`.
+pub fn unit_quat(q: [f64; 4]) -> UnitQuaternion<f64> {
+    UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3]))
+}
+
+/// A description's pose as an isometry.
+pub fn pose_iso(p: &PoseDesc) -> Isometry3<f64> {
+    Isometry3::from_parts(Translation3::from(Vector3::from(p.xyz)), unit_quat(p.quat))
 }
 
 impl ArmModel {
     pub fn new(desc: &RobotDesc) -> ArmModel {
         let j = &desc.arm.joints;
+        let dof = j.len();
+        let each = |f: &dyn Fn(usize) -> f64| JointVec::from_fn(|i, _| if i < dof { f(i) } else { 0.0 });
         ArmModel {
+            dof,
             mount: Vector3::from(desc.arm.mount),
-            origins: std::array::from_fn(|i| Vector3::from(j[i].origin)),
-            axes: std::array::from_fn(|i| Vector3::from(j[i].axis.unit())),
-            lower: JointVec::from_fn(|i, _| j[i].limits[0]),
-            upper: JointVec::from_fn(|i, _| j[i].limits[1]),
-            max_velocity: JointVec::from_fn(|i, _| j[i].max_velocity),
+            mount_rotation: desc.arm.mount_rotation.map(unit_quat),
+            origins: std::array::from_fn(|i| j.get(i).map_or(Vector3::zeros(), |j| Vector3::from(j.origin))),
+            rotations: std::array::from_fn(|i| j.get(i).and_then(|j| j.rotation).map(unit_quat)),
+            axes: std::array::from_fn(|i| {
+                j.get(i)
+                    .map_or(Vector3::zeros(), |j| Vector3::from(j.axis.unit()))
+            }),
+            lower: each(&|i| j[i].limits[0]),
+            upper: each(&|i| j[i].limits[1]),
+            max_velocity: each(&|i| j[i].max_velocity),
             tcp_offset: desc.gripper.tcp_offset,
+            flange: desc.arm.flange.as_ref().map(pose_iso),
         }
     }
 
+    /// A joint-space vector from one value per arm joint (zeros past them).
+    pub fn vec(&self, values: &[f64]) -> JointVec {
+        JointVec::from_fn(|i, _| if i < self.dof { values[i] } else { 0.0 })
+    }
+
     pub fn forward(&self, q: &JointVec) -> ArmFk {
-        let mut frame = Isometry3::from_parts(Translation3::from(self.mount), UnitQuaternion::identity());
+        let mount = self.mount_rotation.unwrap_or_else(UnitQuaternion::identity);
+        let mut frame = Isometry3::from_parts(Translation3::from(self.mount), mount);
         let joints = std::array::from_fn(|i| {
-            let rot = UnitQuaternion::from_scaled_axis(self.axes[i] * q[i]);
-            frame *= Isometry3::from_parts(Translation3::from(self.origins[i]), rot);
+            if i < self.dof {
+                let rot = UnitQuaternion::from_scaled_axis(self.axes[i] * q[i]);
+                let rot = match self.rotations[i] {
+                    Some(fixed) => fixed * rot,
+                    None => rot,
+                };
+                frame *= Isometry3::from_parts(Translation3::from(self.origins[i]), rot);
+            }
             frame
         });
-        let tcp = frame * Translation3::new(self.tcp_offset, 0.0, 0.0);
-        ArmFk { joints, tcp }
+        let hand = match &self.flange {
+            Some(f) => frame * f,
+            None => frame,
+        };
+        let tcp = hand * Translation3::new(self.tcp_offset, 0.0, 0.0);
+        ArmFk { joints, hand, tcp }
     }
 
     /// Geometric Jacobian of the TCP: rows 0..3 linear, 3..6 angular, base frame.
-    pub fn jacobian(&self, fk: &ArmFk) -> Matrix6<f64> {
+    pub fn jacobian(&self, fk: &ArmFk) -> Jacobian {
         let p = fk.tcp.translation.vector;
-        let mut jac = Matrix6::zeros();
-        for i in 0..DOF {
+        let mut jac = Jacobian::zeros();
+        for i in 0..self.dof {
             let a = fk.joints[i].rotation * self.axes[i];
             let o = fk.joints[i].translation.vector;
             let lin = a.cross(&(p - o));
@@ -77,7 +131,7 @@ impl ArmModel {
     }
 
     pub fn within_limits(&self, q: &JointVec) -> bool {
-        (0..DOF).all(|i| q[i] >= self.lower[i] - 1e-9 && q[i] <= self.upper[i] + 1e-9)
+        (0..self.dof).all(|i| q[i] >= self.lower[i] - 1e-9 && q[i] <= self.upper[i] + 1e-9)
     }
 }
 
@@ -89,11 +143,11 @@ mod tests {
     fn jacobian_matches_finite_differences() {
         let desc = RobotDesc::load_default().unwrap();
         let arm = ArmModel::new(&desc);
-        let q = JointVec::from_column_slice(&[0.3, -0.2, 0.8, 0.4, 0.6, -0.5]);
+        let q = arm.vec(&[0.3, -0.2, 0.8, 0.4, 0.6, -0.5]);
         let fk = arm.forward(&q);
         let jac = arm.jacobian(&fk);
         let h = 1e-6;
-        for i in 0..DOF {
+        for i in 0..arm.dof {
             let mut q2 = q;
             q2[i] += h;
             let fk2 = arm.forward(&q2);

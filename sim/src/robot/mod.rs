@@ -12,6 +12,7 @@
 
 pub mod articulated;
 pub mod desc;
+pub mod ik;
 pub mod kinematics;
 pub mod rmp;
 
@@ -21,11 +22,14 @@ use rapier3d::prelude::*;
 use crate::convert::{iso_to_pose, planar, pose_to_iso, vec_to_glam, yaw_of};
 use crate::material::{Material, Materials, Owner, Tag};
 use desc::RobotDesc;
-use kinematics::{ArmModel, DOF, JointVec};
+use kinematics::{ArmModel, JointVec};
 use rmp::{ArmState, RmpParams};
 
-/// Names of the robot parts, indexed by the collider tag's `index`.
-pub const PART_NAMES: [&str; 10] = [
+mod links;
+
+/// Names of the robot parts, indexed by the collider tag's `index` (a seven-joint arm's last
+/// link is `link7`, after the gripper's parts, so the six-joint indices stay as they are).
+pub const PART_NAMES: [&str; 11] = [
     "base",
     "waist",
     "shoulder",
@@ -36,6 +40,7 @@ pub const PART_NAMES: [&str; 10] = [
     "palm",
     "left_finger",
     "right_finger",
+    "link7",
 ];
 const PALM: u32 = 7;
 const FINGERS: [u32; 2] = [8, 9];
@@ -54,7 +59,8 @@ const STOP_PENETRATION: f64 = 0.003;
 #[derive(Debug, Clone)]
 pub struct RobotBodies {
     pub base: RigidBodyHandle,
-    pub links: [RigidBodyHandle; DOF],
+    /// One body per arm joint, base to tool.
+    pub links: Vec<RigidBodyHandle>,
     pub fingers: [ColliderHandle; 2],
     /// Every arm collider with the index of the link it belongs to.
     pub arm_colliders: Vec<(ColliderHandle, usize)>,
@@ -109,7 +115,7 @@ impl Robot {
         start: [f64; 3],
     ) -> (Robot, RobotState) {
         let arm = ArmModel::new(desc);
-        let home = JointVec::from_column_slice(&desc.arm.home);
+        let home = arm.vec(&desc.arm.home);
         let b = &desc.base;
         let base_iso = planar(start[0], start[1], 0.0, start[2]);
         let base = world.insert_body(
@@ -158,41 +164,34 @@ impl Robot {
         let grip_mat = mats.add(Material::plain(desc.gripper.color));
         let mut arm_colliders = Vec::new();
         let mut fingers = [ColliderHandle::invalid(); 2];
-        let links = std::array::from_fn(|i| {
-            let pose = base_iso * fk.joints[i];
-            let h = world.insert_body(
-                RigidBodyBuilder::dynamic()
-                    .pose(iso_to_pose(&pose))
-                    .gravity_scale(0.0)
-                    .dominance_group(LINK_DOMINANCE)
-                    .can_sleep(false),
-            );
-            let end = if i + 1 < DOF {
-                arm.origins[i + 1]
-            } else {
-                Vector3::x() * (desc.gripper.tcp_offset - desc.gripper.palm_back)
-            };
-            let r = desc.arm.joints[i].link_radius as f32;
-            let shape = SharedShape::capsule(vec_to_glam(&Vector3::zeros()), vec_to_glam(&end), r);
-            arm_colliders.push((
-                world.insert_collider(collider(shape, i as u32 + 1, arm_mat, false), Some(h)),
-                i,
-            ));
-            if i == DOF - 1 {
-                let g = &desc.gripper;
-                let ps = g.palm_size.map(|v| v as f32 / 2.0);
-                let palm = collider(SharedShape::cuboid(ps[0], ps[1], ps[2]), PALM, grip_mat, false)
-                    .translation(vec_to_glam(&Vector3::new(g.tcp_offset - g.palm_back, 0.0, 0.0)));
-                arm_colliders.push((world.insert_collider(palm, Some(h)), i));
-                for (k, part) in FINGERS.iter().enumerate() {
-                    let fs = [g.finger_length, g.finger_thickness, g.finger_height].map(|v| v as f32 / 2.0);
-                    let co = collider(SharedShape::cuboid(fs[0], fs[1], fs[2]), *part, grip_mat, true);
-                    fingers[k] = world.insert_collider(co, Some(h));
-                    arm_colliders.push((fingers[k], i));
+        let links = (0..arm.dof)
+            .map(|i| {
+                let pose = base_iso * fk.joints[i];
+                let h = world.insert_body(
+                    RigidBodyBuilder::dynamic()
+                        .pose(iso_to_pose(&pose))
+                        .gravity_scale(0.0)
+                        .dominance_group(LINK_DOMINANCE)
+                        .can_sleep(false),
+                );
+                for co in links::link_colliders(desc, &arm, i, arm_mat, mats) {
+                    arm_colliders.push((world.insert_collider(co, Some(h)), i));
                 }
-            }
-            h
-        });
+                if i == arm.dof - 1 {
+                    let palm = links::palm(desc, &arm, grip_mat);
+                    arm_colliders.push((world.insert_collider(palm, Some(h)), i));
+                    for (k, part) in FINGERS.iter().enumerate() {
+                        let g = &desc.gripper;
+                        let fs =
+                            [g.finger_length, g.finger_thickness, g.finger_height].map(|v| v as f32 / 2.0);
+                        let co = collider(SharedShape::cuboid(fs[0], fs[1], fs[2]), *part, grip_mat, true);
+                        fingers[k] = world.insert_collider(co, Some(h));
+                        arm_colliders.push((fingers[k], i));
+                    }
+                }
+                h
+            })
+            .collect();
         let robot = Robot {
             desc: desc.clone(),
             arm,
@@ -238,6 +237,10 @@ impl Robot {
         for (k, s) in [1.0, -1.0].into_iter().enumerate() {
             let y = s * (opening / 2.0 + g.finger_thickness / 2.0);
             let p = Isometry3::translation(tcp, y, 0.0);
+            let p = match &self.arm.flange {
+                Some(f) => f * p,
+                None => p,
+            };
             if let Some(c) = world.colliders.get_mut(self.bodies.fingers[k]) {
                 c.set_position_wrt_parent(iso_to_pose(&p));
             }

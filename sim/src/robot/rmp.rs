@@ -7,11 +7,17 @@
 //! and combined by the canonical resolved solve `q̈ = (Σ Jᵢᵀ Mᵢ Jᵢ)⁺ Σ Jᵢᵀ Mᵢ aᵢ`. The result is
 //! integrated into joint velocity and position targets with the joint speed and position limits
 //! applied, so an unreachable target is approached but never reached through a limit.
+//!
+//! A seven-joint arm takes the same 6-value pose target: the attractors fix six directions of
+//! joint space and the posture pull towards the home pose (with joint damping) settles the
+//! seventh, the arm's self-motion, so its redundancy resolves towards home. Joint-space slots
+//! past the arm's joints carry a unit metric and no force: they stay zero and leave the solve of
+//! the arm's own joints exactly as it is without them.
 
-use nalgebra::{Isometry3, Matrix3, Matrix6, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Matrix3, SMatrix, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
-use super::kinematics::{ArmModel, DOF, JointVec};
+use super::kinematics::{ArmModel, JointVec, MAX_DOF};
 
 /// Gains and weights; `configs/sim.toml` `[rmp]`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -99,10 +105,13 @@ pub fn resolve(
     let m_p = Matrix3::identity() * p.position_weight;
     let m_o = Matrix3::identity() * p.orientation_weight;
 
-    let mut a_mat: Matrix6<f64> = jp.transpose() * m_p * jp + jo.transpose() * m_o * jo;
+    let mut a_mat: SMatrix<f64, MAX_DOF, MAX_DOF> = jp.transpose() * m_p * jp + jo.transpose() * m_o * jo;
     let mut b: JointVec = jp.transpose() * (m_p * a_p) + jo.transpose() * (m_o * a_o);
+    for i in arm.dof..MAX_DOF {
+        a_mat[(i, i)] = 1.0;
+    }
 
-    for i in 0..DOF {
+    for i in 0..arm.dof {
         // Barrier: its metric grows as the joint nears a limit, so it overrides the attractor there.
         let (lo, hi) = (state.q[i] - arm.lower[i], arm.upper[i] - state.q[i]);
         let (d, dir) = if lo < hi { (lo, 1.0) } else { (hi, -1.0) };
@@ -134,7 +143,7 @@ pub fn resolve(
 /// Integrate one controller step of length `dt`, applying speed and position limits.
 pub fn integrate(arm: &ArmModel, state: &ArmState, qdd: &JointVec, dt: f64) -> ArmState {
     let mut next = *state;
-    for i in 0..DOF {
+    for i in 0..arm.dof {
         let v = (state.qd[i] + qdd[i] * dt).clamp(-arm.max_velocity[i], arm.max_velocity[i]);
         let q = state.q[i] + v * dt;
         let clamped = q.clamp(arm.lower[i], arm.upper[i]);
@@ -153,7 +162,7 @@ mod tests {
     fn run(target: Isometry3<f64>, steps: usize) -> (ArmModel, ArmState) {
         let desc = RobotDesc::load_default().unwrap();
         let arm = ArmModel::new(&desc);
-        let home = JointVec::from_column_slice(&desc.arm.home);
+        let home = arm.vec(&desc.arm.home);
         let mut s = ArmState {
             q: home,
             qd: JointVec::zeros(),
