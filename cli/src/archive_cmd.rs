@@ -95,7 +95,7 @@ pub(crate) fn import(server: &ServerArgs, token: &str, file: &Path, raw: bool) -
         .collect();
     if !teams.is_empty() {
         println!(
-            "teams have no token after an import ({}): issue new ones with POST /api/v1/teams/{{id}}/token",
+            "teams have no token after an import ({}): issue new ones with `kitchen-r team rotate-token ID`",
             teams.join(", ")
         );
     }

@@ -11,6 +11,7 @@ mod support;
 mod remote_support;
 
 mod admin;
+mod archive;
 mod audit;
 mod baseline_diffusion;
 mod baseline_planner;

@@ -202,6 +202,8 @@ pub(crate) struct Console {
     pub queue: QueueView,
     pub workers: WorkersView,
     pub runs: RunsView,
+    /// `admin verify`'s stored verdicts (issue #42): a run marked unverified shows it.
+    pub verifications: Vec<super::verification::Verdict>,
 }
 
 /// A consistent copy of the database, open and already unlinked from the file system (Unix):
@@ -348,6 +350,7 @@ impl AppState {
             queue: self.admin_queue(admin).await?,
             workers: self.admin_workers(admin).await?,
             runs: self.admin_runs(admin).await?,
+            verifications: self.verdicts().await?,
         })
     }
 

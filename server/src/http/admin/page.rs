@@ -136,6 +136,9 @@ pub(super) fn console(c: &Console, csrf: &str) -> String {
                                         (Some(at), Some(by)) => { "cancelled by " (by) " at " (at) }
                                         _ => { (r.state.as_str()) }
                                     }
+                                    @if let Some(v) = c.verifications.iter().find(|v| v.run == r.run) {
+                                        @if v.verdict == "verified" { " · verified" } @else { " · " strong { "UNVERIFIED" } }
+                                    }
                                 }
                                 td { progress max=(r.episodes_total.max(1)) value=(r.episodes_done) {} " " (r.episodes_done) "/" (r.episodes_total) }
                                 td.n { (r.episodes_running) } td.n { (r.episodes_queued) } td.n { (r.episodes_gave_up) }

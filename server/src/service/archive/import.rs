@@ -33,7 +33,7 @@ pub(crate) struct Imported {
     pub binary_version: String,
     pub dataset: String,
     /// Teams have no token after an import: the organiser issues new ones
-    /// (`POST /api/v1/teams/{id}/token`).
+    /// (`kitchen-r team rotate-token ID`, `POST /api/v1/teams/{id}/token`).
     pub teams_without_token: Vec<String>,
     pub notice: String,
 }
