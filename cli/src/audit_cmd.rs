@@ -1,14 +1,22 @@
 //! `kitchen-r dataset audit DIR`: the leak and feasibility audit an organiser runs on a test set
 //! before a contest. The figures come from `kitchen_r_core::audit`; `--oracle` adds a run of the
 //! privileged oracle over every test instruction through `kitchen_r_episode::eval`, the code path
-//! of `kitchen-r eval --policy builtin:oracle --ground-truth FILE`.
+//! of `kitchen-r eval --policy builtin:oracle --ground-truth FILE`. The starter kit's parser is
+//! Python: the audit runs `starter-kit/baselines/planner/plan_file.py` with `python3` on the
+//! set's instructions and the scenes' briefs (as the server serves them) and says so in the
+//! report, or scores a plan file given with `--parser-plans`; without python3 it says why the
+//! figure is missing rather than failing.
 
-use std::path::PathBuf;
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::process::Command;
 
 use anyhow::{Context, bail};
 use clap::Args;
 use kitchen_r_core::audit::{self, OracleCheck, OracleFailure, Thresholds};
-use kitchen_r_core::dataset::Split;
+use kitchen_r_core::catalogue::Catalogue;
+use kitchen_r_core::dataset::{Split, read_jsonl};
+use kitchen_r_core::scene::Scene;
 use kitchen_r_episode::eval::{EvalConfig, EvalOptions, PolicyChoice, evaluate};
 
 #[derive(Args, Debug)]
@@ -42,6 +50,26 @@ pub(super) struct AuditArgs {
     /// the repository's assets].
     #[arg(long, value_name = "DIR")]
     assets: Option<PathBuf>,
+    /// Largest acceptable EM of the bag-of-mentions guess (the attack's fallback alone: the
+    /// mentioned objects and places, in order, in the most common public plan shape).
+    #[arg(long, value_name = "F", default_value_t = audit::DEFAULT_MAX_BAG_OF_MENTIONS_EM)]
+    max_bag_of_mentions_em: f64,
+    /// Largest acceptable EM of the starter kit's rule-based parser (checked when it ran).
+    #[arg(long, value_name = "F", default_value_t = audit::DEFAULT_MAX_PARSER_EM)]
+    max_parser_em: f64,
+    /// Score this plan file (JSON Lines `{"id", "plan"}`, e.g. from
+    /// `starter-kit/baselines/planner/plan_file.py`) as the starter kit's parser instead of
+    /// running it.
+    #[arg(long, value_name = "FILE", conflicts_with = "no_parser")]
+    parser_plans: Option<PathBuf>,
+    /// Do not run the starter kit's parser. By default the audit runs it when `python3` is on
+    /// PATH and the planner folder is found, and says so; otherwise it reports why not.
+    #[arg(long)]
+    no_parser: bool,
+    /// The starter kit's planner folder (holding plan_file.py) [default:
+    /// starter-kit/baselines/planner beside the assets directory].
+    #[arg(long, value_name = "DIR")]
+    planner: Option<PathBuf>,
     /// --oracle: parallel episodes [default: the number of cores].
     #[arg(long)]
     jobs: Option<usize>,
@@ -57,6 +85,14 @@ pub(super) fn audit(args: AuditArgs) -> anyhow::Result<()> {
         .unwrap_or_else(kitchen_r_core::assets::assets_dir);
     let mut report = audit::audit(&args.dir, &assets)
         .with_context(|| format!("auditing {} against {}", args.dir.display(), assets.display()))?;
+    if report.ground_truth {
+        let (plans, note) = parser_plans(&args, &assets)?;
+        report.parser = match plans {
+            Some(plans) => audit::score_plans(&args.dir, &plans)?,
+            None => None,
+        };
+        report.parser_note = Some(note);
+    }
     if args.oracle {
         report.oracle = Some(run_oracle(&args)?);
     }
@@ -65,6 +101,8 @@ pub(super) fn audit(args: AuditArgs) -> anyhow::Result<()> {
         max_public_phrasing_share: args.max_public_phrasing_share,
         max_shared_plans: args.max_shared_plans,
         max_oracle_failures: 0,
+        max_bag_of_mentions_em: args.max_bag_of_mentions_em,
+        max_parser_em: args.max_parser_em,
     };
     let checks = report.checks(&thresholds);
     let passed = checks.iter().all(|c| c.passed);
@@ -84,6 +122,89 @@ pub(super) fn audit(args: AuditArgs) -> anyhow::Result<()> {
         bail!("audit failed: {}", failed.join(", "));
     }
     Ok(())
+}
+
+/// The starter kit's parser's plans for the test split, and how they were got (or why not).
+fn parser_plans(
+    args: &AuditArgs,
+    assets: &Path,
+) -> anyhow::Result<(Option<HashMap<String, Vec<String>>>, String)> {
+    if let Some(file) = &args.parser_plans {
+        let plans = read_plans(file)?;
+        return Ok((Some(plans), format!("plans read from {}", file.display())));
+    }
+    if args.no_parser {
+        return Ok((None, "--no-parser".into()));
+    }
+    let planner = (args.planner.clone()).unwrap_or_else(|| assets.join("../starter-kit/baselines/planner"));
+    let script = planner.join("plan_file.py");
+    let script = script.canonicalize().unwrap_or(script);
+    if !script.is_file() {
+        return Ok((
+            None,
+            format!(
+                "{} not found (--planner DIR names the starter kit's planner folder)",
+                script.display()
+            ),
+        ));
+    }
+    let instructions = ["test.jsonl", "test_ground_truth.jsonl"]
+        .map(|f| args.dir.join(f))
+        .into_iter()
+        .find(|p| p.is_file())
+        .context("the set has no test.jsonl")?;
+    let scratch = tempfile::tempdir().context("a scratch folder for the parser")?;
+    let briefs = scratch.path().join("briefs");
+    std::fs::create_dir(&briefs)?;
+    let catalogue = Catalogue::load(&assets.join("objects.toml"))?;
+    for scene in Scene::load_all(&assets.join("scenes"), &catalogue)? {
+        std::fs::write(briefs.join(format!("{}.txt", scene.id)), scene.planner_brief())?;
+    }
+    let out = scratch.path().join("plans.jsonl");
+    let started = std::time::Instant::now();
+    let run = Command::new("python3")
+        .arg(&script)
+        .arg("--instructions")
+        .arg(&instructions)
+        .arg("--briefs")
+        .arg(&briefs)
+        .arg("--out")
+        .arg(&out)
+        .output();
+    let run = match run {
+        Ok(run) => run,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            return Ok((
+                None,
+                "python3 is not on PATH (or give --parser-plans FILE)".into(),
+            ));
+        }
+        Err(e) => return Err(e).context("running python3"),
+    };
+    if !run.status.success() {
+        bail!(
+            "the starter kit's parser failed ({}): {}",
+            script.display(),
+            String::from_utf8_lossy(&run.stderr).trim()
+        );
+    }
+    let note = format!(
+        "ran python3 {} in {:.1} s",
+        script.display(),
+        started.elapsed().as_secs_f64()
+    );
+    Ok((Some(read_plans(&out)?), note))
+}
+
+/// A plan file: JSON Lines `{"id": ..., "plan": [...]}`.
+fn read_plans(path: &Path) -> anyhow::Result<HashMap<String, Vec<String>>> {
+    #[derive(serde::Deserialize)]
+    struct Line {
+        id: String,
+        plan: Vec<String>,
+    }
+    let lines: Vec<Line> = read_jsonl(path).with_context(|| format!("reading plans {}", path.display()))?;
+    Ok(lines.into_iter().map(|l| (l.id, l.plan)).collect())
 }
 
 /// Every test instruction through the privileged oracle; the failed ones with their reasons.

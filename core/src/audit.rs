@@ -10,6 +10,12 @@
 //!   EM against the set's ground truth;
 //! - test instructions whose (scene, plan) pair also occurs in the public dev split, or equals
 //!   the public sample's answer under the same id (the sign of a reused public seed);
+//! - the EM of three planners that do not understand language: the bag-of-mentions guess (the
+//!   attack's fallback alone), the public template inverter (the attack) and, filled in by the
+//!   CLI ([`score_plans`]), the starter kit's rule-based parser;
+//! - for a set composed with language features, the composer's counts from the manifest:
+//!   instructions composed, instructions left with their template phrasing, and the renderings
+//!   the uniqueness checker refused, by reason;
 //! - optionally (the CLI runs the oracle, this crate has no simulator) the instructions the
 //!   privileged oracle cannot complete.
 //!
@@ -35,7 +41,7 @@ pub use report::Check;
 use crate::ContentError;
 use crate::catalogue::Catalogue;
 use crate::dataset::templates::load_templates;
-use crate::dataset::{Instruction, read_jsonl};
+use crate::dataset::{Instruction, LanguageSummary, read_jsonl};
 use crate::metrics::PlanMatch;
 use crate::scene::Scene;
 
@@ -52,6 +58,13 @@ pub const DEFAULT_MAX_PUBLIC_PHRASING_SHARE: f64 = 0.0;
 /// and scenes few, so some coincide by chance even in a well-made private set (25 to 38 of 400
 /// with the dev split for seeds 1 to 4); a reused public seed repeats nearly all 400.
 pub const DEFAULT_MAX_SHARED_PLANS: usize = 60;
+/// Default limit on the EM of the bag-of-mentions guess (the attack's fallback alone: the
+/// objects and places an instruction mentions, in the order mentioned, poured into the most
+/// common public plan shape). Above it, a planner scores well without reading the sentence.
+pub const DEFAULT_MAX_BAG_OF_MENTIONS_EM: f64 = 0.3;
+/// Default limit on the EM of the starter kit's rule-based parser: a set it solves cannot tell
+/// planners that understand language from a hand-written parser (docs/measured/baseline-planning.md).
+pub const DEFAULT_MAX_PARSER_EM: f64 = 0.6;
 
 /// The limits a set must stay within.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -61,6 +74,9 @@ pub struct Thresholds {
     pub max_shared_plans: usize,
     /// Instructions the oracle may fail (only checked when the oracle ran).
     pub max_oracle_failures: usize,
+    pub max_bag_of_mentions_em: f64,
+    /// Only checked when the parser ran (or its plans were given).
+    pub max_parser_em: f64,
 }
 
 impl Default for Thresholds {
@@ -70,6 +86,8 @@ impl Default for Thresholds {
             max_public_phrasing_share: DEFAULT_MAX_PUBLIC_PHRASING_SHARE,
             max_shared_plans: DEFAULT_MAX_SHARED_PLANS,
             max_oracle_failures: 0,
+            max_bag_of_mentions_em: DEFAULT_MAX_BAG_OF_MENTIONS_EM,
+            max_parser_em: DEFAULT_MAX_PARSER_EM,
         }
     }
 }
@@ -147,6 +165,47 @@ pub struct AuditReport {
     pub attack: Option<AttackScore>,
     pub shared_plans: Option<Vec<SharedPlan>>,
     pub oracle: Option<OracleCheck>,
+    /// What the language composer did, from the manifest (sets composed with features).
+    pub language: Option<LanguageSummary>,
+    /// The starter kit's parser on this set, filled in by the caller that ran it (or read its
+    /// plans); `parser_note` says how, or why it did not run.
+    pub parser: Option<PlannerScore>,
+    pub parser_note: Option<String>,
+}
+
+/// A planner's plans scored against the set's ground truth with the contest's EM.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PlannerScore {
+    pub em: f64,
+    /// Instructions whose plan it got entirely right.
+    pub perfect: usize,
+    /// Test instructions it gave no plan for (scored 0).
+    pub missing: usize,
+}
+
+/// Score `plans` (instruction id → steps) against the ground truth in `dir`; `None` without one.
+pub fn score_plans(
+    dir: &Path,
+    plans: &HashMap<String, Vec<String>>,
+) -> Result<Option<PlannerScore>, ContentError> {
+    let gt_path = dir.join("test_ground_truth.jsonl");
+    if !gt_path.is_file() {
+        return Ok(None);
+    }
+    let truth: Vec<Record> = read_jsonl(&gt_path)?;
+    let matches: Vec<PlanMatch> = (truth.iter())
+        .map(|r| {
+            PlanMatch::of(
+                plans.get(&r.id).map(Vec::as_slice),
+                r.plan.as_deref().unwrap_or(&[]),
+            )
+        })
+        .collect();
+    Ok(Some(PlannerScore {
+        em: crate::metrics::em_of(&matches),
+        perfect: matches.iter().filter(|m| m.correct == m.total).count(),
+        missing: truth.iter().filter(|r| !plans.contains_key(&r.id)).count(),
+    }))
 }
 
 /// A test record as the files hold it (plans only in the ground truth); unknown fields are
@@ -175,7 +234,7 @@ pub fn audit(dir: &Path, public_assets: &Path) -> Result<AuditReport, ContentErr
     let (gt_path, public_path) = (dir.join("test_ground_truth.jsonl"), dir.join("test.jsonl"));
     let ground_truth = gt_path.is_file();
     let test: Vec<Record> = read_jsonl(if ground_truth { &gt_path } else { &public_path })?;
-    let kind = manifest_kind(dir)?;
+    let (kind, language) = manifest_kind(dir)?;
 
     let dev_texts: HashMap<&str, &str> = (dev.iter().rev())
         .map(|d| (d.instruction.as_str(), d.id.as_str()))
@@ -270,15 +329,18 @@ pub fn audit(dir: &Path, public_assets: &Path) -> Result<AuditReport, ContentErr
         }),
         shared_plans: ground_truth.then_some(shared),
         oracle: None,
+        language,
+        parser: None,
+        parser_note: None,
     })
 }
 
-/// The manifest's `kind`, read loosely so that any manifest version works; no manifest or no
-/// `kind` gives `None`.
-fn manifest_kind(dir: &Path) -> Result<Option<String>, ContentError> {
+/// The manifest's `kind` and `language`, read loosely so that any manifest version works; no
+/// manifest or no such key gives `None`.
+fn manifest_kind(dir: &Path) -> Result<(Option<String>, Option<LanguageSummary>), ContentError> {
     let path = dir.join("manifest.json");
     if !path.is_file() {
-        return Ok(None);
+        return Ok((None, None));
     }
     let text = std::fs::read_to_string(&path).map_err(|source| ContentError::Io {
         path: path.clone(),
@@ -288,5 +350,9 @@ fn manifest_kind(dir: &Path) -> Result<Option<String>, ContentError> {
         path,
         message: e.to_string(),
     })?;
-    Ok(v.get("kind").and_then(|k| k.as_str()).map(str::to_string))
+    let language = (v.get("language")).and_then(|l| serde_json::from_value(l.clone()).ok());
+    Ok((
+        v.get("kind").and_then(|k| k.as_str()).map(str::to_string),
+        language,
+    ))
 }

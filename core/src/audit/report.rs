@@ -26,6 +26,12 @@ const PHRASING_ADVICE: &str = "some test instructions use a public phrasing (ass
 const SHARED_ADVICE: &str = "too many test plans repeat a public plan in the same scene (a dev plan, or \
      the public sample's answer under the same id, which a reused public seed gives): regenerate with \
      another secret seed";
+const MENTIONS_ADVICE: &str = "the objects and places an instruction mentions, in the order mentioned, give its \
+     plan away: compose the test split with language features (`dataset generate --language all`, the \
+     default with --phrasings) or vary mention order in the private phrasings";
+const PARSER_ADVICE: &str = "the starter kit's rule-based parser solves this set, so it cannot tell planners \
+     apart: compose the test split with language features (the default with --phrasings) and give \
+     the private phrasings file a [language] table of wording no public file contains";
 const ORACLE_ADVICE: &str = "the oracle cannot complete the listed instructions: fix the scenes or \
      templates that produce them (see the reasons) and regenerate; a contest set must be executable";
 
@@ -57,6 +63,18 @@ impl AuditReport {
                 self.shared_plans.as_ref().map(|s| s.len() as f64),
                 t.max_shared_plans as f64,
                 SHARED_ADVICE,
+            ),
+            check(
+                "bag-of-mentions EM",
+                self.attack.as_ref().map(|a| a.fallback_em),
+                t.max_bag_of_mentions_em,
+                MENTIONS_ADVICE,
+            ),
+            check(
+                "parser EM",
+                self.parser.as_ref().map(|p| p.em),
+                t.max_parser_em,
+                PARSER_ADVICE,
             ),
             check(
                 "oracle failures",
@@ -94,17 +112,57 @@ impl AuditReport {
         }
         match &self.attack {
             Some(a) => {
+                let _ = writeln!(
+                    s,
+                    "\nplanners that do not understand language (EM against the ground truth)"
+                );
+                let _ = writeln!(
+                    s,
+                    "  bag-of-mentions guess              {:.3}  (mentions in order, most common public plan shape)",
+                    a.fallback_em
+                );
+                let _ = writeln!(s, "  public template inverter           {:.3}", a.em);
+                match (&self.parser, &self.parser_note) {
+                    (Some(p), note) => {
+                        let _ = writeln!(
+                            s,
+                            "  starter kit's parser               {:.3}  ({})",
+                            p.em,
+                            note.as_deref().unwrap_or("plans given")
+                        );
+                    }
+                    (None, Some(note)) => {
+                        let _ = writeln!(s, "  starter kit's parser               not run: {note}");
+                    }
+                    (None, None) => {
+                        let _ = writeln!(s, "  starter kit's parser               not run");
+                    }
+                }
                 let _ = writeln!(s, "\ntemplate-inversion attack");
-                let _ = writeln!(s, "  EM                                 {:.3}", a.em);
-                let _ = writeln!(s, "  EM of its fallback alone           {:.3}", a.fallback_em);
                 row(&mut s, "inverted by a public phrasing", a.inverted);
                 row(&mut s, "plans entirely right", a.perfect);
+                if let Some(p) = &self.parser {
+                    let _ = writeln!(s, "\nstarter kit's parser");
+                    row(&mut s, "plans entirely right", p.perfect);
+                    row(&mut s, "no plan given", p.missing);
+                }
             }
             None => {
                 let _ = writeln!(
                     s,
-                    "\nno test_ground_truth.jsonl: attack EM and shared plans not computed"
+                    "\nno test_ground_truth.jsonl: attack EM, planner EMs and shared plans not computed"
                 );
+            }
+        }
+        if let Some(l) = &self.language {
+            let features: Vec<&str> = l.features.iter().map(|f| f.as_str()).collect();
+            let _ = writeln!(s, "\nlanguage features: {}", features.join(", "));
+            row(&mut s, "composed", l.composed);
+            row(&mut s, "kept the template phrasing", l.template_phrased);
+            let refused: usize = l.rejected.values().sum();
+            let _ = writeln!(s, "  renderings refused by the uniqueness checker: {refused}");
+            for (reason, k) in &l.rejected {
+                let _ = writeln!(s, "    {reason:<32} {k:>5}");
             }
         }
         if let Some(shared) = &self.shared_plans {

@@ -124,6 +124,7 @@ fn reworded_sample(name: &str) -> PathBuf {
 fn mention_order_thresholds() -> Thresholds {
     Thresholds {
         max_attack_em: 0.75,
+        max_bag_of_mentions_em: 0.75,
         ..Thresholds::default()
     }
 }

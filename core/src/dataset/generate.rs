@@ -27,6 +27,7 @@ use super::{
     TOTAL_INSTRUCTIONS,
 };
 use crate::ContentError;
+use crate::audit::{Attack, Source};
 use crate::catalogue::Catalogue;
 use crate::plan::parse_plan;
 use crate::reach::ArmReach;
@@ -123,6 +124,10 @@ pub fn generate_with(options: &GenerateOptions, assets: &Path) -> Result<Dataset
             Some(private.map_or_else(|| public.clone(), |p| public.overlay(p)))
         }
     };
+    // A composed sentence that a public phrasing reproduces would leak its plan: refused.
+    let public_phrasings = lexicon
+        .is_some()
+        .then(|| crate::audit::Attack::from_parts(&templates, &scenes, &[]));
     let mut tally = Tally::default();
     let mut used_texts: BTreeSet<(String, String)> = BTreeSet::new();
     let mut all = Vec::with_capacity(TOTAL_INSTRUCTIONS);
@@ -145,8 +150,7 @@ pub fn generate_with(options: &GenerateOptions, assets: &Path) -> Result<Dataset
                     &inst,
                     scene,
                     &catalogue,
-                    lexicon,
-                    &options.language,
+                    (lexicon, &options.language, public_phrasings.as_ref()),
                     &mut rng,
                     &mut tally,
                 )
@@ -279,15 +283,18 @@ fn compose_checked(
     inst: &Instruction,
     scene: &Scene,
     catalogue: &Catalogue,
-    lexicon: &Lexicon,
-    features: &BTreeSet<Feature>,
+    (lexicon, features, public): (&Lexicon, &BTreeSet<Feature>, Option<&Attack>),
     rng: &mut SplitMix64,
     tally: &mut Tally,
 ) -> Option<String> {
     let steps = parse_plan(&inst.plan).ok()?;
     for _ in 0..language::ATTEMPTS {
         let (text, meaning) = language::compose(&steps, scene, lexicon, features, rng)?;
+        let is_public = |text: &str| {
+            public.is_some_and(|a| matches!(a.predict(&scene.id, text).source, Source::Template(_)))
+        };
         let reason = match language::check(&meaning, scene, catalogue) {
+            Ok(_) if is_public(&text) => "a public template phrasing",
             Ok(plan) if plan == inst.plan => return Some(text),
             Ok(_) => "another plan than the template's",
             Err(r) => r.reason(),

@@ -105,7 +105,7 @@ pub fn compose(
     let order = (on(Feature::Order) && !splits.is_empty() && rng.below(3) > 0)
         .then(|| {
             let k = *rng.choose(&splits)?;
-            let reverse = rng.below(2) == 0;
+            let reverse = rng.below(3) > 0;
             Some((k, reverse))
         })
         .flatten();
@@ -128,7 +128,7 @@ pub fn compose(
     let mut post = Vec::new();
     // The sentences around the main one are said first or last; mentions follow the text.
     let me_first = w.rng.below(2) == 0;
-    let leave = on(Feature::Distractors) && w.rng.below(2) == 0;
+    let leave = on(Feature::Distractors) && w.rng.below(3) > 0;
     let leave_first = w.rng.below(2) == 0;
     if let Some(z) = &me_zone
         && me_first
@@ -507,7 +507,7 @@ impl Writer<'_, '_> {
 
     /// A place: plainly, or (relational) by an unmoved object there.
     fn place_ref(&mut self, zone: &str) -> Option<(String, usize)> {
-        if self.on(Feature::Relational) && self.rng.below(3) == 0 {
+        if self.on(Feature::Relational) && self.rng.below(2) == 0 {
             let objects = &self.scene.key_objects;
             let there: Vec<usize> = (0..objects.len())
                 .filter(|&u| objects[u].zone == zone && !self.moved.contains(&u))
