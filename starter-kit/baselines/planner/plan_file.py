@@ -35,13 +35,13 @@ import argparse
 import json
 import os
 import sys
-from typing import Dict, List, Optional
+from typing import Optional
 
 from . import interpret
 from .scene import Scene, parse_brief
 
 
-def plan_all(items: List[dict], scenes: Dict[str, Scene]) -> List[dict]:
+def plan_all(items: list[dict], scenes: dict[str, Scene]) -> list[dict]:
     """One `{"id", "plan"}` per instruction; an instruction the parser fails on gets an empty plan."""
     out = []
     for d in items:
@@ -53,7 +53,7 @@ def plan_all(items: List[dict], scenes: Dict[str, Scene]) -> List[dict]:
     return out
 
 
-def main(argv: Optional[List[str]] = None) -> int:
+def main(argv: Optional[list[str]] = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--instructions", required=True, help="JSON Lines with id, scene, instruction")
     p.add_argument("--briefs", required=True, help="folder of scene briefs, <scene id>.txt")
