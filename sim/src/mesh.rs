@@ -138,10 +138,62 @@ pub fn load_robot(robot: &kitchen_r_core::robot::RobotDesc) -> Result<(), SimErr
                     format!("scale {scale:?}: the twin scales a robot mesh uniformly; give one value thrice"),
                 ));
             }
-            load(&file.to_string_lossy(), scale[0])?;
+            let name = file.to_string_lossy();
+            let mesh = load(&name, scale[0])?;
+            let key = (name.to_string(), scale[0].to_bits());
+            if let Ok(mut c) = robot_hulls().lock()
+                && !c.contains_key(&key)
+            {
+                let hull = coarse_hull(&mesh).ok_or_else(|| mesh_error(file, "the mesh is flat".into()))?;
+                c.insert(key, hull);
+            }
         }
     }
     Ok(())
+}
+
+/// Most vertices of a robot link's collision hull.
+const ROBOT_HULL_VERTICES: usize = 32;
+
+fn robot_hulls() -> &'static Mutex<BTreeMap<(String, u64), SharedShape>> {
+    static HULLS: OnceLock<Mutex<BTreeMap<(String, u64), SharedShape>>> = OnceLock::new();
+    HULLS.get_or_init(|| Mutex::new(BTreeMap::new()))
+}
+
+/// A robot link mesh's collision hull (centred like the mesh), loaded by [`load_robot`]: the
+/// convex hull of at most [`ROBOT_HULL_VERTICES`] of the mesh's hull vertices, picked farthest
+/// first. A CAD link's full hull has hundreds of vertices, and every arm link is queried against
+/// the scene at every substep; the coarse hull lies inside the full one and costs a fraction.
+pub fn robot_hull(file: &str, scale: f64) -> Option<SharedShape> {
+    robot_hulls()
+        .lock()
+        .ok()?
+        .get(&(file.to_string(), scale.to_bits()))
+        .cloned()
+}
+
+fn coarse_hull(mesh: &MeshData) -> Option<SharedShape> {
+    let all: Vec<Vector> = match mesh.hull.as_convex_polyhedron() {
+        Some(p) => p.points().to_vec(),
+        None => points(&mesh.vertices),
+    };
+    if all.len() <= ROBOT_HULL_VERTICES {
+        return SharedShape::convex_hull(&all);
+    }
+    let mut picked = vec![all[0]];
+    let mut dist: Vec<f32> = all.iter().map(|p| (*p - all[0]).length_squared()).collect();
+    while picked.len() < ROBOT_HULL_VERTICES {
+        let (far, _) = dist
+            .iter()
+            .enumerate()
+            .fold((0, -1.0f32), |b, (i, d)| if *d > b.1 { (i, *d) } else { b });
+        let p = all[far];
+        picked.push(p);
+        for (d, q) in dist.iter_mut().zip(&all) {
+            *d = d.min((*q - p).length_squared());
+        }
+    }
+    SharedShape::convex_hull(&picked)
 }
 
 impl MeshData {

@@ -217,12 +217,11 @@ pub(crate) fn joint(
             Shape::Capsule { radius, .. } | Shape::Cylinder { radius, .. } => (radius, Vec::new()),
             _ => unreachable!("capsule() returns capsules and cylinders"),
         },
-        Err(no_capsule) => {
+        Err(_) => {
+            // A link of its own shapes, or none (a bare wrist link between two joints, as
+            // xArm 7's link7): radius 0 and no shapes is a link without collider.
             let set = fixed_frames(t, a.child, next);
             let shapes = link_shapes(t, &set, &Frame::IDENTITY, first_colour(t, a.child))?;
-            if shapes.is_empty() {
-                return Err(no_capsule);
-            }
             (0.0, shapes)
         }
     };

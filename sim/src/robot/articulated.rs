@@ -93,14 +93,19 @@ impl Robot {
         let dof = robot.arm.dof;
         let mut links = Vec::new();
         for i in 0..dof {
-            let h = world.insert_body(
-                RigidBodyBuilder::dynamic()
-                    .pose(iso_to_pose(&(base_iso * fk.joints[i])))
-                    .gravity_scale(0.0)
-                    .can_sleep(false),
-            );
             let mass = desc.arm.joints[i].mass.unwrap_or(DEFAULT_LINK_MASS);
             let link = links::link_colliders(desc, &robot.arm, i, arm_mat, mats);
+            let body = RigidBodyBuilder::dynamic()
+                .pose(iso_to_pose(&(base_iso * fk.joints[i])))
+                .gravity_scale(0.0)
+                .can_sleep(false);
+            // A link without shapes carries its mass on the body.
+            let body = if link.is_empty() {
+                body.additional_mass(mass as f32)
+            } else {
+                body
+            };
+            let h = world.insert_body(body);
             let each = mass as f32 / link.len() as f32;
             for co in link {
                 arm_colliders.push((world.insert_collider(co.mass(each), Some(h)), i));

@@ -30,7 +30,7 @@ pub(crate) fn link_colliders(
         .iter()
         .filter_map(|s| shape_collider(s, part(i), mats))
         .collect();
-    if j.shapes.is_empty() {
+    if j.shapes.is_empty() && j.link_radius > 0.0 {
         let end = if i + 1 < arm.dof {
             arm.origins[i + 1]
         } else {
@@ -77,10 +77,11 @@ fn shape_collider(s: &LinkShape, part: u32, mats: &mut Materials) -> Option<Coll
     let mut pose = pose_iso(&s.pose);
     let shape = match &s.geometry {
         Geometry::Mesh { file, scale } => {
-            let mesh = crate::mesh::cached(&file.to_string_lossy(), scale[0])?;
+            let name = file.to_string_lossy();
+            let mesh = crate::mesh::cached(&name, scale[0])?;
             // The cached mesh is centred on its bounding box: put the centre back.
             pose *= Translation3::from(Vector3::from(mesh.center));
-            mesh.hull.clone()
+            crate::mesh::robot_hull(&name, scale[0])?
         }
         Geometry::Box { size } => {
             SharedShape::cuboid(size[0] as f32 / 2.0, size[1] as f32 / 2.0, size[2] as f32 / 2.0)
