@@ -203,6 +203,9 @@ fn sentence(s: &str) -> String {
     out
 }
 
+/// Builds a clause's act from the object and place mentions its holes made.
+type MakeAct = fn(&[usize], &[usize]) -> Act;
+
 /// A hole of a clause pattern.
 #[derive(Debug, Clone)]
 enum Hole {
@@ -260,7 +263,7 @@ impl Writer<'_, '_> {
     /// One act as a clause; `carrying` is what the robot holds when a visit is said.
     fn clause(&mut self, did: &Did, carrying: Option<usize>) -> Option<String> {
         let me = |z: &String| self.me_zone.as_ref() == Some(z);
-        let (pattern, holes, act): (String, Vec<(&str, Hole)>, fn(&[usize], &[usize]) -> Act) = match did {
+        let (pattern, holes, act): (String, Vec<(&str, Hole)>, MakeAct) = match did {
             Did::Go(z) if me(z) && self.rng.below(2) == 0 => {
                 let p = self.pick(&self.lex.go_me)?;
                 let place = self.push_place(PlaceRef::Me);
