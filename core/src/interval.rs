@@ -12,11 +12,22 @@ pub fn wilson95(successes: u64, n: u64) -> (f64, f64) {
 
 /// The Wilson score interval for `z` standard deviations.
 pub fn wilson(successes: u64, n: u64, z: f64) -> (f64, f64) {
-    if n == 0 {
+    wilson_of_mean(successes.min(n) as f64 / n.max(1) as f64, n, z)
+}
+
+/// The 95 % Wilson interval of a mean of `n` values each in `[0, 1]` (a mean of per-episode
+/// success rates, an exact-match proportion over instructions): the proportion's formula with
+/// `mean` for `successes / n`. Such values vary at most as much as successes and failures do,
+/// so the interval is at least as wide as it needs to be. `(0, 1)` when `n` is 0.
+pub fn wilson95_of_mean(mean: f64, n: u64) -> (f64, f64) {
+    wilson_of_mean(mean, n, Z95)
+}
+
+fn wilson_of_mean(mean: f64, n: u64, z: f64) -> (f64, f64) {
+    if n == 0 || mean.is_nan() {
         return (0.0, 1.0);
     }
-    let (k, n) = (successes.min(n) as f64, n as f64);
-    let p = k / n;
+    let (p, n) = (mean.clamp(0.0, 1.0), n as f64);
     let z2 = z * z;
     let centre = (p + z2 / (2.0 * n)) / (1.0 + z2 / n);
     let half = z / (1.0 + z2 / n) * (p * (1.0 - p) / n + z2 / (4.0 * n * n)).sqrt();
@@ -48,5 +59,7 @@ mod tests {
         assert_eq!(wilson95(0, 0), (0.0, 1.0));
         assert!(overlap(wilson95(5, 10), wilson95(7, 10)));
         assert!(!overlap(wilson95(0, 50), wilson95(50, 50)));
+        assert_eq!(wilson95_of_mean(0.8, 10), wilson95(8, 10));
+        assert_eq!(wilson95_of_mean(0.5, 0), (0.0, 1.0));
     }
 }

@@ -12,10 +12,12 @@ use figment::providers::{Env, Format, Serialized, Toml};
 use kitchen_r_core::GraspMode;
 use serde::{Deserialize, Serialize};
 
+mod leaderboard;
 mod live;
 mod secrets;
 mod sessions;
 mod video;
+pub(crate) use leaderboard::LeaderboardConfig;
 pub(crate) use live::LiveConfig;
 pub(crate) use secrets::SecretsConfig;
 pub(crate) use sessions::SessionConfig;
@@ -107,6 +109,7 @@ pub struct Config {
     pub live: LiveConfig,
     pub sessions: SessionConfig,
     pub secrets: SecretsConfig,
+    pub leaderboard: LeaderboardConfig,
 }
 
 /// How requests share the database (`[db_pool]`). Writes have one connection of their own
@@ -260,6 +263,7 @@ impl Default for Config {
             live: LiveConfig::default(),
             sessions: SessionConfig::default(),
             secrets: SecretsConfig::default(),
+            leaderboard: LeaderboardConfig::default(),
         }
     }
 }

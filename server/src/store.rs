@@ -231,6 +231,10 @@ pub(crate) async fn count_submissions_since(
         .await
 }
 
+/// The version stored with every scoring run this server makes (`scoring_runs.binary_version`,
+/// shown on results cards).
+pub(crate) const BINARY_VERSION: &str = env!("CARGO_PKG_VERSION");
+
 /// The scores of one run, as stored.
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct NewRun<'a> {
@@ -287,14 +291,15 @@ async fn insert_run_in(
     run: &NewRun<'_>,
 ) -> sqlx::Result<i64> {
     sqlx::query_scalar(
-        "INSERT INTO scoring_runs (submission_id, scorer_version, created_at, em, instructions_z)
-         VALUES (?, ?, ?, ?, ?) RETURNING id",
+        "INSERT INTO scoring_runs (submission_id, scorer_version, created_at, em, instructions_z, binary_version)
+         VALUES (?, ?, ?, ?, ?, ?) RETURNING id",
     )
     .bind(submission)
     .bind(run.scorer_version)
     .bind(now)
     .bind(run.em)
     .bind(packed::pack_instructions(run.instructions))
+    .bind(BINARY_VERSION)
     .fetch_one(&mut **tx)
     .await
 }

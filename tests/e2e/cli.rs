@@ -80,7 +80,10 @@ fn team_submit_leaderboard_rescore_from_the_command_line() {
         &["leaderboard", "--split", "dev", "--format", "csv"],
         &[],
     );
-    assert!(stdout(&out).starts_with("rank,team,submission_id,em,submitted_at\n1,cli team,1,1.000000,"));
+    assert!(
+        stdout(&out)
+            .starts_with("rank,team,submission_id,em,submitted_at,em_low,em_high\n1,cli team,1,1.000000,")
+    );
 
     let out = run(
         &server,

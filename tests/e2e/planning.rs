@@ -323,7 +323,7 @@ async fn leaderboard_orders_by_em_then_time_and_hides_test_ground_truth() {
         .await
         .unwrap();
     assert!(
-        csv.starts_with("rank,team,submission_id,em,submitted_at\n1,b-team,4,1.000000,"),
+        csv.starts_with("rank,team,submission_id,em,submitted_at,em_low,em_high\n1,b-team,4,1.000000,"),
         "{csv}"
     );
     let page = client()

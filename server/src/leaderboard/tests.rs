@@ -1,6 +1,7 @@
 use kitchen_r_core::GraspMode;
 use kitchen_r_core::observations::ObservationTrack;
 
+use super::intervals::{Interval, Intervals};
 use super::render::csv;
 use super::*;
 use crate::testutil::{FakeProbe, fixture};
@@ -11,6 +12,8 @@ pub(crate) fn board(team: &str) -> Leaderboard {
         observations: None,
         grasp_mode: None,
         split: Split::Test,
+        interval_ties: true,
+        ties: TIES_BY_INTERVAL,
         rows: vec![Row {
             rank: Some(1),
             team: team.into(),
@@ -21,6 +24,11 @@ pub(crate) fn board(team: &str) -> Leaderboard {
             baseline: false,
             observations: None,
             grasp_mode: None,
+            intervals: Intervals {
+                em: Some(Interval { low: 0.2, high: 0.8 }),
+                ..Intervals::default()
+            },
+            card: None,
         }],
     }
 }
@@ -29,7 +37,8 @@ pub(crate) fn board(team: &str) -> Leaderboard {
 fn csv_quotes_and_formats() {
     assert_eq!(
         csv(&board("a,b")),
-        "rank,team,submission_id,em,submitted_at\n1,\"a,b\",7,0.500000,2026-01-01T00:00:00Z\n"
+        "rank,team,submission_id,em,submitted_at,em_low,em_high\n\
+         1,\"a,b\",7,0.500000,2026-01-01T00:00:00Z,0.200000,0.800000\n"
     );
 }
 
@@ -52,7 +61,7 @@ fn csv_neutralises_cells_a_spreadsheet_would_evaluate() {
         let row = csv.split_once('\n').unwrap().1;
         assert_eq!(
             row,
-            format!("1,{cell},7,0.500000,2026-01-01T00:00:00Z\n"),
+            format!("1,{cell},7,0.500000,2026-01-01T00:00:00Z,0.200000,0.800000\n"),
             "{team:?}"
         );
     }
@@ -75,6 +84,10 @@ pub(crate) fn control_board(observations: ObservationTrack) -> Leaderboard {
     b.rows[0].observations = Some(observations);
     b.grasp_mode = Some(GraspMode::Abstract);
     b.rows[0].grasp_mode = Some(GraspMode::Abstract);
+    b.rows[0].intervals = Intervals {
+        sr: Some(Interval { low: 0.1, high: 0.5 }),
+        ..Intervals::default()
+    };
     b
 }
 
@@ -84,10 +97,15 @@ fn policy_boards_name_their_observation_track_in_csv_and_html() {
     let privileged = control_board(ObservationTrack::Privileged);
     assert_eq!(
         csv(&privileged),
-        "rank,team,submission_id,sr,mse,state,baseline,submitted_at,observations,grasp_mode\n\
-         1,team,7,0.250000,0.500000,finished,false,2026-01-01T00:00:00Z,privileged,abstract\n"
+        "rank,team,submission_id,sr,mse,state,baseline,submitted_at,observations,grasp_mode,\
+         sr_low,sr_high,mse_low,mse_high,\
+         sr_navigation,sr_navigation_low,sr_navigation_high,\
+         sr_manipulation,sr_manipulation_low,sr_manipulation_high,\
+         sr_pick,sr_pick_low,sr_pick_high,sr_place,sr_place_low,sr_place_high\n\
+         1,team,7,0.250000,0.500000,finished,false,2026-01-01T00:00:00Z,privileged,abstract,\
+         0.100000,0.500000,,,,,,,,,,,,,,\n"
     );
-    assert!(csv(&control_board(ObservationTrack::Standard)).ends_with(",standard,abstract\n"));
+    assert!(csv(&control_board(ObservationTrack::Standard)).contains(",standard,abstract,"));
     // The page's headings and links: `http/leaderboard/tests.rs`.
     // Planning keeps its CSV exactly.
     assert!(!csv(&board("a")).contains("observations"));
@@ -102,7 +120,7 @@ fn policy_boards_name_their_grasp_mode_and_another_mode_than_the_contests_is_lab
     physical.grasp_mode = Some(GraspMode::Physical);
     physical.rows[0].grasp_mode = Some(GraspMode::Physical);
     assert!(
-        csv(&physical).ends_with(",standard,physical\n"),
+        csv(&physical).contains(",standard,physical,"),
         "{}",
         csv(&physical)
     );
@@ -265,17 +283,22 @@ async fn control_and_integrated_order_with_baselines_and_infinite_p() {
         .iter()
         .map(|r| (r.submission_id, r.rank, r.baseline))
         .collect();
+    // These runs were written without episodes: each SR's interval is [0, 1], so every finished
+    // entry shares rank 1 (docs/reference/leaderboard.md#ties); the evaluating run c never ties.
     assert_eq!(
         order,
         vec![
             (b1, None, true),
             (b, Some(1), false),
-            (a_best, Some(2), false),
-            (d, Some(3), false),
+            (a_best, Some(1), false),
+            (d, Some(1), false),
             (b2, None, true),
             (c, Some(4), false),
         ]
     );
+    let strict = ranked(control.rows.clone(), Track::Control, false);
+    let ranks: Vec<Option<usize>> = strict.iter().map(|r| r.rank).collect();
+    assert_eq!(ranks, [None, Some(1), Some(2), Some(3), None, Some(4)]);
     let integrated = f.state.leaderboard(Track::Integrated, Split::Dev).await.unwrap();
     let order: Vec<i64> = integrated.rows.iter().map(|r| r.submission_id).collect();
     // M ties 1.5: b's P 3.0 beats a's +inf.
@@ -302,14 +325,13 @@ async fn control_and_integrated_order_with_baselines_and_infinite_p() {
     );
     let text = String::from_utf8(dev_csv(&f, Track::Integrated).await.to_vec()).unwrap();
     let mut lines = text.lines();
-    assert_eq!(
-        lines.next(),
-        Some("rank,team,submission_id,m,p,sr,mse,state,baseline,submitted_at,observations,grasp_mode")
-    );
+    assert!((lines.next().unwrap()).starts_with(
+        "rank,team,submission_id,m,p,sr,mse,state,baseline,submitted_at,observations,grasp_mode,"
+    ));
     let a_line = lines.nth(2).unwrap();
     assert!(
         a_line.starts_with(&format!(
-            "2,a,{a_best},1.500000,inf,0.800000,0.300000,finished,false,"
+            "1,a,{a_best},1.500000,inf,0.800000,0.300000,finished,false,"
         )),
         "{text}"
     );
@@ -624,7 +646,7 @@ async fn runs_are_ranked_with_their_own_grasp_mode_and_the_contests_is_the_defau
     );
     let csv = String::from_utf8(dev_csv(&f, Track::Control).await.to_vec()).unwrap();
     assert!(
-        csv.lines().nth(1).unwrap().ends_with(",standard,physical"),
+        csv.lines().nth(1).unwrap().contains(",standard,physical,"),
         "{csv}"
     );
 }

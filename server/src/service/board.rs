@@ -9,9 +9,15 @@ use kitchen_r_core::observations::ObservationTrack;
 
 use super::{AppState, rfc3339};
 use crate::error::ServiceError;
-use crate::leaderboard::{BoardPage, Format, Leaderboard, RenderPage, Row, Track, ranked, render};
+use crate::leaderboard::intervals::{self, Intervals, PolicyScores};
+use crate::leaderboard::{
+    BoardPage, Card, Format, Leaderboard, RenderPage, Row, TIES_BY_INTERVAL, TIES_STRICT, Track, ranked,
+    render,
+};
 use crate::scores::Scores;
-use crate::store::board;
+use crate::store::{board, queue};
+
+mod card;
 
 impl AppState {
     /// The standard ranking of one track and split, in the contest's grasp mode.
@@ -59,11 +65,9 @@ impl AppState {
         let integrated = track == Track::Integrated;
         let label = policy.then_some(observations);
         let grasp_label = policy.then_some(mode);
-        let rows = stored.into_iter().map(|r| Row {
-            rank: None,
-            team: r.team,
-            submission_id: r.submission_id,
-            scores: match track {
+        let mut rows = Vec::with_capacity(stored.len());
+        for r in stored {
+            let scores = match track {
                 Track::Planning => Scores::em(r.em),
                 Track::Control | Track::Integrated => Scores {
                     em: None,
@@ -72,20 +76,67 @@ impl AppState {
                     m: r.m.filter(|_| integrated),
                     p: r.p.filter(|_| integrated),
                 },
-            },
-            submitted_at: rfc3339(r.submitted_at),
-            state: r.state.map(|s| s.as_str().to_string()),
-            baseline: r.baseline,
-            observations: label,
-            grasp_mode: policy.then_some(r.grasp_mode),
-        });
+            };
+            let (intervals, card) = self.evidence(track, &r, scores, observations, split).await?;
+            rows.push(Row {
+                rank: None,
+                team: r.team,
+                submission_id: r.submission_id,
+                scores,
+                submitted_at: rfc3339(r.submitted_at),
+                state: r.state.map(|s| s.as_str().to_string()),
+                baseline: r.baseline,
+                observations: label,
+                grasp_mode: policy.then_some(r.grasp_mode),
+                intervals,
+                card,
+            });
+        }
+        let ties = self.config().leaderboard.interval_ties;
         Ok(Leaderboard {
             track,
             observations: label,
             grasp_mode: grasp_label,
             split,
-            rows: ranked(rows),
+            interval_ties: ties,
+            ties: if ties { TIES_BY_INTERVAL } else { TIES_STRICT },
+            rows: ranked(rows, track, ties),
         })
+    }
+
+    /// A row's intervals and results card, from the run it shows: a plan run's EM over the
+    /// split's instructions, a policy run's recorded episodes. Read on a cache miss only.
+    async fn evidence(
+        &self,
+        track: Track,
+        row: &board::BoardRow,
+        scores: Scores,
+        observations: ObservationTrack,
+        split: Split,
+    ) -> Result<(Intervals, Option<Card>), ServiceError> {
+        let Some(run) = board::shown_run(self.read_pool(), row.submission_id).await? else {
+            return Ok((Intervals::default(), None));
+        };
+        if track == Track::Planning {
+            let n = self.content().ground_truth(split).len() as u64;
+            return Ok((intervals::planning(scores.em, n), Some(card::planning(&run, n))));
+        }
+        let mut conn = self.read_pool().acquire().await.map_err(anyhow::Error::from)?;
+        let episodes = queue::episodes(&mut conn, run.episodes_run).await?;
+        drop(conn);
+        let scored: Vec<_> = episodes.iter().map(|e| e.scoring()).collect();
+        let shown = PolicyScores {
+            sr: scores.sr,
+            mse: scores.mse,
+            em: row.em,
+            m: scores.m,
+            p: scores.p,
+        };
+        let specs: Vec<_> = episodes.iter().map(|e| &e.spec).collect();
+        Ok((
+            intervals::policy(shown, &scored),
+            Some(card::policy(&run, &specs, row.grasp_mode, observations)),
+        ))
     }
 
     /// The leaderboard rendered in `format` (HTML by `html`, the adapter's page), from the cache

@@ -226,3 +226,26 @@ fn policy_best(primary: &str, secondary: &str, linked: &str) -> String {
          FROM (SELECT * FROM best UNION ALL SELECT * FROM latest WHERE baseline)"
     )
 }
+
+/// The run a board row shows, as its results card and intervals read it: the submission's latest
+/// scoring run.
+#[derive(Debug, Clone, PartialEq, FromRow)]
+pub(crate) struct ShownRun {
+    pub id: i64,
+    pub scorer_version: String,
+    /// NULL for runs made before the server stored it.
+    pub binary_version: Option<String>,
+    /// The run whose recorded episodes the scores come from (itself, or a rescore's source).
+    pub episodes_run: i64,
+}
+
+/// The latest scoring run of `submission`, if any.
+pub(crate) async fn shown_run(pool: &SqlitePool, submission: i64) -> sqlx::Result<Option<ShownRun>> {
+    sqlx::query_as(
+        "SELECT id, scorer_version, binary_version, COALESCE(source_run_id, id) AS episodes_run
+         FROM scoring_runs WHERE submission_id = ? ORDER BY id DESC LIMIT 1",
+    )
+    .bind(submission)
+    .fetch_optional(pool)
+    .await
+}

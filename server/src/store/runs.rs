@@ -72,8 +72,8 @@ async fn insert_run_with_jobs(
     now: i64,
 ) -> sqlx::Result<i64> {
     let run: i64 = sqlx::query_scalar(
-        "INSERT INTO scoring_runs (submission_id, scorer_version, created_at, em, state, episodes_total, max_concurrency, grasp_mode)
-         VALUES (?, ?, ?, NULL, 'active', ?, ?, ?) RETURNING id",
+        "INSERT INTO scoring_runs (submission_id, scorer_version, created_at, em, state, episodes_total, max_concurrency, grasp_mode, binary_version)
+         VALUES (?, ?, ?, NULL, 'active', ?, ?, ?, ?) RETURNING id",
     )
     .bind(sub)
     .bind(new.scorer_version)
@@ -81,6 +81,7 @@ async fn insert_run_with_jobs(
     .bind(new.jobs.len() as i64)
     .bind(i64::from(new.max_concurrency))
     .bind(new.grasp.as_str())
+    .bind(crate::store::BINARY_VERSION)
     .fetch_one(&mut **tx)
     .await?;
     // 6 parameters a row; 100 rows stay far below SQLite's parameter limit.
@@ -184,8 +185,9 @@ pub(crate) async fn insert_derived_run(
     let mut tx = pool.begin_with("BEGIN IMMEDIATE").await?;
     let id = sqlx::query_scalar(
         "INSERT INTO scoring_runs (submission_id, scorer_version, created_at, em, state,
-             episodes_total, max_concurrency, sr, mse, m, p, finished_at, source_run_id, grasp_mode)
-         SELECT ?, ?, ?, ?, 'finished', episodes_total, max_concurrency, ?, ?, ?, ?, ?, ?, grasp_mode
+             episodes_total, max_concurrency, sr, mse, m, p, finished_at, source_run_id, grasp_mode,
+             binary_version)
+         SELECT ?, ?, ?, ?, 'finished', episodes_total, max_concurrency, ?, ?, ?, ?, ?, ?, grasp_mode, ?
          FROM scoring_runs WHERE id = ? RETURNING id",
     )
     .bind(submission)
@@ -198,6 +200,7 @@ pub(crate) async fn insert_derived_run(
     .bind(scores.p)
     .bind(now)
     .bind(source)
+    .bind(crate::store::BINARY_VERSION)
     .bind(source)
     .fetch_one(&mut *tx)
     .await?;

@@ -1,21 +1,25 @@
 //! The public leaderboard page (`GET /`, and `GET /api/v1/leaderboard?format=html` for one
 //! board): one table per board, all of one split, built with maud, which escapes every value
 //! (team names are chosen by participants). The service hands over the boards
-//! ([`BoardPage`]) and caches what this renders. Scores print as the CSV prints them.
+//! ([`BoardPage`]) and caches what this renders. Scores print as the CSV prints them, each with
+//! its 95 % interval below it; the board says in words how ties are decided, and each row's
+//! results card folds open in its last column (docs/reference/leaderboard.md).
 
 use kitchen_r_core::GraspMode;
 use kitchen_r_core::dataset::Split;
 use kitchen_r_core::observations::ObservationTrack;
 use maud::{DOCTYPE, Markup, PreEscaped, html};
 
-use crate::leaderboard::render::{columns, rank};
-use crate::leaderboard::{BoardPage, Leaderboard, Row, Track};
+use crate::leaderboard::render::{columns, fmt_interval, interval_columns, rank};
+use crate::leaderboard::{BoardPage, Card, Leaderboard, Row, Track};
 use crate::scores::fmt_score;
 
 const STYLE: &str = "body{font-family:system-ui,sans-serif;margin:2rem auto;max-width:60rem;padding:0 1rem}\
 table{border-collapse:collapse;width:100%;margin-bottom:2rem}th,td{padding:.4rem .6rem;border-bottom:1px solid #ddd;text-align:left}\
 td.n{text-align:right;font-variant-numeric:tabular-nums}th{background:#f4f4f4}tr.baseline{color:#555;background:#fafafa}\
 .banner{background:#fff4d6;border:1px solid #e0b84a;padding:.6rem .8rem}\
+small.ci{display:block;color:#666;white-space:nowrap}dl.card{margin:.3rem 0;font-size:.85rem}\
+dl.card dt{font-weight:600}dl.card dd{margin:0 0 .2rem 0;overflow-wrap:anywhere}\
 @media(max-width:40rem){table{display:block;overflow-x:auto}}";
 
 fn describe(track: Track) -> &'static str {
@@ -91,8 +95,45 @@ fn state_note(policy: bool, r: &Row) -> &'static str {
     }
 }
 
+/// SR per task kind, each with its interval (policy rows).
+fn kinds(r: &Row) -> Markup {
+    html! {
+        @for (kind, k) in &r.intervals.sr_by_kind {
+            small.ci {
+                (kind) " " (fmt_score(Some(k.sr))) " " (fmt_interval(Some(k.interval)))
+                " (" (k.successes) "/" (k.tasks) ")"
+            }
+        }
+    }
+}
+
+/// A row's results card: what its score was computed with.
+fn card(c: &Card) -> Markup {
+    let seeds = match c.seeds.is_empty() {
+        true => "n/a".to_string(),
+        false => c.seeds.iter().map(u64::to_string).collect::<Vec<_>>().join(", "),
+    };
+    html! {
+        details {
+            summary { "card" }
+            dl.card {
+                dt { "Run" } dd { (c.run_id) " (" (c.scorer_version) ")" }
+                dt { "Binary version" } dd { (c.binary_version) }
+                dt { "Config hash" } dd { code { (c.config_hash) } }
+                @for line in &c.config { dd { code { (line) } } }
+                dt { "Dataset" } dd { code { (c.dataset) } }
+                dt { "Seeds" } dd { (seeds) }
+                @if let Some(g) = c.grasp_mode { dt { "Grasp mode" } dd { (g) } }
+                @if let Some(o) = c.observations { dt { "Observations" } dd { (o) } }
+                dt { "Episodes" } dd { (c.episodes) }
+            }
+        }
+    }
+}
+
 fn table(board: &Leaderboard, contest: GraspMode) -> Markup {
     let cols = columns(board.track);
+    let intervals = interval_columns(board.track);
     let policy = board.track != Track::Planning;
     let track = board.track.as_str();
     let (heading, anchor, note) = board_label(board);
@@ -109,15 +150,17 @@ fn table(board: &Leaderboard, contest: GraspMode) -> Markup {
     html! {
         h2 id={ (track) (anchor) (grasp_anchor) } { (title) " track" (heading) (grasp_heading) }
         p {
-            (describe(board.track)) " (ties: earlier submission first)." (note) (grasp_note) " "
+            (describe(board.track)) ", each score with its 95 % interval." (note) (grasp_note) " "
             a href={ (api) "&format=csv" } { "CSV" } " · " a href=(api) { "JSON" }
         }
+        p.ties { b { "Ties: " } (board.ties) }
         table {
             thead {
                 tr {
                     th { "Rank" } th { "Team" }
                     @for (name, _) in cols { th { (name.to_uppercase()) } }
-                    th { "Submission" } th { "Submitted (UTC)" }
+                    @if policy { th { "SR by task kind" } }
+                    th { "Submission" } th { "Submitted (UTC)" } th { "Results card" }
                 }
             }
             tbody {
@@ -125,7 +168,10 @@ fn table(board: &Leaderboard, contest: GraspMode) -> Markup {
                     tr class=[r.baseline.then_some("baseline")] {
                         td { (rank(r)) }
                         td { (r.team) @if r.baseline { " " i { "(baseline)" } } }
-                        @for (_, get) in cols { td.n { (fmt_score(get(r))) } }
+                        @for ((_, get), (_, iv)) in cols.iter().zip(intervals) {
+                            td.n { (fmt_score(get(r))) small.ci { (fmt_interval(iv(r))) } }
+                        }
+                        @if policy { td { (kinds(r)) } }
                         // The entry's public summary: what this row shows, on a page of its own.
                         td.n {
                             a href={ "/leaderboard/" (track) "/" (board.split) "/" (r.submission_id) } { (r.submission_id) }
@@ -135,10 +181,11 @@ fn table(board: &Leaderboard, contest: GraspMode) -> Markup {
                             @if let Some(m) = r.grasp_mode.filter(|m| *m != contest) { " (" (m) " grasp)" }
                         }
                         td { (r.submitted_at) }
+                        td { @if let Some(c) = &r.card { (card(c)) } }
                     }
                 }
                 @if board.rows.is_empty() {
-                    tr { td colspan=(cols.len() + 4) { "No submissions yet." } }
+                    tr { td colspan=(cols.len() + 5 + usize::from(policy)) { "No submissions yet." } }
                 }
             }
         }

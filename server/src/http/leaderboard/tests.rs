@@ -86,3 +86,34 @@ fn another_grasp_mode_than_the_contests_is_labelled() {
     assert!(html.contains("&amp;grasp_mode=abstract&amp;format=csv"), "{html}");
     assert!(!html.contains("(physical grasp)</td>"), "{html}");
 }
+
+/// Every score shows its 95 % interval, the board says how ties are decided, and a row's
+/// results card folds open in its last column.
+#[test]
+fn scores_show_their_intervals_ties_in_words_and_the_results_card() {
+    let mut b = control_board(ObservationTrack::Standard);
+    b.rows[0].card = Some(crate::leaderboard::Card {
+        run_id: 9,
+        binary_version: "unknown".into(),
+        config_hash: "0123456789abcdef".into(),
+        config: vec!["seed=7 task_time_limit=120".into()],
+        dataset: "feedbeef".into(),
+        seeds: vec![7],
+        grasp_mode: Some(GraspMode::Abstract),
+        observations: Some(ObservationTrack::Standard),
+        episodes: 12,
+        scorer_version: "control/1+dataset-feedbeef".into(),
+    });
+    let html = page(Split::Dev, &[b], false, GraspMode::Abstract);
+    assert!(
+        html.contains("0.250000<small class=\"ci\">[0.100000, 0.500000]</small>"),
+        "{html}"
+    );
+    assert!(html.contains("<b>Ties: </b>Ranks are shared"), "{html}");
+    assert!(
+        html.contains("<dt>Config hash</dt><dd><code>0123456789abcdef</code></dd>"),
+        "{html}"
+    );
+    assert!(html.contains("<dt>Seeds</dt><dd>7</dd>"), "{html}");
+    assert!(html.contains("<dt>Binary version</dt><dd>unknown</dd>"), "{html}");
+}
