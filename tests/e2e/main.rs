@@ -22,6 +22,7 @@ mod episodes;
 mod grasp;
 mod grpc;
 mod integrity;
+mod leaderboard_ties;
 mod live;
 mod load_bench;
 mod metrics;
