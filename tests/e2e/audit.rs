@@ -1,5 +1,6 @@
 //! `kitchen-r dataset audit` as an organiser runs it: a public sample fails with the reasons and
-//! a non-zero exit code; a set generated with private phrasings passes; `--oracle` runs the
+//! a non-zero exit code; a set generated with private phrasings (composed with the language
+//! features, the default) passes, the starter kit's parser included; `--oracle` runs the
 //! privileged oracle over the set's instructions with progress on stderr.
 
 use std::path::{Path, PathBuf};
@@ -65,6 +66,10 @@ fn a_public_sample_fails_the_audit_with_reasons() {
         "1",
         "--max-public-phrasing-share",
         "1",
+        "--max-bag-of-mentions-em",
+        "1",
+        "--max-parser-em",
+        "1",
     ]);
     assert!(out.status.success(), "{}", text(&out.stdout));
     assert!(text(&out.stdout).contains("the set passes the audit"));
@@ -95,8 +100,28 @@ fn a_private_set_passes_and_the_oracle_completes_it() {
     assert_eq!(v["report"]["public_phrasing"], 0);
     assert_eq!(v["report"]["attack"]["inverted"], 0);
     assert!(v["report"]["attack"]["em"].as_f64().unwrap() <= 0.3, "{v:#}");
+    assert!(
+        v["report"]["attack"]["fallback_em"].as_f64().unwrap() <= 0.3,
+        "{v:#}"
+    );
     assert_eq!(v["passed"], true, "{v:#}");
     assert!(out.status.success());
+    // Composed with every language feature (the default for private sets), each instruction
+    // kept only with exactly one plan; the checker's refusals are counted by reason.
+    let language = &v["report"]["language"];
+    assert_eq!(language["features"].as_array().unwrap().len(), 5, "{v:#}");
+    assert_eq!(language["composed"], 400, "{v:#}");
+    assert!(
+        language["rejected"]["ambiguous reference"].as_u64().unwrap() > 0,
+        "{v:#}"
+    );
+    // The starter kit's parser ran through python3 (or the report says why not).
+    let note = v["report"]["parser_note"].as_str().unwrap();
+    if note.starts_with("ran python3") {
+        assert!(v["report"]["parser"]["em"].as_f64().unwrap() <= 0.6, "{v:#}");
+    } else {
+        assert!(note.contains("python3"), "{note}");
+    }
 
     // The oracle over the first three instructions (a whole set takes minutes).
     let gt = std::fs::read_to_string(set.join("test_ground_truth.jsonl")).unwrap();
@@ -114,6 +139,9 @@ fn a_private_set_passes_and_the_oracle_completes_it() {
         "1",
         "--max-attack-em",
         "1",
+        "--max-bag-of-mentions-em",
+        "1",
+        "--no-parser",
     ]);
     let (stdout, stderr) = (text(&out.stdout), text(&out.stderr));
     assert!(out.status.success(), "{stdout}\n{stderr}");
