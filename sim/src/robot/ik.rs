@@ -1,6 +1,6 @@
 //! Numerical inverse kinematics: damped least squares on the geometric Jacobian of
-//! [`ArmModel`], with the redundant directions of a seven-joint arm (and a six-joint arm's
-//! singular ones) pulled towards a rest pose through the damped pseudo-inverse's null space, and
+//! [`ArmModel`], with a seven-joint arm's redundant direction pulled towards a rest pose through
+//! the Jacobian's null space, and
 //! the joint limits applied at every step. No crate fitted: `k` builds its own chain type from a
 //! URDF and knows neither MJCF nor our turned joint frames, so this solves on the very model the
 //! controller and the oracle use (tested against its forward kinematics below).
@@ -74,8 +74,14 @@ pub fn solve(
         let Some(inv) = jjt.try_inverse() else { break };
         let pinv: SMatrix<f64, MAX_DOF, 6> = jac.transpose() * inv;
         let mut step = pinv * e;
-        let null = SMatrix::<f64, MAX_DOF, MAX_DOF>::identity() - pinv * jac;
-        step += null * ((rest - q) * o.rest_gain);
+        if arm.dof > 6 {
+            // The self-motion towards rest, through the exact null-space projector (the damped
+            // one leaks into the task and would hold the TCP off its target).
+            if let Ok(exact) = jac.pseudo_inverse(1e-9) {
+                let null = SMatrix::<f64, MAX_DOF, MAX_DOF>::identity() - exact * jac;
+                step += null * ((rest - q) * o.rest_gain);
+            }
+        }
         let largest = step.amax();
         if largest > o.max_step {
             step *= o.max_step / largest;
