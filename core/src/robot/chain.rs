@@ -192,7 +192,7 @@ pub(crate) fn joint(
         [0.0, 0.0, 1.0] => Axis::Z,
         v => {
             let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-            if !(n > 1e-9) {
+            if n.is_nan() || n <= 1e-9 {
                 return Err(at(&format!("axis {v:?}: give a non-zero axis")));
             }
             Axis::Along(v.map(|c| c / n))
