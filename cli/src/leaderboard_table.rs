@@ -1,6 +1,8 @@
 //! The leaderboard as a terminal table: the columns of each track (planning: EM; control: SR
 //! then MSE; integrated: M then P), baseline rows marked; a policy board's heading names its
-//! observation track (standard or privileged) and grasp mode (abstract or physical).
+//! observation track (standard or privileged) and grasp mode (abstract or physical). Each score
+//! is followed by its 95 % interval, and the table ends with how ties are decided
+//! (docs/reference/leaderboard.md); `--format json` prints the board with its results cards.
 
 use serde_json::Value;
 
@@ -19,6 +21,15 @@ fn cell(v: &Value) -> String {
         Value::Number(n) => n.as_f64().map_or("-".into(), |f| format!("{f:.4}")),
         Value::String(s) => s.clone(),
         _ => "-".into(),
+    }
+}
+
+/// A score's 95 % interval (`intervals.<key>`, `[low, high]`) as `[0.5800, 0.9200]`; empty when
+/// the row has none.
+fn interval(v: &Value) -> String {
+    match v.as_array().map(Vec::as_slice) {
+        Some([low, high]) => format!("[{}, {}]", cell(low), cell(high)),
+        _ => String::new(),
     }
 }
 
@@ -50,7 +61,7 @@ pub(crate) fn print_table(board: &Value) {
     let cols = columns(track);
     let mut header = format!("{:>4}  {:<width$}", "rank", "team");
     for (h, _) in cols {
-        header.push_str(&format!("  {h:>8}"));
+        header.push_str(&format!("  {h:>8}  {:<18}", format!("{h} 95 %")));
     }
     println!("{header}  {:>10}  {:<9}  submitted (UTC)", "submission", "state");
     for r in rows {
@@ -61,7 +72,8 @@ pub(crate) fn print_table(board: &Value) {
         };
         let mut line = format!("{rank:>4}  {:<width$}", r["team"].as_str().unwrap_or("?"));
         for (_, key) in cols {
-            line.push_str(&format!("  {:>8}", cell(&r["scores"][*key])));
+            let (score, iv) = (cell(&r["scores"][*key]), interval(&r["intervals"][*key]));
+            line.push_str(&format!("  {score:>8}  {iv:<18}"));
         }
         println!(
             "{line}  {:>10}  {:<9}  {}",
@@ -69,6 +81,9 @@ pub(crate) fn print_table(board: &Value) {
             r["state"].as_str().unwrap_or("finished"),
             r["submitted_at"].as_str().unwrap_or("?")
         );
+    }
+    if let Some(ties) = board["ties"].as_str() {
+        println!("ties: {ties}");
     }
 }
 
@@ -82,5 +97,7 @@ mod tests {
         assert_eq!(cell(&serde_json::json!(0.5)), "0.5000");
         assert_eq!(cell(&Value::Null), "-");
         assert_eq!(columns("integrated")[0], ("M", "m"));
+        assert_eq!(interval(&serde_json::json!([0.25, "inf"])), "[0.2500, inf]");
+        assert_eq!(interval(&Value::Null), "");
     }
 }

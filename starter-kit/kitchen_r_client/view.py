@@ -262,6 +262,13 @@ def _cell(v):
     return "-"
 
 
+def _interval(v):
+    """A score's 95 % interval (`intervals.<key>`, `[low, high]`) as `[0.5800, 0.9200]`."""
+    if isinstance(v, list) and len(v) == 2:
+        return "[%s, %s]" % (_cell(v[0]), _cell(v[1]))
+    return ""
+
+
 def print_leaderboard(board, out=print):
     track = board.get("track") if isinstance(board.get("track"), str) else "planning"
     observations = board.get("observations")
@@ -275,11 +282,14 @@ def print_leaderboard(board, out=print):
         return
     width = max([len(r["team"]) for r in rows if isinstance(r.get("team"), str)] + [4])
     cols = _COLUMNS.get(track, [("EM", "em")])
-    header = "%4s  %-*s" % ("rank", width, "team") + "".join("  %8s" % h for h, _ in cols)
+    header = "%4s  %-*s" % ("rank", width, "team") + "".join("  %8s  %-18s" % (h, h + " 95 %") for h, _ in cols)
     out("%s  %10s  %-9s  submitted (UTC)" % (header, "submission", "state"))
     for r in rows:
         rank = "base" if r.get("baseline") is True else _j(r.get("rank"))
         line = "%4s  %-*s" % (rank, width, _s(r.get("team")))
-        line += "".join("  %8s" % _cell((r.get("scores") or {}).get(k)) for _, k in cols)
+        scores, intervals = r.get("scores") or {}, r.get("intervals") or {}
+        line += "".join("  %8s  %-18s" % (_cell(scores.get(k)), _interval(intervals.get(k))) for _, k in cols)
         state_ = r.get("state") if isinstance(r.get("state"), str) else "finished"
         out("%s  %10s  %-9s  %s" % (line, _j(r.get("submission_id")), state_, _s(r.get("submitted_at"))))
+    if isinstance(board.get("ties"), str):
+        out("ties: %s" % board["ties"])

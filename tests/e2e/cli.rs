@@ -74,6 +74,12 @@ fn team_submit_leaderboard_rescore_from_the_command_line() {
     assert!(out.status.success(), "{}", stderr(&out));
     let table = stdout(&out);
     assert!(table.contains("cli team") && table.contains("1.0000"), "{table}");
+    // Each score with its 95 % interval (EM over the fixture's 3 instructions), then the rule.
+    assert!(
+        table.contains("EM 95 %") && table.contains("[0.4385, 1.0000]"),
+        "{table}"
+    );
+    assert!(table.contains("\nties: Ranks are shared"), "{table}");
 
     let out = run(
         &server,
@@ -92,6 +98,11 @@ fn team_submit_leaderboard_rescore_from_the_command_line() {
     );
     let v: serde_json::Value = serde_json::from_str(&stdout(&out)).unwrap();
     assert_eq!(v["rows"][0]["team"], "cli team");
+    // The results card (docs/reference/leaderboard.md#results-cards).
+    let card = &v["rows"][0]["card"];
+    assert_eq!(card["episodes"], 3, "{v}");
+    assert_eq!(card["binary_version"], env!("CARGO_PKG_VERSION"), "{v}");
+    assert_eq!(v["rows"][0]["intervals"]["em"][1], 1.0, "{v}");
 
     let out = run(
         &server,

@@ -86,6 +86,11 @@ fn the_python_client_submits_waits_shows_and_reads_the_leaderboard() {
 
     let board = out(&ok(client(&server, &["leaderboard", "--split", "dev"], &[])));
     assert!(board.contains("py team") && board.contains("1.0000"), "{board}");
+    // The same interval and ties line as `kitchen-r leaderboard` (tests/e2e/cli.rs).
+    assert!(
+        board.contains("[0.4385, 1.0000]") && board.contains("\nties: "),
+        "{board}"
+    );
     let board = out(&ok(client(
         &server,
         &["leaderboard", "--split", "dev", "--json"],
@@ -93,6 +98,7 @@ fn the_python_client_submits_waits_shows_and_reads_the_leaderboard() {
     )));
     let v: Value = serde_json::from_str(&board).unwrap();
     assert_eq!(v["rows"][0]["team"], "py team");
+    assert_eq!(v["rows"][0]["card"]["episodes"], 3, "{board}");
 
     // Refusals: exit 1, the server's message, code and request id on stderr.
     let refused = client(&server, &["submit", "plans", file, "--split", "test"], &auth);
