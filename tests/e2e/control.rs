@@ -78,6 +78,50 @@ async fn the_oracle_reference_run_scores_at_least_095_through_serve() {
             .any(|r| r["baseline"] == true && r["submission_id"] == id),
         "{board:#}"
     );
+    // Its intervals and results card (docs/reference/leaderboard.md): SR over the 4 online
+    // episodes and per task kind, MSE over the offline tasks; the rules every job carried.
+    let row = rows.iter().find(|r| r["submission_id"] == id).unwrap();
+    let iv = &row["intervals"];
+    let (low, high) = (iv["sr"][0].as_f64().unwrap(), iv["sr"][1].as_f64().unwrap());
+    assert!(
+        low <= sr(&view) && sr(&view) <= high && high - low > 0.1,
+        "{row:#}"
+    );
+    assert!(iv["mse"][0].as_f64().unwrap() <= mse, "{row:#}");
+    for kind in ["navigation", "manipulation", "pick", "place"] {
+        assert!(iv["sr_by_kind"][kind]["tasks"].as_u64().unwrap() > 0, "{row:#}");
+    }
+    let card = &row["card"];
+    assert_eq!(card["episodes"], 8, "{card:#}");
+    assert_eq!(card["seeds"], json!([0]), "{card:#}");
+    assert_eq!(card["grasp_mode"], "abstract", "{card:#}");
+    assert_eq!(card["observations"], "standard", "{card:#}");
+    assert_eq!(card["config_hash"].as_str().unwrap().len(), 16, "{card:#}");
+    let config = card["config"][0].as_str().unwrap();
+    assert!(
+        config.starts_with("seed=0 task_time_limit=120 execute=")
+            && config.ends_with("grasp=abstract privileged_observations=none"),
+        "{card:#}"
+    );
+    let csv = client()
+        .get(server.url("/api/v1/leaderboard?track=control&split=dev&format=csv"))
+        .send()
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+    let at = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let line: Vec<&str> = (csv.lines())
+        .find(|l| l.contains(&format!(",{id},")))
+        .unwrap()
+        .split(',')
+        .collect();
+    assert!(
+        !line[at("sr_low")].is_empty() && !line[at("sr_pick_high")].is_empty(),
+        "{csv}"
+    );
 }
 
 #[tokio::test(flavor = "multi_thread")]
