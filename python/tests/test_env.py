@@ -201,7 +201,7 @@ def test_task_env_runs_one_sub_task_from_the_experts_state_at_its_start():
     j = next(i for i, step in enumerate(plan) if step.startswith("place"))
     obs, info = env.reset(seed=0, options={"instruction": "dev-0001", "task": j})
     assert obs["sub_task"] == plan[j] and obs["task_index"] == j and info["task"] == j
-    # Issue #38: a reset is no success; only the task's end can be one.
+    # A reset is no success; only the task's end can be one (docs/participant/python.md).
     assert info["is_success"] is False
     # The robot starts holding what the expert picked before this step: the gripper is closed on it.
     assert obs["state"][gym_kitchen_r.STATE_FIELDS.index("gripper")] < 0.9
@@ -269,9 +269,9 @@ def test_randomise_gives_the_episodes_kitchen_r_episodes_generate_writes(tmp_pat
 
 
 def test_the_expert_labels_a_state_a_lagging_policy_reached_and_finishes_from_it():
-    """Issue #38: a policy that holds the hand still for 6 s of a place (the expert's own plan
-    would have lowered and let go by then) gets a label at every step, and the expert, taking
-    over from that state, completes the task."""
+    """A policy that holds the hand still for 6 s of a place (the expert's own plan would have
+    lowered and let go by then) gets a label at every step, and the expert, taking over from that
+    state, completes the task."""
     env = gym.make("KitchenR/Task-v0", expert=True)
     plan = env.unwrapped.instruction_of("dev-0001")["plan"]
     j = next(i for i, step in enumerate(plan) if step.startswith("place"))

@@ -17,7 +17,7 @@
 //! - [`rescore`]: the organiser's rescoring of every stored submission;
 //! - [`secrets`]: endpoint tokens sealed at rest, opened for workers, sealed at start-up;
 //! - [`admin`]: the organiser's console (queue, workers, runs; cancel, requeue, backup);
-//! - [`archive`]: the contest archive, exported and imported whole (issue #42);
+//! - [`archive`]: the contest archive, exported and imported whole (docs/contest/archive.md);
 //! - [`verification`]: replay verdicts on runs and the material to verify and re-evaluate them;
 //! - [`video_budget`]: the video storage budgets and the files nothing links any more;
 //! - [`videos`]: episode videos and traces stored by content, served, swept after retention.

@@ -1,8 +1,8 @@
-//! Results people can trust and keep (issue #42, docs/contest/archive.md) through the real
-//! binary: `admin export` then `admin import` into a fresh server gives the same boards, byte for
-//! byte in the CSV; an altered archive and a non-empty server are refused; `admin verify`
-//! replays a policy run's traces and a tampered trace marks the run unverified; `admin
-//! reevaluate` runs episodes again against the served oracle policy and reports intervals.
+//! Results people can trust and keep (docs/contest/archive.md) through the real binary: `admin
+//! export` then `admin import` into a fresh server gives the same boards, byte for byte in the CSV;
+//! an altered archive and a non-empty server are refused; `admin verify` replays a policy run's
+//! traces and a tampered trace marks the run unverified; `admin reevaluate` runs episodes again
+//! against the served oracle policy and reports intervals.
 
 use std::io::Read;
 use std::path::Path;

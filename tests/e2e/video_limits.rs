@@ -1,8 +1,8 @@
-//! Issue #37, items 1 and 2, end to end: the largest trace a legal policy makes (one action of
-//! each chunk executed, every task failed, actions that do not compress) is stored, reaches a
-//! worker in chunks (`FetchTrace`, never inside a lease reply, whose gRPC limit is 4 MiB) and
-//! renders into a playable video; and a server whose storage budget exceeds its volume's free
-//! space warns at start, or refuses under `--strict`.
+//! Storage budgets and trace sizes (docs/contest/video.md), end to end: the largest trace a legal
+//! policy makes (one action of each chunk executed, every task failed, actions that do not
+//! compress) is stored, reaches a worker in chunks (`FetchTrace`, never inside a lease reply, whose
+//! gRPC limit is 4 MiB) and renders into a playable video; and a server whose storage budget
+//! exceeds its volume's free space warns at start, or refuses under `--strict`.
 
 use crate::remote_support;
 use crate::support;

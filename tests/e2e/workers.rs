@@ -213,8 +213,9 @@ fn a_later_small_run_starts_within_one_episode_of_a_big_slow_one() {
 }
 
 async fn fairness_case(slow: &TestServer, quick: &TestServer) {
-    // Issue #13 item 10: team A's slow policy (max_concurrency 64) with 40 episodes, then team B
-    // with 2; two slots. Before, B's first episode waited for A's whole backlog.
+    // Fair sharing (docs/control-track-server.md, Lease): team A's slow policy (max_concurrency 64)
+    // with 40 episodes, then team B with 2; two slots. Before, B's first episode waited for A's
+    // whole backlog.
     let fx =
         ControlFixture::new("[control]\noffline_mse = false\nmax_plan_steps = 1\ntask_time_limit_s = 4.0\n");
     let server = fx.serve(2);

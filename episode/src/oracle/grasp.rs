@@ -1,11 +1,11 @@
-//! Where the oracle grasps in the physical grasp mode (issue #41), where only the two finger
-//! contacts hold an object: a two-point pinch resists gravity and the hand's accelerations without
-//! turning the object only when the line through the contacts passes through the object's centre
-//! of mass, so objects are taken at their centre (the catalogue's uniform solids have it at the
-//! bounding-box centre), raised only as far as keeps the fingertips at the surface the object
+//! Where the oracle grasps in the physical grasp mode (docs/twin/robot.md), where only the two
+//! finger contacts hold an object: a two-point pinch resists gravity and the hand's accelerations
+//! without turning the object only when the line through the contacts passes through the object's
+//! centre of mass, so objects are taken at their centre (the catalogue's uniform solids have it at
+//! the bounding-box centre), raised only as far as keeps the fingertips at the surface the object
 //! stands on. Rim grasps (a bowl, a cylinder with a horizontal `grasp_offset`: the plate) and
-//! meshes keep the catalogue's point.
-//! The abstract mode, scored by positions, keeps the catalogue's `grasp_offset`.
+//! meshes keep the catalogue's point. The abstract mode, scored by positions, keeps the catalogue's
+//! `grasp_offset`.
 
 use kitchen_r_core::catalogue::{ObjectModel, Shape};
 

@@ -1,5 +1,5 @@
-//! Results people can trust and keep (issue #42), over HTTP, organiser token only: a run's
-//! verification (what to replay, each trace, the verdict), its re-evaluation (the jobs to run
+//! Results people can trust and keep (docs/contest/archive.md), over HTTP, organiser token only: a
+//! run's verification (what to replay, each trace, the verdict), its re-evaluation (the jobs to run
 //! again), and the contest archive (export streamed out, import streamed in).
 
 use axum::Router;

@@ -202,7 +202,7 @@ pub(crate) struct Console {
     pub queue: QueueView,
     pub workers: WorkersView,
     pub runs: RunsView,
-    /// `admin verify`'s stored verdicts (issue #42): a run marked unverified shows it.
+    /// `admin verify`'s stored verdicts: a run marked unverified shows it.
     pub verifications: Vec<super::verification::Verdict>,
 }
 

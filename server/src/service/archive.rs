@@ -1,6 +1,6 @@
-//! The contest archive (issue #42): `kitchen-r admin export` writes everything needed to stand
-//! the contest up again into one `.tar.zst`; `kitchen-r admin import` loads it into an empty
-//! server, whose boards are then the same, byte for byte in the CSV.
+//! The contest archive (docs/contest/archive.md): `kitchen-r admin export` writes everything needed
+//! to stand the contest up again into one `.tar.zst`; `kitchen-r admin import` loads it into an
+//! empty server, whose boards are then the same, byte for byte in the CSV.
 //!
 //! Policy: the archive holds the hidden answers (the test split's ground truth) and every team's
 //! results, so it is made and read only by the organiser (both routes need the organiser token)

@@ -1,4 +1,4 @@
-//! Checking a policy run's result (issue #42), for the organiser only.
+//! Checking a policy run's result (docs/contest/archive.md), for the organiser only.
 //!
 //! - `admin verify RUN`: the server hands out the run's recorded episodes (stored results and
 //!   trace files); the organiser's `kitchen-r` replays every trace bit for bit, as the workers'

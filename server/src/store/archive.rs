@@ -1,5 +1,6 @@
-//! The contest archive's rows (issue #42): tables read as JSON objects, one per row, and written
-//! back into an empty database with their ids, so every reference between rows survives.
+//! The contest archive's rows (docs/contest/archive.md): tables read as JSON objects, one per row,
+//! and written back into an empty database with their ids, so every reference between rows
+//! survives.
 //!
 //! The encoding is generic and driven by the schema, so a reader needs no code of ours:
 //! - INTEGER and TEXT values are JSON numbers and strings; NULL is `null`;

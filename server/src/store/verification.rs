@@ -1,6 +1,6 @@
-//! Verification verdicts on policy runs (`run_verifications`, issue #42) and the reads that
-//! `admin verify` and `admin reevaluate` start from: a run's episodes with their stored results,
-//! trace files and job specs.
+//! Verification verdicts on policy runs (`run_verifications`, docs/contest/archive.md) and the
+//! reads that `admin verify` and `admin reevaluate` start from: a run's episodes with their stored
+//! results, trace files and job specs.
 
 use sqlx::FromRow;
 use sqlx::sqlite::SqlitePool;

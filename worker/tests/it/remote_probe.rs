@@ -187,8 +187,8 @@ fn an_execution_count_outside_the_organisers_range_is_refused() {
     assert!(ok.summary.ends_with("history 2, executes 4"), "{}", ok.summary);
 }
 
-/// Issue #12: with loopback allowed, registration must not tell a closed port from a service
-/// that is not a policy on the evaluation host: the same text, after the same startup deadline.
+/// With loopback allowed, registration must not tell a closed port from a service that is not a
+/// policy on the evaluation host: the same text, after the same startup deadline.
 #[test]
 fn registration_says_only_unreachable_for_anything_near_the_evaluation_host() {
     use kitchen_r_contract::probe::probe_for_registration;

@@ -449,8 +449,8 @@ async fn register_team(f: &Fixture, name: &str, episodes: u32) {
 
 #[tokio::test]
 async fn a_later_small_run_is_not_starved_by_a_big_one() {
-    // Issue #13 item 10: team A queues 40 episodes (max_concurrency 64), team B then 2; two
-    // slots. Before, B waited for all of A's backlog.
+    // Fair sharing (docs/control-track-server.md, Lease): team A queues 40 episodes
+    // (max_concurrency 64), team B then 2; two slots. Before, B waited for all of A's backlog.
     let f = fixture(FakeProbe::ok(64), |c| c.control.dev_episodes = 20).await;
     register_team(&f, "alpha", 20).await;
     let a1 = f.lease("slot-1", 1).await.remove(0);
@@ -550,8 +550,9 @@ async fn a_released_job_is_queued_at_once_without_using_an_attempt() {
     assert!(failure.contains("gave up after 2 attempts"), "{failure}");
 }
 
-/// Issue #23: polling a test run's view while it runs must not give each episode's failure
-/// kinds by subtraction, so it shows progress only; the aggregate appears once it has ended.
+/// Polling a test run's view while it runs must not give each episode's failure kinds by
+/// subtraction, so it shows progress only; the aggregate appears once it has ended
+/// (docs/reference/pages.md: test split, the aggregate view only).
 #[tokio::test]
 async fn a_test_run_in_progress_shows_progress_only_and_its_failure_counts_once_ended() {
     let f = fixture(FakeProbe::ok(4), |_| {}).await;

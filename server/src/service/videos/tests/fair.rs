@@ -1,7 +1,7 @@
-//! Issue #37, items 2 and 3: traces count in the storage budgets beside videos, a team within
-//! its fair share of the total never loses a file to another team's upload (sequential and in
-//! parallel), the traces of a ranked test run are never removed, and a render whose video finds
-//! no room waits, queued, saying why.
+//! Storage budgets (docs/contest/video.md): traces count in the storage budgets beside videos, a
+//! team within its fair share of the total never loses a file to another team's upload (sequential
+//! and in parallel), the traces of a ranked test run are never removed, and a render whose video
+//! finds no room waits, queued, saying why.
 
 use super::budget::{KIB, budget_fixture, dev_run, note_of, shown};
 use super::*;

@@ -1,6 +1,6 @@
-//! Issue #26: videos rendered on demand from stored traces: a render never leases while an
-//! evaluation job waits, a lost render lease is queued again, a failed render says why, and a
-//! render of a trace rendered before reuses its video.
+//! Videos rendered on demand (docs/contest/video.md) from stored traces: a render never leases
+//! while an evaluation job waits, a lost render lease is queued again, a failed render says why,
+//! and a render of a trace rendered before reuses its video.
 
 use super::*;
 use crate::service::WorkerCred;
@@ -300,8 +300,8 @@ async fn asking_for_a_queued_prerender_moves_it_ahead_and_none_prerenders_nothin
     );
 }
 
-/// Issue #37: a render whose every lease was lost fails saying whose lease it was last and how
-/// far it got, not only that "no worker finished it".
+/// A render whose every lease was lost fails saying whose lease it was last and how far it got, not
+/// only that "no worker finished it".
 #[tokio::test]
 async fn a_render_out_of_attempts_says_whose_lease_ended_and_how_far_it_got() {
     let f = render_fixture().await;
