@@ -90,11 +90,12 @@ fn a_urdf_variant_of_the_shipped_robot_completes_a_dev_instruction() {
 }
 
 /// robosuite 1.5.2's four arms, mounted on the base from their sidecars
-/// (`configs/robots/robosuite/`), each complete a dev instruction with the oracle, reading the
-/// wheel's own MJCF and meshes from `ROBOSUITE_ASSETS` (scripts/robosuite-assets.sh; the test
-/// skips with that command outside CI and fails in CI without it).
+/// (`configs/robots/robosuite/`), each complete the first two dev instructions with the oracle,
+/// reading the wheel's own MJCF and meshes from `ROBOSUITE_ASSETS` (scripts/robosuite-assets.sh;
+/// the test skips with that command outside CI and fails in CI without it). Not yet every dev
+/// instruction: the README has each arm's figures.
 #[test]
-fn the_robosuite_arms_complete_a_dev_instruction() {
+fn the_robosuite_arms_complete_the_first_dev_instructions() {
     if std::env::var_os("ROBOSUITE_ASSETS").is_none() {
         assert_ne!(
             std::env::var("CI").as_deref(),
@@ -105,8 +106,30 @@ fn the_robosuite_arms_complete_a_dev_instruction() {
         return;
     }
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/robots/robosuite");
+    let first: Vec<Instruction> = instructions(Split::Dev, None)
+        .unwrap()
+        .into_iter()
+        .take(2)
+        .collect();
     for name in ["panda", "ur5e", "kinova3", "xarm7"] {
         let assets = assets_with(dir.join(format!("{name}.toml")));
-        assert_oracle_completes_with(&assets, "kitchen_a");
+        let cfgs = episode_configs(&assets, &first, 0, None).unwrap();
+        for (cfg, ins) in cfgs.iter().zip(&first) {
+            // Every task succeeds; unlike the shipped robot's episodes, a mounted arm's hand may
+            // brush furniture and make the oracle re-plan a phase on the way.
+            let mut sim = crate::test_oracle::blind_sim(&assets, cfg);
+            let run = crate::runner::RunOptions {
+                privileged: true,
+                ..crate::runner::RunOptions::default()
+            };
+            let mut oracle = crate::oracle::OraclePolicy::new(&assets);
+            let out = crate::runner::run_episode(&mut sim, &mut oracle, &run, None, &mut ()).unwrap();
+            assert!(
+                out.tasks.iter().all(|t| t.success),
+                "{name} {}: {:?}",
+                ins.id,
+                out.tasks
+            );
+        }
     }
 }
