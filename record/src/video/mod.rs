@@ -2,9 +2,9 @@
 //!
 //! Two codecs, one container ([`Codec`]):
 //! - **H.264** ([`h264`], Cisco's OpenH264 compiled from source by the `openh264` crate): the
-//!   default, about twelve times faster than AV1 here (docs/measured/video.md). Chromium, Firefox
-//! and   Safari play it inline; LeRobot (PyAV/torchcodec) decodes it. Note its patents: OpenH264
-//!   built from source is not covered by Cisco's licence for its own binaries.
+//!   default, about twelve times faster than AV1 here (docs/measured/video.md). Chromium,
+//!   Firefox and Safari play it inline; LeRobot (PyAV/torchcodec) decodes it. Note its patents:
+//!   OpenH264 built from source is not covered by Cisco's licence for its own binaries.
 //! - **AV1** ([`av1`], `rav1e`, with its assembly when the `asm` feature finds nasm):
 //!   royalty-free and what LeRobot writes by default, but slow to encode.
 //!
