@@ -2,7 +2,7 @@
 //! split) and `GET /api/v1/leaderboard` (one board, as JSON, CSV or HTML). The service ranks and
 //! caches; the HTML is [`page`]'s, handed to the service as the renderer of its cached bodies.
 
-mod page;
+pub(in crate::http) mod page;
 #[cfg(test)]
 mod tests;
 

@@ -107,26 +107,28 @@ fn kinds(r: &Row) -> Markup {
     }
 }
 
-/// A row's results card: what its score was computed with.
+/// A row's results card, folded (the board's last column).
 fn card(c: &Card) -> Markup {
+    html! { details { summary { "card" } (card_list(c)) } }
+}
+
+/// A row's results card: what its score was computed with (also the entry's summary page).
+pub(in crate::http) fn card_list(c: &Card) -> Markup {
     let seeds = match c.seeds.is_empty() {
         true => "n/a".to_string(),
         false => c.seeds.iter().map(u64::to_string).collect::<Vec<_>>().join(", "),
     };
     html! {
-        details {
-            summary { "card" }
-            dl.card {
-                dt { "Run" } dd { (c.run_id) " (" (c.scorer_version) ")" }
-                dt { "Binary version" } dd { (c.binary_version) }
-                dt { "Config hash" } dd { code { (c.config_hash) } }
-                @for line in &c.config { dd { code { (line) } } }
-                dt { "Dataset" } dd { code { (c.dataset) } }
-                dt { "Seeds" } dd { (seeds) }
-                @if let Some(g) = c.grasp_mode { dt { "Grasp mode" } dd { (g) } }
-                @if let Some(o) = c.observations { dt { "Observations" } dd { (o) } }
-                dt { "Episodes" } dd { (c.episodes) }
-            }
+        dl.card {
+            dt { "Run" } dd { (c.run_id) " (" (c.scorer_version) ")" }
+            dt { "Binary version" } dd { (c.binary_version) }
+            dt { "Config hash" } dd { code { (c.config_hash) } }
+            @for line in &c.config { dd { code { (line) } } }
+            dt { "Dataset" } dd { code { (c.dataset) } }
+            dt { "Seeds" } dd { (seeds) }
+            @if let Some(g) = c.grasp_mode { dt { "Grasp mode" } dd { (g) } }
+            @if let Some(o) = c.observations { dt { "Observations" } dd { (o) } }
+            dt { "Episodes" } dd { (c.episodes) }
         }
     }
 }

@@ -5,6 +5,8 @@ use kitchen_r_core::observations::ObservationTrack;
 use maud::{Markup, PreEscaped, html};
 
 use super::layout::score;
+use crate::http::leaderboard::page::card_list;
+use crate::leaderboard::render::{fmt_interval, interval_columns};
 use crate::leaderboard::{Row, Track};
 use crate::service::portal::QuotaView;
 use crate::states::{RunState, SubmissionKind};
@@ -142,9 +144,16 @@ pub(super) fn entry(track: Track, split: &str, row: &Row) -> Markup {
             tr { th { "Submission" } td.n { (row.submission_id) } }
             @if let Some(o) = row.observations { tr { th { "Observations" } td { (o) } } }
             @if let Some(g) = row.grasp_mode { tr { th { "Grasp mode" } td { (g) } } }
-            @for (name, v) in scores { tr { th { (name) } td.n { (score(*v)) } } }
+            @for ((name, v), (_, iv)) in scores.iter().zip(interval_columns(track)) {
+                tr { th { (name) } td.n { (score(*v)) " " (fmt_interval(iv(row))) } }
+            }
             @if let Some(state) = &row.state { tr { th { "State" } td { (state) } } }
             tr { th { "Submitted (UTC)" } td { (row.submitted_at) } }
+        }
+        @if let Some(c) = &row.card {
+            h2 { "Results card" }
+            p { "What this score was computed with; reproduce it with local " code { "kitchen-r eval" } "." }
+            (card_list(c))
         }
         p {
             a href={ "/?split=" (split) "#" (anchor) } { "Back to the leaderboard" }

@@ -425,6 +425,17 @@ async fn pages_render_without_script_and_the_leaderboard_links_public_summaries(
     let summary = call(&app, get(&entry, "")).await;
     assert_eq!(summary.status, StatusCode::OK);
     assert!(summary.body.contains("<td>alpha</td>") && summary.body.contains("<th>EM</th>"));
+    // The entry's results card and its score's interval (docs/reference/leaderboard.md).
+    assert!(
+        summary.body.contains("<h2>Results card</h2>")
+            && summary.body.contains(&format!(
+                "<dt>Binary version</dt><dd>{}</dd>",
+                env!("CARGO_PKG_VERSION")
+            ))
+            && summary.body.contains(" [0."),
+        "{}",
+        summary.body
+    );
     assert!(!summary.body.contains("Per instruction"));
     for bad in [
         format!("/leaderboard/planning/dev/{id}"),
