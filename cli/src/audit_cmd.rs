@@ -124,11 +124,11 @@ pub(super) fn audit(args: AuditArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Plans by instruction id.
+type Plans = HashMap<String, Vec<String>>;
+
 /// The starter kit's parser's plans for the test split, and how they were got (or why not).
-fn parser_plans(
-    args: &AuditArgs,
-    assets: &Path,
-) -> anyhow::Result<(Option<HashMap<String, Vec<String>>>, String)> {
+fn parser_plans(args: &AuditArgs, assets: &Path) -> anyhow::Result<(Option<Plans>, String)> {
     if let Some(file) = &args.parser_plans {
         let plans = read_plans(file)?;
         return Ok((Some(plans), format!("plans read from {}", file.display())));
