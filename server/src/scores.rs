@@ -79,7 +79,7 @@ pub(crate) fn fmt_score(v: Option<f64>) -> String {
 
 /// A score: a number, `null` when it cannot be computed (no episode, NaN), or the strings
 /// `inf` / `-inf` (JSON has no infinities).
-fn score_schema() -> impl Into<RefOr<Schema>> {
+pub(crate) fn score_schema() -> impl Into<RefOr<Schema>> {
     OneOfBuilder::new()
         .item(ObjectBuilder::new().schema_type(SchemaType::new(Type::Number)))
         .item(ObjectBuilder::new().schema_type(SchemaType::new(Type::Null)))

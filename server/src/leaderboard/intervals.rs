@@ -55,6 +55,20 @@ impl Serialize for Interval {
     }
 }
 
+/// An interval in the OpenAPI document: two scores, `[low, high]`, either of which may be
+/// `"inf"`.
+fn interval_schema() -> impl Into<utoipa::openapi::RefOr<utoipa::openapi::schema::Schema>> {
+    utoipa::openapi::schema::ArrayBuilder::new()
+        .items(
+            Into::<utoipa::openapi::RefOr<utoipa::openapi::schema::Schema>>::into(
+                crate::scores::score_schema(),
+            ),
+        )
+        .min_items(Some(2))
+        .max_items(Some(2))
+        .description(Some("A 95 % interval [low, high]; an unbounded end is \"inf\"."))
+}
+
 /// SR over the tasks of one kind.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, utoipa::ToSchema)]
 pub(crate) struct KindSr {
@@ -62,7 +76,7 @@ pub(crate) struct KindSr {
     pub tasks: u64,
     pub sr: f64,
     /// 95 % Wilson interval `[low, high]` of successes out of tasks.
-    #[schema(value_type = Vec<f64>)]
+    #[schema(schema_with = interval_schema)]
     pub interval: Interval,
 }
 
@@ -74,20 +88,20 @@ pub(crate) const KINDS: [&str; 4] = ["navigation", "manipulation", "pick", "plac
 #[derive(Debug, Clone, Default, PartialEq, Serialize, utoipa::ToSchema)]
 pub(crate) struct Intervals {
     #[serde(skip_serializing_if = "Option::is_none")]
-    #[schema(value_type = Option<Vec<f64>>)]
+    #[schema(schema_with = interval_schema, nullable = false)]
     pub em: Option<Interval>,
     #[serde(skip_serializing_if = "Option::is_none")]
-    #[schema(value_type = Option<Vec<f64>>)]
+    #[schema(schema_with = interval_schema, nullable = false)]
     pub sr: Option<Interval>,
     #[serde(skip_serializing_if = "Option::is_none")]
-    #[schema(value_type = Option<Vec<f64>>)]
+    #[schema(schema_with = interval_schema, nullable = false)]
     pub mse: Option<Interval>,
     #[serde(skip_serializing_if = "Option::is_none")]
-    #[schema(value_type = Option<Vec<f64>>)]
+    #[schema(schema_with = interval_schema, nullable = false)]
     pub m: Option<Interval>,
     /// P's upper end is `"inf"` while EM's interval reaches 0.
     #[serde(skip_serializing_if = "Option::is_none")]
-    #[schema(value_type = Option<Vec<f64>>)]
+    #[schema(schema_with = interval_schema, nullable = false)]
     pub p: Option<Interval>,
     /// Policy rows: SR per task kind (`navigation`, `manipulation`, `pick`, `place`) with
     /// Wilson's interval of successes out of tasks.
