@@ -25,6 +25,7 @@ if __name__ == "__main__" and not __package__:
         spec = importlib.util.spec_from_file_location(
             "kitchen_r_baselines", os.path.join(root, "__init__.py"), submodule_search_locations=[root]
         )
+        assert spec is not None and spec.loader is not None, root
         package = importlib.util.module_from_spec(spec)
         sys.modules["kitchen_r_baselines"] = package
         spec.loader.exec_module(package)
