@@ -10,9 +10,10 @@
 //! - `POST /api/v1/submissions/policies` (both passes): the server probes the endpoint a body
 //!   names, and generated bodies name arbitrary public hosts, so the fuzz would make the server
 //!   connect out (its refusals are covered by `control` and the server's unit tests);
-//! - `POST /api/v1/admin/backup` and `POST /api/v1/admin/rescore` (organiser pass): a database
-//!   copy per request and a rescore of everything per request test nothing the shape checks of
-//!   the team pass (403) and the admin e2e tests do not, at a cost that grows with the fuzz.
+//! - `POST /api/v1/admin/backup`, `POST /api/v1/admin/rescore` and `POST /api/v1/admin/export`
+//!   (organiser pass): a database copy, a rescore of everything and an archive of the whole
+//!   contest per request test nothing the shape checks of the team pass (403) and the admin and
+//!   archive e2e tests do not, at a cost that grows with the fuzz.
 
 use std::path::Path;
 use std::process::Command;
@@ -27,13 +28,21 @@ const SEED: &str = "20261123";
 /// Examples per operation and phase: enough to reach odd inputs, small enough for 2 cores.
 const MAX_EXAMPLES: &str = "100";
 
-/// Plan uploads are JSON Lines (`application/x-ndjson`): schemathesis has no serializer for
-/// that media type by itself; the generated text is sent as is.
+/// Plan uploads are JSON Lines (`application/x-ndjson`) and contest archives `.tar.zst`
+/// (`application/zstd`): schemathesis has no serializer for either media type by itself; the
+/// generated value is sent as is.
 const HOOKS: &str = r#"
 import schemathesis
 
 @schemathesis.serializer("application/x-ndjson")
 def ndjson(ctx, value):
+    if isinstance(value, bytes):
+        return value
+    return str(value).encode("utf-8")
+
+
+@schemathesis.serializer("application/zstd")
+def zstd(ctx, value):
     if isinstance(value, bytes):
         return value
     return str(value).encode("utf-8")
@@ -107,6 +116,7 @@ async fn schemathesis_finds_no_server_error_or_schema_violation() {
         "/api/v1/submissions/policies",
         "/api/v1/admin/backup",
         "/api/v1/admin/rescore",
+        "/api/v1/admin/export",
     ];
     let organiser_pass = fuzz(&server, dir, ADMIN, &excluded).await;
     assert_all_tested(&organiser_pass, excluded.len());

@@ -46,11 +46,20 @@ fn run_id(id: &str) -> Result<i64, ServiceError> {
     tag = "organiser",
     summary = "Every stored verification verdict (`kitchen-r admin verify`)",
     security(("organiser_token" = [])),
-    responses((status = 200, description = "Verdicts by run", body = Vec<crate::service::verification::Verdict>))
+    responses((status = 200, description = "Verdicts by run", body = Verdicts))
 )]
 pub(super) async fn verdicts(State(s): State<AppState>, caller: Caller) -> Result<Response, ServiceError> {
     caller.organiser()?;
-    Ok(axum::Json(serde_json::json!({ "verifications": s.verdicts().await? })).into_response())
+    Ok(axum::Json(Verdicts {
+        verifications: s.verdicts().await?,
+    })
+    .into_response())
+}
+
+/// Every stored verification verdict.
+#[derive(Debug, serde::Serialize, utoipa::ToSchema)]
+pub(super) struct Verdicts {
+    verifications: Vec<crate::service::verification::Verdict>,
 }
 
 #[utoipa::path(
@@ -58,9 +67,11 @@ pub(super) async fn verdicts(State(s): State<AppState>, caller: Caller) -> Resul
     path = "/api/v1/admin/runs/{id}/verification",
     tag = "organiser",
     summary = "What verifying a run replays: its episodes' stored results and trace files, and the verdict so far",
+    params(("id" = i64, Path, minimum = 1, description = "The run id (`GET /api/v1/admin/runs`)", example = 1)),
     security(("organiser_token" = [])),
     responses(
         (status = 200, description = "The episodes", body = crate::service::verification::VerifyPlan),
+        (status = 400, description = "The run id is not a positive integer", body = super::schemas::ErrorBody),
         (status = 404, description = "No such run", body = super::schemas::ErrorBody),
         (status = 409, description = "A plan run (no episodes)", body = super::schemas::ErrorBody),
     )
@@ -80,11 +91,13 @@ pub(super) async fn plan(
     tag = "organiser",
     summary = "Record the verdict of a replay of the run's traces: any disagreement marks it unverified",
     request_body = VerdictReport,
+    params(("id" = i64, Path, minimum = 1, description = "The run id (`GET /api/v1/admin/runs`)", example = 1)),
     security(("organiser_token" = [])),
     responses(
         (status = 200, description = "The stored verdict", body = crate::service::verification::Verdict),
-        (status = 400, description = "The body is not a verdict report", body = super::schemas::ErrorBody),
+        (status = 400, description = "The run id is not a positive integer, or the body is not a verdict report", body = super::schemas::ErrorBody),
         (status = 404, description = "No such run", body = super::schemas::ErrorBody),
+        (status = 409, description = "A plan run (no episodes)", body = super::schemas::ErrorBody),
     )
 )]
 pub(super) async fn record(
@@ -104,10 +117,14 @@ pub(super) async fn record(
     path = "/api/v1/admin/runs/{id}/episodes/{key}/trace",
     tag = "organiser",
     summary = "One episode's stored trace (gzipped JSON) of a given run, dev or test",
+    params(("id" = i64, Path, minimum = 1, description = "The run id (`GET /api/v1/admin/runs`)", example = 1),
+        ("key" = String, Path, description = "The episode's key, e.g. `dev-0007`", example = "dev-0001")),
     security(("organiser_token" = [])),
     responses(
         (status = 200, description = "The trace", content_type = "application/gzip", body = Vec<u8>),
+        (status = 400, description = "The run id is not a positive integer", body = super::schemas::ErrorBody),
         (status = 404, description = "No such run or no stored trace", body = super::schemas::ErrorBody),
+        (status = 409, description = "A plan run (no episodes)", body = super::schemas::ErrorBody),
     )
 )]
 pub(super) async fn trace(
@@ -129,8 +146,10 @@ pub(super) async fn trace(
 
 #[derive(Debug, Deserialize, utoipa::IntoParams)]
 pub(super) struct EpisodesQuery {
-    /// How many of the run's online episodes to hand out (the first N in key order).
-    episodes: usize,
+    /// How many of the run's online episodes to hand out (the first N in key order); required.
+    /// Optional to the query parser only, so that a caller without the organiser's token is
+    /// told so (401) before anything about its query.
+    episodes: Option<usize>,
 }
 
 #[utoipa::path(
@@ -138,10 +157,11 @@ pub(super) struct EpisodesQuery {
     path = "/api/v1/admin/runs/{id}/reevaluation",
     tag = "organiser",
     summary = "N of a run's jobs, as workers lease them (endpoint token opened), with their stored results",
-    params(EpisodesQuery),
+    params(("id" = i64, Path, minimum = 1, description = "The run id (`GET /api/v1/admin/runs`)", example = 1), EpisodesQuery),
     security(("organiser_token" = [])),
     responses(
         (status = 200, description = "The jobs", body = crate::service::verification::Reevaluation),
+        (status = 400, description = "The run id is not a positive integer, or `episodes` is missing or not a count", body = super::schemas::ErrorBody),
         (status = 404, description = "No such run", body = super::schemas::ErrorBody),
         (status = 409, description = "A plan run (no episodes)", body = super::schemas::ErrorBody),
     )
@@ -153,7 +173,10 @@ pub(super) async fn reevaluation(
     caller: Caller,
 ) -> Result<Response, ServiceError> {
     let admin = caller.organiser()?;
-    Ok(axum::Json(s.reevaluation(admin, run_id(&id)?, q.episodes).await?).into_response())
+    let episodes = q.episodes.ok_or_else(|| {
+        ServiceError::BadRequest("`episodes` is required: how many of the run's episodes to run again".into())
+    })?;
+    Ok(axum::Json(s.reevaluation(admin, run_id(&id)?, episodes).await?).into_response())
 }
 
 #[derive(Debug, Deserialize, utoipa::IntoParams)]
