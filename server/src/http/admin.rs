@@ -22,6 +22,7 @@ use serde::Deserialize;
 use tokio::io::AsyncReadExt;
 
 use super::extract::{ClientAddr, PathArg};
+use super::queries::run_id;
 use super::session;
 use crate::error::ServiceError;
 use crate::service::sessions::{Login, Role};
@@ -46,14 +47,6 @@ pub(super) fn quick_routes() -> Router<AppState> {
 /// The backup streams a copy of the whole database: its length grows with the contest.
 pub(super) fn unbounded_routes() -> Router<AppState> {
     Router::new().route("/api/v1/admin/backup", post(backup))
-}
-
-/// A run id from the path: a positive integer, else 400 `bad_request` (an unknown one is 404).
-fn run_id(id: &str) -> Result<i64, ServiceError> {
-    id.parse::<i64>()
-        .ok()
-        .filter(|n| *n > 0)
-        .ok_or_else(|| ServiceError::BadRequest(format!("a run id is a positive integer, not {id:?}")))
 }
 
 #[utoipa::path(

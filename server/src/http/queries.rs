@@ -47,3 +47,12 @@ pub(super) fn split_param(value: Option<&String>, default: Option<Split>) -> Res
         (Some(s), _) => s.parse().map_err(ServiceError::BadRequest),
     }
 }
+
+/// A run id from a path (`/api/v1/admin/runs/{id}/…`): a positive integer, else 400
+/// `bad_request` (an unknown one is 404 where it is looked up).
+pub(crate) fn run_id(id: &str) -> Result<i64, ServiceError> {
+    id.parse::<i64>()
+        .ok()
+        .filter(|n| *n > 0)
+        .ok_or_else(|| ServiceError::BadRequest(format!("a run id is a positive integer, not {id:?}")))
+}

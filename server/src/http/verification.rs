@@ -11,6 +11,7 @@ use axum::routing::{get, post};
 use serde::Deserialize;
 
 use super::extract::{BodyBytes, PathArg, QueryArgs};
+use super::queries::run_id;
 use crate::error::ServiceError;
 use crate::service::verification::VerdictReport;
 use crate::service::{AppState, Caller};
@@ -31,13 +32,6 @@ pub(super) fn unbounded_routes() -> Router<AppState> {
         "/api/v1/admin/import",
         post(import).layer(DefaultBodyLimit::disable()),
     )
-}
-
-fn run_id(id: &str) -> Result<i64, ServiceError> {
-    id.parse::<i64>()
-        .ok()
-        .filter(|n| *n > 0)
-        .ok_or_else(|| ServiceError::BadRequest(format!("a run id is a positive integer, not {id:?}")))
 }
 
 #[utoipa::path(
