@@ -16,6 +16,14 @@ VIRTUAL_ENV="$(cd "$VENV" && pwd)"
 export VIRTUAL_ENV PATH="$VIRTUAL_ENV/bin:$PATH"
 hash -r
 echo "python3: $(command -v python3) ($(python3 --version 2>&1))"
+# LeRobot 0.4.4 in a venv of its own (scripts/lerobot-venv.sh: its torch, datasets and
+# huggingface-hub pins are below the test venv's), not on PATH: the LeRobot path's section below
+# runs with it, and the export's test (worker/tests/it/lerobot_export.rs) loads the export with
+# LeRobotDataset through KITCHEN_R_LEROBOT_PYTHON.
+section "the LeRobot venv (scripts/lerobot-venv.sh)"
+bash scripts/lerobot-venv.sh
+KITCHEN_R_LEROBOT_PYTHON="$(cd "${KITCHEN_R_LEROBOT_VENV:-target/lerobot-venv}" && pwd)/bin/python"
+export KITCHEN_R_LEROBOT_PYTHON
 # The browser test (tests/e2e/browser.rs) drives Debian's Chromium: installed here when this
 # is root on a machine with apt (as CI and a fresh container are); else said here rather than
 # failing (CI) or skipping (elsewhere) deep inside the test run.
@@ -56,6 +64,21 @@ section "the LeRobot env plugin: pip install ./python/lerobot_env_kitchen_r, the
 python3 -m pip install --quiet --disable-pip-version-check --no-build-isolation --no-deps \
   ./python/lerobot_env_kitchen_r
 python3 -m pytest -q python/lerobot_env_kitchen_r/tests
+# The LeRobot path (docs/participant/lerobot.md) with LeRobot 0.4.4, tiny and on the CPU: the env
+# plugin's tests that need LeRobot (marked `lerobot`), then our export -> lerobot-train (ACT and
+# diffusion, 3 steps) -> kitchen-r-serve-lerobot -> check-policy, and lerobot-eval
+# --env.type=kitchen_r for one short episode (starter-kit/baselines/lerobot/tests). gym_kitchen_r
+# goes into the LeRobot venv as a wheel of the build above (cargo has nothing left to compile).
+section "the LeRobot path: the env plugin and starter-kit/baselines/lerobot/tests with LeRobot 0.4.4"
+rm -rf target/lerobot-wheels
+MATURIN_PEP517_ARGS="--profile dev" \
+  python3 -m pip wheel --quiet --disable-pip-version-check --no-deps --no-build-isolation -w target/lerobot-wheels ./python
+"$KITCHEN_R_LEROBOT_PYTHON" -m pip install --quiet --disable-pip-version-check --no-deps --force-reinstall \
+  target/lerobot-wheels/gym_kitchen_r-*.whl
+"$KITCHEN_R_LEROBOT_PYTHON" -m pip install --quiet --disable-pip-version-check --no-build-isolation --no-deps \
+  ./python/lerobot_env_kitchen_r
+KITCHEN_R_BIN=target/debug/kitchen-r "$KITCHEN_R_LEROBOT_PYTHON" -m pytest -q -m lerobot python/lerobot_env_kitchen_r/tests
+KITCHEN_R_BIN=target/debug/kitchen-r "$KITCHEN_R_LEROBOT_PYTHON" -m pytest -q starter-kit/baselines/lerobot/tests
 # The control baselines trained from live simulators (docs/measured/baseline-gates.md): a few CPU training steps on
 # streamed expert samples each; the privileged checkpoint reloads, serves over gRPC and passes
 # check-policy; training and serving compute the same features.

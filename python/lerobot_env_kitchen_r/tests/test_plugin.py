@@ -1,8 +1,9 @@
 """The LeRobot env plugin (docs/participant/lerobot.md) without LeRobot: the adapter's observation keys,
 shapes and dtypes, ``is_success``, the gym id, determinism for a seed, the instruction and seed
-choices, and its refusals. The tests marked ``lerobot`` need LeRobot and are skipped without it
-(CI does not install LeRobot or torch for them); they check the ``kitchen_r`` env config and
-LeRobot's own ``make_env`` / ``preprocess_observation`` / ``add_envs_task`` on the plugin.
+choices, and its refusals. The tests marked ``lerobot`` need LeRobot and are skipped without it;
+scripts/test.sh runs them in the LeRobot venv (scripts/lerobot-venv.sh, LeRobot 0.4.4). They check
+the ``kitchen_r`` env config and LeRobot's own ``make_env`` / ``preprocess_observation`` /
+``add_envs_task`` on the plugin.
 """
 
 import importlib.util
@@ -15,7 +16,13 @@ from gym_kitchen_r import STATE_FIELDS, KitchenREnv
 from lerobot_env_kitchen_r import GYM_ID, KitchenRLeRobotEnv
 
 HAS_LEROBOT = importlib.util.find_spec("lerobot") is not None
-needs_lerobot = pytest.mark.skipif(not HAS_LEROBOT, reason="lerobot is not installed")
+_skip_without_lerobot = pytest.mark.skipif(not HAS_LEROBOT, reason="lerobot is not installed")
+
+
+def needs_lerobot(test):
+    """Skipped without LeRobot; marked `lerobot`, so scripts/test.sh runs only these (`-m lerobot`)
+    in the LeRobot venv, the others having run in the test venv."""
+    return pytest.mark.lerobot(_skip_without_lerobot(test))
 
 
 @pytest.fixture(scope="module")

@@ -1,0 +1,1 @@
+"""Serving LeRobot checkpoints over the Kitchen-R contract (serve.py, features.py)."""

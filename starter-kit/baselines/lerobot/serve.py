@@ -1,0 +1,204 @@
+#!/usr/bin/env python3
+"""Serve a trained LeRobot checkpoint (lerobot-train's `pretrained_model` folder) over the
+Kitchen-R policy contract (gRPC), on the standard track.
+
+    kitchen-r-serve-lerobot --policy.path=outputs/train/act/checkpoints/last/pretrained_model \\
+        [--listen 127.0.0.1:50051] [--policy.device auto] [--execute K] [--token T]
+
+Any LeRobot policy whose inputs are features of `kitchen-r collect --format lerobot`
+(`observation.images.<camera>`, `observation.state`, `observation.joints`,
+`observation.base_pose`: features.py says what each is made of) and whose action is the export's
+10-value `action`; ACT and diffusion are tested. GetSpec asks for each camera the policy reads at
+the size it was trained on, an observation history of the policy's `n_obs_steps`, and `--execute`
+actions of each 16-action chunk (default: the policy's `n_action_steps`, at most 16). Each Act runs
+LeRobot's own pre-processor (normalisation, device), the policy's `predict_action_chunk` and its
+post-processor (unnormalisation), as lerobot-eval does; the chunk is padded with its last action or
+cut to 16, each quaternion normalised and the gripper clipped to [0, 1]. Prints
+`listening grpc=HOST:PORT` once it accepts calls.
+"""
+
+if __name__ == "__main__" and not __package__:  # run as a file: hand over to the installed package's module
+    import runpy
+
+    runpy.run_module("kitchen_r_baselines.lerobot.serve", run_name="__main__", alter_sys=True)
+    raise SystemExit
+
+import argparse
+import logging
+import os
+import sys
+import threading
+from typing import Any
+
+import numpy as np
+
+from .. import serving
+from ..observation import frames
+from . import features as F
+
+HORIZON = 16
+MAX_HISTORY = 8
+
+
+def parser() -> argparse.ArgumentParser:
+    """The flags, spelled as LeRobot's own tools spell the policy's (`--policy.path`)."""
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument(
+        "--policy.path",
+        dest="policy_path",
+        required=True,
+        help="a pretrained_model folder written by lerobot-train (config.json, model.safetensors, processors)",
+    )
+    ap.add_argument(
+        "--policy.device", dest="device", default="auto", help="auto (CUDA if available), cpu, cuda, cuda:1, ..."
+    )
+    ap.add_argument("--listen", default="127.0.0.1:50051", help="HOST:PORT; port 0 picks a free port")
+    ap.add_argument(
+        "--execute",
+        type=int,
+        default=0,
+        help="actions of each 16-action chunk executed before the next Act; 0: the policy's n_action_steps (at most 16)",
+    )
+    ap.add_argument(
+        "--concurrency",
+        type=int,
+        default=4,
+        help="Act calls accepted at once (max_concurrency); they run one at a time",
+    )
+    ap.add_argument("--token", default=os.environ.get("POLICY_TOKEN"), help="require this bearer token")
+    ap.add_argument("--proto-dir", default=None, help="directory with kitchen_r/policy/v1/policy.proto")
+    return ap
+
+
+class LeRobotRunner:
+    """The policy object `policy_server.serve` drives: one LeRobot policy and its processors."""
+
+    def __init__(self, path: str, device: str = "cpu"):
+        import torch
+        from lerobot.configs.policies import PreTrainedConfig
+        from lerobot.policies.factory import get_policy_class, make_pre_post_processors
+
+        self.torch = torch
+        cfg = PreTrainedConfig.from_pretrained(path)
+        cfg.pretrained_path = path
+        cfg.device = device
+        self.policy = get_policy_class(cfg.type).from_pretrained(path, config=cfg)
+        self.policy.to(device)
+        self.policy.eval()
+        self.preprocessor, self.postprocessor = make_pre_post_processors(
+            cfg, pretrained_path=path, preprocessor_overrides={"device_processor": {"device": device}}
+        )
+        self.config = cfg
+        self.keys = list(cfg.input_features)
+        unknown = [k for k in self.keys if F.camera(k) is None and k not in F.VECTORS]
+        if unknown:
+            sys.exit(
+                f"{path}: the policy reads {unknown}, which the Kitchen-R export has not: it has "
+                f"{F.IMAGE_PREFIX}<camera>, {', '.join(F.VECTORS)} (train on `kitchen-r collect --format lerobot`)"
+            )
+        action = cfg.output_features.get("action")
+        if action is None or tuple(action.shape) != (len(F.ACTION_NAMES),):
+            sys.exit(f"{path}: the policy's action is {action}, not the export's 10 values {F.ACTION_NAMES}")
+        self.history = max(1, int(getattr(cfg, "n_obs_steps", 1) or 1))
+        if self.history > MAX_HISTORY:
+            sys.exit(
+                f"{path}: n_obs_steps {self.history} is more frames than the contract sends (at most {MAX_HISTORY})"
+            )
+        # The policy object keeps state (diffusion's observation queues), so Acts take turns.
+        self.lock = threading.Lock()
+
+    def cameras(self) -> list[tuple[str, int, int]]:
+        """(name, width, height) of each camera the policy reads, at its training size."""
+        out = []
+        for key in self.keys:
+            cam = F.camera(key)
+            if cam is not None:
+                _, height, width = self.config.input_features[key].shape
+                out.append((cam, int(width), int(height)))
+        return out
+
+    def default_execute(self) -> int:
+        return max(1, min(HORIZON, int(getattr(self.config, "n_action_steps", HORIZON) or HORIZON)))
+
+    def reset(self, episode_id: str, task_index: int, sub_task: str) -> None:
+        pass
+
+    def batch(self, frame: Any, task: str) -> dict[str, Any]:
+        """One frame as lerobot-eval hands it to the pre-processor: a batch of one, images
+        (1, 3, H, W) float in [0, 1], vectors (1, D) float32, and the task sentence."""
+        torch = self.torch
+        out: dict[str, Any] = {"task": [task]}
+        for key, value in F.frame_features(frame, self.keys).items():
+            t = torch.from_numpy(np.array(value))  # a copy: gRPC's bytes are read-only
+            if F.camera(key) is not None:
+                t = t.permute(2, 0, 1).float().div(255.0)
+            out[key] = t.unsqueeze(0)
+        return self.preprocessor(out)
+
+    def decide(self, obs: Any) -> list[list[float]]:
+        torch = self.torch
+        with self.lock, torch.no_grad():
+            batches = [self.batch(f, obs.sub_task) for f in frames(obs, self.history)]
+            actions = self.chunk(batches)  # (1, K, 10), normalised as in training
+            real = [self.postprocessor(actions[:, i]) for i in range(actions.shape[1])]
+            out = torch.stack([a.reshape(-1) for a in real]).float().cpu().numpy()
+        return F.to_chunk(out, HORIZON)
+
+    def chunk(self, batches: list[dict[str, Any]]) -> Any:
+        """The policy's chunk for the newest frame, the frames before it as its history: policies
+        that keep their observations in queues (diffusion: `n_obs_steps` frames) get the queues
+        filled from this Act's frames, so no state is carried from one Act (or episode) to the next."""
+        policy = self.policy
+        # The pre-processor's output carries an `action` entry (None here): no input of the policy.
+        batches = [{k: v for k, v in b.items() if k != "action"} for b in batches]
+        last = batches[-1]
+        if hasattr(policy, "_queues"):
+            from lerobot.policies.utils import populate_queues
+
+            image_keys = list(getattr(self.config, "image_features", {}) or {})
+
+            def stacked(b: dict[str, Any]) -> dict[str, Any]:
+                if not image_keys:
+                    return b
+                return {**b, "observation.images": self.torch.stack([b[k] for k in image_keys], dim=-4)}
+
+            policy.reset()
+            for b in batches:
+                populate_queues(policy._queues, stacked(b))
+            last = stacked(last)
+        return policy.predict_action_chunk(last)
+
+
+def main(argv: list[str] | None = None) -> None:
+    args = parser().parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(message)s")
+    device = str(serving.torch_device(args.device))
+    if device == "cpu":
+        import torch
+
+        torch.set_num_threads(max(1, min(8, os.cpu_count() or 1)))
+    runner = LeRobotRunner(args.policy_path, device)
+    if args.execute == 0:
+        args.execute = runner.default_execute()
+    if not 1 <= args.execute <= HORIZON:
+        sys.exit(f"--execute must be between 1 and {HORIZON}")
+    logging.info(
+        "%s policy from %s on %s: inputs %s, %d frame(s) per Act, %d action(s) executed per chunk",
+        runner.config.type,
+        args.policy_path,
+        device,
+        runner.keys,
+        runner.history,
+        args.execute,
+    )
+    serving.serve(
+        args,
+        runner,
+        history=runner.history,
+        name=f"LeRobot {runner.config.type} ({os.path.basename(os.path.normpath(args.policy_path))})",
+        cameras=runner.cameras(),
+    )
+
+
+if __name__ == "__main__":
+    main()
