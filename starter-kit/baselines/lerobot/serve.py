@@ -12,7 +12,8 @@ Any LeRobot policy whose inputs are features of `kitchen-r collect --format lero
 the size it was trained on, an observation history of the policy's `n_obs_steps`, and `--execute`
 actions of each 16-action chunk (default: the policy's `n_action_steps`, at most 16). Each Act runs
 LeRobot's own pre-processor (normalisation, device), the policy's `predict_action_chunk` and its
-post-processor (unnormalisation), as lerobot-eval does; the chunk is padded with its last action or
+post-processor (unnormalisation), as lerobot-eval does; an ActBatch call (`--max-batch`) runs its
+episodes' decisions through them in one batch; the chunk is padded with its last action or
 cut to 16, each quaternion normalised and the gripper clipped to [0, 1]. Prints
 `listening grpc=HOST:PORT` once it accepts calls.
 """
@@ -28,6 +29,7 @@ import logging
 import os
 import sys
 import threading
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -64,6 +66,13 @@ def parser() -> argparse.ArgumentParser:
         type=int,
         default=4,
         help="Act calls accepted at once (max_concurrency); they run one at a time",
+    )
+    ap.add_argument(
+        "--max-batch",
+        type=int,
+        default=16,
+        help="batched decisions: the most episodes' decisions one ActBatch call carries, run through the "
+        "policy in one forward pass; 0 or 1 = Acts only",
     )
     ap.add_argument("--token", default=os.environ.get("POLICY_TOKEN"), help="require this bearer token")
     ap.add_argument("--proto-dir", default=None, help="directory with kitchen_r/policy/v1/policy.proto")
@@ -123,29 +132,34 @@ class LeRobotRunner:
     def reset(self, episode_id: str, task_index: int, sub_task: str) -> None:
         pass
 
-    def batch(self, frame: Any, task: str) -> dict[str, Any]:
-        """One frame as lerobot-eval hands it to the pre-processor: a batch of one, images
-        (1, 3, H, W) float in [0, 1], vectors (1, D) float32, and the task sentence."""
+    def batch(self, frames_: list[Any], tasks: list[str]) -> dict[str, Any]:
+        """One frame of each episode as lerobot-eval hands a step to the pre-processor: a batch of
+        images (N, 3, H, W) float in [0, 1], vectors (N, D) float32, and the task sentences."""
         torch = self.torch
-        out: dict[str, Any] = {"task": [task]}
-        for key, value in F.frame_features(frame, self.keys).items():
-            t = torch.from_numpy(np.array(value))  # a copy: gRPC's bytes are read-only
-            if F.camera(key) is not None:
-                t = t.permute(2, 0, 1).float().div(255.0)
-            out[key] = t.unsqueeze(0)
+        per = [F.frame_features(f, self.keys) for f in frames_]
+        out: dict[str, Any] = {"task": list(tasks)}
+        for key in self.keys:
+            t = torch.from_numpy(np.stack([p[key] for p in per]))  # a copy: gRPC's bytes are read-only
+            out[key] = t.permute(0, 3, 1, 2).float().div(255.0) if F.camera(key) is not None else t
         return self.preprocessor(out)
 
     def decide(self, obs: Any) -> list[list[float]]:
+        return self.decide_batch([obs])[0]
+
+    def decide_batch(self, observations: list[Any]) -> list[list[list[float]]]:
+        """One chunk per observation (each from its own episode), in one forward pass."""
         torch = self.torch
+        history = [frames(o, self.history) for o in observations]
+        tasks = [o.sub_task for o in observations]
         with self.lock, torch.no_grad():
-            batches = [self.batch(f, obs.sub_task) for f in frames(obs, self.history)]
-            actions = self.chunk(batches)  # (1, K, 10), normalised as in training
+            batches = [self.batch([h[i] for h in history], tasks) for i in range(self.history)]
+            actions = self.chunk(batches)  # (N, K, 10), normalised as in training
             real = [self.postprocessor(actions[:, i]) for i in range(actions.shape[1])]
-            out = torch.stack([a.reshape(-1) for a in real]).float().cpu().numpy()
-        return F.to_chunk(out, HORIZON)
+            out = torch.stack([a.reshape(len(observations), -1) for a in real], dim=1).float().cpu().numpy()
+        return [F.to_chunk(a, HORIZON) for a in out]
 
     def chunk(self, batches: list[dict[str, Any]]) -> Any:
-        """The policy's chunk for the newest frame, the frames before it as its history: policies
+        """The policy's chunks for the newest frames, the frames before them as their history: policies
         that keep their observations in queues (diffusion: `n_obs_steps` frames) get the queues
         filled from this Act's frames, so no state is carried from one Act (or episode) to the next."""
         policy = self.policy
@@ -169,6 +183,16 @@ class LeRobotRunner:
         return policy.predict_action_chunk(last)
 
 
+def checkpoint_name(path: str) -> str:
+    """`outputs/act/checkpoints/last/pretrained_model` -> `act/000003` (`last` is a link to the step)."""
+    p = Path(path).resolve()
+    if p.name == "pretrained_model":
+        p = p.parent
+    if p.parent.name == "checkpoints":
+        return f"{p.parent.parent.name}/{p.name}"
+    return p.name
+
+
 def main(argv: list[str] | None = None) -> None:
     args = parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(message)s")
@@ -182,6 +206,8 @@ def main(argv: list[str] | None = None) -> None:
         args.execute = runner.default_execute()
     if not 1 <= args.execute <= HORIZON:
         sys.exit(f"--execute must be between 1 and {HORIZON}")
+    if args.max_batch < 0:
+        sys.exit("--max-batch must be at least 0")
     logging.info(
         "%s policy from %s on %s: inputs %s, %d frame(s) per Act, %d action(s) executed per chunk",
         runner.config.type,
@@ -195,7 +221,7 @@ def main(argv: list[str] | None = None) -> None:
         args,
         runner,
         history=runner.history,
-        name=f"LeRobot {runner.config.type} ({os.path.basename(os.path.normpath(args.policy_path))})",
+        name=f"LeRobot {runner.config.type} ({checkpoint_name(args.policy_path)})",
         cameras=runner.cameras(),
     )
 

@@ -193,6 +193,31 @@ def test_act_trains_on_the_export_serves_and_passes_check_policy(act_model):
 
 
 @needs_lerobot
+def test_a_batch_of_decisions_is_each_decision_alone(act_model):
+    # ActBatch runs several episodes' decisions in one forward pass; a deterministic policy (ACT
+    # without its VAE) answers each as it answers it alone.
+    from kitchen_r_baselines.lerobot.serve import LeRobotRunner
+
+    runner = LeRobotRunner(str(act_model), "cpu")
+    observations = []
+    for seed in range(3):
+        rng = np.random.default_rng(seed)
+        images = [
+            SimpleNamespace(
+                camera=c, width=128, height=128, data=rng.integers(0, 256, (128, 128, 3), np.uint8).tobytes()
+            )
+            for c in ("base", "gripper")
+        ]
+        f = frame(base_v=float(rng.normal()), arm_joints=list(rng.normal(size=6)))
+        observations.append(SimpleNamespace(history=[], robot=f.robot, images=images, sub_task="pick the apple"))
+    batched = np.array(runner.decide_batch(observations))
+    alone = np.array([runner.decide(o) for o in observations])
+    assert batched.shape == (3, HORIZON, 10)
+    np.testing.assert_allclose(batched, alone, atol=1e-5)
+    assert np.abs(batched[0] - batched[1]).max() > 1e-4  # the inputs differ, and so do the answers
+
+
+@needs_lerobot
 def test_diffusion_trains_on_the_export_serves_and_passes_check_policy(export, tmp_path):
     model = train(export, "diffusion", tmp_path / "train")
     out = serve_and_check(model)
