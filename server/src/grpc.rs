@@ -24,7 +24,8 @@ use tonic::{Request, Response, Status};
 
 use crate::config::Config;
 use crate::error::{REQUEST_ID_HEADER, ServiceError, request_id_from, with_request_id};
-use crate::leaderboard::Track;
+use crate::leaderboard::intervals::{Interval, Intervals};
+use crate::leaderboard::{Card, Track};
 use crate::probe::BoxFuture;
 use crate::service::lease::MAX_LEASE_WAIT_MS;
 use crate::service::{AppState, EpisodeView, RegisterPolicy, Scores, SubmissionView};
@@ -61,6 +62,55 @@ fn scores(s: Scores) -> pb::Scores {
         mse: s.mse,
         m: s.m,
         p: s.p,
+    }
+}
+
+fn interval(i: Interval) -> pb::Interval {
+    pb::Interval {
+        low: i.low,
+        high: i.high,
+    }
+}
+
+/// A row's intervals as the HTTP board gives them (the same numbers: both adapters read the
+/// service's [`Intervals`]).
+fn intervals(i: Intervals) -> pb::Intervals {
+    pb::Intervals {
+        em: i.em.map(interval),
+        sr: i.sr.map(interval),
+        mse: i.mse.map(interval),
+        m: i.m.map(interval),
+        p: i.p.map(interval),
+        sr_by_kind: (i.sr_by_kind.into_iter())
+            .map(|(kind, k)| {
+                let kind_sr = pb::KindSr {
+                    successes: k.successes,
+                    tasks: k.tasks,
+                    sr: k.sr,
+                    interval: Some(interval(k.interval)),
+                };
+                (kind, kind_sr)
+            })
+            .collect(),
+    }
+}
+
+fn card(
+    c: Card,
+    label: impl Fn(Option<ObservationTrack>) -> String,
+    mode: impl Fn(Option<kitchen_r_core::GraspMode>) -> String,
+) -> pb::ResultsCard {
+    pb::ResultsCard {
+        run_id: c.run_id,
+        binary_version: c.binary_version,
+        config_hash: c.config_hash,
+        config: c.config,
+        dataset: c.dataset,
+        seeds: c.seeds,
+        grasp_mode: mode(c.grasp_mode),
+        observations: label(c.observations),
+        episodes: c.episodes,
+        scorer_version: c.scorer_version,
     }
 }
 
@@ -201,6 +251,8 @@ impl Submissions for SubmissionsService {
             split: split.to_string(),
             observations: label(board.observations),
             grasp_mode: mode(board.grasp_mode),
+            interval_ties: board.interval_ties,
+            ties: board.ties.into(),
             rows: board
                 .rows
                 .into_iter()
@@ -213,6 +265,9 @@ impl Submissions for SubmissionsService {
                     baseline: r.baseline,
                     observations: label(r.observations),
                     grasp_mode: mode(r.grasp_mode),
+                    intervals: Some(intervals(r.intervals)),
+                    card: r.card.map(|c| card(c, label, mode)),
+                    state: r.state.unwrap_or_default(),
                 })
                 .collect(),
         }))

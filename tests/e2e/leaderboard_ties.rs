@@ -7,6 +7,7 @@
 
 use crate::support;
 
+use kitchen_r_proto::submission::v1 as pb;
 use serde_json::Value;
 use support::*;
 
@@ -79,6 +80,8 @@ async fn overlapping_intervals_share_a_rank_and_every_rendering_shows_them() {
     assert_ne!(card["dataset"], "unknown", "{card}");
     assert_eq!(card["binary_version"], env!("CARGO_PKG_VERSION"), "{card}");
 
+    grpc_board_matches(&server, &board).await;
+
     let csv = text(&server, "/api/v1/leaderboard?track=planning&split=dev&format=csv").await;
     let mut csv_lines = csv.lines();
     assert_eq!(
@@ -118,4 +121,39 @@ async fn overlapping_intervals_share_a_rank_and_every_rendering_shows_them() {
     assert_eq!(board["interval_ties"], false, "{board:#}");
     let page = text(&server, "/?split=dev").await;
     assert!(page.contains("a rank of its own"), "{page}");
+}
+
+/// The gRPC twin of the board (`GetLeaderboard`) carries what the HTTP board carries: the same
+/// shared ranks, intervals, ties sentence and results cards.
+async fn grpc_board_matches(server: &Server, http: &Value) {
+    let mut client = pb::submissions_client::SubmissionsClient::connect(server.grpc.clone())
+        .await
+        .unwrap();
+    let board = (client.get_leaderboard(pb::GetLeaderboardRequest {
+        track: "planning".into(),
+        split: "dev".into(),
+        ..Default::default()
+    }))
+    .await
+    .unwrap()
+    .into_inner();
+    assert_eq!(board.interval_ties, http["interval_ties"].as_bool().unwrap());
+    assert_eq!(board.ties, http["ties"].as_str().unwrap());
+    let rows = http["rows"].as_array().unwrap();
+    assert_eq!(board.rows.len(), rows.len());
+    for (g, h) in board.rows.iter().zip(rows) {
+        assert_eq!(g.team, h["team"].as_str().unwrap());
+        assert_eq!(u64::from(g.rank), h["rank"].as_u64().unwrap(), "{h}");
+        let em = g.intervals.as_ref().and_then(|i| i.em).unwrap();
+        let want = h["intervals"]["em"].as_array().unwrap();
+        assert_eq!(
+            (em.low, em.high),
+            (want[0].as_f64().unwrap(), want[1].as_f64().unwrap()),
+            "{h}"
+        );
+        let card = g.card.as_ref().unwrap();
+        assert_eq!(card.run_id, h["card"]["run_id"].as_i64().unwrap(), "{h}");
+        assert_eq!(card.episodes, h["card"]["episodes"].as_u64().unwrap(), "{h}");
+        assert_eq!(card.dataset, h["card"]["dataset"].as_str().unwrap(), "{h}");
+    }
 }
