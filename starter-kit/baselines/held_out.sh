@@ -25,7 +25,11 @@
 # baselines to train: cam, priv, diff), PRIV_JOBS [4] (the privileged gate's jobs: its gate runs
 # beside the camera's, which takes JOBS). The diffusion baseline (TRAIN=diff, EVAL=diff) trains
 # through its own pipeline (diffusion_policy/device_pipeline.sh, STOP_AFTER=train) on episodes
-# of TRAIN_INSTRUCTIONS; DIFF_EPISODES [1000] and DIFF_MINUTES [10] set its data and time. On a machine of several GPUs, give each run its own with CUDA_VISIBLE_DEVICES and RUN.
+# of TRAIN_INSTRUCTIONS; DIFF_EPISODES [1000] and DIFF_MINUTES [10] set its data and time. On a machine of several GPUs,
+# give each run its own with CUDA_VISIBLE_DEVICES and RUN, or give one gate several: GPUS [1] = 2
+# runs the dev and test parts side by side, one GPU and one served policy each (JOBS jobs each),
+# GPUS = 4 each part's halves (for a slow policy's gate, the diffusion baseline's: "Run 6" in
+# docs/measured/baseline-gates.md); one EVAL at a time then.
 # Needs python3 with the baselines installed (pip install -e ./starter-kit -e "./starter-kit/baselines[control]"
 # and ./python; on a GPU machine of the developers' `device` tool, device_setup.sh links them).
 set -euo pipefail
@@ -76,14 +80,38 @@ train() {
 CAM_CKPT="${CAM_CKPT:-$RUN/cam/ckpt.pt}"
 PRIV_CKPT="${PRIV_CKPT:-$RUN/priv/ckpt.pt}"
 DIFF_CKPT="${DIFF_CKPT:-$RUN/diff/results/ckpt.pt}"
+# Halves of a 1-based inclusive range A-B when asked for 2 or more parts (else the range).
+halves() {
+  local a=${1%-*} b=${1#*-}
+  if [ "$2" -lt 2 ] || [ "$a" -ge "$b" ]; then echo "$1"; return; fi
+  local m=$(((a + b) / 2))
+  echo "$a-$m $((m + 1))-$b"
+}
 gate() {  # name track serve-command train-log jobs
   local name=$1 track=$2 serve=$3 log=$4 jobs=$5
   local out="$RUN/results/$name"
-  python3 "$HERE/gate.py" --track "$track" --out "$out/dev-$EVAL_DEV" --split dev --instructions "$EVAL_DEV" \
-    --seed "$EVAL_SEED" --held-out --no-offline --jobs "$jobs" --train-log "$log" --serve "$serve"
-  python3 "$HERE/gate.py" --track "$track" --out "$out/test-$EVAL_TEST" --split test --instructions "$EVAL_TEST" \
-    --seed "$EVAL_SEED" --held-out --no-offline --jobs "$jobs" --train-log "$log" --serve "$serve"
-  python3 "$HERE/gate.py" --track "$track" --out "$out" --train-log "$log" --combine "$out/dev-$EVAL_DEV" "$out/test-$EVAL_TEST"
+  # GPUS > 1: the held-out parts run side by side, one GPU (and its own served policy) each:
+  # 2 GPUs take dev and test, 4 take each one's halves. Episode seeds are per instruction, so
+  # the episodes are those of one run over the whole ranges.
+  local gpus=${GPUS:-1} parts=() pids=() dirs=() i=0 failed=0 p s r
+  for r in $(halves "$EVAL_DEV" $((gpus / 2))); do parts+=("dev:$r"); done
+  for r in $(halves "$EVAL_TEST" $((gpus / 2))); do parts+=("test:$r"); done
+  for p in "${parts[@]}"; do
+    s=${p%%:*} r=${p#*:}
+    dirs+=("$out/$s-$r")
+    if [ "$gpus" -gt 1 ]; then
+      CUDA_VISIBLE_DEVICES=$((i % gpus)) python3 "$HERE/gate.py" --track "$track" --out "$out/$s-$r" --split "$s" \
+        --instructions "$r" --seed "$EVAL_SEED" --held-out --no-offline --jobs "$jobs" --train-log "$log" --serve "$serve" &
+      pids+=($!)
+    else
+      python3 "$HERE/gate.py" --track "$track" --out "$out/$s-$r" --split "$s" --instructions "$r" \
+        --seed "$EVAL_SEED" --held-out --no-offline --jobs "$jobs" --train-log "$log" --serve "$serve"
+    fi
+    i=$((i + 1))
+  done
+  for p in "${pids[@]}"; do wait "$p" || failed=1; done
+  [ "$failed" = 0 ] || { say "a part of the $name gate failed"; return 1; }
+  python3 "$HERE/gate.py" --track "$track" --out "$out" --train-log "$log" --combine "${dirs[@]}"
 }
 evaluate() {
   # The gates run side by side: the privileged one is light (no images) and done well before.
