@@ -15,9 +15,15 @@
 #   numpy==2.2.6 too);
 # - wandb (imported only with --wandb.enable=true) and torchcodec (needs FFmpeg's shared libraries,
 #   which the image lacks; pass --dataset.video_backend=pyav, PyAV's wheel brings FFmpeg).
-# On the machine, with OUT carried (docs/participant/lerobot.md, "On the GPU machine"):
-#   python3 -m pip install -q --no-index --no-deps --no-compile --target /tmp/site OUT/*.whl
+# A call to the machine carries at most 64 MiB with the repository (about 38 MB of it), and PyAV's
+# wheel alone is 40 MB: so the wheels are also packed into OUT.part-aa, -ab, ... of 20 MB each.
+# Carry one part per call to one warm machine, each call starting with
+#   cp target/device/lerobot.part-* /tmp/
+# and the last one, when /tmp holds every part, installing them:
+#   mkdir -p /tmp/lerobot-wheels && cat /tmp/lerobot.part-* | tar -xf - -C /tmp/lerobot-wheels
+#   python3 -m pip install -q --no-index --no-deps --no-compile --target /tmp/site /tmp/lerobot-wheels/*.whl
 #   export PYTHONPATH=/tmp/site
+# (docs/participant/lerobot.md, "On the GPU machine").
 set -euo pipefail
 OUT="${1:-target/device/lerobot}"
 mkdir -p "$OUT"
@@ -33,4 +39,7 @@ for p in manylinux_2_28_x86_64 manylinux_2_27_x86_64 manylinux_2_17_x86_64 manyl
 done
 python3 -m pip download --quiet --disable-pip-version-check --no-deps --only-binary=:all: \
   --python-version 3.12 --implementation cp "${platforms[@]}" -d "$OUT" "${PACKAGES[@]}"
-echo "$(ls "$OUT"/*.whl | wc -l) wheels, $(du -ch "$OUT"/*.whl | tail -1 | cut -f1) in $OUT"
+rm -f "$OUT".part-*
+tar -cf - -C "$OUT" . | split -b 20m - "$OUT.part-"
+echo "$(ls "$OUT"/*.whl | wc -l) wheels, $(du -cb "$OUT"/*.whl | tail -1 | cut -f1) bytes in $OUT;" \
+  "to carry: $(ls "$OUT".part-* | tr '\n' ' ')"
