@@ -29,6 +29,14 @@ target) and key objects' poses in the scene frame; on the test split only what t
 sub-task names. A server accepts such a policy only where its organiser enabled the track
 (`control.privileged_track = true`; otherwise registration is refused, naming that key), and
 ranks it on the privileged boards, apart from standard policies. `privileged(obs)` below reads it.
+
+Batched decisions (`--max-batch N`, N > 1): GetSpec declares `max_batch`, and a worker running
+several episodes against this server sends their pending decisions in one `ActBatch` call (up
+to N observations, one chunk back for each, in the same order). By default each observation is
+answered by `decide(obs)`, one after the other; a policy that defines
+`decide_batch(observations)` (a list of observations in, a list of chunks out, same order) gets
+the whole batch instead, for one batched forward pass. Each observation is exactly what its Act
+would carry, and an episode's result depends only on the chunk returned for it.
 """
 
 import argparse
@@ -112,6 +120,10 @@ class StarterPolicy:
         _world = privileged(obs)  # None unless this policy asked for privileged observations
         return [list(self.HOLD) for _ in range(HORIZON)]
 
+    # Batched decisions (--max-batch > 1): define `decide_batch(self, observations)` returning one
+    # chunk per observation, in order, to run a batch through a model at once; without it the
+    # server calls `decide` for each observation.
+
 
 def frames(obs):
     """The frames of one Act, oldest first: `obs.history` (the steps before, as many as
@@ -165,8 +177,14 @@ def make_servicer(
     max_concurrency=4,
     privileged=False,
     cameras=(("base", 128, 128), ("gripper", 128, 128)),
+    max_batch=0,
 ):
     import grpc
+
+    def chunk_message(chunk, context):
+        if len(chunk) != HORIZON or any(len(a) != ACTION_DIM for a in chunk):
+            context.abort(grpc.StatusCode.INTERNAL, "policy produced a chunk of the wrong shape")
+        return pb2.ActionChunk(values=[v for a in chunk for v in a])
 
     class Servicer(pb2_grpc.PolicyServicer):
         def _authorise(self, context):
@@ -205,6 +223,8 @@ def make_servicer(
                 # Privileged track: True asks for `privileged_observation` in every Act (the
                 # server says whether it runs the track in request.privileged_track).
                 privileged_observations=privileged,
+                # Batched decisions: up to this many observations per ActBatch (0/1: Acts only).
+                max_batch=max_batch,
             )
 
         def Reset(self, request, context):
@@ -214,10 +234,26 @@ def make_servicer(
 
         def Act(self, request, context):
             self._authorise(context)
-            chunk = policy.decide(request)
-            if len(chunk) != HORIZON or any(len(a) != ACTION_DIM for a in chunk):
-                context.abort(grpc.StatusCode.INTERNAL, "policy produced a chunk of the wrong shape")
-            return pb2.ActionChunk(values=[v for a in chunk for v in a])
+            return chunk_message(policy.decide(request), context)
+
+        def ActBatch(self, request, context):
+            """Batched decisions: one chunk per observation, in order; through the policy's
+            `decide_batch` when it has one, else `decide` for each."""
+            self._authorise(context)
+            observations = list(request.observations)
+            if len(observations) > max(1, max_batch):
+                context.abort(
+                    grpc.StatusCode.INVALID_ARGUMENT,
+                    f"ActBatch carries {len(observations)} observations, more than max_batch {max(1, max_batch)}",
+                )
+            batch = getattr(policy, "decide_batch", None)
+            chunks = batch(observations) if batch is not None else [policy.decide(o) for o in observations]
+            if len(chunks) != len(observations):
+                context.abort(
+                    grpc.StatusCode.INTERNAL,
+                    f"policy produced {len(chunks)} chunks for {len(observations)} observations",
+                )
+            return pb2.ActionChunkBatch(chunks=[chunk_message(c, context) for c in chunks])
 
     return Servicer()
 
@@ -238,6 +274,13 @@ def main():
         help="ask for privileged observations (the privileged track; ranked apart, needs the organiser's "
         "control.privileged_track = true)",
     )
+    ap.add_argument(
+        "--max-batch",
+        type=int,
+        default=0,
+        help="batched decisions: declare max_batch in GetSpec, so workers send up to N episodes' decisions "
+        "in one ActBatch call; 0 or 1 = Acts only",
+    )
     args = ap.parse_args()
     if not 1 <= args.history <= MAX_OBSERVATION_HISTORY:
         sys.exit(f"--history must be between 1 and {MAX_OBSERVATION_HISTORY}")
@@ -253,6 +296,7 @@ def main():
         args.history,
         args.execute,
         privileged=args.privileged,
+        max_batch=args.max_batch,
     )
 
 
@@ -268,10 +312,12 @@ def serve(
     max_concurrency=4,
     privileged=False,
     cameras=None,
+    max_batch=0,
 ):
     """Serve `policy` (an object with `reset(episode_id, task_index, sub_task)` and
-    `decide(obs)`, as StarterPolicy) with the health service until interrupted; prints
-    `listening grpc=HOST:PORT` once it accepts calls. Learned policies (baselines/) reuse this.
+    `decide(obs)`, as StarterPolicy, and optionally `decide_batch(observations)`) with the health
+    service until interrupted; prints `listening grpc=HOST:PORT` once it accepts calls. Learned
+    policies (baselines/) reuse this. `max_batch` > 1 declares batched decisions (ActBatch).
     `cameras`: `(name, width, height[, depth])` per camera GetSpec asks for (default both at 128x128, no depth;
     an empty list means the server's default cameras, so a policy that reads none asks for one
     small image)."""
@@ -280,7 +326,8 @@ def serve(
 
     pb2, pb2_grpc = load_stubs(proto_dir(proto))
     opts = [
-        ("grpc.max_receive_message_length", MAX_MESSAGE_BYTES),
+        # A batch carries up to max_batch observations, each up to the one-Act size.
+        ("grpc.max_receive_message_length", MAX_MESSAGE_BYTES * max(1, max_batch)),
         ("grpc.max_send_message_length", MAX_MESSAGE_BYTES),
     ]
     server = grpc.server(futures.ThreadPoolExecutor(max_workers=threads), options=opts)
@@ -288,7 +335,16 @@ def serve(
     if cameras is not None:
         extra["cameras"] = cameras
     servicer = make_servicer(
-        pb2, pb2_grpc, policy, token, history, execute, max_concurrency=max_concurrency, privileged=privileged, **extra
+        pb2,
+        pb2_grpc,
+        policy,
+        token,
+        history,
+        execute,
+        max_concurrency=max_concurrency,
+        privileged=privileged,
+        max_batch=max_batch,
+        **extra,
     )
     pb2_grpc.add_PolicyServicer_to_server(servicer, server)
     h = health.HealthServicer()

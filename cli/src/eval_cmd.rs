@@ -92,6 +92,16 @@ pub(crate) struct EvalArgs {
     /// `[robot] file`, or KITCHEN_R_ROBOT]; a relative name is relative to the working directory
     #[arg(long, value_name = "FILE")]
     robot: Option<PathBuf>,
+    /// Endpoint policies that declare `max_batch` > 1 in GetSpec: the most pending decisions
+    /// sent in one ActBatch call; 1 sends every decision as its own Act, to compare
+    /// [default: configs/eval.toml's `max_batch`, 64].
+    #[arg(long, value_name = "N")]
+    max_batch: Option<u32>,
+    /// The gather window of batched decisions, milliseconds: how long the oldest pending
+    /// decision waits for other episodes' before a partial batch goes
+    /// [default: configs/eval.toml's `batch_gather_ms`, 5].
+    #[arg(long, value_name = "MS")]
+    batch_gather_ms: Option<f64>,
     #[command(flatten)]
     live: crate::live_view::LiveArgs,
 }
@@ -239,6 +249,8 @@ fn eval_endpoint(
         trace: args.trace.clone(),
         watch: None,
         grasp: args.grasp,
+        max_batch: args.max_batch.unwrap_or(config.max_batch),
+        batch_gather_ms: args.batch_gather_ms.unwrap_or(config.batch_gather_ms),
     };
     let view = crate::live_view::LiveView::start(&args.live, &crate::live_view::default_sensors()?)?;
     let settings = LocalSettings {
@@ -336,6 +348,12 @@ fn print_local(r: &LocalReport) {
         println!(
             "{} episode(s) hit a platform error and are not scored",
             r.platform_errors
+        );
+    }
+    if r.batching.calls > 0 {
+        println!(
+            "batched decisions {} in {} ActBatch calls (mean batch {:.2})",
+            r.batching.decisions, r.batching.calls, r.batching.mean_batch
         );
     }
     println!("total wall time {:.1} s", r.total_wall_s);

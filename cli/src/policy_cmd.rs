@@ -49,6 +49,11 @@ pub(crate) struct OracleArgs {
     #[arg(long, value_name = "MS", default_value_t = 0,
           value_parser = clap::value_parser!(u64).range(0..=60_000))]
     pub delay_ms: u64,
+    /// Declare batched decisions in GetSpec (`max_batch`): workers running several episodes
+    /// against this endpoint then send their pending decisions in ActBatch calls of up to N.
+    /// 0 or 1 = Acts only (the default). Each decision is answered exactly as its Act would be.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    pub max_batch: u32,
 }
 
 /// A policy that takes `delay` over every chunk, without using a core while it waits.
@@ -92,6 +97,7 @@ fn oracle(args: OracleArgs) -> anyhow::Result<()> {
     };
     let opts = ServeOptions {
         tls,
+        max_batch: args.max_batch,
         ..ServeOptions::default()
     };
     let assets = Arc::new(Assets::load_default().context("loading the benchmark assets")?);

@@ -27,7 +27,7 @@ use kitchen_r_episode::policy::{
 };
 
 /// Check names, in the order they run.
-pub(crate) const NAMES: [&str; 11] = [
+pub(crate) const NAMES: [&str; 12] = [
     "reachable",
     "health",
     "protocol",
@@ -39,6 +39,7 @@ pub(crate) const NAMES: [&str; 11] = [
     "act",
     "act-again",
     "large-image",
+    "act-batch",
 ];
 
 /// Probe `endpoint`; never panics on what the endpoint does. `key_map` (JSON, empty for the
@@ -160,7 +161,7 @@ async fn probe(
     let track_ok = report.push(NAMES[6], describe_track(spec.privileged_observations, cfg));
     match client::check_spec(&spec, sim, cfg) {
         Ok(_) if !track_ok => report.skip(&NAMES[7..], "this server would refuse the registration"),
-        Ok((checked, _)) => acts(report, &mut conn, cfg, &plans, &checked).await,
+        Ok((checked, _)) => acts(report, &mut conn, cfg, &plans, &checked, &spec).await,
         Err(_) if !v1_1_ok => report.skip(&NAMES[7..], "the v1.1 fields are out of range"),
         Err(_) => report.skip(&NAMES[7..], "the handshake failed"),
     }
@@ -203,6 +204,7 @@ async fn acts(
     cfg: &RemoteConfig,
     plans: &[CameraPlan],
     spec: &PolicySpec,
+    wire_spec: &pb::PolicySpec,
 ) {
     let episode = "check-policy";
     let reset = pb::ResetRequest {
@@ -252,6 +254,82 @@ async fn acts(
         r.map(|(ms, _)| format!("{} camera(s) at {MAX_SIDE}x{MAX_SIDE} accepted in {ms:.1} ms", large.len()))
             .map_err(|e| format!("{e} (the worker may send images up to {MAX_SIDE}x{MAX_SIDE}: raise the server's receive limit)")),
     );
+    let batch = act_batch(conn, cfg, plans, wire_spec, 3 * k, privileged).await;
+    report.push(NAMES[11], batch);
+}
+
+/// Batched decisions: with `max_batch` > 1, episodes of their own (Reset each) get one Act each
+/// and then the same observations in one ActBatch, whose answer must hold one valid chunk per
+/// observation. A chunk unlike its Act's is noted, not failed: a policy with memory may answer
+/// a repeated step differently.
+async fn act_batch(
+    conn: &Conn,
+    cfg: &RemoteConfig,
+    plans: &[CameraPlan],
+    spec: &pb::PolicySpec,
+    step: u64,
+    privileged: Option<&PrivilegedObservation>,
+) -> Result<String, String> {
+    let declared = spec.max_batch;
+    if declared <= 1 {
+        return Ok(format!(
+            "max_batch {declared}: no batching, every decision is its own Act (declare max_batch > 1 \
+             in GetSpec and answer ActBatch to have workers batch decisions across episodes)"
+        ));
+    }
+    let n = declared.min(4) as usize;
+    let mut conn = conn.clone().for_batch(n, cfg);
+    let mut singles = Vec::new();
+    let mut observations = Vec::new();
+    for i in 0..n {
+        let episode = format!("check-policy-batch-{i}");
+        let reset = pb::ResetRequest {
+            episode_id: episode.clone(),
+            task_index: 0,
+            sub_task: "move to the blue zone".into(),
+            scene_id: "kitchen_a".into(),
+        };
+        conn.reset(reset).await.map_err(|e| e.to_string())?;
+        let wire = wire_observation(
+            &episode,
+            step,
+            plans,
+            spec.observation_history.max(1) as usize,
+            privileged,
+        )?;
+        let single = conn.act(wire.clone()).await.map_err(|e| e.to_string())?;
+        singles.push(single);
+        observations.push(wire);
+    }
+    let t = Instant::now();
+    let answer = conn
+        .act_batch(pb::ObservationBatch { observations }, cfg.call_deadline())
+        .await
+        .map_err(|e| format!("{e} (a policy declaring max_batch > 1 must answer ActBatch)"))?;
+    let ms = t.elapsed().as_secs_f64() * 1e3;
+    if answer.chunks.len() != n {
+        return Err(format!(
+            "ActBatch of {n} observations answered {} chunks: one chunk per observation, in the same order",
+            answer.chunks.len()
+        ));
+    }
+    let mut differ = 0;
+    for (i, (c, single)) in answer.chunks.iter().zip(&singles).enumerate() {
+        let mut chunk = convert::chunk_from_wire(c, HORIZON).map_err(|e| format!("chunk {i}: {e}"))?;
+        check_chunk(&mut chunk, HORIZON, &ChunkTolerance::default())
+            .map_err(|e| format!("chunk {i}: {e}"))?;
+        differ += usize::from(c != single);
+    }
+    let note = match differ {
+        0 => "each equal to its Act's answer".to_string(),
+        d => format!(
+            "{d} unlike the Act answer to the same observation (fine for a policy with memory; \
+             a stateless policy should answer alike)"
+        ),
+    };
+    Ok(format!(
+        "max_batch {declared}: {n} valid chunks for {n} observations of {n} episodes in {ms:.1} ms; {note}"
+    ))
 }
 
 /// One Act on a synthetic observation (with `history - 1` earlier frames, padded as at the
@@ -265,6 +343,26 @@ async fn one_act(
     history: usize,
     privileged: Option<&PrivilegedObservation>,
 ) -> Result<(f64, String), String> {
+    let wire = wire_observation(episode, step, plans, history, privileged)?;
+    let t = Instant::now();
+    let answer = conn.act(wire).await.map_err(|e| e.to_string())?;
+    let ms = t.elapsed().as_secs_f64() * 1e3;
+    let mut chunk = convert::chunk_from_wire(&answer, HORIZON).map_err(|e| e.to_string())?;
+    let fixed = check_chunk(&mut chunk, HORIZON, &ChunkTolerance::default()).map_err(|e| e.to_string())?;
+    let note = fixed
+        .warning()
+        .map_or_else(String::new, |w| format!("; warning: {w} (within tolerance)"));
+    Ok((ms, note))
+}
+
+/// The synthetic observation of `episode` at `step`, as a worker would send it.
+fn wire_observation(
+    episode: &str,
+    step: u64,
+    plans: &[CameraPlan],
+    history: usize,
+    privileged: Option<&PrivilegedObservation>,
+) -> Result<pb::Observation, String> {
     let obs = synthetic(plans, step);
     let input = PolicyInput {
         episode_id: episode,
@@ -278,16 +376,7 @@ async fn one_act(
         privileged: None,
         privileged_observation: privileged,
     };
-    let wire = convert::observation(&input, plans, history).map_err(|e| e.to_string())?;
-    let t = Instant::now();
-    let answer = conn.act(wire).await.map_err(|e| e.to_string())?;
-    let ms = t.elapsed().as_secs_f64() * 1e3;
-    let mut chunk = convert::chunk_from_wire(&answer, HORIZON).map_err(|e| e.to_string())?;
-    let fixed = check_chunk(&mut chunk, HORIZON, &ChunkTolerance::default()).map_err(|e| e.to_string())?;
-    let note = fixed
-        .warning()
-        .map_or_else(String::new, |w| format!("; warning: {w} (within tolerance)"));
-    Ok((ms, note))
+    convert::observation(&input, plans, history).map_err(|e| e.to_string())
 }
 
 /// What a privileged run would show for the check's sub-task, `move to the blue zone`: the

@@ -9,6 +9,7 @@
 use kitchen_r_proto::POLICY_PROTOCOL_VERSION;
 use kitchen_r_proto::policy::v1 as pb;
 
+use crate::batch::{self, Attachment};
 use crate::conn::Conn;
 use crate::convert::{self, CameraPlan};
 use crate::{Credentials, RemoteConfig, RemoteError, SimCamera, endpoint};
@@ -23,6 +24,10 @@ pub struct RemotePolicy {
     wire_spec: pb::PolicySpec,
     cameras: Vec<CameraPlan>,
     scene: String,
+    /// The endpoint's shared batcher when the policy declared `max_batch` > 1 (and this side
+    /// batches): Acts then go through it as ActBatch calls; everything else is unchanged.
+    batch: Option<Attachment>,
+    call_deadline: std::time::Duration,
 }
 
 impl std::fmt::Debug for RemotePolicy {
@@ -62,6 +67,8 @@ impl RemotePolicy {
                 endpoint: conn.endpoint.uri.clone(),
                 reason,
             })?;
+        let batch = batch::batch_size(&wire_spec, cfg)
+            .and_then(|n| batch::attach(&conn.endpoint, creds, cfg, &wire_spec, n));
         Ok(RemotePolicy {
             rt,
             conn,
@@ -69,12 +76,19 @@ impl RemotePolicy {
             wire_spec,
             cameras,
             scene: String::new(),
+            batch,
+            call_deadline: cfg.call_deadline(),
         })
     }
 
     /// The policy's GetSpec answer as received.
     pub fn wire_spec(&self) -> &pb::PolicySpec {
         &self.wire_spec
+    }
+
+    /// Whether this policy's decisions go out as ActBatch calls.
+    pub fn batched(&self) -> bool {
+        self.batch.is_some()
     }
 
     /// The scene id announced in the following Resets (the runner's `reset` does not carry it).
@@ -164,7 +178,10 @@ impl Policy for RemotePolicy {
 
     fn act(&mut self, input: &PolicyInput<'_>) -> Result<Vec<[f64; ACTION_DIM]>, PolicyError> {
         let obs = convert::observation(input, &self.cameras, self.spec.observation_history)?;
-        let chunk = self.rt.block_on(self.conn.act(obs))?;
+        let chunk = match &self.batch {
+            Some(b) => b.act(obs, self.call_deadline)?,
+            None => self.rt.block_on(self.conn.act(obs))?,
+        };
         convert::chunk_from_wire(&chunk, self.spec.horizon)
     }
 }

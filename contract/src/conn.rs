@@ -176,6 +176,38 @@ impl Conn {
             .map_err(|s| self.to_policy_error("Act", &s))
     }
 
+    /// This connection with size caps for ActBatch calls of up to `n` decisions: `n` times the
+    /// caps of one Act (each chunk is checked against the one-Act cap when it arrives, each
+    /// observation before it is handed in).
+    pub(crate) fn for_batch(self, n: usize, cfg: &RemoteConfig) -> Conn {
+        let n = n.max(1);
+        Conn {
+            policy: self
+                .policy
+                .max_decoding_message_size(cfg.max_answer_bytes.saturating_mul(n))
+                .max_encoding_message_size(cfg.max_request_bytes.saturating_mul(n)),
+            ..self
+        }
+    }
+
+    /// One ActBatch call under `deadline` (the latest of its decisions' own deadlines).
+    pub(crate) async fn act_batch(
+        &mut self,
+        batch: pb::ObservationBatch,
+        deadline: Duration,
+    ) -> Result<pb::ActionChunkBatch, PolicyError> {
+        let mut req = Request::new(batch);
+        req.set_timeout(deadline);
+        within(deadline, self.policy.act_batch(req))
+            .await
+            .map(tonic::Response::into_inner)
+            .map_err(|s| self.to_policy_error("ActBatch", &s))
+    }
+
+    pub(crate) fn max_answer_bytes(&self) -> usize {
+        self.max_answer_bytes
+    }
+
     fn to_policy_error(&self, rpc: &str, s: &Status) -> PolicyError {
         // tonic enforces the `grpc-timeout` it sends itself, as Cancelled "Timeout expired".
         let expired = s.code() == Code::Cancelled && s.message().contains("Timeout expired");

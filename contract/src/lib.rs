@@ -13,6 +13,7 @@
 //! failed call is reported as a [`PolicyError`](kitchen_r_episode::policy::PolicyError), the
 //! episode crate decides what it costs), lease jobs, or touch a database.
 
+mod batch;
 pub mod bench;
 pub mod check;
 mod client;
@@ -28,6 +29,7 @@ use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
 
+pub use batch::{BatchStats, batch_stats};
 pub use client::RemotePolicy;
 pub use endpoint::{AllowedNetworks, EndpointError, Transport};
 pub use openpi::{KeyMap, OpenpiPolicy};
@@ -57,6 +59,14 @@ pub struct RemoteConfig {
     pub control_rate_hz: f64,
     /// Address ranges a policy endpoint may resolve to (`[policy.allowed_networks]`).
     pub allowed_networks: AllowedNetworks,
+    /// Batched decisions: the most decisions one ActBatch call carries from this side; the
+    /// policy's GetSpec `max_batch` caps it further. 0 or 1 turns batching off (every decision
+    /// its own Act, whatever the policy declares).
+    pub max_batch: u32,
+    /// Batched decisions: the gather window, milliseconds. The first pending decision waits at
+    /// most this long for the other episodes' before a partial batch goes out; a batch goes
+    /// at once when it is full or when every episode attached to the endpoint is waiting.
+    pub batch_gather_ms: f64,
     /// Whether this run may give privileged observations (the server's
     /// `control.privileged_track`, or the job's grant), announced in GetSpec as
     /// `privileged_track`. Not a `[policy]` key: the caller sets it.
@@ -75,6 +85,8 @@ impl Default for RemoteConfig {
             min_actions_executed_per_chunk: 1,
             control_rate_hz: 10.0,
             allowed_networks: AllowedNetworks::default(),
+            max_batch: 64,
+            batch_gather_ms: 5.0,
             privileged_track: false,
         }
     }
@@ -86,6 +98,9 @@ impl RemoteConfig {
     }
     pub fn startup_deadline(&self) -> Duration {
         Duration::from_secs_f64(self.startup_deadline_s.max(0.001))
+    }
+    pub(crate) fn batch_gather(&self) -> Duration {
+        Duration::try_from_secs_f64(self.batch_gather_ms.max(0.0) / 1e3).unwrap_or(Duration::from_secs(1))
     }
 }
 

@@ -35,6 +35,9 @@ pub struct ServeOptions {
     pub max_episodes: usize,
     /// Serve over TLS with this certificate chain and private key (PEM); plain gRPC when unset.
     pub tls: Option<TlsIdentity>,
+    /// GetSpec's `max_batch`: the most decisions one ActBatch call may carry; 0 or 1 = the
+    /// workers send Acts only (ActBatch is answered either way).
+    pub max_batch: u32,
 }
 
 /// A server certificate chain and its private key, PEM-encoded.
@@ -51,6 +54,7 @@ impl Default for ServeOptions {
             max_request_bytes: 64 << 20,
             max_episodes: 256,
             tls: None,
+            max_batch: 0,
         }
     }
 }
@@ -143,40 +147,68 @@ impl PolicyRpc for Service {
     async fn act(&self, req: Request<pb::Observation>) -> Result<Response<pb::ActionChunk>, Status> {
         let o = req.into_inner();
         let p = self.episode(&o.episode_id, false)?;
-        let chunk = blocking(move || {
-            let obs = convert::observation_from_wire(&o).map_err(Status::invalid_argument)?;
-            let privileged = match &o.privileged {
-                Some(pv) => Some(convert::privileged_from_wire(pv).map_err(Status::invalid_argument)?),
-                None => None,
-            };
-            let shown = match &o.privileged_observation {
-                Some(pv) => Some(convert::privileged::from_wire(pv).map_err(Status::invalid_argument)?),
-                None => None,
-            };
-            let history = (o.history.iter())
-                .map(convert::frame_from_wire)
+        let chunk = blocking(move || act_one(&p, &o)).await?;
+        Ok(Response::new(chunk))
+    }
+
+    /// Each observation answered by its own episode's policy, exactly as its Act would be: a
+    /// batch changes no answer. One failing decision fails the call (as one failing Act fails
+    /// that Act), so the worker fails each of the batch's decisions with the reason.
+    async fn act_batch(
+        &self,
+        req: Request<pb::ObservationBatch>,
+    ) -> Result<Response<pb::ActionChunkBatch>, Status> {
+        let batch = req.into_inner().observations;
+        let most = self.spec.max_batch.max(1) as usize;
+        if batch.len() > most {
+            return Err(Status::invalid_argument(format!(
+                "ActBatch carries {} observations, more than this policy's max_batch {most}",
+                batch.len()
+            )));
+        }
+        let policies = (batch.iter())
+            .map(|o| self.episode(&o.episode_id, false))
+            .collect::<Result<Vec<_>, _>>()?;
+        let chunks = blocking(move || {
+            (policies.iter().zip(&batch))
+                .map(|(p, o)| act_one(p, o))
                 .collect::<Result<Vec<_>, _>>()
-                .map_err(Status::invalid_argument)?;
-            let robot = o.robot.clone().unwrap_or_default();
-            let input = PolicyInput {
-                episode_id: &o.episode_id,
-                step: o.step,
-                task_index: o.task_index as usize,
-                sub_task: &o.sub_task,
-                observation: &obs,
-                ee_pose: convert::ee_pose_from_wire(&robot.ee_pose).map_err(Status::invalid_argument)?,
-                previous_action: convert::action_from_wire(&o.previous_action)
-                    .map_err(Status::invalid_argument)?,
-                history: &history,
-                privileged: privileged.as_ref(),
-                privileged_observation: shown.as_ref(),
-            };
-            let mut p = p.lock().map_err(|_| Status::internal("policy state poisoned"))?;
-            p.act(&input).map_err(status)
         })
         .await?;
-        Ok(Response::new(convert::chunk_to_wire(&chunk)))
+        Ok(Response::new(pb::ActionChunkBatch { chunks }))
     }
+}
+
+/// One decision of the episode's policy `p`, from the wire and back.
+fn act_one(p: &Shared, o: &pb::Observation) -> Result<pb::ActionChunk, Status> {
+    let obs = convert::observation_from_wire(o).map_err(Status::invalid_argument)?;
+    let privileged = match &o.privileged {
+        Some(pv) => Some(convert::privileged_from_wire(pv).map_err(Status::invalid_argument)?),
+        None => None,
+    };
+    let shown = match &o.privileged_observation {
+        Some(pv) => Some(convert::privileged::from_wire(pv).map_err(Status::invalid_argument)?),
+        None => None,
+    };
+    let history = (o.history.iter())
+        .map(convert::frame_from_wire)
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(Status::invalid_argument)?;
+    let robot = o.robot.clone().unwrap_or_default();
+    let input = PolicyInput {
+        episode_id: &o.episode_id,
+        step: o.step,
+        task_index: o.task_index as usize,
+        sub_task: &o.sub_task,
+        observation: &obs,
+        ee_pose: convert::ee_pose_from_wire(&robot.ee_pose).map_err(Status::invalid_argument)?,
+        previous_action: convert::action_from_wire(&o.previous_action).map_err(Status::invalid_argument)?,
+        history: &history,
+        privileged: privileged.as_ref(),
+        privileged_observation: shown.as_ref(),
+    };
+    let mut p = p.lock().map_err(|_| Status::internal("policy state poisoned"))?;
+    p.act(&input).map(|c| convert::chunk_to_wire(&c)).map_err(status)
 }
 
 /// Serve `factory`'s policies on `listener` until `shutdown` resolves.
@@ -216,6 +248,7 @@ pub async fn serve_policy(
         },
         actions_executed_per_chunk: s.actions_executed_per_chunk.map_or(0, |n| n as u32),
         privileged_observations: s.privileged_observations,
+        max_batch: opts.max_batch,
     };
     let service = Service {
         factory,

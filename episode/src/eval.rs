@@ -134,6 +134,12 @@ pub struct EvalConfig {
     /// Largest distance of a gripper value outside [0, 1] that is clamped (and counted) instead
     /// of failing the task (the server's `policy.gripper_margin`).
     pub gripper_margin: f64,
+    /// Endpoint runs: the most decisions one ActBatch call carries when the policy declares
+    /// `max_batch` > 1 (a worker's `policy.max_batch`); 0 or 1 = Acts only.
+    pub max_batch: u32,
+    /// Endpoint runs: the gather window of batched decisions, milliseconds (a worker's
+    /// `policy.batch_gather_ms`).
+    pub batch_gather_ms: f64,
 }
 
 impl Default for EvalConfig {
@@ -149,6 +155,8 @@ impl Default for EvalConfig {
             max_successive_timeouts: r.max_consecutive_timeouts,
             quat_norm_tolerance: r.chunk_tolerance.quat_norm,
             gripper_margin: r.chunk_tolerance.gripper_margin,
+            max_batch: 64,
+            batch_gather_ms: 5.0,
         }
     }
 }

@@ -2,7 +2,8 @@
 training round's rollout threads, each submit one input and wait; one thread takes up to
 `max_batch` waiting inputs, runs them together and hands each caller its output (or the batch's
 exception). The camera (camera/model.py) and diffusion-policy (diffusion_policy/serve.py)
-baselines batch this way."""
+baselines batch this way. A batch that arrives whole (an ActBatch call: several episodes'
+decisions in one request) runs at once through `run_now`."""
 
 from __future__ import annotations
 
@@ -35,6 +36,16 @@ class RequestBatcher:
         if request.error is not None:
             raise request.error
         return request.output
+
+    def run_now(self, inputs: list[Any]) -> list[Any]:
+        """Outputs of `inputs` (one per input, in order), run on the calling thread in batches of
+        up to `max_batch` under `lock`: a batch that arrived whole (an ActBatch call) needs no
+        gathering."""
+        outputs: list[Any] = []
+        for i in range(0, len(inputs), self.max_batch):
+            with self.lock:
+                outputs.extend(self.run(inputs[i : i + self.max_batch]))
+        return outputs
 
     def _loop(self) -> None:
         while True:

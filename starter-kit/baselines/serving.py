@@ -31,16 +31,25 @@ def parser(description: str, execute: int, device: bool = True) -> argparse.Argu
     ap.add_argument(
         "--concurrency", type=int, default=16, help="Act calls the policy accepts at once (max_concurrency)"
     )
+    ap.add_argument(
+        "--max-batch",
+        type=int,
+        default=16,
+        help="batched decisions: GetSpec's max_batch, the most episodes' decisions one ActBatch call carries "
+        "(one forward pass for them all); 0 or 1 = Acts only",
+    )
     ap.add_argument("--token", default=os.environ.get("POLICY_TOKEN"), help="require this bearer token")
     ap.add_argument("--proto-dir", default=None, help="directory with kitchen_r/policy/v1/policy.proto")
     return ap
 
 
 def parse(ap: argparse.ArgumentParser, argv: Sequence[str] | None = None) -> argparse.Namespace:
-    """The parsed flags, `--execute` checked against the contract; logging set up."""
+    """The parsed flags, `--execute` and `--max-batch` checked; logging set up."""
     args = ap.parse_args(argv)
     if not 1 <= args.execute <= kit.HORIZON:
         sys.exit(f"--execute must be between 1 and {kit.HORIZON}")
+    if args.max_batch < 0:
+        sys.exit("--max-batch must be at least 0")
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(message)s")
     return args
 
@@ -66,7 +75,8 @@ def serve(
 ) -> None:
     """Serve `runner` with the parsed flags until interrupted: `history` frames per Act,
     `cameras` as `policy_server.serve` takes them (None: both at 128x128), `threads` gRPC
-    threads (default `--concurrency` + 4)."""
+    threads (default `--concurrency` + 4), `--max-batch` declared for ActBatch calls, which
+    the runner's `decide_batch(observations)` answers."""
     kit.serve(
         args.listen,
         args.token,
@@ -79,4 +89,5 @@ def serve(
         max_concurrency=args.concurrency,
         privileged=privileged,
         cameras=cameras,
+        max_batch=args.max_batch,
     )

@@ -15,6 +15,7 @@ mod archive;
 mod audit;
 mod baseline_diffusion;
 mod baseline_planner;
+mod batched;
 mod browser;
 mod cli;
 mod control;

@@ -7,7 +7,8 @@ privileged-information track.
 Reuses the starter kit's server (`starter-kit/policy_server.py`) with `privileged=True`: GetSpec
 asks for privileged observations and one 8x8 image it does not read, so the server must run the track
 (`control.privileged_track = true`) and ranks the policy on the privileged boards. Prints
-`listening grpc=HOST:PORT` once it accepts calls. One forward of a small MLP per Act, on CPU.
+`listening grpc=HOST:PORT` once it accepts calls. One forward of a small MLP per Act, on CPU, and
+one per ActBatch call for all its observations (`--max-batch`, 16 by default).
 """
 
 if __name__ == "__main__" and not __package__:  # run as a file: hand over to the installed package's module
@@ -18,6 +19,7 @@ if __name__ == "__main__" and not __package__:  # run as a file: hand over to th
 
 import logging
 
+import numpy as np
 import torch
 
 from .. import serving
@@ -27,7 +29,7 @@ from .model import load
 
 
 class PrivilegedRunner:
-    """The policy object `policy_server.serve` drives: one MLP forward per Act."""
+    """The policy object `policy_server.serve` drives: one MLP forward per Act or ActBatch."""
 
     def __init__(self, checkpoint):
         self.model, self.meta = load(checkpoint)
@@ -40,6 +42,12 @@ class PrivilegedRunner:
         x = F.from_grpc(obs, self.clock.seconds(obs))
         chunk = self.model.chunk(torch.as_tensor(x[None]))[0].numpy()
         return F.finish(chunk).tolist()
+
+    def decide_batch(self, observations):
+        """An ActBatch call's chunks: one forward of the MLP for the whole batch."""
+        x = np.stack([F.from_grpc(o, self.clock.seconds(o)) for o in observations])
+        chunks = self.model.chunk(torch.as_tensor(x)).numpy()
+        return [F.finish(c).tolist() for c in chunks]
 
 
 def main(argv=None):

@@ -26,7 +26,7 @@ use serde::{Deserialize, Serialize};
 use super::execute::{JobControl, execute_job_traced};
 use super::{JobContext, JobError};
 use kitchen_r_contract::probe::{ProbeFailure, probe_endpoint};
-use kitchen_r_contract::{AllowedNetworks, RemoteConfig};
+use kitchen_r_contract::{AllowedNetworks, BatchStats, RemoteConfig, batch_stats};
 pub use kitchen_r_core::observations::ObservationTrack as Track;
 use kitchen_r_episode::batch::run_batch;
 use kitchen_r_episode::eval::{Sr, task_kinds};
@@ -73,6 +73,21 @@ pub struct LocalSettings {
     /// `None` = configs/sim.toml's `[grasp] mode`.
     #[serde(default)]
     pub grasp: Option<GraspMode>,
+    /// Batched decisions (`policy.max_batch` of a worker): the most decisions per ActBatch
+    /// call from this side; 0 or 1 = Acts only, whatever the policy declares.
+    #[serde(default = "default_max_batch")]
+    pub max_batch: u32,
+    /// The gather window of batched decisions, milliseconds (`policy.batch_gather_ms`).
+    #[serde(default = "default_gather_ms")]
+    pub batch_gather_ms: f64,
+}
+
+fn default_max_batch() -> u32 {
+    RemoteConfig::default().max_batch
+}
+
+fn default_gather_ms() -> f64 {
+    RemoteConfig::default().batch_gather_ms
 }
 
 impl LocalSettings {
@@ -152,7 +167,36 @@ pub struct LocalReport {
     #[serde(default)]
     pub grasp_mode: GraspMode,
     pub total_wall_s: f64,
+    /// How the decisions went out: ActBatch calls and the decisions they carried (both 0 when
+    /// every decision was its own Act).
+    #[serde(default)]
+    pub batching: Batching,
     pub episodes: Vec<LocalEpisode>,
+}
+
+/// The ActBatch calls of a local run.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct Batching {
+    pub calls: u64,
+    pub decisions: u64,
+    /// Decisions per call, on average (0 without calls).
+    pub mean_batch: f64,
+}
+
+impl Batching {
+    fn between(before: BatchStats, after: BatchStats) -> Batching {
+        let calls = after.calls - before.calls;
+        let decisions = after.decisions - before.decisions;
+        Batching {
+            calls,
+            decisions,
+            mean_batch: if calls == 0 {
+                0.0
+            } else {
+                decisions as f64 / calls as f64
+            },
+        }
+    }
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -240,8 +284,11 @@ fn evaluate_endpoint_with(
     let remote = RemoteConfig {
         allowed_networks: AllowedNetworks::ALL,
         privileged_track: true,
+        max_batch: s.max_batch,
+        batch_gather_ms: s.batch_gather_ms,
         ..RemoteConfig::default()
     };
+    let batched_before = batch_stats();
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
@@ -308,7 +355,9 @@ fn evaluate_endpoint_with(
     );
     let Ok(()) = ran;
     let episodes: Vec<LocalEpisode> = slots.into_iter().flatten().collect();
-    Ok(report(url, probed.summary, split, s, workers, episodes, started))
+    let mut r = report(url, probed.summary, split, s, workers, episodes, started);
+    r.batching = Batching::between(batched_before, batch_stats());
+    Ok(r)
 }
 
 fn episode(job: &pb::Job, r: &pb::EpisodeResult, wall_s: f64) -> LocalEpisode {
@@ -404,6 +453,7 @@ fn report(
         jobs,
         grasp_mode: s.grasp.unwrap_or_default(),
         total_wall_s: started.elapsed().as_secs_f64(),
+        batching: Batching::default(),
         episodes,
     }
 }
@@ -443,6 +493,8 @@ mod tests {
             trace: None,
             watch: None,
             grasp: None,
+            max_batch: 0,
+            batch_gather_ms: 0.0,
         }
     }
 

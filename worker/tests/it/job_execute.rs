@@ -257,6 +257,8 @@ fn local_eval_of_an_endpoint_gives_the_workers_numbers() {
         trace: None,
         watch: None,
         grasp: None,
+        max_batch: 0,
+        batch_gather_ms: 0.0,
     };
     let local = evaluate_endpoint(
         &server.url(),

@@ -39,8 +39,10 @@ fn a_good_endpoint_passes_every_check() {
     let server = TestServer::start(still(), ServeOptions::default());
     let r = probe(&server.url());
     assert!(r.passed());
-    assert_eq!(r.checks.len(), 11);
+    assert_eq!(r.checks.len(), 12);
     assert!(r.checks.iter().all(|c| c.verdict == Verdict::Pass));
+    let batch = &r.get("act-batch").unwrap().detail;
+    assert!(batch.starts_with("max_batch 0: no batching"), "{batch}");
     let track = &r.get("privileged").unwrap().detail;
     assert!(track.starts_with("standard track"), "{track}");
     assert!(r.get("cameras").unwrap().detail.contains("base 128x128 RAW_RGB8"));
@@ -48,6 +50,23 @@ fn a_good_endpoint_passes_every_check() {
     assert!(
         v.contains("history 1 frame(s); executes the organiser's 8"),
         "{v}"
+    );
+}
+
+#[test]
+fn a_batching_endpoint_has_its_actbatch_checked_against_its_acts() {
+    let opts = ServeOptions {
+        max_batch: 8,
+        ..ServeOptions::default()
+    };
+    let server = TestServer::start(still(), opts);
+    let r = probe(&server.url());
+    assert!(r.passed());
+    let batch = &r.get("act-batch").unwrap().detail;
+    assert!(
+        batch.starts_with("max_batch 8: 4 valid chunks for 4 observations of 4 episodes")
+            && batch.ends_with("each equal to its Act's answer"),
+        "{batch}"
     );
 }
 

@@ -140,6 +140,14 @@ class CameraBaselineTest(unittest.TestCase):
             self.assertTrue(np.isfinite(chunk).all())
             np.testing.assert_allclose(np.linalg.norm(chunk[:, 5:9], axis=1), 1.0, atol=1e-6)
             self.assertTrue(((chunk[:, 9] >= 0) & (chunk[:, 9] <= 1)).all())
+            # An ActBatch of two episodes runs one forward and answers each as its Act.
+            obs0, step0 = self.observations[0]
+            runner.reset("ep-1", 0, obs0["sub_task"])
+            batched = runner.decide_batch([grpc_like(obs, step), grpc_like(obs0, step0, "ep-1")])
+            single = np.asarray(runner.decide(grpc_like(obs0, step0, "ep-1")))
+            self.assertEqual(len(batched), 2)
+            np.testing.assert_allclose(batched[0], chunk, rtol=0, atol=1e-4)
+            np.testing.assert_allclose(batched[1], single, rtol=0, atol=1e-4)
 
 
 def tiny_round(out, *extra):

@@ -36,6 +36,42 @@ def kitchen_r_bin():
     raise unittest.SkipTest("no kitchen-r binary (set KITCHEN_R_BIN)")
 
 
+@unittest.skipUnless(HAVE_TORCH, "torch is not installed")
+class BatchedServingTest(unittest.TestCase):
+    def test_an_actbatch_runs_one_forward_and_answers_each_as_its_act(self):
+        """The committed checkpoint answers a batch of three episodes' observations (one MLP
+        forward) with the chunks their single Acts get."""
+        import policy_server as kit
+        from kitchen_r_baselines.privileged.serve import PrivilegedRunner
+
+        pb2, _ = kit.load_stubs(kit.proto_dir(None))
+        runner = PrivilegedRunner(str(BASE / "results/h200-2026-11-26/ckpt.pt"))
+        observations = []
+        for i in range(3):
+            goal = pb2.Goal()
+            goal.approach.x, goal.approach.y, goal.approach.yaw = 1.0 + i, -0.5 * i, 0.3 * i
+            observations.append(
+                pb2.Observation(
+                    episode_id=f"ep-{i}",
+                    step=8 * i,
+                    robot=pb2.RobotState(arm_joints=[0.1 * i] * 6, gripper=1.0, ee_pose=[0.35, 0, 0.95, 0, 1, 0, 0]),
+                    privileged_observation=pb2.PrivilegedObservation(base_x=0.2 * i, goal=goal),
+                )
+            )
+            runner.reset(f"ep-{i}", 0, "move to the blue zone")
+        forwards = []
+        chunk = runner.model.chunk
+        runner.model.chunk = lambda x: forwards.append(len(x)) or chunk(x)
+        batched = runner.decide_batch(observations)
+        self.assertEqual(forwards, [3])
+        singles = [runner.decide(o) for o in observations]
+        self.assertEqual(len(batched), 3)
+        for b, s in zip(batched, singles):
+            self.assertEqual(np.asarray(b).shape, (16, 10))
+            np.testing.assert_allclose(b, s, rtol=0, atol=1e-5)
+        self.assertFalse(np.allclose(batched[0], batched[2]), "each observation has its own answer")
+
+
 class FeaturesTest(unittest.TestCase):
     def test_training_and_serving_features_agree(self):
         """One decision of the environment, turned into the gRPC observation the worker would
