@@ -70,9 +70,10 @@ pub enum Shape {
         height: f64,
         thickness: f64,
     },
-    /// A triangle mesh from a glTF 2.0 file (`.gltf` with its `.bin`, or `.glb`), relative to the
-    /// catalogue file; y-up as glTF has it, turned z-up, multiplied by `scale` and centred on
-    /// its bounding box. `size` is that bounding box, which the rules here (resting height,
+    /// A triangle mesh from a glTF 2.0 file (`.gltf` with its `.bin`, or `.glb`), OBJ, STL, MuJoCo
+    /// `.msh`, or an MJCF object file (`.xml`: its colliding mesh geoms, [`crate::catalogue_mjcf`]),
+    /// relative to the catalogue file or starting with `${VAR}`; glTF is y-up and turned z-up,
+    /// multiplied by `scale` and centred on its bounding box. `size` is that bounding box, which the rules here (resting height,
     /// footprint) use; the simulator checks it against the file. Collides and renders as the
     /// mesh's convex hull.
     Mesh {
@@ -118,11 +119,14 @@ impl Catalogue {
             path: path.to_path_buf(),
             message: e.to_string(),
         })?;
-        // Mesh files are named relative to the catalogue; from here on they are full paths.
+        // Mesh files are named relative to the catalogue or to an environment variable
+        // (`${ROBOSUITE_ASSETS}/objects/milk.xml`); from here on they are full paths.
         let dir = path.parent().unwrap_or(Path::new("."));
         for m in &mut cat.objects {
             if let Shape::Mesh { file, .. } = &mut m.shape {
-                *file = dir.join(&*file).to_string_lossy().into_owned();
+                *file = crate::robot::resolve_file(dir, file, path)?
+                    .to_string_lossy()
+                    .into_owned();
             }
         }
         let mut seen = std::collections::BTreeSet::new();

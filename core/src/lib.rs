@@ -11,6 +11,7 @@
 pub mod assets;
 pub mod audit;
 pub mod catalogue;
+pub mod catalogue_mjcf;
 pub mod dataset;
 pub mod describe;
 pub mod error;

@@ -22,6 +22,8 @@ pub mod offline;
 pub mod oracle;
 pub mod policy;
 #[cfg(test)]
+mod robosuite_object_tests;
+#[cfg(test)]
 mod robot_file_tests;
 pub mod runner;
 pub mod samples;

@@ -19,6 +19,7 @@ pub mod generator;
 pub mod grasp;
 pub mod material;
 pub mod mesh;
+mod mesh_mjcf;
 pub mod oracle;
 pub mod preflight;
 pub mod randomise;

@@ -15,6 +15,9 @@
 //! axis: they are read z-up, as URDF, MJCF and ROS read them (CAD exports STL z-up, and a robot
 //! description's OBJ and STL meshes are in their link's z-up frame).
 //!
+//! MuJoCo's binary `.msh` and MJCF object files (robosuite's `objects/*.xml`, their colliding mesh
+//! geoms merged) are read by `crate::mesh_mjcf`.
+//!
 //! Whatever the format, the mesh is multiplied by the scale and centred on its bounding box,
 //! which is the catalogue's model origin.
 
@@ -214,24 +217,31 @@ fn points(vertices: &[[f64; 3]]) -> Vec<Vector> {
 }
 
 fn read(path: &Path, scale: f64) -> Result<MeshData, SimError> {
-    let bad = |message: String| mesh_error(path, message);
+    let (vertices, triangles) = read_raw(path, scale)?;
+    centred(path, vertices, triangles)
+}
+
+/// Vertices and triangles of a mesh file, by its extension, before centring.
+pub(crate) fn read_raw(path: &Path, scale: f64) -> Result<Raw, SimError> {
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
         .map(str::to_ascii_lowercase);
-    let (vertices, triangles) = match ext.as_deref() {
-        Some("gltf" | "glb") => read_gltf(path, scale)?,
-        Some("obj" | "stl") => read_obj_stl(path, scale)?,
-        _ => {
-            return Err(bad(
-                "unknown mesh format: give a glTF 2.0 (.gltf, .glb), OBJ (.obj) or STL (.stl) file".into(),
-            ));
-        }
-    };
-    centred(path, vertices, triangles)
+    match ext.as_deref() {
+        Some("gltf" | "glb") => read_gltf(path, scale),
+        Some("obj" | "stl") => read_obj_stl(path, scale),
+        Some("msh") => crate::mesh_mjcf::read_msh(path, scale),
+        Some("xml") => crate::mesh_mjcf::read_object(path, scale),
+        _ => Err(mesh_error(
+            path,
+            "unknown mesh format: give a glTF 2.0 (.gltf, .glb), OBJ (.obj), STL (.stl) or MuJoCo (.msh) file, \
+             or an MJCF object (.xml)"
+                .into(),
+        )),
+    }
 }
 
-fn mesh_error(path: &Path, message: String) -> SimError {
+pub(crate) fn mesh_error(path: &Path, message: String) -> SimError {
     SimError::Mesh {
         path: path.to_path_buf(),
         message,
@@ -239,7 +249,7 @@ fn mesh_error(path: &Path, message: String) -> SimError {
 }
 
 /// Vertices (z-up, scaled) and triangles of a mesh file.
-type Raw = (Vec<[f64; 3]>, Vec<[u32; 3]>);
+pub(crate) type Raw = (Vec<[f64; 3]>, Vec<[u32; 3]>);
 
 fn read_obj_stl(path: &Path, scale: f64) -> Result<Raw, SimError> {
     let bad = |message: String| mesh_error(path, message);

@@ -24,6 +24,7 @@ mod chain;
 mod frame;
 mod mjcf;
 mod mounted;
+pub(crate) use mounted::resolve_file;
 mod shapes;
 pub mod sidecar;
 mod tree;

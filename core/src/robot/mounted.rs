@@ -87,7 +87,7 @@ struct MountedGripper {
 }
 
 /// `${VAR}/rest` with the variable's value, other relative names against `dir`.
-fn resolve_file(dir: &Path, name: &str, sidecar: &Path) -> Result<PathBuf, ContentError> {
+pub(crate) fn resolve_file(dir: &Path, name: &str, sidecar: &Path) -> Result<PathBuf, ContentError> {
     if let Some(rest) = name.strip_prefix("${") {
         let (var, tail) = rest.split_once('}').ok_or_else(|| ContentError::Invalid {
             path: sidecar.to_path_buf(),

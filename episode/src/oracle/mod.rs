@@ -97,6 +97,8 @@ pub struct OraclePolicy {
     /// Half the fingers' length along the approach axis, m: how far the fingertips reach below
     /// the TCP (the physical grasp keeps them off the surface an object stands on).
     finger_reach: f64,
+    /// How far under a shelf board the tool must stay, m (`headroom::wrist_clear`).
+    wrist_clear: f64,
 }
 
 impl OraclePolicy {
@@ -117,6 +119,7 @@ impl OraclePolicy {
             grasp: SimConfig::load_default().map_or(GraspMode::Abstract, |c| c.grasp.mode),
             replans: 0,
             finger_reach: assets.robot.gripper.finger_length / 2.0,
+            wrist_clear: headroom::wrist_clear(&assets.robot),
         }
     }
 
@@ -202,13 +205,13 @@ impl OraclePolicy {
         let tool_world = kitchen_r_sim::oracle::manip::base_isometry(p.base_pose) * tool;
         let t = tool_world.translation;
         // The board that matters is the first one above the hand.
-        let here_max = headroom::max_tool_z(scene, [t.x, t.y], t.z);
+        let here_max = headroom::max_tool_z(scene, [t.x, t.y], t.z, self.wrist_clear);
         let work = match p.target {
             TaskTarget::Pick { object } => p.objects.get(object).map(|o| [o.pose[0], o.pose[1], o.pose[2]]),
             TaskTarget::Place { target, .. } => Some(target),
             TaskTarget::Base { .. } => None,
         };
-        let target_max = work.and_then(|w| headroom::max_tool_z(scene, [w[0], w[1]], w[2]));
+        let target_max = work.and_then(|w| headroom::max_tool_z(scene, [w[0], w[1]], w[2], self.wrist_clear));
         let physical = self.grasp == GraspMode::Physical;
         Ok(TaskCtl::new(
             goal, tool, holding, approach, here_max, target_max, physical,

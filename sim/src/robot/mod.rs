@@ -15,6 +15,7 @@ pub mod desc;
 pub mod ik;
 pub mod kinematics;
 pub mod rmp;
+pub mod wrist;
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use rapier3d::prelude::*;
