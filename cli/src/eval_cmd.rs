@@ -99,7 +99,7 @@ pub(crate) struct EvalArgs {
     max_batch: Option<u32>,
     /// The gather window of batched decisions, milliseconds: how long the oldest pending
     /// decision waits for other episodes' before a partial batch goes
-    /// [default: configs/eval.toml's `batch_gather_ms`, 5].
+    /// [default: configs/eval.toml's `batch_gather_ms`, 2].
     #[arg(long, value_name = "MS")]
     batch_gather_ms: Option<f64>,
     #[command(flatten)]

@@ -86,7 +86,7 @@ impl Default for RemoteConfig {
             control_rate_hz: 10.0,
             allowed_networks: AllowedNetworks::default(),
             max_batch: 64,
-            batch_gather_ms: 5.0,
+            batch_gather_ms: 2.0,
             privileged_track: false,
         }
     }

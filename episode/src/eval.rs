@@ -156,7 +156,7 @@ impl Default for EvalConfig {
             quat_norm_tolerance: r.chunk_tolerance.quat_norm,
             gripper_margin: r.chunk_tolerance.gripper_margin,
             max_batch: 64,
-            batch_gather_ms: 5.0,
+            batch_gather_ms: 2.0,
         }
     }
 }

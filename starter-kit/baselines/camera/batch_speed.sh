@@ -10,7 +10,7 @@
 # CKPT: a camera checkpoint (starter-kit/baselines/camera/results/*/ckpt.pt); EPISODES [103]
 # dev instructions from the first; JOBS [16] episodes at once (and the policy's max_concurrency
 # and max_batch). Environment: KITCHEN_R_BIN [target/release/kitchen-r], DEVICE [auto],
-# OUT [/tmp/kr-batch-speed], SEED [0], GATHER_MS [5] (the gather window), EVAL_ARGS (more
+# OUT [/tmp/kr-batch-speed], SEED [0], GATHER_MS [2] (the gather window), EVAL_ARGS (more
 # `kitchen-r eval` flags for every run, e.g. `--config short.toml` for a quick try). Needs python3 with the
 # baselines installed (pip install -e ./starter-kit -e "./starter-kit/baselines[control]").
 set -euo pipefail
@@ -25,7 +25,7 @@ BIN="${KITCHEN_R_BIN:-target/release/kitchen-r}"
 DEVICE="${DEVICE:-auto}"
 OUT="${OUT:-/tmp/kr-batch-speed}"
 SEED="${SEED:-0}"
-GATHER_MS="${GATHER_MS:-5}"
+GATHER_MS="${GATHER_MS:-2}"
 read -r -a EXTRA <<<"${EVAL_ARGS:-}"
 mkdir -p "$OUT"
 PIDS=()
