@@ -56,6 +56,10 @@ pub struct ArticulationConfig {
     pub finger_damping: f64,
     /// Coulomb friction of the finger pads (combined with the object's by averaging).
     pub finger_friction: f64,
+    /// Mass of each finger (kg). The solver's few constraint iterations converge poorly where a
+    /// light finger squeezes a heavier object: a held bowl crept 2 mm/s down 0.03 kg pads and
+    /// does not with 0.1 kg ones (docs/twin/robot.md).
+    pub finger_mass: f64,
     /// Natural frequency of the contact softness (Hz; rapier's default is 30): stiffer contacts
     /// keep squeezed light objects from sinking millimetres into the fingers.
     pub contact_frequency: f64,
@@ -76,6 +80,7 @@ impl Default for ArticulationConfig {
             finger_stiffness: 4000.0,
             finger_damping: 40.0,
             finger_friction: 1.0,
+            finger_mass: 0.1,
             contact_frequency: 120.0,
             solver_iterations: 1,
             pgs_iterations: 8,
@@ -255,6 +260,7 @@ impl SimConfig {
             a.finger_force,
             a.finger_stiffness,
             a.finger_damping,
+            a.finger_mass,
             a.contact_frequency,
         ];
         if gains.iter().any(|v| v.is_nan() || *v <= 0.0)
@@ -264,7 +270,7 @@ impl SimConfig {
             || a.pgs_iterations == 0
         {
             return Err(SimError::Config(
-                "articulation: gains, force and contact frequency > 0, finger_friction >= 0, \
+                "articulation: gains, force, finger mass and contact frequency > 0, finger_friction >= 0, \
                  solver_iterations and pgs_iterations >= 1"
                     .into(),
             ));

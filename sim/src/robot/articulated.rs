@@ -24,8 +24,6 @@ use crate::material::{Material, Materials, Owner};
 
 /// Mass of an arm link whose description gives none (kg): a ViperX-300-class link's.
 const DEFAULT_LINK_MASS: f64 = 0.5;
-/// Mass of each finger (kg).
-const FINGER_MASS: f32 = 0.03;
 /// Mass of the mount body between the base and the waist (kg).
 const MOUNT_MASS: f32 = 0.5;
 
@@ -173,7 +171,7 @@ impl Robot {
             )
             .collision_groups(Owner::Robot.physical_finger_groups())
             .friction(config.finger_friction as f32)
-            .mass(FINGER_MASS);
+            .mass(config.finger_mass as f32);
             robot.bodies.fingers[k] = world.insert_collider(co, Some(body));
             let joint = PrismaticJointBuilder::new(vec_to_glam(&axis))
                 .local_anchor1(vec_to_glam(&tcp.translation.vector))
