@@ -251,7 +251,7 @@ async fn handshake(
         .map_or_else(|| "default".to_string(), |n| n.to_string());
     let summary = format!(
         "{:?} at {}: protocol v{}, horizon {}, action dim {}, cameras [{}], max concurrency {}, \
-         history {}, executes {execute}{}",
+         history {}, executes {execute}{}{}",
         spec.name,
         conn.endpoint.uri,
         spec.protocol_version,
@@ -265,6 +265,12 @@ async fn handshake(
             ", privileged observations"
         } else {
             ""
+        },
+        // Likewise for policies that do not batch.
+        if spec.max_batch > 1 {
+            format!(", max batch {} (ActBatch)", spec.max_batch)
+        } else {
+            String::new()
         },
     );
     Ok(ProbedSpec {

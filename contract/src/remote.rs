@@ -3,8 +3,10 @@
 //! `eval` drive, so the episode code, its deadlines, chunk rules and scoring never ask which
 //! wire a policy speaks.
 //!
-//! A later batched call (several episodes' decisions in one request) belongs here too, as a
-//! method both transports answer, so the episode code still sees one interface.
+//! Batched decisions (ActBatch, several episodes' decisions in one request) live below this
+//! interface: a gRPC [`RemotePolicy`] whose policy declared `max_batch` hands its Acts to the
+//! endpoint's shared batcher (`batch.rs`), so the episode code still sees one policy per
+//! episode. openpi's protocol has no batch call.
 
 use crate::endpoint::Transport;
 use crate::openpi::OpenpiPolicy;
@@ -49,6 +51,11 @@ impl Remote {
     /// The policy's self-declared name (gRPC), or the openpi handshake's summary.
     pub fn describe(&self) -> String {
         match self {
+            Remote::Grpc(p) if p.batched() => format!(
+                "{:?} (decisions batched: ActBatch of up to {})",
+                p.wire_spec().name,
+                p.wire_spec().max_batch
+            ),
             Remote::Grpc(p) => format!("{:?}", p.wire_spec().name),
             Remote::Openpi(p) => p.summary().to_string(),
         }

@@ -58,6 +58,10 @@ class DiffusionRunner:
     def decide(self, obs):
         return self.batcher.submit(self.features(obs)).tolist()
 
+    def decide_batch(self, observations):
+        """An ActBatch call's chunks (`--max-batch`): denoised together, as concurrent Acts are."""
+        return [y.tolist() for y in self.batcher.run_now([self.features(o) for o in observations])]
+
     @torch.no_grad()
     def _run(self, batch):
         """Denoise the chunks of a batch of `features` at once."""
