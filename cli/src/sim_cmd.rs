@@ -69,6 +69,11 @@ pub(crate) enum BenchCommand {
         /// Observe every this many control steps (the policy query rate).
         #[arg(long, default_value_t = 8)]
         query_every: u32,
+        /// Also time the physics step and the observation with this robot (a URDF or MJCF
+        /// description or a mounting sidecar, e.g. configs/robots/robosuite/panda.toml: a
+        /// seven-joint arm of mesh links in the cameras' view)
+        #[arg(long, value_name = "FILE")]
+        mesh_robot: Option<std::path::PathBuf>,
     },
     /// The server under deadline-hour load: seed N plan submissions across T teams, then R
     /// leaderboard readers and U uploads/s for D seconds on loopback; latency percentiles and
@@ -118,8 +123,11 @@ pub(crate) fn bench(args: BenchArgs) -> anyhow::Result<()> {
             json,
             steps,
             query_every,
+            mesh_robot,
         } => {
-            let r = kitchen_r_sim::bench::run(steps.max(1), query_every.max(1))?;
+            // Relative to the working directory, as `eval --robot` reads it.
+            let mesh_robot = mesh_robot.map(std::path::absolute).transpose()?;
+            let r = kitchen_r_sim::bench::run(steps.max(1), query_every.max(1), mesh_robot.as_deref())?;
             if json {
                 println!("{}", r.to_json());
             } else {
@@ -142,6 +150,20 @@ pub(crate) fn bench(args: BenchArgs) -> anyhow::Result<()> {
                     "realtime_factor       {:.1} (observe every {} steps)",
                     r.realtime_factor, r.query_every
                 );
+                if let Some(m) = &r.mesh_robot {
+                    println!(
+                        "mesh robot            {} ({} arm joints, {} arm colliders)",
+                        m.robot, m.arm_joints, m.arm_colliders
+                    );
+                    println!(
+                        "  physics_step_us     {:.1} (fastest {:.1})",
+                        m.physics_step_us, m.physics_step_us_min
+                    );
+                    println!(
+                        "  observation_ms      {:.2} ({} cameras, robot in view; fastest {:.2})",
+                        m.observation_ms, m.cameras, m.observation_ms_min
+                    );
+                }
             }
             Ok(())
         }

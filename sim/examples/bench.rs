@@ -5,6 +5,6 @@ fn main() -> Result<(), kitchen_r_sim::SimError> {
     let args: Vec<String> = std::env::args().collect();
     let steps = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(600);
     let every = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(8);
-    println!("{}", kitchen_r_sim::bench::run(steps, every)?.to_json());
+    println!("{}", kitchen_r_sim::bench::run(steps, every, None)?.to_json());
     Ok(())
 }

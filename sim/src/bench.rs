@@ -73,6 +73,26 @@ pub struct BenchReport {
     pub substeps_per_control_step: u32,
     pub bodies: usize,
     pub colliders: usize,
+    /// The same physics step and observation with another robot (`bench sim --mesh-robot`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mesh_robot: Option<MeshRobotReport>,
+}
+
+/// Figures with a robot given by file, such as a mounted robosuite arm (seven joints, links
+/// colliding as mesh hulls and drawn by the cameras): the abstract mode's physics substep and the
+/// configured cameras' observation with that robot's arm in their view.
+#[derive(Debug, Clone, Serialize)]
+pub struct MeshRobotReport {
+    pub robot: String,
+    pub arm_joints: usize,
+    /// Arm and hand colliders (mesh hulls and primitives).
+    pub arm_colliders: usize,
+    pub physics_step_us: f64,
+    pub physics_step_us_min: f64,
+    /// Every configured camera, no LiDAR (ms), median and fastest of `BATCHES` batches.
+    pub observation_ms: f64,
+    pub observation_ms_min: f64,
+    pub cameras: usize,
 }
 
 /// Timed batches per figure.
@@ -118,8 +138,50 @@ fn control_steps(sim: &mut Sim, per_batch: u32) -> Result<(f64, f64), SimError> 
     Ok(median_min(control))
 }
 
-/// Run the benchmark on the first scene for `steps` control steps.
-pub fn run(steps: u32, query_every: u32) -> Result<BenchReport, SimError> {
+/// [`MeshRobotReport`] for the robot `file` on episode `ep`, `steps` control steps.
+fn mesh_robot(
+    file: &std::path::Path,
+    ep: &crate::EpisodeConfig,
+    steps: u32,
+) -> Result<MeshRobotReport, SimError> {
+    let dir = kitchen_r_core::assets::assets_dir();
+    let assets = Assets::load_with_robot(&dir, &crate::RobotConfig { file: file.into() })?;
+    let sensors = SensorsConfig {
+        lidar: None,
+        ..SensorsConfig::load_default()?
+    };
+    let (mut sim, _) = Sim::new(assets, SimConfig::load_default()?, sensors, ep)?;
+    let substeps = f64::from(sim.config().physics.substeps);
+    let (step_us, step_min) = control_steps(&mut sim, (steps / BATCHES).max(1))?;
+    let n_obs = 30;
+    let mut observe = Vec::new();
+    for _ in 0..BATCHES {
+        let t0 = Clock::start();
+        for _ in 0..n_obs / BATCHES {
+            std::hint::black_box(sim.observe());
+        }
+        observe.push(t0.secs() * 1e3 / f64::from(n_obs / BATCHES));
+    }
+    let (observation_ms, observation_ms_min) = median_min(observe);
+    Ok(MeshRobotReport {
+        robot: file.display().to_string(),
+        arm_joints: sim.robot.arm.dof,
+        arm_colliders: sim.robot.bodies.arm_colliders.len(),
+        physics_step_us: step_us / substeps,
+        physics_step_us_min: step_min / substeps,
+        observation_ms,
+        observation_ms_min,
+        cameras: sim.sensors.cameras.len(),
+    })
+}
+
+/// Run the benchmark on the first scene for `steps` control steps (and with the robot
+/// `mesh_robot` too, when given).
+pub fn run(
+    steps: u32,
+    query_every: u32,
+    mesh_robot_file: Option<&std::path::Path>,
+) -> Result<BenchReport, SimError> {
     let assets = Assets::load_default()?;
     let config = SimConfig::load_default()?;
     let sensors = SensorsConfig::load_default()?;
@@ -173,6 +235,10 @@ pub fn run(steps: u32, query_every: u32) -> Result<BenchReport, SimError> {
         .map(|c| u64::from(c.width) * u64::from(c.height))
         .sum();
 
+    let mesh_robot = match mesh_robot_file {
+        Some(f) => Some(mesh_robot(f, &ep, steps)?),
+        None => None,
+    };
     sim.reset(&ep)?;
     let t0 = Clock::start();
     for k in 0..steps {
@@ -203,6 +269,7 @@ pub fn run(steps: u32, query_every: u32) -> Result<BenchReport, SimError> {
         substeps_per_control_step: substeps,
         bodies: sim.world.bodies.len(),
         colliders: sim.world.colliders.len(),
+        mesh_robot,
     })
 }
 

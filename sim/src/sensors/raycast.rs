@@ -13,14 +13,14 @@ use rapier3d::prelude::*;
 
 use super::footprint::{Coverage, Footprint, Projector};
 use super::projection::Projection;
-use super::ray_shapes::{aligned_normal, ray_capsule, ray_cuboid, ray_cylinder, slab};
+use super::ray_shapes::{aligned_normal, ray_capsule, ray_convex, ray_cuboid, ray_cylinder, slab};
 use crate::convert::vec_to_glam;
 
 /// One collider, flattened.
 struct Prim<'a> {
     pose: Pose,
     shape: &'a dyn Shape,
-    kind: Kind,
+    kind: Kind<'a>,
     user_data: u128,
     /// World bounding box, SIMD-friendly.
     mins: Vec3A,
@@ -33,13 +33,16 @@ struct Prim<'a> {
 
 /// Shapes with a closed-form intersection here; anything else uses parry's generic ray cast.
 #[derive(Clone, Copy)]
-enum Kind {
+enum Kind<'a> {
     /// A box whose world bounding box is the box itself: the slab test is the exact hit.
     AlignedBox,
     Cuboid(Vector),
     Capsule(Vector, Vector, f32),
     /// Half height along local y, radius (parry's cylinder axis).
     Cylinder(f32, f32),
+    /// A convex hull (robot link meshes): clipped against its face planes, where parry's
+    /// generic cast iterates GJK on the support map and made a mesh arm ten times the image.
+    Convex(&'a ConvexPolyhedron),
     Other,
 }
 
@@ -59,6 +62,8 @@ impl<'a> Prim<'a> {
             Kind::Capsule(c.segment.a, c.segment.b, c.radius)
         } else if let Some(c) = shape.as_cylinder() {
             Kind::Cylinder(c.half_height, c.radius)
+        } else if let Some(c) = shape.as_convex_polyhedron() {
+            Kind::Convex(c)
         } else {
             Kind::Other
         };
@@ -124,6 +129,7 @@ impl Prim<'_> {
             Kind::Cuboid(h) => ray_cuboid(o, d, h, best_t),
             Kind::Capsule(a, b, r) => ray_capsule(o, d, a, b, r, best_t),
             Kind::Cylinder(hh, r) => ray_cylinder(o, d, hh, r, best_t),
+            Kind::Convex(c) => ray_convex(o, d, c, best_t),
             Kind::Other => self
                 .shape
                 .cast_local_ray_and_get_normal(&Ray::new(o, d), best_t, true)
