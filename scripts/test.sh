@@ -16,13 +16,11 @@ VIRTUAL_ENV="$(cd "$VENV" && pwd)"
 export VIRTUAL_ENV PATH="$VIRTUAL_ENV/bin:$PATH"
 hash -r
 echo "python3: $(command -v python3) ($(python3 --version 2>&1))"
-# LeRobot 0.4.4 in a venv of its own (scripts/lerobot-venv.sh: its torch, datasets and
-# huggingface-hub pins are below the test venv's), not on PATH: the LeRobot path's section below
-# runs with it, and the export's test (worker/tests/it/lerobot_export.rs) loads the export with
-# LeRobotDataset through KITCHEN_R_LEROBOT_PYTHON.
-section "the LeRobot venv (scripts/lerobot-venv.sh)"
-bash scripts/lerobot-venv.sh
-KITCHEN_R_LEROBOT_PYTHON="$(cd "${KITCHEN_R_LEROBOT_VENV:-target/lerobot-venv}" && pwd)/bin/python"
+# LeRobot 0.4.4 is in the test venv (scripts/test-requirements-lerobot.txt), or with torch in
+# KITCHEN_R_TORCH_PYTHON's Python when that is set: the LeRobot path's section below runs with it,
+# and the export's test (worker/tests/it/lerobot_export.rs) loads the export with LeRobotDataset
+# through KITCHEN_R_LEROBOT_PYTHON.
+KITCHEN_R_LEROBOT_PYTHON="${KITCHEN_R_TORCH_PYTHON:-$VIRTUAL_ENV/bin/python}"
 export KITCHEN_R_LEROBOT_PYTHON
 # The browser test (tests/e2e/browser.rs) drives Debian's Chromium: installed here when this
 # is root on a machine with apt (as CI and a fresh container are); else said here rather than
@@ -59,25 +57,30 @@ MATURIN_PEP517_ARGS="--profile dev" \
   python3 -m pip install --quiet --disable-pip-version-check --no-build-isolation -c scripts/test-constraints.txt ./python
 KITCHEN_R_BIN=target/debug/kitchen-r python3 -m pytest -q python/tests
 # The LeRobot env plugin (python/lerobot_env_kitchen_r, docs/participant/lerobot.md): pure Python, installed
-# offline over the package just built; its tests need no LeRobot (those that do are skipped).
+# offline over the package just built; with LeRobot 0.4.4 in the test venv its tests marked
+# `lerobot` run here too (without it, as with KITCHEN_R_TORCH_PYTHON, they are skipped here and run
+# with that Python below).
 section "the LeRobot env plugin: pip install ./python/lerobot_env_kitchen_r, then its tests"
 python3 -m pip install --quiet --disable-pip-version-check --no-build-isolation --no-deps \
   ./python/lerobot_env_kitchen_r
 python3 -m pytest -q python/lerobot_env_kitchen_r/tests
-# The LeRobot path (docs/participant/lerobot.md) with LeRobot 0.4.4, tiny and on the CPU: the env
-# plugin's tests that need LeRobot (marked `lerobot`), then our export -> lerobot-train (ACT and
-# diffusion, 3 steps) -> kitchen-r-serve-lerobot -> check-policy, and lerobot-eval
-# --env.type=kitchen_r for one short episode (starter-kit/baselines/lerobot/tests). gym_kitchen_r
-# goes into the LeRobot venv as a wheel of the build above (cargo has nothing left to compile).
+# The LeRobot path (docs/participant/lerobot.md) with LeRobot 0.4.4, tiny and on the CPU: our
+# export -> lerobot-train (ACT and diffusion, 3 steps) -> kitchen-r-serve-lerobot -> check-policy,
+# and lerobot-eval --env.type=kitchen_r for one short episode (starter-kit/baselines/lerobot/tests). In the test
+# venv gym_kitchen_r and the plugin are installed above; another Python (KITCHEN_R_TORCH_PYTHON)
+# gets them as a wheel of the build above (cargo has nothing left to compile), then runs the
+# plugin's tests marked `lerobot`.
 section "the LeRobot path: the env plugin and starter-kit/baselines/lerobot/tests with LeRobot 0.4.4"
-rm -rf target/lerobot-wheels
-MATURIN_PEP517_ARGS="--profile dev" \
-  python3 -m pip wheel --quiet --disable-pip-version-check --no-deps --no-build-isolation -w target/lerobot-wheels ./python
-"$KITCHEN_R_LEROBOT_PYTHON" -m pip install --quiet --disable-pip-version-check --no-deps --force-reinstall \
-  target/lerobot-wheels/gym_kitchen_r-*.whl
-"$KITCHEN_R_LEROBOT_PYTHON" -m pip install --quiet --disable-pip-version-check --no-build-isolation --no-deps \
-  ./python/lerobot_env_kitchen_r
-KITCHEN_R_BIN=target/debug/kitchen-r "$KITCHEN_R_LEROBOT_PYTHON" -m pytest -q -m lerobot python/lerobot_env_kitchen_r/tests
+if [[ "$KITCHEN_R_LEROBOT_PYTHON" != "$VIRTUAL_ENV/bin/python" ]]; then
+  rm -rf target/lerobot-wheels
+  MATURIN_PEP517_ARGS="--profile dev" \
+    python3 -m pip wheel --quiet --disable-pip-version-check --no-deps --no-build-isolation -w target/lerobot-wheels ./python
+  "$KITCHEN_R_LEROBOT_PYTHON" -m pip install --quiet --disable-pip-version-check --no-deps --force-reinstall \
+    target/lerobot-wheels/gym_kitchen_r-*.whl
+  "$KITCHEN_R_LEROBOT_PYTHON" -m pip install --quiet --disable-pip-version-check --no-build-isolation --no-deps \
+    ./python/lerobot_env_kitchen_r
+  KITCHEN_R_BIN=target/debug/kitchen-r "$KITCHEN_R_LEROBOT_PYTHON" -m pytest -q -m lerobot python/lerobot_env_kitchen_r/tests
+fi
 KITCHEN_R_BIN=target/debug/kitchen-r "$KITCHEN_R_LEROBOT_PYTHON" -m pytest -q starter-kit/baselines/lerobot/tests
 # The control baselines trained from live simulators (docs/measured/baseline-gates.md): a few CPU training steps on
 # streamed expert samples each; the privileged checkpoint reloads, serves over gRPC and passes

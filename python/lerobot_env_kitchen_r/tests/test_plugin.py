@@ -1,7 +1,7 @@
 """The LeRobot env plugin (docs/participant/lerobot.md) without LeRobot: the adapter's observation keys,
 shapes and dtypes, ``is_success``, the gym id, determinism for a seed, the instruction and seed
 choices, and its refusals. The tests marked ``lerobot`` need LeRobot and are skipped without it;
-scripts/test.sh runs them in the LeRobot venv (scripts/lerobot-venv.sh, LeRobot 0.4.4). They check
+scripts/test.sh runs them in the test venv (scripts/test-venv.sh, LeRobot 0.4.4). They check
 the ``kitchen_r`` env config and LeRobot's own ``make_env`` / ``preprocess_observation`` /
 ``add_envs_task`` on the plugin.
 """

@@ -5,8 +5,8 @@ passes; and `lerobot-eval --env.type=kitchen_r` runs the trained ACT on the env 
 (python/lerobot_env_kitchen_r) for one short episode. Also, with numpy only: the served features
 are the export's (names and order) and a policy's actions become valid chunks.
 
-scripts/test.sh runs this file with target/lerobot-venv's Python (scripts/lerobot-venv.sh:
-LeRobot 0.4.4); without LeRobot the end-to-end tests are skipped. KITCHEN_R_BIN names the binary.
+scripts/test.sh runs this file in the test venv (scripts/test-venv.sh, LeRobot 0.4.4 from
+scripts/test-requirements-lerobot.txt); without LeRobot the end-to-end tests are skipped. KITCHEN_R_BIN names the binary.
 """
 
 from __future__ import annotations
