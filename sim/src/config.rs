@@ -56,12 +56,13 @@ pub struct ArticulationConfig {
     pub finger_damping: f64,
     /// Coulomb friction of the finger pads (combined with the object's by averaging).
     pub finger_friction: f64,
-    /// Mass of each finger (kg). The solver's few constraint iterations converge poorly where a
-    /// light finger squeezes a heavier object: a held bowl crept 2 mm/s down 0.03 kg pads and
-    /// does not with 0.1 kg ones (docs/twin/robot.md).
+    /// Mass of each finger (kg): the few constraint iterations converge differently with it (a
+    /// held bowl crept 2 mm/s down 0.03 kg pads and not down 0.1 kg ones, which let cups slip;
+    /// docs/twin/robot.md).
     pub finger_mass: f64,
     /// Natural frequency of the contact softness (Hz; rapier's default is 30): stiffer contacts
-    /// keep squeezed light objects from sinking millimetres into the fingers.
+    /// keep squeezed light objects from sinking millimetres into the fingers; 120 Hz let a held
+    /// bowl rattle in the pads at the mode's single 10 ms solver substep.
     pub contact_frequency: f64,
     /// Rapier's solver in this mode: substeps per physics step (`num_solver_iterations`; each
     /// rebuilds and factorises the arm's mass matrix, the mode's main cost) and constraint
@@ -80,8 +81,8 @@ impl Default for ArticulationConfig {
             finger_stiffness: 4000.0,
             finger_damping: 40.0,
             finger_friction: 1.0,
-            finger_mass: 0.1,
-            contact_frequency: 120.0,
+            finger_mass: 0.03,
+            contact_frequency: 60.0,
             solver_iterations: 1,
             pgs_iterations: 8,
         }
