@@ -20,6 +20,7 @@ pub mod grasp;
 pub mod material;
 pub mod mesh;
 mod mesh_mjcf;
+mod mesh_raw;
 pub mod oracle;
 pub mod preflight;
 pub mod randomise;

@@ -33,6 +33,7 @@ use rapier3d::math::Vector;
 use rapier3d::prelude::SharedShape;
 
 use crate::error::SimError;
+use crate::mesh_raw::{Raw, mesh_error};
 
 /// A mesh as the twin uses it.
 #[derive(Debug)]
@@ -231,7 +232,8 @@ pub(crate) fn read_raw(path: &Path, scale: f64) -> Result<Raw, SimError> {
         Some("gltf" | "glb") => read_gltf(path, scale),
         Some("obj" | "stl") => read_obj_stl(path, scale),
         Some("msh") => crate::mesh_mjcf::read_msh(path, scale),
-        Some("xml") => crate::mesh_mjcf::read_object(path, scale),
+        // An MJCF object's meshes are files of the formats above, read with this function.
+        Some("xml") => crate::mesh_mjcf::read_object(path, scale, read_raw),
         _ => Err(mesh_error(
             path,
             "unknown mesh format: give a glTF 2.0 (.gltf, .glb), OBJ (.obj), STL (.stl) or MuJoCo (.msh) file, \
@@ -240,16 +242,6 @@ pub(crate) fn read_raw(path: &Path, scale: f64) -> Result<Raw, SimError> {
         )),
     }
 }
-
-pub(crate) fn mesh_error(path: &Path, message: String) -> SimError {
-    SimError::Mesh {
-        path: path.to_path_buf(),
-        message,
-    }
-}
-
-/// Vertices (z-up, scaled) and triangles of a mesh file.
-pub(crate) type Raw = (Vec<[f64; 3]>, Vec<[u32; 3]>);
 
 fn read_obj_stl(path: &Path, scale: f64) -> Result<Raw, SimError> {
     let bad = |message: String| mesh_error(path, message);

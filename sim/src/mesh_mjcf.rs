@@ -9,10 +9,11 @@ use std::path::Path;
 use nalgebra::{Point3, Quaternion, Translation3, UnitQuaternion};
 
 use crate::error::SimError;
-use crate::mesh::{Raw, mesh_error, read_raw};
+use crate::mesh_raw::{Raw, ReadRaw, mesh_error};
 
-/// An MJCF object file's colliding meshes as one mesh (file frame, z-up, times `scale`).
-pub(crate) fn read_object(path: &Path, scale: f64) -> Result<Raw, SimError> {
+/// An MJCF object file's colliding meshes as one mesh (file frame, z-up, times `scale`), each
+/// mesh file read with `read_raw` (`crate::mesh`'s reader by extension).
+pub(crate) fn read_object(path: &Path, scale: f64, read_raw: ReadRaw) -> Result<Raw, SimError> {
     let meshes = kitchen_r_core::catalogue_mjcf::object_meshes(path).map_err(SimError::Content)?;
     let (mut vertices, mut triangles): Raw = (Vec::new(), Vec::new());
     for m in meshes {
