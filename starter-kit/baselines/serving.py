@@ -19,18 +19,25 @@ def parser(description: str, execute: int, device: bool = True) -> argparse.Argu
     """The flags every serve.py takes; a baseline adds its own to the parser returned."""
     ap = argparse.ArgumentParser(description=description)
     ap.add_argument("--checkpoint", required=True, help="checkpoint written by train.py")
-    ap.add_argument("--listen", default="127.0.0.1:50051", help="HOST:PORT; port 0 picks a free port")
     if device:
         ap.add_argument("--device", default="auto", help="auto (CUDA if available), cpu, cuda, ...")
-    ap.add_argument(
-        "--execute",
-        type=int,
-        default=execute,
-        help="actions of each 16-action chunk executed before the next Act (contract v1.1)",
-    )
-    ap.add_argument(
-        "--concurrency", type=int, default=16, help="Act calls the policy accepts at once (max_concurrency)"
-    )
+    add_server_flags(ap, execute, "actions of each 16-action chunk executed before the next Act (contract v1.1)")
+    return ap
+
+
+def add_server_flags(
+    ap: argparse.ArgumentParser,
+    execute: int,
+    execute_help: str,
+    concurrency: int = 16,
+    concurrency_help: str = "Act calls the policy accepts at once (max_concurrency)",
+) -> None:
+    """The policy server's flags (what `serve` reads): `--listen`, `--execute`, `--concurrency`,
+    `--max-batch`, `--token`, `--proto-dir`; shared with serve commands that name their model
+    their own way (kitchen-r-serve-lerobot's `--policy.path`)."""
+    ap.add_argument("--listen", default="127.0.0.1:50051", help="HOST:PORT; port 0 picks a free port")
+    ap.add_argument("--execute", type=int, default=execute, help=execute_help)
+    ap.add_argument("--concurrency", type=int, default=concurrency, help=concurrency_help)
     ap.add_argument(
         "--max-batch",
         type=int,
@@ -40,7 +47,6 @@ def parser(description: str, execute: int, device: bool = True) -> argparse.Argu
     )
     ap.add_argument("--token", default=os.environ.get("POLICY_TOKEN"), help="require this bearer token")
     ap.add_argument("--proto-dir", default=None, help="directory with kitchen_r/policy/v1/policy.proto")
-    return ap
 
 
 def parse(ap: argparse.ArgumentParser, argv: Sequence[str] | None = None) -> argparse.Namespace:

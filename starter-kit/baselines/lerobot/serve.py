@@ -54,28 +54,13 @@ def parser() -> argparse.ArgumentParser:
     ap.add_argument(
         "--policy.device", dest="device", default="auto", help="auto (CUDA if available), cpu, cuda, cuda:1, ..."
     )
-    ap.add_argument("--listen", default="127.0.0.1:50051", help="HOST:PORT; port 0 picks a free port")
-    ap.add_argument(
-        "--execute",
-        type=int,
-        default=0,
-        help="actions of each 16-action chunk executed before the next Act; 0: the policy's n_action_steps (at most 16)",
+    serving.add_server_flags(
+        ap,
+        0,
+        "actions of each 16-action chunk executed before the next Act; 0: the policy's n_action_steps (at most 16)",
+        concurrency=4,
+        concurrency_help="Act calls accepted at once (max_concurrency); they run one at a time",
     )
-    ap.add_argument(
-        "--concurrency",
-        type=int,
-        default=4,
-        help="Act calls accepted at once (max_concurrency); they run one at a time",
-    )
-    ap.add_argument(
-        "--max-batch",
-        type=int,
-        default=16,
-        help="batched decisions: the most episodes' decisions one ActBatch call carries, run through the "
-        "policy in one forward pass; 0 or 1 = Acts only",
-    )
-    ap.add_argument("--token", default=os.environ.get("POLICY_TOKEN"), help="require this bearer token")
-    ap.add_argument("--proto-dir", default=None, help="directory with kitchen_r/policy/v1/policy.proto")
     return ap
 
 
