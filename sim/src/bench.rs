@@ -154,15 +154,7 @@ fn mesh_robot(
     let substeps = f64::from(sim.config().physics.substeps);
     let (step_us, step_min) = control_steps(&mut sim, (steps / BATCHES).max(1))?;
     let n_obs = 30;
-    let mut observe = Vec::new();
-    for _ in 0..BATCHES {
-        let t0 = Clock::start();
-        for _ in 0..n_obs / BATCHES {
-            std::hint::black_box(sim.observe());
-        }
-        observe.push(t0.secs() * 1e3 / f64::from(n_obs / BATCHES));
-    }
-    let (observation_ms, observation_ms_min) = median_min(observe);
+    let (observation_ms, observation_ms_min) = observe_ms(&mut sim, n_obs);
     Ok(MeshRobotReport {
         robot: file.display().to_string(),
         arm_joints: sim.robot.arm.dof,
@@ -173,6 +165,19 @@ fn mesh_robot(
         observation_ms_min,
         cameras: sim.sensors.cameras.len(),
     })
+}
+
+/// Milliseconds per full observation (median and fastest of the batches), over `n_obs` of them.
+fn observe_ms(sim: &mut Sim, n_obs: u32) -> (f64, f64) {
+    let mut observe = Vec::new();
+    for _ in 0..BATCHES {
+        let t0 = Clock::start();
+        for _ in 0..n_obs / BATCHES {
+            std::hint::black_box(sim.observe());
+        }
+        observe.push(t0.secs() * 1e3 / f64::from(n_obs / BATCHES));
+    }
+    median_min(observe)
 }
 
 /// Run the benchmark on the first scene for `steps` control steps (and with the robot
@@ -208,15 +213,7 @@ pub fn run(
     let (articulated_us, articulated_min) = control_steps(&mut articulated, per_batch)?;
 
     let n_obs = 30;
-    let mut observe = Vec::new();
-    for _ in 0..BATCHES {
-        let t0 = Clock::start();
-        for _ in 0..n_obs / BATCHES {
-            std::hint::black_box(sim.observe());
-        }
-        observe.push(t0.secs() * 1e3 / f64::from(n_obs / BATCHES));
-    }
-    let (observation_ms, observation_ms_min) = median_min(observe);
+    let (observation_ms, observation_ms_min) = observe_ms(&mut sim, n_obs);
     let lidar_ms = match &sim.sensors.lidar {
         Some(l) => {
             let pose = sim.robot.base_iso(&sim.world);
