@@ -16,15 +16,7 @@ use tonic::{Request, Response, Status};
 
 /// `kitchen-r policy oracle` for four episodes at once, declaring `max_batch`.
 fn batch_oracle(max_batch: u32) -> (Proc, String) {
-    let (child, line) = spawn_ready(
-        Command::new(bin())
-            .args(["policy", "oracle", "--listen", "127.0.0.1:0"])
-            .args(["--max-concurrency", "4", "--max-batch", &max_batch.to_string()])
-            .env("RUST_LOG", "warn"),
-        "listening grpc=",
-    );
-    let addr = line.trim_start_matches("listening grpc=").trim().to_string();
-    (Proc(child), format!("http://{addr}"))
+    oracle_policy_with(&["--max-concurrency", "4", "--max-batch", &max_batch.to_string()])
 }
 
 /// `kitchen-r eval --json` of the oracle at `url` with `extra` flags.
@@ -112,14 +104,7 @@ async fn the_oracle_over_actbatch_scores_as_over_act_through_serve_and_workers()
         assert_eq!(view["latest_run"]["evaluation"]["state"], "finished", "{view:#}");
         views.push(view);
     }
-    let text = client()
-        .get(server.url("/metrics"))
-        .send()
-        .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap();
+    let text = get_text(&server, "/metrics").await;
     let calls = metric(&text, "kitchen_r_worker_policy_batch_calls_total");
     let decisions = metric(&text, "kitchen_r_worker_policy_batched_decisions_total");
     assert!(calls > 0.0 && decisions > calls, "{text}");

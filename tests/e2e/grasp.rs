@@ -15,12 +15,6 @@ use support::*;
 const CONFIG: &str =
     "[control]\ngrasp = \"physical\"\noffline_mse = false\nlease_s = 4\nreaper_interval_s = 1\n";
 
-async fn text(server: &Server, path: &str) -> String {
-    let r = client().get(server.url(path)).send().await.unwrap();
-    assert_eq!(r.status(), 200, "{path}");
-    r.text().await.unwrap()
-}
-
 #[tokio::test(flavor = "multi_thread")]
 async fn a_physical_grasp_contest_names_its_mode_wherever_the_score_shows() {
     let fx = ControlFixture::new(CONFIG);
@@ -66,7 +60,7 @@ async fn a_physical_grasp_contest_names_its_mode_wherever_the_score_shows() {
     .await;
     assert_eq!(status, 400, "{bad}");
 
-    let csv = text(&server, "/api/v1/leaderboard?track=control&split=dev&format=csv").await;
+    let csv = get_text(&server, "/api/v1/leaderboard?track=control&split=dev&format=csv").await;
     let mut lines = csv.lines();
     assert!(
         lines.next().unwrap().contains(",observations,grasp_mode,"),
@@ -77,7 +71,7 @@ async fn a_physical_grasp_contest_names_its_mode_wherever_the_score_shows() {
         "{csv}"
     );
 
-    let page = text(&server, "/?split=dev").await;
+    let page = get_text(&server, "/?split=dev").await;
     assert!(
         page.contains("Grasp mode of this contest: <b>physical</b>"),
         "{page}"
@@ -86,7 +80,7 @@ async fn a_physical_grasp_contest_names_its_mode_wherever_the_score_shows() {
         page.contains("<h2 id=\"control\">Control track — standard observations — physical grasp</h2>"),
         "{page}"
     );
-    let entry = text(&server, &format!("/leaderboard/control/dev/{id}")).await;
+    let entry = get_text(&server, &format!("/leaderboard/control/dev/{id}")).await;
     assert!(entry.contains("<th>Grasp mode</th><td>physical</td>"), "{entry}");
 }
 

@@ -22,12 +22,6 @@ fn dev_lines() -> Vec<String> {
         .collect()
 }
 
-async fn text(server: &Server, path: &str) -> String {
-    let r = client().get(server.url(path)).send().await.unwrap();
-    assert_eq!(r.status(), 200, "{path}");
-    r.text().await.unwrap()
-}
-
 fn ranks(board: &Value) -> Vec<(String, u64)> {
     (board["rows"].as_array().unwrap().iter())
         .map(|r| {
@@ -82,7 +76,7 @@ async fn overlapping_intervals_share_a_rank_and_every_rendering_shows_them() {
 
     grpc_board_matches(&server, &board).await;
 
-    let csv = text(&server, "/api/v1/leaderboard?track=planning&split=dev&format=csv").await;
+    let csv = get_text(&server, "/api/v1/leaderboard?track=planning&split=dev&format=csv").await;
     let mut csv_lines = csv.lines();
     assert_eq!(
         csv_lines.next(),
@@ -97,11 +91,11 @@ async fn overlapping_intervals_share_a_rank_and_every_rendering_shows_them() {
         .collect();
     assert!(cells[1] < cells[0] && cells[0] < cells[2], "{csv}");
 
-    let page = text(&server, "/?split=dev").await;
+    let page = get_text(&server, "/?split=dev").await;
     assert!(page.contains("<b>Ties: </b>Ranks are shared"), "{page}");
     assert!(page.contains("<small class=\"ci\">[0.97"), "{page}");
     assert!(page.contains("<summary>card</summary>"), "{page}");
-    let html = text(
+    let html = get_text(
         &server,
         "/api/v1/leaderboard?track=planning&split=dev&format=html",
     )
@@ -119,7 +113,7 @@ async fn overlapping_intervals_share_a_rank_and_every_rendering_shows_them() {
     let expected = pairs([("full", 1), ("all-but-one", 2), ("half", 3), ("under-half", 4)]);
     assert_eq!(ranks(&board), expected, "{board:#}");
     assert_eq!(board["interval_ties"], false, "{board:#}");
-    let page = text(&server, "/?split=dev").await;
+    let page = get_text(&server, "/?split=dev").await;
     assert!(page.contains("a rank of its own"), "{page}");
 }
 

@@ -144,12 +144,6 @@ fn teams_on(board: &Value) -> Vec<(&str, &str)> {
         .collect()
 }
 
-async fn text(server: &Server, path: &str) -> String {
-    let r = client().get(server.url(path)).send().await.unwrap();
-    assert_eq!(r.status().as_u16(), 200, "{path}");
-    r.text().await.unwrap()
-}
-
 #[test]
 fn privileged_runs_get_what_their_split_allows_and_are_ranked_apart() {
     let (privileged, seen) = logging_policy(true);
@@ -280,7 +274,7 @@ fn privileged_runs_get_what_their_split_allows_and_are_ranked_apart() {
         let (_, std_test) = board(&server, "track=control&split=test").await;
         assert_eq!(std_test["rows"], json!([]), "{std_test}");
 
-        let csv = text(
+        let csv = get_text(
             &server,
             "/api/v1/leaderboard?track=control&split=dev&observations=privileged&format=csv",
         )
@@ -299,7 +293,7 @@ fn privileged_runs_get_what_their_split_allows_and_are_ranked_apart() {
             "{csv}"
         );
         assert_eq!(lines.next(), None, "{csv}");
-        let csv = text(&server, "/api/v1/leaderboard?track=control&split=dev&format=csv").await;
+        let csv = get_text(&server, "/api/v1/leaderboard?track=control&split=dev&format=csv").await;
         assert!(
             csv.lines()
                 .skip(1)
@@ -307,7 +301,7 @@ fn privileged_runs_get_what_their_split_allows_and_are_ranked_apart() {
             "{csv}"
         );
 
-        let page = text(&server, "/?split=dev").await;
+        let page = get_text(&server, "/?split=dev").await;
         assert!(page.contains("Control track — standard observations"), "{page}");
         assert!(
             page.contains("id=\"control-privileged\">Control track — privileged observations"),
@@ -318,7 +312,7 @@ fn privileged_runs_get_what_their_split_allows_and_are_ranked_apart() {
             "{page}"
         );
         let id = rows[0]["submission_id"].as_i64().unwrap();
-        let entry = text(&server, &format!("/leaderboard/control/dev/{id}")).await;
+        let entry = get_text(&server, &format!("/leaderboard/control/dev/{id}")).await;
         assert!(
             entry.contains("<th>Observations</th><td>privileged</td>"),
             "{entry}"
@@ -351,7 +345,7 @@ fn privileged_runs_get_what_their_split_allows_and_are_ranked_apart() {
             let (_, b) = board(&server, query).await;
             assert_eq!(b["rows"], json!([]), "{query}: {b}");
         }
-        let entry = text(&server, &format!("/leaderboard/integrated/dev/{privileged_dev}")).await;
+        let entry = get_text(&server, &format!("/leaderboard/integrated/dev/{privileged_dev}")).await;
         assert!(
             entry.contains("<th>Observations</th><td>privileged</td>"),
             "{entry}"

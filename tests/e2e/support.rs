@@ -277,6 +277,13 @@ pub(crate) async fn submit(
     (status, r.json().await.unwrap())
 }
 
+/// The body of a GET that must answer 200 (pages, CSV, metrics).
+pub(crate) async fn get_text(server: &Server, path: &str) -> String {
+    let r = client().get(server.url(path)).send().await.unwrap();
+    assert_eq!(r.status(), 200, "{path}");
+    r.text().await.unwrap()
+}
+
 pub(crate) async fn get_json(server: &Server, path: &str, token: Option<&str>) -> (u16, Value) {
     let mut req = client().get(server.url(path));
     if let Some(t) = token {
@@ -339,9 +346,15 @@ impl Drop for Proc {
 /// The reference oracle served over gRPC (`kitchen-r policy oracle --listen 127.0.0.1:0`);
 /// returns the process and its `http://` URL.
 pub(crate) fn oracle_policy() -> (Proc, String) {
+    oracle_policy_with(&[])
+}
+
+/// The oracle served with extra `kitchen-r policy oracle` flags (e.g. `--max-batch 4`).
+pub(crate) fn oracle_policy_with(flags: &[&str]) -> (Proc, String) {
     let (child, line) = spawn_ready(
         Command::new(bin())
             .args(["policy", "oracle", "--listen", "127.0.0.1:0"])
+            .args(flags)
             .env("RUST_LOG", "warn"),
         "listening grpc=",
     );
