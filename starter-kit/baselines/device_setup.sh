@@ -22,8 +22,10 @@ ln -sfn "$PWD/starter-kit/kitchen_r_client" /tmp/site/kitchen_r_client
 ln -sf "$PWD/starter-kit/policy_server.py" /tmp/site/policy_server.py
 export PYTHONPATH=/tmp/site${PYTHONPATH:+:$PYTHONPATH}
 if [ -f target/device/kitchen-r.xz ]; then
-  python3 -c "import lzma, shutil; shutil.copyfileobj(lzma.open('target/device/kitchen-r.xz'), open('/tmp/kitchen-r', 'wb'))"
-  chmod +x /tmp/kitchen-r
+  # Written beside it, then renamed: a second call while a run still uses the binary would
+  # otherwise fail with "Text file busy".
+  python3 -c "import lzma, shutil; shutil.copyfileobj(lzma.open('target/device/kitchen-r.xz'), open('/tmp/kitchen-r.new', 'wb'))"
+  chmod +x /tmp/kitchen-r.new && mv -f /tmp/kitchen-r.new /tmp/kitchen-r
 fi
 export KITCHEN_R_BIN=/tmp/kitchen-r KITCHEN_R_ASSETS="$PWD/assets" KITCHEN_R_CONFIGS="$PWD/configs" RUST_LOG=warn
 export PYTHONUNBUFFERED=1

@@ -118,14 +118,17 @@ def summarise(online, offline, train_log, track, gates, evaluated=None):
             "reasons": dict(sorted(reasons.items(), key=lambda kv: -kv[1])),
         }
     tr = train_log or {}
+    # The camera and privileged trainers log `expert.episodes`, `rows` and `train_seconds`; the
+    # diffusion pipeline logs `episodes`, `samples` and `train_minutes`.
+    minutes = tr.get("train_minutes")
     return {
         "track": track,
         "hardware": tr.get("hardware"),
-        "training_episodes": (tr.get("expert") or {}).get("episodes", tr.get("training_episodes")),
+        "training_episodes": (tr.get("expert") or {}).get("episodes", tr.get("training_episodes", tr.get("episodes"))),
         "dagger_episodes": sum(r.get("episodes", 0) for r in tr.get("rounds", [])),
-        "training_samples": tr.get("rows"),
+        "training_samples": tr.get("rows", tr.get("samples")),
         "sr_while_driving_by_round": [r.get("sr_while_driving") for r in tr.get("rounds", [])],
-        "train_seconds": tr.get("train_seconds"),
+        "train_seconds": tr.get("train_seconds", None if minutes is None else round(minutes * 60)),
         "eval_episodes": len(online["episodes"]),
         "eval_seed": online.get("seed"),
         "sr": (online.get("overall") or {}).get("sr"),
