@@ -11,9 +11,11 @@
 //! A dispatcher thread (its own runtime and connection) gathers decisions and sends a batch
 //! when it is full (`max_batch`), when every episode attached is waiting (nothing more can
 //! come), or when the oldest pending decision has waited the gather window
-//! (`policy.batch_gather_ms`) and no other batch is in flight (decisions arriving while one is
-//! out join the next; a decision waits for a batch in flight at most a quarter of its call
-//! deadline). Each episode waits for its own answer under its own call
+//! (`policy.batch_gather_ms`), so long as fewer than [`flights`] batches of the endpoint are in
+//! flight (else it waits for one to land, at most a quarter of its call deadline). Two in
+//! flight let a policy server overlap one batch's network pass with the next batch's transfer
+//! and decoding, where one at a time left it idle between them (measured on an H200: the camera
+//! baseline at 0.47× its unbatched rate with one batch in flight). Each episode waits for its own answer under its own call
 //! deadline, counted from when it handed its decision in, so batching moves no deadline; a
 //! batch call is given the latest of its decisions' deadlines, and a decision whose episode
 //! gave up is not sent.
@@ -131,6 +133,16 @@ pub(crate) fn batch_size(spec: &pb::PolicySpec, cfg: &RemoteConfig) -> Option<us
     (n > 1).then_some(n as usize)
 }
 
+/// Batches of one endpoint in flight at once: two (a policy pipelines transfer and compute),
+/// more when the policy declares more concurrent calls than two batches fill, one when it
+/// takes one call at a time.
+pub(crate) fn flights(max_concurrency: u32, max_batch: usize) -> usize {
+    match max_concurrency as usize {
+        0 | 1 => 1,
+        n => n.div_ceil(max_batch.max(1)).clamp(2, n),
+    }
+}
+
 /// Join (or start) the batcher of this endpoint. `None` when the dispatcher thread could not
 /// start: the episode then sends its decisions one Act at a time.
 pub(crate) fn attach(
@@ -146,7 +158,13 @@ pub(crate) fn attach(
     let shared = match reg.get(&key).and_then(Weak::upgrade) {
         Some(s) => s,
         None => {
-            let s = start(ep.clone(), creds.clone(), cfg.clone(), max_batch)?;
+            let s = start(
+                ep.clone(),
+                creds.clone(),
+                cfg.clone(),
+                max_batch,
+                flights(spec.max_concurrency, max_batch),
+            )?;
             reg.insert(key, Arc::downgrade(&s));
             s
         }
@@ -158,7 +176,13 @@ pub(crate) fn attach(
     })
 }
 
-fn start(ep: Endpoint, creds: Credentials, cfg: RemoteConfig, max_batch: usize) -> Option<Arc<Shared>> {
+fn start(
+    ep: Endpoint,
+    creds: Credentials,
+    cfg: RemoteConfig,
+    max_batch: usize,
+    max_flights: usize,
+) -> Option<Arc<Shared>> {
     let (tx, rx) = mpsc::unbounded_channel();
     let attached = Arc::new(AtomicUsize::new(0));
     let seen = attached.clone();
@@ -177,7 +201,7 @@ fn start(ep: Endpoint, creds: Credentials, cfg: RemoteConfig, max_batch: usize) 
             let Ok(conn) = conn else { return };
             // Waiting for a batch in flight costs a decision at most a quarter of its deadline.
             let times = (cfg.batch_gather(), cfg.call_deadline() / 4);
-            rt.block_on(dispatch(rx, conn, max_batch, times, seen));
+            rt.block_on(dispatch(rx, conn, (max_batch, max_flights), times, seen));
         })
         .ok()?;
     Some(Arc::new(Shared { tx, attached }))
@@ -222,7 +246,7 @@ impl Attachment {
 async fn dispatch(
     mut rx: mpsc::UnboundedReceiver<Msg>,
     conn: Conn,
-    max_batch: usize,
+    (max_batch, max_flights): (usize, usize),
     (window, hold): (Duration, Duration),
     attached: Arc<AtomicUsize>,
 ) {
@@ -237,27 +261,35 @@ async fn dispatch(
                 None => break,
             }
         }
-        // Gather until full or until nobody else can add a decision. Past the window a partial
-        // batch goes, but while another batch is in flight it waits for it (up to `hold`): a
-        // policy that runs one batch at a time (one GPU) would only queue it, and the decisions
-        // that come in meanwhile join it when the batch in flight comes back.
-        while open && pending.len() < max_batch {
+        // Gather until the batch is full, nobody else can add a decision, or the oldest has
+        // waited the window; then send it if fewer than `max_flights` batches are out, else wait
+        // for one to land (at most `hold` more): a policy already busy with that many would only
+        // queue it, and the decisions arriving meanwhile join it.
+        loop {
+            let now = Instant::now();
             let busy = flight.decisions.load(Ordering::SeqCst);
-            if pending.len() + busy >= attached.load(Ordering::SeqCst) {
+            let ready = !open
+                || pending.len() >= max_batch
+                || pending.len() + busy >= attached.load(Ordering::SeqCst)
+                || now >= pending[0].arrived + window;
+            let free = flight.calls.load(Ordering::SeqCst) < max_flights;
+            let overdue = pending[0].arrived + window + hold;
+            if (ready && free) || now >= overdue {
                 break;
             }
-            let limit = pending[0].arrived + if busy == 0 { window } else { window + hold };
-            if Instant::now() >= limit {
-                break;
-            }
+            let wake = if ready {
+                overdue
+            } else {
+                pending[0].arrived + window
+            };
             tokio::select! {
-                m = rx.recv() => match m {
+                m = rx.recv(), if open => match m {
                     Some(Msg::Decide(p)) => pending.push(*p),
                     Some(Msg::Wake) => {}
                     None => open = false,
                 },
                 () = flight.landed.notified() => {}
-                () = tokio::time::sleep_until(tokio::time::Instant::from_std(limit)) => {}
+                () = tokio::time::sleep_until(tokio::time::Instant::from_std(wake)) => {}
             }
         }
         let now = Instant::now();
@@ -267,14 +299,16 @@ async fn dispatch(
         let batch: Vec<Pending> = pending.drain(..take).collect();
         if !batch.is_empty() {
             flight.decisions.fetch_add(batch.len(), Ordering::SeqCst);
+            flight.calls.fetch_add(1, Ordering::SeqCst);
             tokio::spawn(send(conn.clone(), batch, flight.clone()));
         }
     }
 }
 
-/// The decisions in flight, and a wake-up when a batch comes back.
+/// The batches and decisions in flight, and a wake-up when a batch comes back.
 #[derive(Default)]
 struct Flight {
+    calls: AtomicUsize,
     decisions: AtomicUsize,
     landed: tokio::sync::Notify,
 }
@@ -299,6 +333,7 @@ async fn send(mut conn: Conn, batch: Vec<Pending>, flight: Arc<Flight>) {
         .act_batch(pb::ObservationBatch { observations }, deadline)
         .await;
     flight.decisions.fetch_sub(n, Ordering::SeqCst);
+    flight.calls.fetch_sub(1, Ordering::SeqCst);
     flight.landed.notify_one();
     let cap = conn.max_answer_bytes();
     match answer {
@@ -329,5 +364,25 @@ async fn send(mut conn: Conn, batch: Vec<Pending>, flight: Arc<Flight>) {
                 let _ = reply.try_send(Err(e.clone()));
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::flights;
+
+    #[test]
+    fn a_policy_taking_one_call_at_a_time_gets_one_batch_at_a_time() {
+        assert_eq!(flights(0, 16), 1);
+        assert_eq!(flights(1, 16), 1);
+    }
+
+    #[test]
+    fn two_batches_fly_unless_the_policy_declares_room_for_more() {
+        assert_eq!(flights(16, 16), 2);
+        assert_eq!(flights(4, 16), 2);
+        assert_eq!(flights(2, 64), 2);
+        assert_eq!(flights(64, 16), 4);
+        assert_eq!(flights(3, 1), 3);
     }
 }

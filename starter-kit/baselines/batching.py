@@ -3,7 +3,9 @@ training round's rollout threads, each submit one input and wait; one thread tak
 `max_batch` waiting inputs, runs them together and hands each caller its output (or the batch's
 exception). The camera (camera/model.py) and diffusion-policy (diffusion_policy/serve.py)
 baselines batch this way. A batch that arrives whole (an ActBatch call: several episodes'
-decisions in one request) runs at once through `run_now`."""
+decisions in one request) joins the same queue through `submit_many`, so two ActBatch calls in
+flight at once (workers keep two: contract/src/batch.rs) and any concurrent Acts share one pass
+of the network."""
 
 from __future__ import annotations
 
@@ -37,15 +39,20 @@ class RequestBatcher:
             raise request.error
         return request.output
 
-    def run_now(self, inputs: list[Any]) -> list[Any]:
-        """Outputs of `inputs` (one per input, in order), run on the calling thread in batches of
-        up to `max_batch` under `lock`: a batch that arrived whole (an ActBatch call) needs no
-        gathering."""
-        outputs: list[Any] = []
-        for i in range(0, len(inputs), self.max_batch):
-            with self.lock:
-                outputs.extend(self.run(inputs[i : i + self.max_batch]))
-        return outputs
+    def submit_many(self, xs: list[Any]) -> list[Any]:
+        """The outputs of `xs` (one per input, in order), each through the queue as `submit`:
+        they run with whatever else is waiting, up to `max_batch` a pass. Raises the first
+        exception of a batch they were in."""
+        requests = [_Request(x) for x in xs]
+        with self._cond:
+            self._pending.extend(requests)
+            self._cond.notify()
+        for r in requests:
+            r.done.wait()
+        for r in requests:
+            if r.error is not None:
+                raise r.error
+        return [r.output for r in requests]
 
     def _loop(self) -> None:
         while True:

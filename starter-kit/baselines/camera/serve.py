@@ -8,9 +8,9 @@ Reuses the starter kit's server (`starter-kit/policy_server.py`) with `privilege
 asks for both cameras at the size the training images were rendered at (128x128 RAW_RGB8, the
 sensors config; the policy resizes them to its training resolution with the same function
 training used, features.resize_images), an observation history of 2 and `--execute` actions per
-chunk. Concurrent Act calls run through the network in one batch (model.Batcher), and so does
-each ActBatch call (`--max-batch`, 16 by default: GetSpec's max_batch, so workers send the
-pending decisions of up to 16 episodes in one call). Prints `listening grpc=HOST:PORT` once it
+chunk. Concurrent Act calls run through the network in one batch (model.Batcher), and so do
+ActBatch calls (`--max-batch`, 16 by default: GetSpec's max_batch, so workers send the pending
+decisions of up to 16 episodes in one call), two of which in flight share one pass. Prints `listening grpc=HOST:PORT` once it
 accepts calls.
 """
 
@@ -55,8 +55,9 @@ class CameraRunner:
         return self.batcher.decide(*self.inputs(obs)).tolist()
 
     def decide_batch(self, observations):
-        """An ActBatch call's chunks: one forward pass for the whole batch."""
-        return [c.tolist() for c in self.batcher.run_now([self.inputs(o) for o in observations])]
+        """An ActBatch call's chunks: one forward pass for the whole batch (and for whatever
+        else is waiting: another ActBatch in flight, concurrent Acts)."""
+        return [c.tolist() for c in self.batcher.submit_many([self.inputs(o) for o in observations])]
 
 
 def main(argv=None):
@@ -64,7 +65,8 @@ def main(argv=None):
     device = serving.torch_device(args.device)
     if device.type == "cpu":
         torch.set_num_threads(max(1, min(8, os.cpu_count() or 1)))
-    runner = CameraRunner(args.checkpoint, device, max_batch=max(args.concurrency, args.max_batch))
+    # Workers keep two ActBatch calls in flight (contract/src/batch.rs): both fit one pass.
+    runner = CameraRunner(args.checkpoint, device, max_batch=max(args.concurrency, 2 * args.max_batch))
     meta = runner.meta
     logging.info("checkpoint %s: %s; serving on %s", args.checkpoint, meta, device)
     size = int(meta.get("render_size", F.RENDER_SIZE))

@@ -60,7 +60,7 @@ class DiffusionRunner:
 
     def decide_batch(self, observations):
         """An ActBatch call's chunks (`--max-batch`): denoised together, as concurrent Acts are."""
-        return [y.tolist() for y in self.batcher.run_now([self.features(o) for o in observations])]
+        return [y.tolist() for y in self.batcher.submit_many([self.features(o) for o in observations])]
 
     @torch.no_grad()
     def _run(self, batch):

@@ -1,0 +1,89 @@
+#!/usr/bin/env python3
+"""How long the served camera baseline takes per decision, apart from gRPC: the features of one
+observation (`CameraRunner.inputs`, on a synthetic 128x128 two-camera observation with a
+history of 2), then one pass of the network at batch sizes 1 to 64 (`Batcher._decide`: resize,
+forward, chunks made valid), wall and CPU milliseconds. Equal wall and CPU times mean the pass
+is bound by launching kernels, not by the GPU: batching then costs almost nothing per decision.
+
+    python3 starter-kit/baselines/camera/forward_speed.py CKPT [--device auto] [--repeats 20]
+"""
+
+if __name__ == "__main__" and not __package__:  # run as a file: hand over to the installed package's module
+    import runpy
+
+    runpy.run_module("kitchen_r_baselines.camera.forward_speed", run_name="__main__", alter_sys=True)
+    raise SystemExit
+
+import argparse
+import json
+import time
+import types
+
+import numpy as np
+import torch
+
+from .. import serving
+from .serve import CameraRunner
+
+
+def synthetic_observation(size=128):
+    """What a worker sends this policy (gRPC field names), with random images."""
+    rng = np.random.default_rng(0)
+
+    def frame(step):
+        images = [
+            types.SimpleNamespace(
+                camera=c, width=size, height=size, data=rng.integers(0, 255, (size, size, 3), np.uint8).tobytes()
+            )
+            for c in ("base", "gripper")
+        ]
+        robot = types.SimpleNamespace(
+            base_v=0.1,
+            base_omega=0.0,
+            arm_joints=[0.0] * 6,
+            gripper=0.0,
+            ee_pose=[0.0] * 6 + [1.0],
+            base_x=0.0,
+            base_y=0.0,
+            base_yaw=0.0,
+        )
+        return types.SimpleNamespace(images=images, depth=[], robot=robot, previous_action=[0.0] * 10, step=step)
+
+    obs = frame(5)
+    obs.history, obs.sub_task, obs.episode_id, obs.task_index = [frame(4)], "pick up the red cup", "e", 0
+    return obs
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("checkpoint")
+    ap.add_argument("--device", default="auto")
+    ap.add_argument("--repeats", type=int, default=20)
+    args = ap.parse_args(argv)
+    device = serving.torch_device(args.device)
+    sync = torch.cuda.synchronize if device.type == "cuda" else (lambda: None)
+    runner = CameraRunner(args.checkpoint, device, max_batch=64)
+    obs = synthetic_observation()
+    x = runner.inputs(obs)
+    t = time.perf_counter()
+    for _ in range(200):
+        runner.inputs(obs)
+    result = {"device": str(device), "inputs_ms": round((time.perf_counter() - t) / 200 * 1e3, 3), "passes": []}
+    for n in (1, 2, 4, 8, 16, 32, 64):
+        for _ in range(3):
+            runner.batcher._decide([x] * n)
+        sync()
+        t, c = time.perf_counter(), time.process_time()
+        for _ in range(args.repeats):
+            runner.batcher._decide([x] * n)
+        sync()
+        wall = (time.perf_counter() - t) / args.repeats * 1e3
+        cpu = (time.process_time() - c) / args.repeats * 1e3
+        result["passes"].append(
+            {"batch": n, "wall_ms": round(wall, 2), "cpu_ms": round(cpu, 2), "per_decision_ms": round(wall / n, 3)}
+        )
+    print(json.dumps(result, indent=1))
+
+
+if __name__ == "__main__":
+    main()
