@@ -14,7 +14,7 @@
 # policy's max_concurrency and max_batch too). Environment: KITCHEN_R_BIN
 # [target/release/kitchen-r], DEVICE [auto], OUT [/tmp/kr-batch-speed], SEED [0], GATHER_MS [2]
 # (the gather window), EVAL_ARGS (more `kitchen-r eval` flags for every run, e.g. `--config
-# short.toml` for a quick try). Needs python3 with the baselines installed (pip install -e
+# short.toml` for a quick try), SERVE_ARGS (more camera serve.py flags, e.g. `--no-cuda-graphs`). Needs python3 with the baselines installed (pip install -e
 # ./starter-kit -e "./starter-kit/baselines[control]").
 set -euo pipefail
 
@@ -32,6 +32,7 @@ OUT="${OUT:-/tmp/kr-batch-speed}"
 SEED="${SEED:-0}"
 GATHER_MS="${GATHER_MS:-2}"
 read -r -a EXTRA <<<"${EVAL_ARGS:-}"
+read -r -a SERVE_EXTRA <<<"${SERVE_ARGS:-}"
 mkdir -p "$OUT"
 PIDS=()
 URL=""
@@ -85,7 +86,7 @@ evaluate() {
 
 for J in "${JOBS_LIST[@]}"; do
   serve "$OUT/camera_serve_$J.log" python3 "$HERE/serve.py" --checkpoint "$CKPT" --listen 127.0.0.1:0 \
-    --device "$DEVICE" --concurrency "$J" --max-batch "$J"
+    --device "$DEVICE" --concurrency "$J" --max-batch "$J" "${SERVE_EXTRA[@]}"
   evaluate "camera_batched_$J" "$URL" "$J"
   evaluate "camera_unbatched_$J" "$URL" "$J" --max-batch 1
   stop

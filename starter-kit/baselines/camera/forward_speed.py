@@ -5,7 +5,9 @@ history of 2), then one pass of the network at batch sizes 1 to 64 (`Batcher._de
 forward, chunks made valid), wall and CPU milliseconds. Equal wall and CPU times mean the pass
 is bound by launching kernels, not by the GPU: batching then costs almost nothing per decision.
 
-    python3 starter-kit/baselines/camera/forward_speed.py CKPT [--device auto] [--repeats 20]
+    python3 starter-kit/baselines/camera/forward_speed.py CKPT [--device auto] [--repeats 20] [--eager]
+
+On CUDA the passes replay the served CUDA graphs unless `--eager`; run it both ways to compare.
 """
 
 if __name__ == "__main__" and not __package__:  # run as a file: hand over to the installed package's module
@@ -59,16 +61,22 @@ def main(argv=None):
     ap.add_argument("checkpoint")
     ap.add_argument("--device", default="auto")
     ap.add_argument("--repeats", type=int, default=20)
+    ap.add_argument("--eager", action="store_true", help="no CUDA graphs (as serve.py --no-cuda-graphs)")
     args = ap.parse_args(argv)
     device = serving.torch_device(args.device)
     sync = torch.cuda.synchronize if device.type == "cuda" else (lambda: None)
-    runner = CameraRunner(args.checkpoint, device, max_batch=64)
+    runner = CameraRunner(args.checkpoint, device, max_batch=64, graphs=not args.eager)
     obs = synthetic_observation()
     x = runner.inputs(obs)
     t = time.perf_counter()
     for _ in range(200):
         runner.inputs(obs)
-    result = {"device": str(device), "inputs_ms": round((time.perf_counter() - t) / 200 * 1e3, 3), "passes": []}
+    result = {
+        "device": str(device),
+        "cuda_graphs": runner.batcher.graphs is not None and device.type == "cuda",
+        "inputs_ms": round((time.perf_counter() - t) / 200 * 1e3, 3),
+        "passes": [],
+    }
     for n in (1, 2, 4, 8, 16, 32, 64):
         for _ in range(3):
             runner.batcher._decide([x] * n)

@@ -10,7 +10,9 @@ sensors config; the policy resizes them to its training resolution with the same
 training used, features.resize_images), an observation history of 2 and `--execute` actions per
 chunk. Concurrent Act calls run through the network in one batch (model.Batcher), and so do
 ActBatch calls (`--max-batch`, 16 by default: GetSpec's max_batch, so workers send the pending
-decisions of up to 16 episodes in one call), two of which in flight share one pass. Prints `listening grpc=HOST:PORT` once it
+decisions of up to 16 episodes in one call), two of which in flight share one pass. On CUDA each
+pass replays a CUDA graph captured at start-up for its (padded) batch size (`--no-cuda-graphs`:
+eager passes). Prints `listening grpc=HOST:PORT` once it
 accepts calls.
 """
 
@@ -34,10 +36,10 @@ from .model import Batcher, load
 class CameraRunner:
     """The policy object `policy_server.serve` drives; concurrent Acts run in one batch."""
 
-    def __init__(self, checkpoint, device="cpu", max_batch=32):
+    def __init__(self, checkpoint, device="cpu", max_batch=32, graphs=True):
         self.model, self.vocab, self.meta = load(checkpoint, device)
         self.vocab_index = {w: i for i, w in enumerate(self.vocab)}
-        self.batcher = Batcher(self.model, max_batch=max_batch)
+        self.batcher = Batcher(self.model, max_batch=max_batch, graphs=graphs)
         self.clock = TaskClock(F.CONTROL_DT)
         # Before the port opens: on CUDA the first forward of each batch shape autotunes for
         # seconds (8.4 s measured on an H100), which would land on an episode's first Act and
@@ -61,12 +63,20 @@ class CameraRunner:
 
 
 def main(argv=None):
-    args = serving.parse(serving.parser(__doc__.split("\n")[0], F.EXECUTE), argv)
+    ap = serving.parser(__doc__.split("\n")[0], F.EXECUTE)
+    ap.add_argument(
+        "--no-cuda-graphs",
+        action="store_true",
+        help="on CUDA, run every pass eagerly instead of replaying each batch size's captured CUDA graph",
+    )
+    args = serving.parse(ap, argv)
     device = serving.torch_device(args.device)
     if device.type == "cpu":
         torch.set_num_threads(max(1, min(8, os.cpu_count() or 1)))
     # Workers keep two ActBatch calls in flight (contract/src/batch.rs): both fit one pass.
-    runner = CameraRunner(args.checkpoint, device, max_batch=max(args.concurrency, 2 * args.max_batch))
+    runner = CameraRunner(
+        args.checkpoint, device, max_batch=max(args.concurrency, 2 * args.max_batch), graphs=not args.no_cuda_graphs
+    )
     meta = runner.meta
     logging.info("checkpoint %s: %s; serving on %s", args.checkpoint, meta, device)
     size = int(meta.get("render_size", F.RENDER_SIZE))
