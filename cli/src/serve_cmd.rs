@@ -83,6 +83,8 @@ pub(crate) fn serve(args: ServeArgs) -> anyhow::Result<()> {
         call_deadline_s: f64::from(cfg.policy.call_deadline_ms) / 1000.0,
         actions_executed_per_chunk: cfg.control.actions_executed_per_chunk,
         allowed_networks: allow,
+        max_batch: cfg.policy.max_batch,
+        batch_gather_ms: cfg.policy.batch_gather_ms,
         ..RemoteConfig::default()
     };
     let slots = cfg.worker_slots();

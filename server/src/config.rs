@@ -236,6 +236,11 @@ pub struct PolicyConfig {
     /// Largest distance of a gripper value outside [0, 1] that workers clamp (and count)
     /// instead of failing the task; 0 to 1.
     pub gripper_margin: f64,
+    /// Batched decisions of `serve`'s in-process workers (a remote worker reads its own
+    /// configs/worker.toml): the most decisions one ActBatch call carries; 0 or 1 = Acts only.
+    pub max_batch: u32,
+    /// Batched decisions of `serve`'s in-process workers: the gather window, milliseconds.
+    pub batch_gather_ms: f64,
 }
 
 impl Default for Config {
@@ -329,6 +334,8 @@ impl Default for PolicyConfig {
             allow_networks: vec!["127.0.0.0/8".into(), "::1/128".into()],
             quat_norm_tolerance: 0.1,
             gripper_margin: 0.05,
+            max_batch: 64,
+            batch_gather_ms: 2.0,
         }
     }
 }
@@ -471,6 +478,12 @@ impl Config {
         }
         if !(0.0..=1.0).contains(&p.quat_norm_tolerance) {
             return invalid("policy.quat_norm_tolerance", "must be between 0 and 1");
+        }
+        if !(0.0..=1000.0).contains(&p.batch_gather_ms) {
+            return invalid(
+                "policy.batch_gather_ms",
+                "must be between 0 and 1000 milliseconds",
+            );
         }
         if !(0.0..=1.0).contains(&p.gripper_margin) {
             return invalid("policy.gripper_margin", "must be between 0 and 1");
