@@ -25,6 +25,7 @@ import numpy as np
 import torch
 
 from .. import serving
+from .model import Batcher
 from .serve import CameraRunner
 
 
@@ -90,6 +91,13 @@ def main(argv=None):
         result["passes"].append(
             {"batch": n, "wall_ms": round(wall, 2), "cpu_ms": round(cpu, 2), "per_decision_ms": round(wall / n, 3)}
         )
+    if result["cuda_graphs"]:
+        # A replayed graph must answer what the eager pass answers (bf16 kernels may differ in
+        # the last bits between the two, not more).
+        eager = Batcher(runner.model, max_batch=64, graphs=False)
+        for n in (1, 16):
+            a, b = runner.batcher._decide([x] * n), eager._decide([x] * n)
+            result[f"graph_vs_eager_max_abs_diff_batch_{n}"] = float(np.abs(np.array(a) - np.array(b)).max())
     print(json.dumps(result, indent=1))
 
 
