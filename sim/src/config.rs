@@ -57,8 +57,7 @@ pub struct ArticulationConfig {
     /// Coulomb friction of the finger pads (combined with the object's by averaging).
     pub finger_friction: f64,
     /// Mass of each finger (kg): the few constraint iterations converge differently with it (a
-    /// held bowl crept 2 mm/s down 0.03 kg pads and not down 0.1 kg ones, which let cups slip;
-    /// docs/twin/robot.md).
+    /// held bowl crept 2 mm/s down 0.03 kg pads and not down 0.06 kg ones; docs/twin/robot.md).
     pub finger_mass: f64,
     /// Natural frequency of the contact softness (Hz; rapier's default is 30): stiffer contacts
     /// keep squeezed light objects from sinking millimetres into the fingers; 120 Hz let a held
@@ -78,10 +77,10 @@ impl Default for ArticulationConfig {
             joint_stiffness: 10000.0,
             joint_damping: 400.0,
             finger_force: 15.0,
-            finger_stiffness: 4000.0,
-            finger_damping: 40.0,
+            finger_stiffness: 8000.0,
+            finger_damping: 44.0,
             finger_friction: 1.0,
-            finger_mass: 0.03,
+            finger_mass: 0.06,
             contact_frequency: 60.0,
             solver_iterations: 1,
             pgs_iterations: 8,
