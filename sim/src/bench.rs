@@ -144,13 +144,7 @@ fn mesh_robot(
     ep: &crate::EpisodeConfig,
     steps: u32,
 ) -> Result<MeshRobotReport, SimError> {
-    let dir = kitchen_r_core::assets::assets_dir();
-    let assets = Assets::load_with_robot(&dir, &crate::RobotConfig { file: file.into() })?;
-    let sensors = SensorsConfig {
-        lidar: None,
-        ..SensorsConfig::load_default()?
-    };
-    let (mut sim, _) = Sim::new(assets, SimConfig::load_default()?, sensors, ep)?;
+    let mut sim = mesh_robot_sim(file, ep)?;
     let substeps = f64::from(sim.config().physics.substeps);
     let (step_us, step_min) = control_steps(&mut sim, (steps / BATCHES).max(1))?;
     let n_obs = 30;
@@ -167,6 +161,17 @@ fn mesh_robot(
     })
 }
 
+/// Episode `ep` with the robot `file` and the configured cameras, without LiDAR.
+fn mesh_robot_sim(file: &std::path::Path, ep: &crate::EpisodeConfig) -> Result<Sim, SimError> {
+    let dir = kitchen_r_core::assets::assets_dir();
+    let assets = Assets::load_with_robot(&dir, &crate::RobotConfig { file: file.into() })?;
+    let sensors = SensorsConfig {
+        lidar: None,
+        ..SensorsConfig::load_default()?
+    };
+    Ok(Sim::new(assets, SimConfig::load_default()?, sensors, ep)?.0)
+}
+
 /// Milliseconds per full observation (median and fastest of the batches), over `n_obs` of them.
 fn observe_ms(sim: &mut Sim, n_obs: u32) -> (f64, f64) {
     let mut observe = Vec::new();
@@ -180,6 +185,18 @@ fn observe_ms(sim: &mut Sim, n_obs: u32) -> (f64, f64) {
     median_min(observe)
 }
 
+/// The benchmark's episode: seed 7 on the first scene.
+fn first_episode(assets: &Assets) -> Result<(kitchen_r_core::scene::Scene, crate::EpisodeConfig), SimError> {
+    let params = EpisodeParams::load_default()?;
+    let scene = assets
+        .scenes
+        .first()
+        .ok_or_else(|| SimError::Config("no scenes".into()))?
+        .clone();
+    let ep = generate(&scene, &assets.catalogue, &params, 7, 0)?;
+    Ok((scene, ep))
+}
+
 /// Run the benchmark on the first scene for `steps` control steps (and with the robot
 /// `mesh_robot` too, when given).
 pub fn run(
@@ -190,13 +207,7 @@ pub fn run(
     let assets = Assets::load_default()?;
     let config = SimConfig::load_default()?;
     let sensors = SensorsConfig::load_default()?;
-    let params = EpisodeParams::load_default()?;
-    let scene = assets
-        .scenes
-        .first()
-        .ok_or_else(|| SimError::Config("no scenes".into()))?
-        .clone();
-    let ep = generate(&scene, &assets.catalogue, &params, 7, 0)?;
+    let (scene, ep) = first_episode(&assets)?;
     let mut physical = config.clone();
     physical.grasp.mode = GraspMode::Physical;
     let blind = SensorsConfig {
@@ -274,5 +285,54 @@ impl BenchReport {
     /// One-line JSON (the CLI has no serde_json of its own).
     pub fn to_json(&self) -> String {
         serde_json::to_string(self).unwrap_or_else(|e| format!("{{\"error\":\"{e}\"}}"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// FNV-1a over the cameras' colour bytes and depth bits.
+    pub(crate) fn image_hash(images: &[crate::sensors::camera::CameraImage]) -> u64 {
+        let mut h = 0xcbf2_9ce4_8422_2325u64;
+        for im in images {
+            let depth = im.depth.iter().flat_map(|d| d.to_bits().to_le_bytes());
+            for b in im.rgb.iter().copied().chain(depth) {
+                h = (h ^ u64::from(b)).wrapping_mul(0x100_0000_01b3);
+            }
+        }
+        h
+    }
+
+    /// The bench's Panda, its hand in the gripper camera's view, renders the bytes it rendered
+    /// when each ray was clipped face by face against the link hulls: making the ray caster
+    /// faster must not move a pixel. Needs the robosuite wheel (`ROBOSUITE_ASSETS`).
+    #[test]
+    fn the_panda_in_view_renders_the_same_bytes() {
+        if std::env::var_os("ROBOSUITE_ASSETS").is_none() {
+            assert_ne!(
+                std::env::var("CI").as_deref(),
+                Ok("true"),
+                "CI needs ROBOSUITE_ASSETS"
+            );
+            eprintln!("skipped: export ROBOSUITE_ASSETS=\"$(scripts/robosuite-assets.sh)\"");
+            return;
+        }
+        let assets = Assets::load_default().unwrap();
+        let (_, ep) = first_episode(&assets).unwrap();
+        let file =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/robots/robosuite/panda.toml");
+        let mut sim = mesh_robot_sim(&file, &ep).unwrap();
+        let mut hashes = Vec::new();
+        for k in 0..60 {
+            sim.step(&wobble_action(k), false).unwrap();
+            if k % 20 == 19 {
+                hashes.push(image_hash(&sim.observe().images));
+            }
+        }
+        assert_eq!(
+            hashes,
+            [16098436688272365871, 3026566338621098452, 15624763835646705680]
+        );
     }
 }

@@ -193,6 +193,87 @@ mod tests {
         world
     }
 
+    /// Twenty lumpy convex hulls (robot link meshes render as such) on a floor, seen from eyes
+    /// around and among them, some inside one: the bytes the face-by-face clipping drew before
+    /// the ray caster kept per-image face planes. A change to how hulls are tested must not
+    /// move a pixel.
+    #[test]
+    fn convex_hulls_render_the_same_bytes() {
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let mut world = PhysicsWorld::new();
+        let body = world.insert_body(RigidBodyBuilder::fixed());
+        let floor = ColliderBuilder::cuboid(3.0, 3.0, 0.05).translation(Vector::new(0.0, 0.0, -0.05));
+        world.insert_collider(floor, Some(body));
+        for k in 0..20u32 {
+            let size = Vector::new(
+                rng.random_range(0.03..0.3),
+                rng.random_range(0.03..0.3),
+                rng.random_range(0.03..0.3),
+            );
+            let points: Vec<Vector> = (0..32)
+                .map(|_| {
+                    let mut r = || rng.random_range(-1.0f32..1.0);
+                    Vector::new(r(), r(), r()) * size
+                })
+                .collect();
+            let at = Translation3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(0.1..1.2),
+            );
+            let rot = UnitQuaternion::from_euler_angles(
+                rng.random_range(-3.0..3.0),
+                rng.random_range(-3.0..3.0),
+                rng.random_range(-3.0..3.0),
+            );
+            let tag = Tag {
+                material: k % 3,
+                owner: Owner::Static,
+                index: 0,
+            };
+            let co = ColliderBuilder::convex_hull(&points)
+                .unwrap()
+                .position(crate::convert::iso_to_pose(&Isometry3::from_parts(at, rot)))
+                .user_data(tag.pack());
+            world.insert_collider(co, Some(body));
+        }
+        let materials = [
+            Material::plain([0.8, 0.2, 0.2]),
+            Material::plain([0.2, 0.8, 0.2]),
+            Material::plain([0.2, 0.2, 0.8]),
+        ];
+        let light = LightConfig::default();
+        let ctx = RenderCtx {
+            world: &world,
+            materials: &materials,
+            light: &light,
+        };
+        let mut h = 0xcbf2_9ce4_8422_2325u64;
+        for shot in 0..12 {
+            let eye = Translation3::new(
+                rng.random_range(-1.2..1.2),
+                rng.random_range(-1.2..1.2),
+                rng.random_range(0.1..1.5),
+            );
+            let rot = UnitQuaternion::from_euler_angles(
+                rng.random_range(-0.5..0.5),
+                rng.random_range(-0.3..1.5),
+                rng.random_range(-3.1..3.1),
+            );
+            let projection = if shot % 6 == 5 {
+                Projection::Ortho { scale: 0.02 }
+            } else {
+                Projection::Pinhole { fov: 1.2 }
+            };
+            let im = ctx.render("c", &Isometry3::from_parts(eye, rot), projection, 64, 64, 20.0);
+            let depth = im.depth.iter().flat_map(|d| d.to_bits().to_le_bytes());
+            for b in im.rgb.iter().copied().chain(depth) {
+                h = (h ^ u64::from(b)).wrapping_mul(0x100_0000_01b3);
+            }
+        }
+        assert_eq!(h, 13142985655491809533);
+    }
+
     #[test]
     fn culling_never_changes_a_pixel() {
         let mut rng = ChaCha8Rng::seed_from_u64(7);

@@ -13,7 +13,7 @@ use rapier3d::prelude::*;
 
 use super::footprint::{Coverage, Footprint, Projector};
 use super::projection::Projection;
-use super::ray_shapes::{aligned_normal, ray_capsule, ray_convex, ray_cuboid, ray_cylinder, slab};
+use super::ray_shapes::{EyePlanes, aligned_normal, ray_capsule, ray_convex, ray_cuboid, ray_cylinder, slab};
 use crate::convert::vec_to_glam;
 
 /// One collider, flattened.
@@ -29,6 +29,8 @@ struct Prim<'a> {
     near: f32,
     /// The eye in the shape's frame: every ray of a perspective camera starts there.
     local_eye: Vector,
+    /// A convex hull's faces as seen from `local_eye`.
+    planes: Option<EyePlanes<'a>>,
 }
 
 /// Shapes with a closed-form intersection here; anything else uses parry's generic ray cast.
@@ -67,6 +69,11 @@ impl<'a> Prim<'a> {
         } else {
             Kind::Other
         };
+        let local_eye = co.position().inverse_transform_point(eye);
+        let planes = match kind {
+            Kind::Convex(c) => Some(EyePlanes::new(c, local_eye)),
+            _ => None,
+        };
         Prim {
             pose: *co.position(),
             shape,
@@ -75,7 +82,8 @@ impl<'a> Prim<'a> {
             mins: Vec3A::from(aabb.mins),
             maxs: Vec3A::from(aabb.maxs),
             near: box_distance(eye, aabb),
-            local_eye: co.position().inverse_transform_point(eye),
+            local_eye,
+            planes,
         }
     }
 }
@@ -129,7 +137,10 @@ impl Prim<'_> {
             Kind::Cuboid(h) => ray_cuboid(o, d, h, best_t),
             Kind::Capsule(a, b, r) => ray_capsule(o, d, a, b, r, best_t),
             Kind::Cylinder(hh, r) => ray_cylinder(o, d, hh, r, best_t),
-            Kind::Convex(c) => ray_convex(o, d, c, best_t),
+            Kind::Convex(c) => match &self.planes {
+                Some(planes) if from_eye => planes.cast(d, best_t),
+                _ => ray_convex(o, d, c, best_t),
+            },
             Kind::Other => self
                 .shape
                 .cast_local_ray_and_get_normal(&Ray::new(o, d), best_t, true)
