@@ -97,8 +97,9 @@ pub struct OraclePolicy {
     /// Half the fingers' length along the approach axis, m: how far the fingertips reach below
     /// the TCP (the physical grasp keeps them off the surface an object stands on).
     finger_reach: f64,
-    /// How far under a shelf board the tool must stay, m (`headroom::wrist_clear`).
-    wrist_clear: f64,
+    /// How far under a shelf board the tool must stay and how it leans there
+    /// (`headroom::headroom`), in the abstract grasp mode and in the physical one.
+    headroom: [headroom::Headroom; 2],
 }
 
 impl OraclePolicy {
@@ -119,7 +120,7 @@ impl OraclePolicy {
             grasp: SimConfig::load_default().map_or(GraspMode::Abstract, |c| c.grasp.mode),
             replans: 0,
             finger_reach: assets.robot.gripper.finger_length / 2.0,
-            wrist_clear: headroom::wrist_clear(&assets.robot),
+            headroom: [true, false].map(|lean| headroom::headroom(&assets.robot, lean)),
         }
     }
 
@@ -205,17 +206,21 @@ impl OraclePolicy {
         let tool_world = kitchen_r_sim::oracle::manip::base_isometry(p.base_pose) * tool;
         let t = tool_world.translation;
         // The board that matters is the first one above the hand.
-        let here_max = headroom::max_tool_z(scene, [t.x, t.y], t.z, self.wrist_clear);
+        let room = self.headroom[usize::from(self.grasp == GraspMode::Physical)];
+        let here_max = headroom::max_tool_z(scene, [t.x, t.y], t.z, room.clear);
         let work = match p.target {
             TaskTarget::Pick { object } => p.objects.get(object).map(|o| [o.pose[0], o.pose[1], o.pose[2]]),
             TaskTarget::Place { target, .. } => Some(target),
             TaskTarget::Base { .. } => None,
         };
-        let target_max = work.and_then(|w| headroom::max_tool_z(scene, [w[0], w[1]], w[2], self.wrist_clear));
+        let target_max = work.and_then(|w| headroom::max_tool_z(scene, [w[0], w[1]], w[2], room.clear));
         let physical = self.grasp == GraspMode::Physical;
-        Ok(TaskCtl::new(
-            goal, tool, holding, approach, here_max, target_max, physical,
-        ))
+        // Only work under a board leans (objects picked and placed in the open stay upright).
+        // Leaning about the base's left axis, negative: the fingers point away from the base.
+        let tilt = (room.tilt)
+            .filter(|_| target_max.is_some())
+            .map(|a| UnitQuaternion::from_axis_angle(&nalgebra::Vector3::y_axis(), -a));
+        Ok(TaskCtl::new(goal, tool, holding, approach, here_max, target_max, physical).with_tilt(tilt))
     }
 
     fn world(&self, p: &Privileged) -> World {

@@ -17,7 +17,7 @@ use kitchen_r_core::catalogue::ObjectModel;
 use kitchen_r_sim::oracle::action::action;
 use kitchen_r_sim::oracle::follow::{PathFollower, wrap};
 use kitchen_r_sim::oracle::manip::{ManipParams, Phase, PhasePlan, PickPlan, PlacePlan, base_isometry};
-use nalgebra::{Isometry3, Vector3};
+use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 
 use super::arm::ArmPath;
 
@@ -74,10 +74,10 @@ enum Stage {
 impl Stage {
     /// The commanded tool pose (base frame) `t` seconds into a timed stage (the arm's prelude,
     /// the pick-and-place machine); `Isometry3::identity()` for the others, which have no clock.
-    fn pose_at(&self, t: f64) -> Isometry3<f64> {
+    fn pose_at(&self, t: f64, tilt: Option<UnitQuaternion<f64>>) -> Isometry3<f64> {
         match self {
             Stage::Arm(path, _) => path.at(t),
-            Stage::Manip(plan, _, _) => plan.target_at(t).0,
+            Stage::Manip(plan, _, _) => tilted(plan.target_at(t).0, tilt),
             _ => Isometry3::identity(),
         }
     }
@@ -135,6 +135,18 @@ pub(super) struct TaskCtl {
     ceiling: Option<f64>,
     /// The physical grasp mode: no re-planning from the state (see [`TaskCtl::off_plan`]).
     physical: bool,
+    /// A turn (base frame, about the tool centre point) applied to every pose of the
+    /// pick-and-place machine: an arm whose wrist stands high over a top-down tool leans its
+    /// fingers away from the base so the wrist stands back and lower (`OraclePolicy`'s tilt).
+    tilt: Option<UnitQuaternion<f64>>,
+}
+
+/// `pose` turned by `tilt` about its own position (base frame).
+fn tilted(pose: Isometry3<f64>, tilt: Option<UnitQuaternion<f64>>) -> Isometry3<f64> {
+    match tilt {
+        Some(r) => Isometry3::from_parts(pose.translation, r * pose.rotation),
+        None => pose,
+    }
 }
 
 impl TaskCtl {
@@ -169,7 +181,14 @@ impl TaskCtl {
             params,
             ceiling: target_max,
             physical,
+            tilt: None,
         }
+    }
+
+    /// Work with the machine's poses turned by `tilt` (see [`TaskCtl::tilt`]).
+    pub(super) fn with_tilt(mut self, tilt: Option<UnitQuaternion<f64>>) -> TaskCtl {
+        self.tilt = tilt;
+        self
     }
 
     /// Whether the pick-and-place machine ran to its end.
@@ -251,14 +270,19 @@ impl TaskCtl {
         // (time, distance to the hand), latest first.
         let back_in_time: Vec<(f64, f64)> = (0..=(now / SYNC_STEP).floor() as usize)
             .map(|k| now - k as f64 * SYNC_STEP)
-            .map(|x| (x, (self.stage.pose_at(x).translation.vector - hand).norm()))
+            .map(|x| {
+                (
+                    x,
+                    (self.stage.pose_at(x, self.tilt).translation.vector - hand).norm(),
+                )
+            })
             .collect();
         let best = back_in_time.iter().map(|&(_, d)| d).fold(f64::INFINITY, f64::min);
         let Some(&(back, _)) = back_in_time.iter().find(|&&(_, d)| d <= best + SYNC_SLACK) else {
             return;
         };
         if back < now {
-            self.tool = self.stage.pose_at(back);
+            self.tool = self.stage.pose_at(back, self.tilt);
             if let Stage::Arm(_, t) | Stage::Manip(_, t, _) = &mut self.stage {
                 *t = back;
             }
@@ -356,7 +380,7 @@ impl TaskCtl {
                         *t = t.min(plan.duration() - last);
                     }
                     let (tool, g, _) = plan.target_at(*t);
-                    (self.tool, self.gripper) = (tool, g);
+                    (self.tool, self.gripper) = (tilted(tool, self.tilt), g);
                     break;
                 }
                 Stage::Done => break,
@@ -379,6 +403,9 @@ impl TaskCtl {
             params.retreat_height = params.retreat_height.min(room);
         }
         let p = &params;
+        // The machine plans top-down; its start is the commanded pose with the tilt taken off,
+        // so the turned poses it commands begin exactly where the hand was told to be.
+        let start = tilted(self.tool, self.tilt.map(|r| r.inverse()));
         match self.goal {
             Goal::Move { .. } => None,
             Goal::Pick => {
@@ -388,13 +415,13 @@ impl TaskCtl {
                     Some(_) if !self.physical => pick.from_phase(Phase::Lift),
                     _ => pick,
                 };
-                Some(pick.starting_from(self.tool, self.gripper))
+                Some(pick.starting_from(start, self.gripper))
             }
             // Not in the hand (dropped, or a start that never held it): pick it up first; the
             // place is planned once it is held.
             Goal::Place { .. } if world.held_in_tool.is_none() && !self.physical => {
                 let pick = PickPlan::new(world.object.as_ref()?, model, now.base, p);
-                Some(pick.plan.starting_from(self.tool, self.gripper))
+                Some(pick.plan.starting_from(start, self.gripper))
             }
             Goal::Place { target } => {
                 let object = world.object?;
@@ -409,13 +436,13 @@ impl TaskCtl {
                 // real grip shifts the target once (the correction is exact: the tool
                 // orientation does not depend on the target position).
                 if let Some(held) = world.held_in_tool {
-                    let lower = plan_for(centre).plan.targets()[1].ee_in_base;
+                    let lower = tilted(plan_for(centre).plan.targets()[1].ee_in_base, self.tilt);
                     let released = (base * lower * held).translation.vector;
                     let want = Vector3::from(target) + Vector3::z() * p.release_height;
                     let err = released - want;
                     centre = [target[0] - err.x, target[1] - err.y, target[2] - err.z];
                 }
-                Some(plan_for(centre).plan.starting_from(self.tool, self.gripper))
+                Some(plan_for(centre).plan.starting_from(start, self.gripper))
             }
         }
     }
