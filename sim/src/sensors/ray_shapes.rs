@@ -187,93 +187,85 @@ pub(super) fn ray_convex(o: Vector, d: Vector, c: &ConvexPolyhedron, max: f32) -
     Some((near, normal))
 }
 
-/// Faces per chunk of [`EyePlanes`]: two SSE vectors, so that the divisions of one chunk overlap.
-const LANES: usize = 8;
-
-/// `LANES` face planes, one lane each: normal components and the eye's signed distance.
-#[derive(Clone, Copy)]
-struct PlaneChunk {
-    x: [f32; LANES],
-    y: [f32; LANES],
-    z: [f32; LANES],
-    dist: [f32; LANES],
-}
-
-impl PlaneChunk {
-    /// Lanes past the last face: a zero normal is parallel to every ray and the eye is on its
-    /// inner side, so they neither clip nor block.
-    const PAD: PlaneChunk = PlaneChunk {
-        x: [0.0; LANES],
-        y: [0.0; LANES],
-        z: [0.0; LANES],
-        dist: [-1.0; LANES],
-    };
-}
-
 /// A convex hull's face planes for rays that all start at one point (a camera's eye, in the
-/// hull's frame). [`ray_convex`] spends most of a mesh arm's image re-deriving each face's
-/// distance from the ray's origin through two indirections and branching on which way each face
-/// turns (a coin toss for the predictor). Here the distances are computed once per image with the
-/// same arithmetic, and [`EyePlanes::cast`] clips branch-free, lane by lane, giving
-/// [`ray_convex`]'s exact bits (the `ray_convex_from_the_eye_gives_the_same_bits` test).
+/// hull's frame). A mesh arm's rays spend their time in [`ray_convex`], most of it on rays that
+/// pass the link's world box, which a turned link fills loosely, and miss the hull. Here each
+/// face's distance from the eye is computed once per image, with `ray_convex`'s own arithmetic,
+/// and a ray must first cross the hull's own box, grown by `BOX_SLACK`; the clipping after that is
+/// `ray_convex`'s, face by face, so the bits are its bits (the
+/// `ray_convex_from_the_eye_gives_the_same_bits` test).
 pub(super) struct EyePlanes<'a> {
     hull: &'a ConvexPolyhedron,
-    chunks: Vec<PlaneChunk>,
+    /// Per face: normal and the eye's signed distance from the face's plane.
+    planes: Vec<[f32; 4]>,
+    mins: Vec3A,
+    maxs: Vec3A,
+    eye: Vec3A,
 }
+
+/// Growth of a hull's box (m, plus this fraction of its largest coordinate): far above the
+/// round-off that lets `ray_convex` accept a ray grazing the hull, so the box never drops one.
+const BOX_SLACK: f32 = 1e-4;
 
 impl<'a> EyePlanes<'a> {
     pub(super) fn new(hull: &'a ConvexPolyhedron, eye: Vector) -> EyePlanes<'a> {
         let (points, ring) = (hull.points(), hull.vertices_adj_to_face());
-        let mut chunks = vec![PlaneChunk::PAD; hull.faces().len().div_ceil(LANES)];
-        for (i, f) in hull.faces().iter().enumerate() {
-            let p = points[ring[f.first_vertex_or_edge as usize] as usize];
-            let (c, l) = (&mut chunks[i / LANES], i % LANES);
-            (c.x[l], c.y[l], c.z[l]) = (f.normal.x, f.normal.y, f.normal.z);
-            c.dist[l] = f.normal.dot(eye - p);
+        let planes = hull
+            .faces()
+            .iter()
+            .map(|f| {
+                let p = points[ring[f.first_vertex_or_edge as usize] as usize];
+                [f.normal.x, f.normal.y, f.normal.z, f.normal.dot(eye - p)]
+            })
+            .collect();
+        let (mut mins, mut maxs) = (Vec3A::splat(f32::INFINITY), Vec3A::splat(f32::NEG_INFINITY));
+        for p in points {
+            (mins, maxs) = (mins.min(Vec3A::from(*p)), maxs.max(Vec3A::from(*p)));
         }
-        EyePlanes { hull, chunks }
+        let slack = BOX_SLACK * (1.0 + mins.abs().max(maxs.abs()).max_element());
+        EyePlanes {
+            hull,
+            planes,
+            mins: mins - slack,
+            maxs: maxs + slack,
+            eye: Vec3A::from(eye),
+        }
     }
 
-    /// [`ray_convex`] for the ray from the eye along `d`. Each lane keeps the latest entry and
-    /// the earliest exit of its faces, and the first face that set the entry; the result is the
-    /// same because the entry is a maximum and the exit a minimum (the sequential early outs
-    /// only save time), and the entry face is the lowest-numbered face reaching the maximum,
-    /// as the strict comparison there keeps.
+    /// [`ray_convex`] for the ray from the eye along `d`.
     #[inline]
     pub(super) fn cast(&self, d: Vector, max: f32) -> Option<(f32, Vector)> {
-        let mut near = [f32::NEG_INFINITY; LANES];
-        let mut first = [0u32; LANES];
-        let mut far = [max; LANES];
-        let mut blocked = [false; LANES];
-        for (k, c) in self.chunks.iter().enumerate() {
-            for l in 0..LANES {
-                // The same expressions, in the same order, as `ray_convex`'s.
-                let along = c.x[l] * d.x + c.y[l] * d.y + c.z[l] * d.z;
-                let t = -c.dist[l] / along;
-                let enter = along < 0.0 && t > near[l];
-                near[l] = if enter { t } else { near[l] };
-                first[l] = if enter { (k * LANES + l) as u32 } else { first[l] };
-                far[l] = if along > 0.0 && t < far[l] { t } else { far[l] };
-                blocked[l] |= along == 0.0 && c.dist[l] > 0.0;
+        slab(self.eye, Vec3A::from(d.recip()), self.mins, self.maxs, max)?;
+        let (mut near, mut far, mut normal) = (f32::NEG_INFINITY, max, Vector::ZERO);
+        for (i, &[x, y, z, dist]) in self.planes.iter().enumerate() {
+            // `ray_convex`'s expressions, in its order: `f.normal.dot(d)` is x, y, z summed left
+            // to right.
+            let along = x * d.x + y * d.y + z * d.z;
+            if along == 0.0 {
+                if dist > 0.0 {
+                    return None;
+                }
+                continue;
+            }
+            let t = -dist / along;
+            if along < 0.0 {
+                if t > near {
+                    (near, normal) = (t, self.hull.faces()[i].normal);
+                }
+            } else if t < far {
+                far = t;
+            }
+            if near > far {
+                return None;
             }
         }
-        if blocked.iter().any(|b| *b) {
+        if far < 0.0 {
             return None;
         }
-        let far = far.iter().fold(max, |a, b| a.min(*b));
-        let (mut entry, mut face) = (f32::NEG_INFINITY, 0u32);
-        for l in 0..LANES {
-            if near[l] > entry || (near[l] == entry && first[l] < face) {
-                (entry, face) = (near[l], first[l]);
-            }
-        }
-        if entry > far || far < 0.0 {
-            return None;
-        }
-        if entry < 0.0 {
+        if near < 0.0 {
             return Some((0.0, -d.normalize_or_zero()));
         }
-        Some((entry, self.hull.faces()[face as usize].normal))
+        Some((near, normal))
     }
 }
 
