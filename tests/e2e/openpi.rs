@@ -87,6 +87,48 @@ fn check_policy(url: &str) -> std::process::Output {
         .unwrap()
 }
 
+/// openpi's server behind TLS (`wss://`) with a participant's own certificate: `check-policy
+/// --ca` trusts it and every check passes; without the CA the certificate is refused, and the
+/// reason says TLS.
+#[test]
+fn a_wss_endpoint_passes_check_policy_with_its_ca_and_is_refused_without() {
+    let Some(py) = openpi_path() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let c =
+        rcgen::generate_simple_self_signed(vec!["localhost".to_string(), "127.0.0.1".to_string()]).unwrap();
+    let (cert, key) = (dir.path().join("cert.pem"), dir.path().join("key.pem"));
+    std::fs::write(&cert, c.cert.pem()).unwrap();
+    std::fs::write(&key, c.signing_key.serialize_pem()).unwrap();
+    let mut cmd = Command::new("python3");
+    cmd.arg(root().join("tests/openpi/policy_server.py"))
+        .args(["--mode", "hold", "--tls"])
+        .args([&cert, &key])
+        .env("PYTHONPATH", &py);
+    let (child, line) = spawn_ready(&mut cmd, "listening wss=");
+    let _policy = Proc(child);
+    let url = format!("wss://{}", line.trim_start_matches("listening wss=").trim());
+
+    let check = |ca: Option<&Path>| {
+        let mut c = Command::new(bin());
+        c.args(["check-policy", &url, "--deadline", "3", "--startup-deadline", "5"]);
+        if let Some(ca) = ca {
+            c.arg("--ca").arg(ca);
+        }
+        c.output().unwrap()
+    };
+    let text = out(&ok(check(Some(&cert))));
+    for name in ["reachable", "health", "metadata", "act", "act-again"] {
+        assert!(text.contains(&format!("PASS  {name}")), "{text}");
+    }
+    let refused = check(None);
+    let text = format!("{}{}", out(&refused), String::from_utf8_lossy(&refused.stderr));
+    assert!(!refused.status.success(), "{text}");
+    assert!(
+        text.contains("TLS") && text.to_lowercase().contains("certificate"),
+        "{text}"
+    );
+}
+
 #[tokio::test(flavor = "multi_thread")]
 async fn an_openpi_server_policy_passes_check_policy_and_is_scored_through_serve() {
     let Some(py) = openpi_path() else { return };

@@ -12,13 +12,18 @@ prints `listening ws=127.0.0.1:PORT` once it accepts connections. Modes:
 - hang: the third and later decisions never answer in time (the event loop sleeps);
 - close: the second decision closes the connection (the server stays up, the next connects);
 - silent: not openpi's server: /healthz answers 200 and connections open, but no metadata comes.
+
+`--tls CERT KEY` serves over TLS (`wss://`, a participant's own certificate: openpi's server is
+handed an SSL context) and prints `listening wss=127.0.0.1:PORT`.
 """
 
 import argparse
 import asyncio
 import http
 import json
+import functools
 import socket
+import ssl
 import sys
 import time
 import urllib.request
@@ -70,9 +75,11 @@ def free_port():
         return s.getsockname()[1]
 
 
-def healthy(port):
+def healthy(port, cafile=None):
+    scheme = "https" if cafile else "http"
+    context = ssl.create_default_context(cafile=cafile) if cafile else None
     try:
-        with urllib.request.urlopen(f"http://127.0.0.1:{port}/healthz", timeout=1) as r:
+        with urllib.request.urlopen(f"{scheme}://127.0.0.1:{port}/healthz", timeout=1, context=context) as r:
             return r.status == 200
     except OSError:
         return False
@@ -98,19 +105,29 @@ def main():
     p = argparse.ArgumentParser()
     p.add_argument("--mode", default="hold", choices=["hold", "raise", "shape", "hang", "close", "silent"])
     p.add_argument("--log")
+    p.add_argument("--tls", nargs=2, metavar=("CERT", "KEY"), help="serve wss:// with this certificate and key (PEM)")
     a = p.parse_args()
     port = free_port()
     if a.mode == "silent":
         asyncio.run(silent(port))
         return
     server = WebsocketPolicyServer(Policy(a.mode, a.log), host="127.0.0.1", port=port, metadata={"policy": a.mode})
+    cafile, scheme = None, "ws"
+    if a.tls:
+        # openpi's server takes no TLS settings: its websockets `serve` is handed the context.
+        from openpi_server import websocket_policy_server as wps
+
+        context = ssl.SSLContext(ssl.PROTOCOL_TLS_SERVER)
+        context.load_cert_chain(*a.tls)
+        wps._server.serve = functools.partial(wps._server.serve, ssl=context)
+        cafile, scheme = a.tls[0], "wss"
 
     async def run():
         task = asyncio.create_task(server.run())
         # Ready once its health check answers.
-        while not await asyncio.to_thread(healthy, port):
+        while not await asyncio.to_thread(healthy, port, cafile):
             await asyncio.sleep(0.05)
-        print(f"listening ws=127.0.0.1:{port}", flush=True)
+        print(f"listening {scheme}=127.0.0.1:{port}", flush=True)
         await task
 
     asyncio.run(run())
