@@ -1,7 +1,8 @@
 //! Batched decisions (ActBatch, a policy's GetSpec `max_batch`) end to end, every part a real
 //! process on loopback: the oracle served over the batch call gives the same results as over
-//! Act, in local `kitchen-r eval` and through `serve` and its workers; a policy whose batch
-//! reply has the wrong count fails its tasks with that reason and loses no episode.
+//! Act, in local `kitchen-r eval` and through `serve` and its workers; the Python starter kit's
+//! server (`--max-batch`) answers the workers' ActBatch calls through `serve`; a policy whose
+//! batch reply has the wrong count fails its tasks with that reason and loses no episode.
 
 use crate::support;
 
@@ -113,6 +114,53 @@ async fn the_oracle_over_actbatch_scores_as_over_act_through_serve_and_workers()
     assert_eq!(batched.len(), 8, "{:#}", views[0]);
     assert_eq!(batched, single);
     assert_eq!(views[0]["latest_run"]["scores"], views[1]["latest_run"]["scores"]);
+}
+
+/// The starter kit's Python server declaring `--max-batch 4`, registered by a team and run by
+/// `serve`'s two slots: the workers reach it through ActBatch, every task ends with a reason
+/// and the run is scored.
+#[tokio::test(flavor = "multi_thread")]
+async fn the_python_starter_kit_answers_actbatch_through_serve() {
+    if !crate::control::python_ready() {
+        assert!(
+            std::env::var("CI").is_err(),
+            "python3 with grpcio, grpcio-tools and grpcio-health-checking is required in CI"
+        );
+        eprintln!("skipped: the starter kit's Python modules are not installed");
+        return;
+    }
+    // One short task per episode: the kit's placeholder policy never succeeds.
+    let fx = ControlFixture::new(
+        "[control]\nlease_s = 10\nreaper_interval_s = 1\nmax_plan_steps = 1\ntask_time_limit_s = 5.0\n",
+    );
+    let server = fx.serve(2);
+    let kit = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../starter-kit/policy_server.py");
+    let (child, line) = spawn_ready(
+        Command::new("python3")
+            .arg(kit)
+            .args(["--listen", "127.0.0.1:0", "--max-batch", "4"]),
+        "listening grpc=",
+    );
+    let _kit = Proc(child);
+    let url = format!("http://{}", line.trim_start_matches("listening grpc=").trim());
+    let token = team(&server, "batchers").await;
+    let body = json!({"endpoint": url, "split": "dev", "episodes": 2});
+    let (status, reg) = register_policy(&server, &token, body).await;
+    assert_eq!(status, 201, "{reg}");
+    let id = reg["id"].as_i64().unwrap();
+    let view = wait_for(&server, id, &token, "the starter kit's batched run", finished).await;
+    assert_eq!(view["latest_run"]["evaluation"]["state"], "finished", "{view:#}");
+    assert!(view["latest_run"]["scores"]["sr"].as_f64().is_some(), "{view:#}");
+    let tasks = tasks_by_episode(&view);
+    assert_eq!(
+        tasks.len(),
+        4,
+        "two online episodes and their offline twins: {view:#}"
+    );
+    let text = get_text(&server, "/metrics").await;
+    let calls = metric(&text, "kitchen_r_worker_policy_batch_calls_total");
+    let decisions = metric(&text, "kitchen_r_worker_policy_batched_decisions_total");
+    assert!(calls > 0.0 && decisions >= calls, "{text}");
 }
 
 /// A policy that declares `max_batch` 4 and answers every ActBatch with one chunk too few.
