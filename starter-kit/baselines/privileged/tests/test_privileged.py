@@ -223,6 +223,28 @@ if __name__ == "__main__":
     unittest.main()
 
 
+class GateSummaryTest(unittest.TestCase):
+    def test_the_summary_reads_each_trainers_log(self):
+        # The camera and privileged trainers log expert.episodes, rows and train_seconds; the
+        # diffusion pipeline episodes, samples and train_minutes (run 7's summary had nulls).
+        from kitchen_r_baselines import gate
+
+        online = {"episodes": [], "overall": {}, "seed": 0}
+        diffusion = gate.summarise(
+            online, None, {"episodes": 198, "samples": 206737, "train_minutes": 8.0}, "standard", {}
+        )
+        self.assertEqual(
+            (diffusion["training_episodes"], diffusion["training_samples"], diffusion["train_seconds"]),
+            (198, 206737, 480),
+        )
+        camera = gate.summarise(
+            online, None, {"expert": {"episodes": 3000}, "rows": 5, "train_seconds": 61.5}, "standard", {}
+        )
+        self.assertEqual(
+            (camera["training_episodes"], camera["training_samples"], camera["train_seconds"]), (3000, 5, 61.5)
+        )
+
+
 @unittest.skipUnless(HAVE_TORCH, "torch is not installed")
 class HeldOutGateTest(unittest.TestCase):
     def test_the_gate_runs_a_test_split_range_and_combines_folders(self):
