@@ -121,28 +121,14 @@ async fn the_oracle_over_actbatch_scores_as_over_act_through_serve_and_workers()
 /// and the run is scored.
 #[tokio::test(flavor = "multi_thread")]
 async fn the_python_starter_kit_answers_actbatch_through_serve() {
-    if !crate::control::python_ready() {
-        assert!(
-            std::env::var("CI").is_err(),
-            "python3 with grpcio, grpcio-tools and grpcio-health-checking is required in CI"
-        );
-        eprintln!("skipped: the starter kit's Python modules are not installed");
+    let Some((_kit, url)) = starter_kit(&["--max-batch", "4"]) else {
         return;
-    }
+    };
     // One short task per episode: the kit's placeholder policy never succeeds.
     let fx = ControlFixture::new(
         "[control]\nlease_s = 10\nreaper_interval_s = 1\nmax_plan_steps = 1\ntask_time_limit_s = 5.0\n",
     );
     let server = fx.serve(2);
-    let kit = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../starter-kit/policy_server.py");
-    let (child, line) = spawn_ready(
-        Command::new("python3")
-            .arg(kit)
-            .args(["--listen", "127.0.0.1:0", "--max-batch", "4"]),
-        "listening grpc=",
-    );
-    let _kit = Proc(child);
-    let url = format!("http://{}", line.trim_start_matches("listening grpc=").trim());
     let token = team(&server, "batchers").await;
     let body = json!({"endpoint": url, "split": "dev", "episodes": 2});
     let (status, reg) = register_policy(&server, &token, body).await;

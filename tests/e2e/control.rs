@@ -11,7 +11,6 @@ use crate::remote_support;
 use crate::support;
 
 use std::collections::BTreeSet;
-use std::process::Command;
 use std::sync::Arc;
 
 use kitchen_r_contract::server::ServeOptions;
@@ -174,35 +173,15 @@ async fn a_server_restarted_mid_run_resumes_the_run() {
     assert!(sr(&view) >= 0.95, "{view:#}");
 }
 
-pub(crate) fn python_ready() -> bool {
-    Command::new("python3")
-        .args(["-c", "import grpc, grpc_tools, grpc_health"])
-        .status()
-        .is_ok_and(|s| s.success())
-}
-
 #[tokio::test(flavor = "multi_thread")]
 async fn the_python_starter_kit_completes_a_run_with_a_score() {
-    if !python_ready() {
-        // scripts/test.sh installs the modules; CI always has them.
-        assert!(
-            std::env::var("CI").is_err(),
-            "python3 with grpcio, grpcio-tools and grpcio-health-checking is required in CI"
-        );
-        eprintln!("skipped: the starter kit's Python modules are not installed");
+    let Some((_kit, url)) = starter_kit(&[]) else {
         return;
-    }
+    };
     // One task per episode with a short limit: the kit's placeholder policy never succeeds, so
     // every task runs to its limit.
     let fx = ControlFixture::new(&format!("{CONFIG}max_plan_steps = 1\ntask_time_limit_s = 10.0\n"));
     let server = fx.serve(2);
-    let kit = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../starter-kit/policy_server.py");
-    let (child, line) = spawn_ready(
-        Command::new("python3").arg(kit).args(["--listen", "127.0.0.1:0"]),
-        "listening grpc=",
-    );
-    let _kit = Proc(child);
-    let url = format!("http://{}", line.trim_start_matches("listening grpc=").trim());
     let token = team(&server, "starters").await;
     let (status, reg) = register_policy(
         &server,

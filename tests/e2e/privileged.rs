@@ -404,23 +404,9 @@ fn a_privileged_policy_is_refused_naming_the_key_when_the_track_is_off() {
 /// privileged observations and labels the result.
 #[test]
 fn the_starter_kit_check_policy_and_local_eval_speak_the_privileged_track() {
-    if !crate::control::python_ready() {
-        assert!(
-            std::env::var("CI").is_err(),
-            "python3 with grpcio, grpcio-tools and grpcio-health-checking is required in CI"
-        );
-        eprintln!("skipped: the starter kit's Python modules are not installed");
+    let Some((_kit, url)) = starter_kit(&["--privileged"]) else {
         return;
-    }
-    let kit = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../starter-kit/policy_server.py");
-    let (child, line) = spawn_ready(
-        std::process::Command::new("python3")
-            .arg(kit)
-            .args(["--listen", "127.0.0.1:0", "--privileged"]),
-        "listening grpc=",
-    );
-    let _kit = Proc(child);
-    let url = format!("http://{}", line.trim_start_matches("listening grpc=").trim());
+    };
     let kr = |args: &[&str]| std::process::Command::new(bin()).args(args).output().unwrap();
 
     let checked = ok(kr(&["check-policy", &url]));

@@ -326,6 +326,34 @@ pub(crate) fn spawn_ready(cmd: &mut Command, prefix: &str) -> (Child, String) {
     }
 }
 
+/// The starter kit's Python policy server (`starter-kit/policy_server.py --listen 127.0.0.1:0`
+/// and `args`), killed on drop, and its `http://` URL; `None` (skipped, said on stderr) when
+/// python3 lacks its modules, which CI always has (scripts/test.sh installs them).
+pub(crate) fn starter_kit(args: &[&str]) -> Option<(Proc, String)> {
+    let ready = Command::new("python3")
+        .args(["-c", "import grpc, grpc_tools, grpc_health"])
+        .status()
+        .is_ok_and(|s| s.success());
+    if !ready {
+        assert!(
+            std::env::var("CI").is_err(),
+            "python3 with grpcio, grpcio-tools and grpcio-health-checking is required in CI"
+        );
+        eprintln!("skipped: the starter kit's Python modules are not installed");
+        return None;
+    }
+    let kit = Path::new(env!("CARGO_MANIFEST_DIR")).join("../starter-kit/policy_server.py");
+    let (child, line) = spawn_ready(
+        Command::new("python3")
+            .arg(kit)
+            .args(["--listen", "127.0.0.1:0"])
+            .args(args),
+        "listening grpc=",
+    );
+    let url = format!("http://{}", line.trim_start_matches("listening grpc=").trim());
+    Some((Proc(child), url))
+}
+
 /// A process killed (SIGKILL) when dropped.
 pub(crate) struct Proc(pub Child);
 
