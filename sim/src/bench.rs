@@ -292,30 +292,12 @@ impl BenchReport {
 mod tests {
     use super::*;
 
-    /// FNV-1a over the cameras' colour bytes and depth bits.
-    pub(crate) fn image_hash(images: &[crate::sensors::camera::CameraImage]) -> u64 {
-        let mut h = 0xcbf2_9ce4_8422_2325u64;
-        for im in images {
-            let depth = im.depth.iter().flat_map(|d| d.to_bits().to_le_bytes());
-            for b in im.rgb.iter().copied().chain(depth) {
-                h = (h ^ u64::from(b)).wrapping_mul(0x100_0000_01b3);
-            }
-        }
-        h
-    }
-
     /// The bench's Panda, its hand in the gripper camera's view, renders the bytes it rendered
     /// when each ray was clipped face by face against the link hulls: making the ray caster
     /// faster must not move a pixel. Needs the robosuite wheel (`ROBOSUITE_ASSETS`).
     #[test]
     fn the_panda_in_view_renders_the_same_bytes() {
-        if std::env::var_os("ROBOSUITE_ASSETS").is_none() {
-            assert_ne!(
-                std::env::var("CI").as_deref(),
-                Ok("true"),
-                "CI needs ROBOSUITE_ASSETS"
-            );
-            eprintln!("skipped: export ROBOSUITE_ASSETS=\"$(scripts/robosuite-assets.sh)\"");
+        if !crate::test_support::robosuite_assets() {
             return;
         }
         let assets = Assets::load_default().unwrap();
@@ -327,7 +309,7 @@ mod tests {
         for k in 0..60 {
             sim.step(&wobble_action(k), false).unwrap();
             if k % 20 == 19 {
-                hashes.push(image_hash(&sim.observe().images));
+                hashes.push(crate::test_support::image_hash(&sim.observe().images));
             }
         }
         assert_eq!(

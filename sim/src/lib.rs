@@ -33,6 +33,8 @@ pub mod sensors;
 pub mod sim;
 pub mod snapshot;
 pub mod task;
+#[cfg(test)]
+mod test_support;
 pub mod types;
 pub mod usd_export;
 pub mod world;

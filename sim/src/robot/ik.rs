@@ -154,13 +154,7 @@ mod tests {
     /// (`ROBOSUITE_ASSETS`, scripts/robosuite-assets.sh).
     #[test]
     fn robosuite_arms_round_trip_through_forward_kinematics() {
-        if std::env::var_os("ROBOSUITE_ASSETS").is_none() {
-            assert_ne!(
-                std::env::var("CI").as_deref(),
-                Ok("true"),
-                "CI needs ROBOSUITE_ASSETS"
-            );
-            eprintln!("skipped: export ROBOSUITE_ASSETS=\"$(scripts/robosuite-assets.sh)\"");
+        if !crate::test_support::robosuite_assets() {
             return;
         }
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/robots/robosuite");

@@ -154,11 +154,26 @@ pub(super) fn ray_capsule(
 /// through the last face it crosses inwards, leave through the first outwards).
 #[inline]
 pub(super) fn ray_convex(o: Vector, d: Vector, c: &ConvexPolyhedron, max: f32) -> Option<(f32, Vector)> {
+    clip(d, max, face_planes(c, o))
+}
+
+/// Each face of `c`: its outward normal and `o`'s signed distance from its plane.
+#[inline]
+fn face_planes(c: &ConvexPolyhedron, o: Vector) -> impl Iterator<Item = (Vector, f32)> + '_ {
     let (points, ring) = (c.points(), c.vertices_adj_to_face());
-    let (mut near, mut far, mut normal) = (f32::NEG_INFINITY, max, Vector::ZERO);
-    for f in c.faces() {
+    c.faces().iter().map(move |f| {
         let p = points[ring[f.first_vertex_or_edge as usize] as usize];
-        let (dist, along) = (f.normal.dot(o - p), f.normal.dot(d));
+        (f.normal, f.normal.dot(o - p))
+    })
+}
+
+/// The ray along `d` (up to `max`) clipped by half-spaces, each a face's outward normal and the
+/// ray origin's signed distance from the face's plane.
+#[inline]
+fn clip(d: Vector, max: f32, planes: impl Iterator<Item = (Vector, f32)>) -> Option<(f32, Vector)> {
+    let (mut near, mut far, mut normal) = (f32::NEG_INFINITY, max, Vector::ZERO);
+    for (n, dist) in planes {
+        let along = n.dot(d);
         if along == 0.0 {
             if dist > 0.0 {
                 return None;
@@ -168,7 +183,7 @@ pub(super) fn ray_convex(o: Vector, d: Vector, c: &ConvexPolyhedron, max: f32) -
         let t = -dist / along;
         if along < 0.0 {
             if t > near {
-                (near, normal) = (t, f.normal);
+                (near, normal) = (t, n);
             }
         } else if t < far {
             far = t;
@@ -190,14 +205,13 @@ pub(super) fn ray_convex(o: Vector, d: Vector, c: &ConvexPolyhedron, max: f32) -
 /// A convex hull's face planes for rays that all start at one point (a camera's eye, in the
 /// hull's frame). A mesh arm's rays spend their time in [`ray_convex`], most of it on rays that
 /// pass the link's world box, which a turned link fills loosely, and miss the hull. Here each
-/// face's distance from the eye is computed once per image, with `ray_convex`'s own arithmetic,
+/// face's distance from the eye is computed once per image ([`face_planes`], as `ray_convex` does),
 /// and a ray must first cross the hull's own box, grown by `BOX_SLACK`; the clipping after that is
-/// `ray_convex`'s, face by face, so the bits are its bits (the
+/// `ray_convex`'s own ([`clip`]), so the bits are its bits (the
 /// `ray_convex_from_the_eye_gives_the_same_bits` test).
-pub(super) struct EyePlanes<'a> {
-    hull: &'a ConvexPolyhedron,
+pub(super) struct EyePlanes {
     /// Per face: normal and the eye's signed distance from the face's plane.
-    planes: Vec<[f32; 4]>,
+    planes: Vec<(Vector, f32)>,
     mins: Vec3A,
     maxs: Vec3A,
     eye: Vec3A,
@@ -207,24 +221,15 @@ pub(super) struct EyePlanes<'a> {
 /// round-off that lets `ray_convex` accept a ray grazing the hull, so the box never drops one.
 const BOX_SLACK: f32 = 1e-4;
 
-impl<'a> EyePlanes<'a> {
-    pub(super) fn new(hull: &'a ConvexPolyhedron, eye: Vector) -> EyePlanes<'a> {
-        let (points, ring) = (hull.points(), hull.vertices_adj_to_face());
-        let planes = hull
-            .faces()
-            .iter()
-            .map(|f| {
-                let p = points[ring[f.first_vertex_or_edge as usize] as usize];
-                [f.normal.x, f.normal.y, f.normal.z, f.normal.dot(eye - p)]
-            })
-            .collect();
+impl EyePlanes {
+    pub(super) fn new(hull: &ConvexPolyhedron, eye: Vector) -> EyePlanes {
+        let planes = face_planes(hull, eye).collect();
         let (mut mins, mut maxs) = (Vec3A::splat(f32::INFINITY), Vec3A::splat(f32::NEG_INFINITY));
-        for p in points {
+        for p in hull.points() {
             (mins, maxs) = (mins.min(Vec3A::from(*p)), maxs.max(Vec3A::from(*p)));
         }
         let slack = BOX_SLACK * (1.0 + mins.abs().max(maxs.abs()).max_element());
         EyePlanes {
-            hull,
             planes,
             mins: mins - slack,
             maxs: maxs + slack,
@@ -236,36 +241,7 @@ impl<'a> EyePlanes<'a> {
     #[inline]
     pub(super) fn cast(&self, d: Vector, max: f32) -> Option<(f32, Vector)> {
         slab(self.eye, Vec3A::from(d.recip()), self.mins, self.maxs, max)?;
-        let (mut near, mut far, mut normal) = (f32::NEG_INFINITY, max, Vector::ZERO);
-        for (i, &[x, y, z, dist]) in self.planes.iter().enumerate() {
-            // `ray_convex`'s expressions, in its order: `f.normal.dot(d)` is x, y, z summed left
-            // to right.
-            let along = x * d.x + y * d.y + z * d.z;
-            if along == 0.0 {
-                if dist > 0.0 {
-                    return None;
-                }
-                continue;
-            }
-            let t = -dist / along;
-            if along < 0.0 {
-                if t > near {
-                    (near, normal) = (t, self.hull.faces()[i].normal);
-                }
-            } else if t < far {
-                far = t;
-            }
-            if near > far {
-                return None;
-            }
-        }
-        if far < 0.0 {
-            return None;
-        }
-        if near < 0.0 {
-            return Some((0.0, -d.normalize_or_zero()));
-        }
-        Some((near, normal))
+        clip(d, max, self.planes.iter().copied())
     }
 }
 
@@ -276,9 +252,6 @@ mod tests {
 
     use super::*;
 
-    /// Rays from all around a lumpy hull: the face clipping finds the hits that casting against
-    /// the hull's own triangles finds, at the same distance, entering through an outward face.
-    /// (parry's generic cast on the hull, GJK on its support map, lands up to 2 mm off.)
     /// Rays from eyes outside, on and inside lumpy hulls, aimed near them and anywhere: the
     /// per-image planes give exactly the face-by-face clipping's bits, up to the ray's `max`.
     #[test]
@@ -327,6 +300,9 @@ mod tests {
         assert!(hits > 40 * 20 * 200 / 4, "{hits} rays hit");
     }
 
+    /// Rays from all around a lumpy hull: the face clipping finds the hits that casting against
+    /// the hull's own triangles finds, at the same distance, entering through an outward face.
+    /// (parry's generic cast on the hull, GJK on its support map, lands up to 2 mm off.)
     #[test]
     fn a_convex_hull_is_hit_where_its_triangles_are_hit() {
         let mut seed = 7u64;

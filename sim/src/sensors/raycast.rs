@@ -30,7 +30,7 @@ struct Prim<'a> {
     /// The eye in the shape's frame: every ray of a perspective camera starts there.
     local_eye: Vector,
     /// A convex hull's faces as seen from `local_eye`.
-    planes: Option<EyePlanes<'a>>,
+    planes: Option<EyePlanes>,
 }
 
 /// Shapes with a closed-form intersection here; anything else uses parry's generic ray cast.
