@@ -42,12 +42,13 @@ const TILTED_CLEAR: f64 = WRIST_CLEAR + 0.02;
 /// [`TILTED_CLEAR`]: leaning, the wrist stands back from the column the margin guarded.
 /// With `lean` false the tool stays straight down and a higher wrist keeps its height plus
 /// [`WRIST_MARGIN`] (the physical grasp's rule: its pinches are planned top-down).
-pub(super) fn headroom(robot: &kitchen_r_sim::robot::desc::RobotDesc, lean: bool) -> Headroom {
+/// `wrist_height`: the arm's, over a top-down tool (`kitchen_r_sim::robot::wrist::wrist_height`).
+pub(super) fn headroom(wrist_height: Option<f64>, lean: bool) -> Headroom {
     let straight = Headroom {
         clear: WRIST_CLEAR,
         tilt: None,
     };
-    let Some(h) = kitchen_r_sim::robot::wrist::wrist_height(robot) else {
+    let Some(h) = wrist_height else {
         return straight;
     };
     match (h + WRIST_MARGIN > WRIST_CLEAR + 1e-3, lean) {
@@ -87,17 +88,19 @@ mod tests {
     #[test]
     fn the_shipped_arm_keeps_its_clearance_and_a_higher_wrist_leans() {
         let mut robot = kitchen_r_sim::robot::desc::RobotDesc::load_default().unwrap();
+        let wrist =
+            |robot: &kitchen_r_sim::robot::desc::RobotDesc| kitchen_r_sim::robot::wrist::wrist_height(robot);
         for lean in [false, true] {
-            let shipped = headroom(&robot, lean);
+            let shipped = headroom(wrist(&robot), lean);
             assert_eq!(shipped.clear.to_bits(), WRIST_CLEAR.to_bits());
             assert_eq!(shipped.tilt, None);
         }
         // The wrist-rotate link 15 cm longer: the wrist stands 0.32 m over a top-down tool.
         robot.arm.joints[5].origin[0] += 0.15;
-        let h = headroom(&robot, true);
+        let h = headroom(wrist(&robot), true);
         assert!((h.clear - 0.32).abs() < 1e-3, "{h:?}");
         assert_eq!(h.tilt, Some(TILT));
-        let h = headroom(&robot, false);
+        let h = headroom(wrist(&robot), false);
         assert!((h.clear - (0.32 + WRIST_MARGIN)).abs() < 1e-3, "{h:?}");
         assert_eq!(h.tilt, None);
     }

@@ -97,9 +97,9 @@ pub struct OraclePolicy {
     /// Half the fingers' length along the approach axis, m: how far the fingertips reach below
     /// the TCP (the physical grasp keeps them off the surface an object stands on).
     finger_reach: f64,
-    /// How far under a shelf board the tool must stay and how it leans there
-    /// (`headroom::headroom`), in the abstract grasp mode and in the physical one.
-    headroom: [headroom::Headroom; 2],
+    /// How high the arm's wrist stands over a top-down tool, m (`headroom::headroom` reads it:
+    /// how far under a shelf board the tool stays and how it leans there).
+    wrist_height: Option<f64>,
 }
 
 impl OraclePolicy {
@@ -120,7 +120,7 @@ impl OraclePolicy {
             grasp: SimConfig::load_default().map_or(GraspMode::Abstract, |c| c.grasp.mode),
             replans: 0,
             finger_reach: assets.robot.gripper.finger_length / 2.0,
-            headroom: [true, false].map(|lean| headroom::headroom(&assets.robot, lean)),
+            wrist_height: kitchen_r_sim::robot::wrist::wrist_height(&assets.robot),
         }
     }
 
@@ -206,7 +206,9 @@ impl OraclePolicy {
         let tool_world = kitchen_r_sim::oracle::manip::base_isometry(p.base_pose) * tool;
         let t = tool_world.translation;
         // The board that matters is the first one above the hand.
-        let room = self.headroom[usize::from(self.grasp == GraspMode::Physical)];
+        let physical = self.grasp == GraspMode::Physical;
+        // The physical grasp's pinches are planned top-down: only the abstract mode leans.
+        let room = headroom::headroom(self.wrist_height, !physical);
         let here_max = headroom::max_tool_z(scene, [t.x, t.y], t.z, room.clear);
         let work = match p.target {
             TaskTarget::Pick { object } => p.objects.get(object).map(|o| [o.pose[0], o.pose[1], o.pose[2]]),
@@ -214,7 +216,6 @@ impl OraclePolicy {
             TaskTarget::Base { .. } => None,
         };
         let target_max = work.and_then(|w| headroom::max_tool_z(scene, [w[0], w[1]], w[2], room.clear));
-        let physical = self.grasp == GraspMode::Physical;
         // Only work under a board leans (objects picked and placed in the open stay upright).
         // Leaning about the base's left axis, negative: the fingers point away from the base.
         let tilt = (room.tilt)
