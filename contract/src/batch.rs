@@ -15,8 +15,8 @@
 //! flight (else it waits for one to land, at most a quarter of its call deadline). Two in
 //! flight let a policy server overlap one batch's network pass with the next batch's transfer
 //! and decoding, where one at a time left it idle between them (measured on an H200: the camera
-//! baseline at 0.47× its unbatched rate with one batch in flight). Each episode waits for its own answer under its own call
-//! deadline, counted from when it handed its decision in, so batching moves no deadline; a
+//! baseline at 0.47× its unbatched rate with one batch in flight). Each episode waits for its
+//! own answer under its own call deadline, counted from when it handed its decision in, so batching moves no deadline; a
 //! batch call is given the latest of its decisions' deadlines, and a decision whose episode
 //! gave up is not sent.
 
