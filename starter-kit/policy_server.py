@@ -300,6 +300,12 @@ def main():
     )
 
 
+def receive_limit(max_batch):
+    """The largest request this server accepts: `max_batch` one-Act observations, at most the
+    2 GiB - 1 a gRPC channel argument holds."""
+    return min(MAX_MESSAGE_BYTES * max(1, max_batch), 2**31 - 1)
+
+
 def serve(
     listen,
     token,
@@ -326,8 +332,9 @@ def serve(
 
     pb2, pb2_grpc = load_stubs(proto_dir(proto))
     opts = [
-        # A batch carries up to max_batch observations, each up to the one-Act size.
-        ("grpc.max_receive_message_length", MAX_MESSAGE_BYTES * max(1, max_batch)),
+        # A batch carries up to max_batch observations, each up to the one-Act size; gRPC takes
+        # a 32-bit length, which 64 MiB x 32 observations would overflow.
+        ("grpc.max_receive_message_length", receive_limit(max_batch)),
         ("grpc.max_send_message_length", MAX_MESSAGE_BYTES),
     ]
     server = grpc.server(futures.ThreadPoolExecutor(max_workers=threads), options=opts)

@@ -103,6 +103,13 @@ class ActBatchTest(unittest.TestCase):
             self.servicer(Short(), 4).ActBatch(self.batch(3), Context())
         self.assertIn("2 chunks for 3 observations", e.exception.args[1])
 
+    def test_a_large_max_batch_keeps_the_receive_limit_within_grpcs_32_bits(self):
+        # 64 MiB x 32 observations overflowed gRPC's int channel argument: the server died at start.
+        self.assertEqual(kit.receive_limit(0), kit.MAX_MESSAGE_BYTES)
+        self.assertEqual(kit.receive_limit(4), 4 * kit.MAX_MESSAGE_BYTES)
+        self.assertEqual(kit.receive_limit(32), 2**31 - 1)
+        grpc.server(None, options=[("grpc.max_receive_message_length", kit.receive_limit(64))])
+
 
 if __name__ == "__main__":
     unittest.main()

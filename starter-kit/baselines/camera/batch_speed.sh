@@ -14,7 +14,10 @@
 # policy's max_concurrency and max_batch too). Environment: KITCHEN_R_BIN
 # [target/release/kitchen-r], DEVICE [auto], OUT [/tmp/kr-batch-speed], SEED [0], GATHER_MS [2]
 # (the gather window), EVAL_ARGS (more `kitchen-r eval` flags for every run, e.g. `--config
-# short.toml` for a quick try), SERVE_ARGS (more camera serve.py flags, e.g. `--no-cuda-graphs`). Needs python3 with the baselines installed (pip install -e
+# short.toml` for a quick try), SERVE_ARGS (more camera serve.py flags, e.g. `--no-cuda-graphs`),
+# REFERENCE (a jobs count: also run the setup before batched decisions and CUDA graphs, in the
+# same run: eager passes, one Act per decision, REFERENCE jobs; each jobs count's result then
+# has `speedup_vs_reference`). Needs python3 with the baselines installed (pip install -e
 # ./starter-kit -e "./starter-kit/baselines[control]").
 set -euo pipefail
 
@@ -84,6 +87,14 @@ evaluate() {
   echo "$(cat "$OUT/$name.time") $before $(cpu_of "$SERVER")" >"$OUT/$name.cpu"
 }
 
+REFERENCE="${REFERENCE:-}"
+if [ -n "$REFERENCE" ]; then
+  serve "$OUT/reference_serve.log" python3 "$HERE/serve.py" --checkpoint "$CKPT" --listen 127.0.0.1:0 \
+    --device "$DEVICE" --concurrency "$REFERENCE" --max-batch 1 --no-cuda-graphs
+  evaluate reference "$URL" "$REFERENCE" --max-batch 1
+  stop
+fi
+
 for J in "${JOBS_LIST[@]}"; do
   serve "$OUT/camera_serve_$J.log" python3 "$HERE/serve.py" --checkpoint "$CKPT" --listen 127.0.0.1:0 \
     --device "$DEVICE" --concurrency "$J" --max-batch "$J" "${SERVE_EXTRA[@]}"
@@ -95,11 +106,12 @@ for J in "${JOBS_LIST[@]}"; do
   stop
 done
 
-python3 - "$OUT" "$EPISODES" "${JOBS_LIST[@]}" <<'PY'
+python3 - "$OUT" "$EPISODES" "$REFERENCE" "${JOBS_LIST[@]}" <<'PY'
 import json
 import sys
 
-out, episodes, jobs_list = sys.argv[1], int(sys.argv[2]), [int(j) for j in sys.argv[3:]]
+out, episodes, reference = sys.argv[1], int(sys.argv[2]), sys.argv[3]
+jobs_list = [int(j) for j in sys.argv[4:]]
 result = {"episodes": episodes, "jobs": jobs_list}
 
 
@@ -112,7 +124,7 @@ def run(name):
         "wall_s": round(r["total_wall_s"], 1),
         "episodes_per_minute": round(60 * n / r["total_wall_s"], 1),
         "sr": r["sr"],
-        "mean_batch": round(r["batching"]["mean_batch"], 2),
+        "mean_batch": round(r["batching"]["mean_batch"], 2) if "batching" in r else 0.0,
         # Where the time went: the simulators (eval) and the policy server, CPU seconds.
         "eval_cpu_s": round(user + system, 1),
         "server_cpu_s": round(after - before, 1),
@@ -123,6 +135,8 @@ def outcomes(name):
     return [[t["success"] for t in e["tasks"]] for e in json.load(open(f"{out}/{name}.json"))["episodes"]]
 
 
+if reference:
+    result["reference"] = dict(run("reference"), jobs=int(reference), setup="eager passes, one Act per decision")
 for j in jobs_list:
     b, u = run(f"camera_batched_{j}"), run(f"camera_unbatched_{j}")
     result[f"jobs_{j}"] = {
@@ -134,5 +148,9 @@ for j in jobs_list:
         # of a network run at another batch size on a GPU, which may move a task's outcome.
         "camera_same_outcomes": outcomes(f"camera_batched_{j}") == outcomes(f"camera_unbatched_{j}"),
     }
+    if reference:
+        result[f"jobs_{j}"]["speedup_vs_reference"] = round(
+            b["episodes_per_minute"] / result["reference"]["episodes_per_minute"], 2
+        )
 print(json.dumps(result, indent=1))
 PY
