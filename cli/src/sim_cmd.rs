@@ -69,9 +69,10 @@ pub(crate) enum BenchCommand {
         /// Observe every this many control steps (the policy query rate).
         #[arg(long, default_value_t = 8)]
         query_every: u32,
-        /// Also time the physics step and the observation with this robot (a URDF or MJCF
-        /// description or a mounting sidecar, e.g. configs/robots/robosuite/panda.toml: a
-        /// seven-joint arm of mesh links in the cameras' view)
+        /// Also time the physics step (both grasp modes) and the observation with this robot (a
+        /// URDF or MJCF description or a mounting sidecar, e.g.
+        /// configs/robots/robosuite/panda.toml: a seven-joint arm of mesh links in the cameras'
+        /// view)
         #[arg(long, value_name = "FILE")]
         mesh_robot: Option<std::path::PathBuf>,
     },
@@ -158,6 +159,10 @@ pub(crate) fn bench(args: BenchArgs) -> anyhow::Result<()> {
                     println!(
                         "  physics_step_us     {:.1} (fastest {:.1})",
                         m.physics_step_us, m.physics_step_us_min
+                    );
+                    println!(
+                        "  physics_step_us (articulated arm, physical grasp) {:.1} (fastest {:.1})",
+                        m.physics_step_us_articulated, m.physics_step_us_articulated_min
                     );
                     println!(
                         "  observation_ms      {:.2} ({} cameras, robot in view; fastest {:.2})",

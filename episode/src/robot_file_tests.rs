@@ -133,3 +133,50 @@ fn the_robosuite_arms_complete_the_first_dev_instructions() {
         }
     }
 }
+
+/// In the physical grasp mode, where only the finger pads' friction holds an object, each
+/// robosuite arm picks and places through the first dev instruction: the fingers slide along the
+/// mounted gripper's own closing axis from its tool centre, where its flange puts them (they
+/// slid along the last link's axes, beside the object, and no pick succeeded before).
+#[test]
+fn the_robosuite_arms_pick_and_place_in_the_physical_grasp_mode() {
+    if std::env::var_os("ROBOSUITE_ASSETS").is_none() {
+        assert_ne!(
+            std::env::var("CI").as_deref(),
+            Ok("true"),
+            "CI needs ROBOSUITE_ASSETS"
+        );
+        eprintln!("skipped: export ROBOSUITE_ASSETS=\"$(scripts/robosuite-assets.sh)\"");
+        return;
+    }
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/robots/robosuite");
+    let first: Vec<Instruction> = instructions(Split::Dev, None)
+        .unwrap()
+        .into_iter()
+        .take(1)
+        .collect();
+    let mut config = SimConfig::load_default().unwrap();
+    config.grasp.mode = kitchen_r_core::GraspMode::Physical;
+    for name in ["panda", "ur5e", "kinova3", "xarm7"] {
+        let assets = assets_with(dir.join(format!("{name}.toml")));
+        let cfg = &episode_configs(&assets, &first, 0, None).unwrap()[0];
+        let blind = kitchen_r_sim::SensorsConfig {
+            cameras: Vec::new(),
+            lidar: None,
+            ..kitchen_r_sim::SensorsConfig::default()
+        };
+        let mut sim = kitchen_r_sim::Sim::new(assets.clone(), config.clone(), blind, cfg)
+            .unwrap()
+            .0;
+        let run = crate::runner::RunOptions {
+            privileged: true,
+            ..crate::runner::RunOptions::default()
+        };
+        let mut oracle =
+            crate::oracle::OraclePolicy::new(&assets).with_grasp_mode(kitchen_r_core::GraspMode::Physical);
+        let out = crate::runner::run_episode(&mut sim, &mut oracle, &run, None, &mut ()).unwrap();
+        let manipulations = first[0].plan.iter().filter(|s| !s.starts_with("move")).count();
+        assert!(manipulations >= 2, "the instruction picks and places");
+        assert!(out.tasks.iter().all(|t| t.success), "{name}: {:?}", out.tasks);
+    }
+}

@@ -79,8 +79,8 @@ pub struct BenchReport {
 }
 
 /// Figures with a robot given by file, such as a mounted robosuite arm (seven joints, links
-/// colliding as mesh hulls and drawn by the cameras): the abstract mode's physics substep and the
-/// configured cameras' observation with that robot's arm in their view.
+/// colliding as mesh hulls and drawn by the cameras): the physics substep in both grasp modes and
+/// the configured cameras' observation with that robot's arm in their view.
 #[derive(Debug, Clone, Serialize)]
 pub struct MeshRobotReport {
     pub robot: String,
@@ -89,6 +89,9 @@ pub struct MeshRobotReport {
     pub arm_colliders: usize,
     pub physics_step_us: f64,
     pub physics_step_us_min: f64,
+    /// The same substep in the physical grasp mode (the arm a motor-driven multibody).
+    pub physics_step_us_articulated: f64,
+    pub physics_step_us_articulated_min: f64,
     /// Every configured camera, no LiDAR (ms), median and fastest of `BATCHES` batches.
     pub observation_ms: f64,
     pub observation_ms_min: f64,
@@ -144,9 +147,12 @@ fn mesh_robot(
     ep: &crate::EpisodeConfig,
     steps: u32,
 ) -> Result<MeshRobotReport, SimError> {
-    let mut sim = mesh_robot_sim(file, ep)?;
+    let mut sim = mesh_robot_sim(file, ep, GraspMode::Abstract)?;
     let substeps = f64::from(sim.config().physics.substeps);
-    let (step_us, step_min) = control_steps(&mut sim, (steps / BATCHES).max(1))?;
+    let per_batch = (steps / BATCHES).max(1);
+    let (step_us, step_min) = control_steps(&mut sim, per_batch)?;
+    let (articulated_us, articulated_min) =
+        control_steps(&mut mesh_robot_sim(file, ep, GraspMode::Physical)?, per_batch)?;
     let n_obs = 30;
     let (observation_ms, observation_ms_min) = observe_ms(&mut sim, n_obs);
     Ok(MeshRobotReport {
@@ -155,21 +161,30 @@ fn mesh_robot(
         arm_colliders: sim.robot.bodies.arm_colliders.len(),
         physics_step_us: step_us / substeps,
         physics_step_us_min: step_min / substeps,
+        physics_step_us_articulated: articulated_us / substeps,
+        physics_step_us_articulated_min: articulated_min / substeps,
         observation_ms,
         observation_ms_min,
         cameras: sim.sensors.cameras.len(),
     })
 }
 
-/// Episode `ep` with the robot `file` and the configured cameras, without LiDAR.
-fn mesh_robot_sim(file: &std::path::Path, ep: &crate::EpisodeConfig) -> Result<Sim, SimError> {
+/// Episode `ep` with the robot `file` in grasp mode `mode` and the configured cameras, without
+/// LiDAR.
+fn mesh_robot_sim(
+    file: &std::path::Path,
+    ep: &crate::EpisodeConfig,
+    mode: GraspMode,
+) -> Result<Sim, SimError> {
     let dir = kitchen_r_core::assets::assets_dir();
     let assets = Assets::load_with_robot(&dir, &crate::RobotConfig { file: file.into() })?;
     let sensors = SensorsConfig {
         lidar: None,
         ..SensorsConfig::load_default()?
     };
-    Ok(Sim::new(assets, SimConfig::load_default()?, sensors, ep)?.0)
+    let mut config = SimConfig::load_default()?;
+    config.grasp.mode = mode;
+    Ok(Sim::new(assets, config, sensors, ep)?.0)
 }
 
 /// Milliseconds per full observation (median and fastest of the batches), over `n_obs` of them.
@@ -304,7 +319,7 @@ mod tests {
         let (_, ep) = first_episode(&assets).unwrap();
         let file =
             std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/robots/robosuite/panda.toml");
-        let mut sim = mesh_robot_sim(&file, &ep).unwrap();
+        let mut sim = mesh_robot_sim(&file, &ep, GraspMode::Abstract).unwrap();
         let mut hashes = Vec::new();
         for k in 0..60 {
             sim.step(&wobble_action(k), false).unwrap();

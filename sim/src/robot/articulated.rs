@@ -173,7 +173,7 @@ impl Robot {
             .friction(config.finger_friction as f32)
             .mass(config.finger_mass as f32);
             robot.bodies.fingers[k] = world.insert_collider(co, Some(body));
-            let joint = PrismaticJointBuilder::new(vec_to_glam(&axis))
+            let mut joint = PrismaticJointBuilder::new(vec_to_glam(&axis))
                 .local_anchor1(vec_to_glam(&tcp.translation.vector))
                 .limits(lim)
                 .motor_model(MotorModel::ForceBased)
@@ -182,7 +182,17 @@ impl Robot {
                     config.finger_stiffness as f32,
                     config.finger_damping as f32,
                 )
-                .motor_max_force(config.finger_force as f32);
+                .motor_max_force(config.finger_force as f32)
+                .build();
+            if let Some(f) = &robot.arm.flange {
+                // A mounted gripper's hand frame is the last link's turned and moved by the
+                // flange: the fingers slide along the hand's closing axis from its TCP, as the
+                // palm and the finger bodies' spawn poses stand, not the last link's.
+                let f2 = pose_to_iso(&joint.data.local_frame2);
+                let at = f * tcp;
+                let f1 = Isometry3::from_parts(at.translation, at.rotation * f2.rotation);
+                joint.data.set_local_frame1(iso_to_pose(&f1));
+            }
             let handle = world
                 .insert_multibody_joint(last, body, joint)
                 .expect("a finger is a new body");
