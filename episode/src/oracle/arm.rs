@@ -16,6 +16,9 @@ const LOW: f64 = 0.05;
 /// How far a low tool rises before moving sideways, m (the machine's retreat height).
 const RISE: f64 = 0.10;
 
+/// A tool whose approach axis has this large a sideways (base y) component leans sideways.
+const SIDEWAYS: f64 = 0.2;
+
 /// A sequence of tool poses (base frame) visited with raised-cosine blends.
 #[derive(Debug, Clone, PartialEq)]
 pub(super) struct ArmPath {
@@ -55,7 +58,16 @@ impl ArmPath {
         let s = stow.translation.vector;
         let at = path.end().translation.vector;
         if here_max.is_some() && (at.xy() - s.xy()).norm() > 0.05 {
-            path.go(stow.rotation, [s.x, s.y, at.z]);
+            // A hand leaning sideways (about its closing axis over flat work, see
+            // `headroom::for_work`) turns a held fork's length as it straightens: under the
+            // board its end strikes the shelf and the arm sticks (the Panda, dev). It
+            // straightens out in the open, on the next leg. A top-down hand (the shipped arm's)
+            // and one leaning towards the board turn on the way out as before.
+            let sideways = (from.rotation * Vector3::x()).y.abs() > SIDEWAYS;
+            path.go(
+                if sideways { from.rotation } else { stow.rotation },
+                [s.x, s.y, at.z],
+            );
         }
         if is_move {
             path.go(stow.rotation, [s.x, s.y, s.z]);

@@ -208,19 +208,19 @@ impl OraclePolicy {
         // The board that matters is the first one above the hand.
         let physical = self.grasp == GraspMode::Physical;
         // The physical grasp's pinches are planned top-down: only the abstract mode leans.
-        let room = headroom::headroom(self.wrist_height, !physical);
-        let here_max = headroom::max_tool_z(scene, [t.x, t.y], t.z, room.clear);
         let work = match p.target {
             TaskTarget::Pick { object } => p.objects.get(object).map(|o| [o.pose[0], o.pose[1], o.pose[2]]),
             TaskTarget::Place { target, .. } => Some(target),
             TaskTarget::Base { .. } => None,
         };
+        let mut room = headroom::headroom(self.wrist_height, !physical);
+        if let Some(w) = work {
+            room = headroom::for_work(room, scene, w);
+        }
+        let here_max = headroom::max_tool_z(scene, [t.x, t.y], t.z, room.clear);
         let target_max = work.and_then(|w| headroom::max_tool_z(scene, [w[0], w[1]], w[2], room.clear));
         // Only work under a board leans (objects picked and placed in the open stay upright).
-        // Leaning about the base's left axis, negative: the fingers point away from the base.
-        let tilt = (room.tilt)
-            .filter(|_| target_max.is_some())
-            .map(|a| UnitQuaternion::from_axis_angle(&nalgebra::Vector3::y_axis(), -a));
+        let tilt = room.tilt.filter(|_| target_max.is_some());
         Ok(TaskCtl::new(goal, tool, holding, approach, here_max, target_max, physical).with_tilt(tilt))
     }
 

@@ -20,10 +20,14 @@ use kitchen_r_sim::oracle::manip::{ManipParams, Phase, PhasePlan, PickPlan, Plac
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 
 use super::arm::ArmPath;
+use super::headroom::Lean;
 
 /// Physical grasp mode: the grasp and lift phases' durations, s (abstract: 1 and 2).
 const PHYSICAL_GRASP_S: f64 = 2.0;
 const PHYSICAL_LIFT_S: f64 = 3.0;
+
+/// The least lift of a hand leaning over flat work under a board, m ([`TaskCtl::plan`]).
+const FLAT_LIFT: f64 = 0.06;
 
 /// Control period, s (the paper's 10 Hz).
 pub(super) const DT: f64 = 0.1;
@@ -74,10 +78,10 @@ enum Stage {
 impl Stage {
     /// The commanded tool pose (base frame) `t` seconds into a timed stage (the arm's prelude,
     /// the pick-and-place machine); `Isometry3::identity()` for the others, which have no clock.
-    fn pose_at(&self, t: f64, tilt: Option<UnitQuaternion<f64>>) -> Isometry3<f64> {
+    fn pose_at(&self, t: f64, tilt: Option<Lean>) -> Isometry3<f64> {
         match self {
             Stage::Arm(path, _) => path.at(t),
-            Stage::Manip(plan, _, _) => tilted(plan.target_at(t).0, tilt),
+            Stage::Manip(plan, _, _) => tilted(plan.target_at(t).0, tilt, false),
             _ => Isometry3::identity(),
         }
     }
@@ -135,18 +139,45 @@ pub(super) struct TaskCtl {
     ceiling: Option<f64>,
     /// The physical grasp mode: no re-planning from the state (see [`TaskCtl::off_plan`]).
     physical: bool,
-    /// A turn (base frame, about the tool centre point) applied to every pose of the
+    /// A lean (about the tool centre point, see [`tilted`]) applied to every pose of the
     /// pick-and-place machine: an arm whose wrist stands high over a top-down tool leans its
     /// fingers away from the base so the wrist stands back and lower (`OraclePolicy`'s tilt).
-    tilt: Option<UnitQuaternion<f64>>,
+    tilt: Option<Lean>,
 }
 
-/// `pose` turned by `tilt` about its own position (base frame).
-fn tilted(pose: Isometry3<f64>, tilt: Option<UnitQuaternion<f64>>) -> Isometry3<f64> {
-    match tilt {
-        Some(r) => Isometry3::from_parts(pose.translation, r * pose.rotation),
-        None => pose,
-    }
+/// `pose` leaned by `tilt` about its own position, the fingers turned away from the base
+/// (`undo`: the lean taken off a leaned pose). [`Lean::Reach`] turns about the base's left
+/// axis; [`Lean::Closing`] about the tool's own closing axis (tool y), so both fingers stay level
+/// over flat work (`headroom::for_work`).
+fn tilted(pose: Isometry3<f64>, tilt: Option<Lean>, undo: bool) -> Isometry3<f64> {
+    let turn = match tilt {
+        None => return pose,
+        // Negative about the base's left axis: the fingers point away from the base.
+        Some(Lean::Reach(a)) => {
+            let r = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), -a);
+            let r = if undo { r.inverse() } else { r };
+            return Isometry3::from_parts(pose.translation, r * pose.rotation);
+        }
+        Some(Lean::Closing(a)) => {
+            // Turned by θ about tool y, the approach axis (tool x) moves along −tool z: the sign
+            // that points it away from the base (base +x), or, closing along the base's forward
+            // axis, to the base's right (the side the arms are mounted on). The lean keeps the
+            // sign of tool z's components, so a leaned pose finds the same sign.
+            let z = pose.rotation * Vector3::z();
+            let s = if z.x.abs() > 1e-3 {
+                -z.x.signum()
+            } else {
+                z.y.signum()
+            };
+            UnitQuaternion::from_axis_angle(&Vector3::y_axis(), s * a)
+        }
+    };
+    let rotation = if undo {
+        pose.rotation * turn.inverse()
+    } else {
+        pose.rotation * turn
+    };
+    Isometry3::from_parts(pose.translation, rotation)
 }
 
 impl TaskCtl {
@@ -186,7 +217,7 @@ impl TaskCtl {
     }
 
     /// Work with the machine's poses turned by `tilt` (see [`TaskCtl::tilt`]).
-    pub(super) fn with_tilt(mut self, tilt: Option<UnitQuaternion<f64>>) -> TaskCtl {
+    pub(super) fn with_tilt(mut self, tilt: Option<Lean>) -> TaskCtl {
         self.tilt = tilt;
         self
     }
@@ -380,7 +411,7 @@ impl TaskCtl {
                         *t = t.min(plan.duration() - last);
                     }
                     let (tool, g, _) = plan.target_at(*t);
-                    (self.tool, self.gripper) = (tilted(tool, self.tilt), g);
+                    (self.tool, self.gripper) = (tilted(tool, self.tilt, false), g);
                     break;
                 }
                 Stage::Done => break,
@@ -392,6 +423,7 @@ impl TaskCtl {
     fn plan(&self, now: &Now, world: &World) -> Option<PhasePlan> {
         let model = world.model.as_ref()?;
         let mut params = self.params.clone();
+        let open_lift = params.lift_height;
         if let Some(m) = self.ceiling {
             let surface_grasp = match self.goal {
                 Goal::Place { target } => target[2] + model.grasp_offset[2],
@@ -401,11 +433,17 @@ impl TaskCtl {
             params.approach_height = params.approach_height.min(room);
             params.lift_height = params.lift_height.min(room);
             params.retreat_height = params.retreat_height.min(room);
+            if let Some(Lean::Closing(_)) = self.tilt {
+                // A hand leaning over flat work closes on it up to 2 cm over the grasp point:
+                // the Kinova3's room under the board above (4.4 cm over a fork) lifted forks 2.7
+                // cm of the 3 a pick needs. Leaning, its wrist stands lower than the room allows.
+                params.lift_height = params.lift_height.max(FLAT_LIFT.min(open_lift));
+            }
         }
         let p = &params;
         // The machine plans top-down; its start is the commanded pose with the tilt taken off,
         // so the turned poses it commands begin exactly where the hand was told to be.
-        let start = tilted(self.tool, self.tilt.map(|r| r.inverse()));
+        let start = tilted(self.tool, self.tilt, true);
         match self.goal {
             Goal::Move { .. } => None,
             Goal::Pick => {
@@ -436,7 +474,7 @@ impl TaskCtl {
                 // real grip shifts the target once (the correction is exact: the tool
                 // orientation does not depend on the target position).
                 if let Some(held) = world.held_in_tool {
-                    let lower = tilted(plan_for(centre).plan.targets()[1].ee_in_base, self.tilt);
+                    let lower = tilted(plan_for(centre).plan.targets()[1].ee_in_base, self.tilt, false);
                     let released = (base * lower * held).translation.vector;
                     let want = Vector3::from(target) + Vector3::z() * p.release_height;
                     let err = released - want;
