@@ -28,7 +28,7 @@ pub(super) struct Headroom {
 pub(super) enum Lean {
     /// About the base's left axis: the wrist stands back towards the board's front edge.
     Reach(f64),
-    /// About the tool's own closing axis, so both fingers stay level (flat work, see [`flat`]).
+    /// About the tool's own closing axis, so both fingers stay level (flat work, see [`for_work`]).
     Closing(f64),
 }
 
