@@ -23,22 +23,9 @@ fn robosuite_catalogue() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/objects/robosuite.toml")
 }
 
-fn wheel_unpacked() -> bool {
-    if std::env::var_os("ROBOSUITE_ASSETS").is_some() {
-        return true;
-    }
-    assert_ne!(
-        std::env::var("CI").as_deref(),
-        Ok("true"),
-        "CI needs ROBOSUITE_ASSETS"
-    );
-    eprintln!("skipped: export ROBOSUITE_ASSETS=\"$(scripts/robosuite-assets.sh)\"");
-    false
-}
-
 #[test]
 fn robosuite_objects_load_and_the_oracle_picks_one() {
-    if !wheel_unpacked() {
+    if !crate::test_oracle::robosuite_assets() {
         return;
     }
     let cat = Catalogue::load(&robosuite_catalogue()).unwrap();

@@ -6,6 +6,7 @@
 
 use std::path::{Path, PathBuf};
 
+use kitchen_r_core::GraspMode;
 use kitchen_r_core::dataset::{Instruction, Split};
 use kitchen_r_sim::{Assets, RobotConfig, SimConfig};
 
@@ -89,40 +90,35 @@ fn a_urdf_variant_of_the_shipped_robot_completes_a_dev_instruction() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
-/// robosuite 1.5.2's four arms, mounted on the base from their sidecars
-/// (`configs/robots/robosuite/`), each complete the first two dev instructions with the oracle,
-/// reading the wheel's own MJCF and meshes from `ROBOSUITE_ASSETS` (scripts/robosuite-assets.sh;
-/// the test skips with that command outside CI and fails in CI without it). Not yet every dev
-/// instruction: the README has each arm's figures.
-#[test]
-fn the_robosuite_arms_complete_the_first_dev_instructions() {
-    if std::env::var_os("ROBOSUITE_ASSETS").is_none() {
-        assert_ne!(
-            std::env::var("CI").as_deref(),
-            Ok("true"),
-            "CI needs ROBOSUITE_ASSETS"
-        );
-        eprintln!("skipped: export ROBOSUITE_ASSETS=\"$(scripts/robosuite-assets.sh)\"");
-        return;
+/// Every task of the first `n` dev instructions, run by the oracle in grasp mode `mode` with each
+/// of robosuite 1.5.2's four arms mounted on the base from their sidecars
+/// (`configs/robots/robosuite/`), read from the wheel's own MJCF and meshes; returns those
+/// instructions (empty when the test skips without `ROBOSUITE_ASSETS`, see
+/// [`crate::test_oracle::robosuite_assets`]).
+fn robosuite_arms_complete(n: usize, mode: GraspMode) -> Vec<Instruction> {
+    if !crate::test_oracle::robosuite_assets() {
+        return Vec::new();
     }
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/robots/robosuite");
     let first: Vec<Instruction> = instructions(Split::Dev, None)
         .unwrap()
         .into_iter()
-        .take(2)
+        .take(n)
         .collect();
+    let mut config = SimConfig::load_default().unwrap();
+    config.grasp.mode = mode;
     for name in ["panda", "ur5e", "kinova3", "xarm7"] {
         let assets = assets_with(dir.join(format!("{name}.toml")));
         let cfgs = episode_configs(&assets, &first, 0, None).unwrap();
         for (cfg, ins) in cfgs.iter().zip(&first) {
             // Every task succeeds; unlike the shipped robot's episodes, a mounted arm's hand may
             // brush furniture and make the oracle re-plan a phase on the way.
-            let mut sim = crate::test_oracle::blind_sim(&assets, cfg);
+            let mut sim = crate::test_oracle::blind_sim_with(&assets, config.clone(), cfg);
             let run = crate::runner::RunOptions {
                 privileged: true,
                 ..crate::runner::RunOptions::default()
             };
-            let mut oracle = crate::oracle::OraclePolicy::new(&assets);
+            let mut oracle = crate::oracle::OraclePolicy::new(&assets).with_grasp_mode(mode);
             let out = crate::runner::run_episode(&mut sim, &mut oracle, &run, None, &mut ()).unwrap();
             assert!(
                 out.tasks.iter().all(|t| t.success),
@@ -132,6 +128,15 @@ fn the_robosuite_arms_complete_the_first_dev_instructions() {
             );
         }
     }
+    first
+}
+
+/// robosuite's four arms each complete the first two dev instructions with the oracle (the test
+/// skips with `scripts/robosuite-assets.sh`'s command outside CI and fails in CI without it).
+/// Not yet every dev instruction: the README has each arm's figures.
+#[test]
+fn the_robosuite_arms_complete_the_first_dev_instructions() {
+    robosuite_arms_complete(2, GraspMode::Abstract);
 }
 
 /// In the physical grasp mode, where only the finger pads' friction holds an object, each
@@ -140,43 +145,9 @@ fn the_robosuite_arms_complete_the_first_dev_instructions() {
 /// slid along the last link's axes, beside the object, and no pick succeeded before).
 #[test]
 fn the_robosuite_arms_pick_and_place_in_the_physical_grasp_mode() {
-    if std::env::var_os("ROBOSUITE_ASSETS").is_none() {
-        assert_ne!(
-            std::env::var("CI").as_deref(),
-            Ok("true"),
-            "CI needs ROBOSUITE_ASSETS"
-        );
-        eprintln!("skipped: export ROBOSUITE_ASSETS=\"$(scripts/robosuite-assets.sh)\"");
-        return;
-    }
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/robots/robosuite");
-    let first: Vec<Instruction> = instructions(Split::Dev, None)
-        .unwrap()
-        .into_iter()
-        .take(1)
-        .collect();
-    let mut config = SimConfig::load_default().unwrap();
-    config.grasp.mode = kitchen_r_core::GraspMode::Physical;
-    for name in ["panda", "ur5e", "kinova3", "xarm7"] {
-        let assets = assets_with(dir.join(format!("{name}.toml")));
-        let cfg = &episode_configs(&assets, &first, 0, None).unwrap()[0];
-        let blind = kitchen_r_sim::SensorsConfig {
-            cameras: Vec::new(),
-            lidar: None,
-            ..kitchen_r_sim::SensorsConfig::default()
-        };
-        let mut sim = kitchen_r_sim::Sim::new(assets.clone(), config.clone(), blind, cfg)
-            .unwrap()
-            .0;
-        let run = crate::runner::RunOptions {
-            privileged: true,
-            ..crate::runner::RunOptions::default()
-        };
-        let mut oracle =
-            crate::oracle::OraclePolicy::new(&assets).with_grasp_mode(kitchen_r_core::GraspMode::Physical);
-        let out = crate::runner::run_episode(&mut sim, &mut oracle, &run, None, &mut ()).unwrap();
-        let manipulations = first[0].plan.iter().filter(|s| !s.starts_with("move")).count();
+    let first = robosuite_arms_complete(1, GraspMode::Physical);
+    if let Some(ins) = first.first() {
+        let manipulations = ins.plan.iter().filter(|s| !s.starts_with("move")).count();
         assert!(manipulations >= 2, "the instruction picks and places");
-        assert!(out.tasks.iter().all(|t| t.success), "{name}: {:?}", out.tasks);
     }
 }

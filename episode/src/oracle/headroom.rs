@@ -131,6 +131,17 @@ pub(super) fn max_tool_z(scene: &Scene, xy: [f64; 2], z: f64, clear: f64) -> Opt
 mod tests {
     use super::*;
 
+    /// The committed kitchen_b, whose west-wall shelf holds the purple zone's 0.85 m board.
+    fn kitchen_b() -> Scene {
+        let assets = kitchen_r_core::assets::assets_dir();
+        let catalogue = kitchen_r_core::catalogue::Catalogue::load(&assets.join("objects.toml")).unwrap();
+        Scene::load_all(&assets.join("scenes"), &catalogue)
+            .unwrap()
+            .into_iter()
+            .find(|s| s.id == "kitchen_b")
+            .unwrap()
+    }
+
     #[test]
     fn the_shipped_arm_keeps_its_clearance_and_a_higher_wrist_leans() {
         let mut robot = kitchen_r_sim::robot::desc::RobotDesc::load_default().unwrap();
@@ -153,15 +164,7 @@ mod tests {
 
     #[test]
     fn flat_work_under_a_board_leans_about_the_closing_axis() {
-        let scenes = Scene::load_all(
-            &kitchen_r_core::assets::assets_dir().join("scenes"),
-            &kitchen_r_core::catalogue::Catalogue::load(
-                &kitchen_r_core::assets::assets_dir().join("objects.toml"),
-            )
-            .unwrap(),
-        )
-        .unwrap();
-        let b = scenes.iter().find(|s| s.id == "kitchen_b").unwrap();
+        let b = &kitchen_b();
         let leaning = headroom(Some(0.33), true);
         // A fork on the purple zone's 0.85 m board, a cup standing on it.
         let fork = for_work(leaning, b, [0.2, 1.7, 0.856]);
@@ -175,15 +178,7 @@ mod tests {
 
     #[test]
     fn a_shelf_level_has_a_ceiling_and_a_counter_top_has_none() {
-        let scenes = Scene::load_all(
-            &kitchen_r_core::assets::assets_dir().join("scenes"),
-            &kitchen_r_core::catalogue::Catalogue::load(
-                &kitchen_r_core::assets::assets_dir().join("objects.toml"),
-            )
-            .unwrap(),
-        )
-        .unwrap();
-        let b = scenes.iter().find(|s| s.id == "kitchen_b").unwrap();
+        let b = &kitchen_b();
         // The purple zone: the 0.85 m board of the west-wall shelf, the next board at 1.25 m.
         let m = max_tool_z(b, [0.2, 1.7], 0.9, WRIST_CLEAR).unwrap();
         assert!((m - (1.23 - WRIST_CLEAR)).abs() < 1e-9, "{m}");
