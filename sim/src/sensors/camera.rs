@@ -157,6 +157,22 @@ mod tests {
     use rand::{RngExt, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
+    /// A camera pose: the eye within `half` of the origin sideways and at a height in `z`,
+    /// looking anywhere, mostly level or down.
+    fn random_view(rng: &mut ChaCha8Rng, half: f64, z: std::ops::Range<f64>) -> Isometry3<f64> {
+        let eye = Translation3::new(
+            rng.random_range(-half..half),
+            rng.random_range(-half..half),
+            rng.random_range(z),
+        );
+        let rot = UnitQuaternion::from_euler_angles(
+            rng.random_range(-0.5..0.5),
+            rng.random_range(-0.3..1.5),
+            rng.random_range(-3.1..3.1),
+        );
+        Isometry3::from_parts(eye, rot)
+    }
+
     /// The materials the test worlds' tags name (`material: k % 3`).
     fn three_materials() -> [Material; 3] {
         [
@@ -255,22 +271,13 @@ mod tests {
         };
         let mut images = Vec::new();
         for shot in 0..12 {
-            let eye = Translation3::new(
-                rng.random_range(-1.2..1.2),
-                rng.random_range(-1.2..1.2),
-                rng.random_range(0.1..1.5),
-            );
-            let rot = UnitQuaternion::from_euler_angles(
-                rng.random_range(-0.5..0.5),
-                rng.random_range(-0.3..1.5),
-                rng.random_range(-3.1..3.1),
-            );
+            let pose = random_view(&mut rng, 1.2, 0.1..1.5);
             let projection = if shot % 6 == 5 {
                 Projection::Ortho { scale: 0.02 }
             } else {
                 Projection::Pinhole { fov: 1.2 }
             };
-            images.push(ctx.render("c", &Isometry3::from_parts(eye, rot), projection, 64, 64, 20.0));
+            images.push(ctx.render("c", &pose, projection, 64, 64, 20.0));
         }
         assert_eq!(crate::test_support::image_hash(&images), 13142985655491809533);
     }
@@ -289,17 +296,7 @@ mod tests {
         let (mut hits, mut pixels) = (0, 0);
         for shot in 0..24 {
             // Eyes anywhere in the clutter, some inside or touching a collider, looking anywhere.
-            let eye = Translation3::new(
-                rng.random_range(-2.5..2.5),
-                rng.random_range(-2.5..2.5),
-                rng.random_range(0.05..2.0),
-            );
-            let rot = UnitQuaternion::from_euler_angles(
-                rng.random_range(-0.5..0.5),
-                rng.random_range(-0.3..1.5),
-                rng.random_range(-3.1..3.1),
-            );
-            let pose = Isometry3::from_parts(eye, rot);
+            let pose = random_view(&mut rng, 2.5, 0.05..2.0);
             let projection = if shot % 6 == 5 {
                 Projection::Ortho { scale: 0.03 }
             } else {
