@@ -177,6 +177,8 @@ class Batcher(RequestBatcher):
 
     def __init__(self, model, max_batch=32, autocast=True, graphs=False):
         self.model = model
+        # The weights stay on one device (DAgger changes them in place), so read it once.
+        self.device = next(model.parameters()).device
         self.autocast = autocast
         self.graphs = {} if graphs else None
         super().__init__(self._decide, max_batch)
@@ -187,7 +189,7 @@ class Batcher(RequestBatcher):
     def warm_up(self):
         """One forward of every batch shape `_forward` pads to (on the CPU, of batch 1); with
         `graphs`, each shape's graph is captured here, before the server takes calls."""
-        dev = next(self.model.parameters()).device
+        dev = self.device
         top = max(1, self.max_batch - 1).bit_length()
         z = FT.RENDER_SIZE
         x = (
@@ -213,8 +215,7 @@ class Batcher(RequestBatcher):
 
     @torch.no_grad()
     def _forward(self, inputs):
-        m = self.model
-        dev = next(m.parameters()).device
+        dev = self.device
         # Batches padded to a power of two: few shapes, so cuDNN's autotuning runs only a few times.
         n = 1 << (len(inputs) - 1).bit_length() if dev.type == "cuda" else len(inputs)
         items = list(inputs) + [inputs[0]] * (n - len(inputs))
@@ -236,8 +237,7 @@ class Batcher(RequestBatcher):
         capture failed (that size then runs eagerly)."""
         if n in self.graphs:
             return self.graphs[n]
-        dev = next(self.model.parameters()).device
-        static = [x.to(dev) for x in like]
+        static = [x.to(self.device) for x in like]
         try:
             side = torch.cuda.Stream()
             side.wait_stream(torch.cuda.current_stream())
