@@ -80,6 +80,13 @@ impl ArmPath {
         path
     }
 
+    /// The path with a last leg that turns the tool to `rot` where it ends.
+    pub(super) fn then_turn(mut self, rot: UnitQuaternion<f64>) -> ArmPath {
+        let p = self.end().translation.vector;
+        self.go(rot, [p.x, p.y, p.z]);
+        self
+    }
+
     fn end(&self) -> Isometry3<f64> {
         self.legs.last().map_or(self.start, |l| l.0)
     }

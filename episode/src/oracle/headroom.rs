@@ -4,6 +4,7 @@
 //! board above the level being served, and a link pressed into fixed geometry freezes the arm.
 //! So the oracle caps tool heights over a shelf and reaches in or out horizontally.
 
+use kitchen_r_core::catalogue::Shape;
 use kitchen_r_core::scene::Scene;
 
 /// Thickness of the twin's shelf boards (`sim/src/furniture.rs`): a surface at height `s` is a
@@ -35,6 +36,20 @@ pub(super) enum Lean {
 /// An object centre (or place target) this close over the surface it stands on is flat work
 /// (a fork 6 mm, a plate 10 mm; an apple, a bowl or a cup stands 3–5 cm over it).
 const FLAT: f64 = 0.015;
+
+/// A flat object this wide in every direction from its centre is plate-like, m ([`plate_like`]).
+const WIDE: f64 = 0.05;
+
+/// Whether an object is flat and reaches [`WIDE`] beyond its centre in every horizontal
+/// direction (a plate, not a fork): tilted by a leaning hand, its edge hangs far below its
+/// centre (a plate's 8 cm at 45°), so it is put down only level (`OraclePolicy::start_task`).
+pub(super) fn plate_like(shape: &Shape) -> bool {
+    let narrowest = match shape {
+        Shape::Sphere { radius } | Shape::Cylinder { radius, .. } | Shape::Bowl { radius, .. } => *radius,
+        Shape::Cuboid { size } | Shape::Mesh { size, .. } => size[0].min(size[1]) / 2.0,
+    };
+    shape.half_height() <= FLAT && narrowest >= WIDE
+}
 
 /// The headroom of a hand working at world `w` under a board, given the arm's `room` for it
 /// ([`headroom`]). Turned about the base's left axis, a leaning hand pinches a fork lying
@@ -130,6 +145,16 @@ pub(super) fn max_tool_z(scene: &Scene, xy: [f64; 2], z: f64, clear: f64) -> Opt
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn of_the_catalogue_only_the_plate_is_plate_like() {
+        let assets = kitchen_r_core::assets::assets_dir();
+        let catalogue = kitchen_r_core::catalogue::Catalogue::load(&assets.join("objects.toml")).unwrap();
+        for id in ["apple", "bowl", "cup", "fork", "plate"] {
+            let shape = &catalogue.model(id).unwrap().shape;
+            assert_eq!(plate_like(shape), id == "plate", "{id}");
+        }
+    }
 
     /// The committed kitchen_b, whose west-wall shelf holds the purple zone's 0.85 m board.
     fn kitchen_b() -> Scene {

@@ -29,7 +29,7 @@ use kitchen_r_sim::oracle::theta_star::{PlannerParams, theta_star};
 use kitchen_r_sim::robot::desc::BaseDesc;
 use kitchen_r_sim::task::TaskTarget;
 use kitchen_r_sim::{Assets, SimConfig};
-use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 
 use crate::policy::{ACTION_DIM, HORIZON, Policy, PolicyError, PolicyInput, PolicySpec, Privileged};
 use crate::runner::RunOptions;
@@ -219,9 +219,35 @@ impl OraclePolicy {
         }
         let here_max = headroom::max_tool_z(scene, [t.x, t.y], t.z, room.clear);
         let target_max = work.and_then(|w| headroom::max_tool_z(scene, [w[0], w[1]], w[2], room.clear));
-        // Only work under a board leans (objects picked and placed in the open stay upright).
-        let tilt = room.tilt.filter(|_| target_max.is_some());
-        Ok(TaskCtl::new(goal, tool, holding, approach, here_max, target_max, physical).with_tilt(tilt))
+        // Only work under a board leans (objects picked and placed in the open stay upright),
+        // except a plate: a hand that leans over it under a board leans over it everywhere, so
+        // the plate is level whenever the hand leans (picked top-down and put on a shelf
+        // leaning, it was released tilted 45°, its low rim 8 cm under its centre: it struck the
+        // shelf and lay 6–8 cm off its target, 3–4 dev places with each arm but the Kinova3).
+        let plate = match p.target {
+            TaskTarget::Pick { object } | TaskTarget::Place { object, .. } => p.objects.get(object),
+            TaskTarget::Base { .. } => None,
+        }
+        .and_then(|o| self.catalogue.model(&o.model))
+        .is_some_and(|m| headroom::plate_like(&m.shape));
+        let tilt = room
+            .tilt
+            .filter(|t| target_max.is_some() || (plate && matches!(t, headroom::Lean::Closing(_))));
+        let ctl = TaskCtl::new(goal, tool, holding, approach, here_max, target_max, physical).with_tilt(tilt);
+        // Put on a shelf, a plate picked in the open (held level by a leaning hand, then
+        // straightened for the drive, so tilted in the hand) is levelled again before the hand
+        // goes in under the board: tilted, it struck the shelf on the way in (the Kinova3, dev).
+        let level = match (held_plate(p, &self.catalogue), target_max, room.tilt) {
+            (Some(in_hand), Some(_), Some(_)) => {
+                let up = tool.rotation * in_hand.rotation * Vector3::z();
+                UnitQuaternion::rotation_between(&up, &Vector3::z())
+            }
+            _ => None,
+        };
+        Ok(match level {
+            Some(turn) => ctl.turning_hand_to(here_max, turn * tool.rotation),
+            None => ctl,
+        })
     }
 
     fn world(&self, p: &Privileged) -> World {
@@ -366,4 +392,13 @@ impl Policy for OraclePolicy {
         });
         Ok(chunk)
     }
+}
+
+/// The held object's pose in the tool frame, if it is plate-like ([`headroom::plate_like`]).
+fn held_plate(p: &Privileged, catalogue: &Catalogue) -> Option<Isometry3<f64>> {
+    let name = p.held.as_deref()?;
+    let o = p.objects.iter().find(|o| o.name == name)?;
+    let plate = headroom::plate_like(&catalogue.model(&o.model)?.shape);
+    let tool_world = kitchen_r_sim::oracle::manip::base_isometry(p.base_pose) * iso(&p.ee_pose);
+    plate.then(|| tool_world.inverse() * iso(&o.pose))
 }

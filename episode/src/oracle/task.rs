@@ -222,6 +222,26 @@ impl TaskCtl {
         self
     }
 
+    /// The prelude with the tool turned to `rotation` (base frame): its stow pose takes that
+    /// orientation, and the hand ends turned to it. A hand holding a plate tilted levels it
+    /// before it goes in under a board (see `OraclePolicy::start_task`). `here_max`: as for
+    /// [`TaskCtl::new`].
+    pub(super) fn turning_hand_to(mut self, here_max: Option<f64>, rotation: UnitQuaternion<f64>) -> TaskCtl {
+        if let Stage::Arm(..) = self.stage {
+            let holding = self.gripper == 0.0;
+            let stow = if holding {
+                self.params.carry
+            } else {
+                self.params.home
+            };
+            let stow = Isometry3::from_parts(stow.translation, rotation);
+            let is_move = matches!(self.goal, Goal::Move { .. });
+            let arm = ArmPath::prelude(self.tool, stow, here_max, self.ceiling, is_move).then_turn(rotation);
+            self.stage = Stage::Arm(arm, 0.0);
+        }
+        self
+    }
+
     /// Whether the pick-and-place machine ran to its end.
     pub(super) fn manipulation_finished(&self) -> bool {
         let capped = self.ceiling.is_some();
