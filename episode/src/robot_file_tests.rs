@@ -166,6 +166,22 @@ fn the_robosuite_arms_put_a_plate_picked_on_a_counter_on_a_shelf_level() {
     }
 }
 
+/// A fork picked from under a shelf board is pulled out and carried away (dev-0052: the silver
+/// fork from kitchen_b's wall shelf, then the red cup back to it): a hand leaning sideways sinks
+/// a little before it pulls back, so the xArm7's links do not press into the board and freeze
+/// the arm (the move after the pick never started).
+#[test]
+fn the_robosuite_arms_pull_a_fork_out_from_under_a_shelf_board() {
+    let chosen = robosuite_arms_complete_these(GraspMode::Abstract, |_, ins| ins.id == "dev-0052");
+    if let Some(ins) = chosen.first() {
+        assert!(
+            ins.plan.iter().any(|s| s == "pick the silver fork"),
+            "{:?}",
+            ins.plan
+        );
+    }
+}
+
 /// In the physical grasp mode, where only the finger pads' friction holds an object, each
 /// robosuite arm picks and places through the first dev instruction: the fingers slide along the
 /// mounted gripper's own closing axis from its tool centre, where its flange puts them (they

@@ -36,7 +36,8 @@ fn blend_time(a: &Isometry3<f64>, b: &Isometry3<f64>) -> f64 {
 impl ArmPath {
     /// The motion before a task: a low tool rises by [`RISE`] (it may be around an object it
     /// just released, or hold one just lifted off a surface), capped at `here_max` under a
-    /// board; under a board it then pulls back horizontally to the stow position; a move then
+    /// board; under a board it then pulls back horizontally to the stow position (a hand leaning
+    /// sideways sinks by `sink` first, see `headroom::sink_before_pullback`); a move then
     /// goes to `stow`, a manipulation lowers the tool to `target_max` when the work is under a
     /// board.
     pub(super) fn prelude(
@@ -45,6 +46,7 @@ impl ArmPath {
         here_max: Option<f64>,
         target_max: Option<f64>,
         is_move: bool,
+        sink: f64,
     ) -> ArmPath {
         let mut path = ArmPath {
             start: from,
@@ -64,6 +66,11 @@ impl ArmPath {
             // straightens out in the open, on the next leg. A top-down hand (the shipped arm's)
             // and one leaning towards the board turn on the way out as before.
             let sideways = (from.rotation * Vector3::x()).y.abs() > SIDEWAYS;
+            // Leaning sideways, it first sinks a little (see `headroom::sink_before_pullback`).
+            if sideways && sink > 0.0 {
+                path.go(from.rotation, [at.x, at.y, at.z - sink]);
+            }
+            let at = path.end().translation.vector;
             path.go(
                 if sideways { from.rotation } else { stow.rotation },
                 [s.x, s.y, at.z],
@@ -133,7 +140,7 @@ mod tests {
     fn a_low_tool_rises_before_going_to_stow_and_ends_there() {
         let low = Isometry3::from_parts(Translation3::new(0.6, 0.0, 0.95), top_down(0.3));
         let stow = Isometry3::from_parts(Translation3::new(0.30, -0.12, 1.10), top_down(0.0));
-        let p = ArmPath::prelude(low, stow, None, None, true);
+        let p = ArmPath::prelude(low, stow, None, None, true, 0.0);
         let mid = p.at(p.legs[0].1);
         assert!((mid.translation.z - 1.05).abs() < 1e-9 && (mid.translation.x - 0.6).abs() < 1e-9);
         assert!((p.at(p.duration() + 1.0).translation.vector - stow.translation.vector).norm() < 1e-12);
@@ -144,21 +151,21 @@ mod tests {
     fn under_a_board_the_tool_rises_only_to_the_cap_and_pulls_back_level() {
         let low = Isometry3::from_parts(Translation3::new(0.6, 0.0, 0.95), top_down(0.0));
         let stow = Isometry3::from_parts(Translation3::new(0.30, -0.12, 1.10), top_down(0.0));
-        let p = ArmPath::prelude(low, stow, Some(1.0), None, true);
+        let p = ArmPath::prelude(low, stow, Some(1.0), None, true, 0.0);
         let legs: Vec<[f64; 3]> = p.legs.iter().map(|l| l.0.translation.vector.into()).collect();
         assert_eq!(
             legs,
             vec![[0.6, 0.0, 1.0], [0.30, -0.12, 1.0], [0.30, -0.12, 1.10]]
         );
         // Reaching into a shelf from stow: straight down to the cap first.
-        let p = ArmPath::prelude(stow, stow, None, Some(1.0), false);
+        let p = ArmPath::prelude(stow, stow, None, Some(1.0), false, 0.0);
         assert_eq!(p.end().translation.vector, Vector3::new(0.30, -0.12, 1.0));
     }
 
     #[test]
     fn a_tool_already_at_stow_needs_no_motion() {
         let stow = Isometry3::from_parts(Translation3::new(0.24, -0.12, 0.81), top_down(0.0));
-        let p = ArmPath::prelude(stow, stow, None, None, true);
+        let p = ArmPath::prelude(stow, stow, None, None, true, 0.0);
         assert_eq!(p.duration(), 0.0);
         assert_eq!(p.at(3.0), stow);
     }

@@ -73,6 +73,24 @@ pub(super) fn for_work(room: Headroom, scene: &Scene, w: [f64; 3]) -> Headroom {
     }
 }
 
+/// How far a hand leaning sideways under a board sinks before it pulls back, m: at the cap
+/// under the board, pulling a fork out pressed the xArm7's links into the board and froze the
+/// arm (dev-0030, 0052 and 0150: the move after the pick never started; 2, 4 and 6 cm all freed
+/// it on dev-0052).
+const SINK: f64 = 0.04;
+/// The least a sinking tool keeps over the surface below it, m: the Kinova3's hand, 7 cm over
+/// the shelf after a fork pick (its room under the board is 4.4 cm, its lift 6), sunk 4 cm
+/// and stuck instead (the moves after 20 fork picks, dev).
+const SINK_ABOVE: f64 = 0.08;
+
+/// How far a hand at world `tool` sinks before it pulls back out from under a board (see
+/// `arm::ArmPath::prelude`): [`SINK`], but no lower than [`SINK_ABOVE`] over the surface
+/// below it.
+pub(super) fn sink_before_pullback(scene: &Scene, tool: [f64; 3]) -> f64 {
+    surface_below(scene, [tool[0], tool[1]], tool[2])
+        .map_or(0.0, |s| (tool[2] - s - SINK_ABOVE).clamp(0.0, SINK))
+}
+
 /// The highest surface at or below `z` over world `xy`, if any.
 fn surface_below(scene: &Scene, xy: [f64; 2], z: f64) -> Option<f64> {
     scene
@@ -145,6 +163,15 @@ pub(super) fn max_tool_z(scene: &Scene, xy: [f64; 2], z: f64, clear: f64) -> Opt
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_hand_sinks_before_pulling_back_only_as_far_as_keeps_it_over_the_shelf() {
+        let s = kitchen_b();
+        // Over the purple zone's 0.85 m shelf level (the wall shelf at x 0.2, y 1.7).
+        assert!((sink_before_pullback(&s, [0.2, 1.7, 0.976]) - SINK).abs() < 1e-12);
+        assert!((sink_before_pullback(&s, [0.2, 1.7, 0.95]) - 0.02).abs() < 1e-9);
+        assert_eq!(sink_before_pullback(&s, [0.2, 1.7, 0.92]), 0.0);
+    }
 
     #[test]
     fn of_the_catalogue_only_the_plate_is_plate_like() {

@@ -246,6 +246,9 @@ impl OraclePolicy {
         };
         Ok(match level {
             Some(turn) => ctl.turning_hand_to(here_max, turn * tool.rotation),
+            None if room.tilt.is_some() && matches!(p.target, TaskTarget::Base { .. }) => {
+                ctl.sinking_first(here_max, headroom::sink_before_pullback(scene, [t.x, t.y, t.z]))
+            }
             None => ctl,
         })
     }

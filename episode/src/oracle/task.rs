@@ -202,7 +202,7 @@ impl TaskCtl {
         }
         let stow = if holding { params.carry } else { params.home };
         let is_move = matches!(goal, Goal::Move { .. });
-        let arm = ArmPath::prelude(tool, stow, here_max, target_max, is_move);
+        let arm = ArmPath::prelude(tool, stow, here_max, target_max, is_move, 0.0);
         TaskCtl {
             goal,
             stage: Stage::Arm(arm, 0.0),
@@ -227,6 +227,18 @@ impl TaskCtl {
     /// before it goes in under a board (see `OraclePolicy::start_task`). `here_max`: as for
     /// [`TaskCtl::new`].
     pub(super) fn turning_hand_to(mut self, here_max: Option<f64>, rotation: UnitQuaternion<f64>) -> TaskCtl {
+        self.replan_prelude(here_max, Some(rotation), 0.0);
+        self
+    }
+
+    /// The prelude with a hand leaning sideways under a board sinking by `sink` before it
+    /// pulls back (`headroom::sink_before_pullback`).
+    pub(super) fn sinking_first(mut self, here_max: Option<f64>, sink: f64) -> TaskCtl {
+        self.replan_prelude(here_max, None, sink);
+        self
+    }
+
+    fn replan_prelude(&mut self, here_max: Option<f64>, rotation: Option<UnitQuaternion<f64>>, sink: f64) {
         if let Stage::Arm(..) = self.stage {
             let holding = self.gripper == 0.0;
             let stow = if holding {
@@ -234,12 +246,11 @@ impl TaskCtl {
             } else {
                 self.params.home
             };
-            let stow = Isometry3::from_parts(stow.translation, rotation);
+            let stow = Isometry3::from_parts(stow.translation, rotation.unwrap_or(stow.rotation));
             let is_move = matches!(self.goal, Goal::Move { .. });
-            let arm = ArmPath::prelude(self.tool, stow, here_max, self.ceiling, is_move).then_turn(rotation);
-            self.stage = Stage::Arm(arm, 0.0);
+            let arm = ArmPath::prelude(self.tool, stow, here_max, self.ceiling, is_move, sink);
+            self.stage = Stage::Arm(rotation.map_or(arm.clone(), |r| arm.then_turn(r)), 0.0);
         }
-        self
     }
 
     /// Whether the pick-and-place machine ran to its end.
