@@ -25,7 +25,7 @@ fn robosuite_catalogue() -> PathBuf {
 
 #[test]
 fn robosuite_objects_load_and_the_oracle_picks_one() {
-    if !crate::test_oracle::robosuite_assets() {
+    if kitchen_r_core::assets::robosuite_assets_for_tests().is_none() {
         return;
     }
     let cat = Catalogue::load(&robosuite_catalogue()).unwrap();

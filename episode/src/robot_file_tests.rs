@@ -94,7 +94,7 @@ fn a_urdf_variant_of_the_shipped_robot_completes_a_dev_instruction() {
 /// of robosuite 1.5.2's four arms mounted on the base from their sidecars
 /// (`configs/robots/robosuite/`), read from the wheel's own MJCF and meshes; returns those
 /// instructions (empty when the test skips without `ROBOSUITE_ASSETS`, see
-/// [`crate::test_oracle::robosuite_assets`]).
+/// [`kitchen_r_core::assets::robosuite_assets_for_tests`]).
 fn robosuite_arms_complete(n: usize, mode: GraspMode) -> Vec<Instruction> {
     robosuite_arms_complete_these(mode, |i, _| i < n)
 }
@@ -104,7 +104,7 @@ fn robosuite_arms_complete_these(
     mode: GraspMode,
     chosen: impl Fn(usize, &Instruction) -> bool,
 ) -> Vec<Instruction> {
-    if !crate::test_oracle::robosuite_assets() {
+    if kitchen_r_core::assets::robosuite_assets_for_tests().is_none() {
         return Vec::new();
     }
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/robots/robosuite");
@@ -141,6 +141,15 @@ fn robosuite_arms_complete_these(
     first
 }
 
+/// [`robosuite_arms_complete_these`] for dev instruction `id` in the abstract grasp mode, whose
+/// plan has the step `step` (what the test is about).
+fn robosuite_arms_complete_one(id: &str, step: &str) {
+    let chosen = robosuite_arms_complete_these(GraspMode::Abstract, |_, ins| ins.id == id);
+    if let Some(ins) = chosen.first() {
+        assert!(ins.plan.iter().any(|s| s == step), "{:?}", ins.plan);
+    }
+}
+
 /// robosuite's four arms each complete the first two dev instructions with the oracle (the test
 /// skips with `scripts/robosuite-assets.sh`'s command outside CI and fails in CI without it).
 /// Not yet every dev instruction: the README has each arm's figures.
@@ -156,14 +165,7 @@ fn the_robosuite_arms_complete_the_first_dev_instructions() {
 /// but the Kinova3); straightened for the drive, the Kinova3's struck the shelf on the way in.
 #[test]
 fn the_robosuite_arms_put_a_plate_picked_on_a_counter_on_a_shelf_level() {
-    let chosen = robosuite_arms_complete_these(GraspMode::Abstract, |_, ins| ins.id == "dev-0009");
-    if let Some(ins) = chosen.first() {
-        assert!(
-            ins.plan.iter().any(|s| s == "place the blue plate"),
-            "{:?}",
-            ins.plan
-        );
-    }
+    robosuite_arms_complete_one("dev-0009", "place the blue plate");
 }
 
 /// A fork picked from under a shelf board is pulled out and carried away (dev-0052: the silver
@@ -172,14 +174,7 @@ fn the_robosuite_arms_put_a_plate_picked_on_a_counter_on_a_shelf_level() {
 /// the arm (the move after the pick never started).
 #[test]
 fn the_robosuite_arms_pull_a_fork_out_from_under_a_shelf_board() {
-    let chosen = robosuite_arms_complete_these(GraspMode::Abstract, |_, ins| ins.id == "dev-0052");
-    if let Some(ins) = chosen.first() {
-        assert!(
-            ins.plan.iter().any(|s| s == "pick the silver fork"),
-            "{:?}",
-            ins.plan
-        );
-    }
+    robosuite_arms_complete_one("dev-0052", "pick the silver fork");
 }
 
 /// In the physical grasp mode, where only the finger pads' friction holds an object, each

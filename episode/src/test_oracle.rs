@@ -1,5 +1,5 @@
 //! Tests' shared check: the oracle, blind (no cameras or LiDAR: it needs none), completes every
-//! task of an episode; and whether robosuite's wheel is there for the tests of its arms and objects.
+//! task of an episode.
 
 use kitchen_r_core::dataset::Instruction;
 use kitchen_r_sim::{Assets, EpisodeConfig, SensorsConfig, Sim, SimConfig};
@@ -15,21 +15,6 @@ pub(crate) fn copy_shipped_robot(src: &std::path::Path, dir: &std::path::Path) {
     for f in [urdf.to_path_buf(), urdf.with_extension("toml")] {
         std::fs::copy(src.join(&f), dir.join(&f)).unwrap();
     }
-}
-
-/// Whether robosuite's unpacked wheel is there (`ROBOSUITE_ASSETS`, scripts/robosuite-assets.sh):
-/// a test of the robosuite arms or objects skips without it, except in CI, which must have it.
-pub(crate) fn robosuite_assets() -> bool {
-    if std::env::var_os("ROBOSUITE_ASSETS").is_some() {
-        return true;
-    }
-    assert_ne!(
-        std::env::var("CI").as_deref(),
-        Ok("true"),
-        "CI needs ROBOSUITE_ASSETS"
-    );
-    eprintln!("skipped: export ROBOSUITE_ASSETS=\"$(scripts/robosuite-assets.sh)\"");
-    false
 }
 
 /// The twin of `cfg` without cameras or LiDAR: the oracle reads only privileged state.

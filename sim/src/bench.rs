@@ -312,7 +312,7 @@ mod tests {
     /// faster must not move a pixel. Needs the robosuite wheel (`ROBOSUITE_ASSETS`).
     #[test]
     fn the_panda_in_view_renders_the_same_bytes() {
-        if !crate::test_support::robosuite_assets() {
+        if kitchen_r_core::assets::robosuite_assets_for_tests().is_none() {
             return;
         }
         let assets = Assets::load_default().unwrap();

@@ -13,18 +13,3 @@ pub(crate) fn image_hash<'a>(images: impl IntoIterator<Item = &'a CameraImage>) 
     }
     h
 }
-
-/// Whether robosuite's unpacked wheel is there (`ROBOSUITE_ASSETS`, scripts/robosuite-assets.sh):
-/// a test of the robosuite arms skips without it, except in CI, which must have it.
-pub(crate) fn robosuite_assets() -> bool {
-    if std::env::var_os("ROBOSUITE_ASSETS").is_some() {
-        return true;
-    }
-    assert_ne!(
-        std::env::var("CI").as_deref(),
-        Ok("true"),
-        "CI needs ROBOSUITE_ASSETS"
-    );
-    eprintln!("skipped: export ROBOSUITE_ASSETS=\"$(scripts/robosuite-assets.sh)\"");
-    false
-}

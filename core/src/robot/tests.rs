@@ -193,23 +193,6 @@ fn the_mjcf_test_robot_maps_onto_six_revolute_joints() {
     assert_eq!(axes, [Axis::Z, Axis::Y, Axis::Y, Axis::X, Axis::Y, Axis::X]);
 }
 
-/// robosuite 1.5.2's assets (the unpacked wheel's `robosuite/models/assets`) from
-/// `ROBOSUITE_ASSETS`; absent outside CI, the test says how to fetch them and skips.
-pub(crate) fn robosuite_assets() -> Option<PathBuf> {
-    match std::env::var_os("ROBOSUITE_ASSETS") {
-        Some(d) => Some(PathBuf::from(d)),
-        None if std::env::var("CI").as_deref() == Ok("true") => {
-            panic!("ROBOSUITE_ASSETS is not set: scripts/test.sh exports it (scripts/robosuite-assets.sh)")
-        }
-        None => {
-            eprintln!(
-                "skipped: ROBOSUITE_ASSETS is not set; export ROBOSUITE_ASSETS=\"$(scripts/robosuite-assets.sh)\""
-            );
-            None
-        }
-    }
-}
-
 fn robosuite_sidecar(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../configs/robots/robosuite/{name}.toml"))
 }
@@ -218,7 +201,9 @@ fn robosuite_sidecar(name: &str) -> PathBuf {
 /// joints where the arm has them, the gripper file's hand meshes on the last link.
 #[test]
 fn robosuite_arms_and_grippers_load_from_the_wheel() {
-    let Some(_) = robosuite_assets() else { return };
+    let Some(_) = crate::assets::robosuite_assets_for_tests() else {
+        return;
+    };
     for (name, joints) in [("panda", 7), ("ur5e", 6), ("kinova3", 7), ("xarm7", 7)] {
         let d = RobotDesc::load(&robosuite_sidecar(name)).unwrap_or_else(|e| panic!("{name}: {e}"));
         assert_eq!(d.arm.joints.len(), joints, "{name}");
@@ -249,7 +234,9 @@ fn robosuite_arms_and_grippers_load_from_the_wheel() {
 /// A mounting sidecar whose files the twin cannot map names the file, the element and the fix.
 #[test]
 fn a_mounted_description_the_twin_cannot_map_is_refused_with_the_fix() {
-    let Some(_) = robosuite_assets() else { return };
+    let Some(_) = crate::assets::robosuite_assets_for_tests() else {
+        return;
+    };
     let dir = tempfile::tempdir().unwrap();
     let text = std::fs::read_to_string(robosuite_sidecar("panda")).unwrap();
     let side = dir.path().join("panda.toml");

@@ -33,33 +33,50 @@ fn blend_time(a: &Isometry3<f64>, b: &Isometry3<f64>) -> f64 {
         .max(MIN_BLEND)
 }
 
+/// Where a task's prelude may go and how it departs from the plain one
+/// (`OraclePolicy::start_task` decides).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub(super) struct Prelude {
+    /// The highest the tool may be where it starts (under a shelf board, see
+    /// [`super::headroom`]).
+    pub here_max: Option<f64>,
+    /// How far a hand leaning sideways sinks before it pulls back from under a board, m
+    /// (`headroom::sink_before_pullback`).
+    pub sink: f64,
+    /// The orientation (base frame) the tool stows with and ends turned to, instead of the
+    /// stow pose's: a hand holding a plate tilted levels it before it goes in under a board.
+    pub turn_to: Option<UnitQuaternion<f64>>,
+}
+
 impl ArmPath {
     /// The motion before a task: a low tool rises by [`RISE`] (it may be around an object it
     /// just released, or hold one just lifted off a surface), capped at `here_max` under a
     /// board; under a board it then pulls back horizontally to the stow position (a hand leaning
-    /// sideways sinks by `sink` first, see `headroom::sink_before_pullback`); a move then
-    /// goes to `stow`, a manipulation lowers the tool to `target_max` when the work is under a
-    /// board.
+    /// sideways sinks by `sink` first); a move then goes to `stow`, a manipulation lowers the
+    /// tool to `target_max` when the work is under a board; with `turn_to`, the tool ends turned
+    /// to it (see [`Prelude`]).
     pub(super) fn prelude(
         from: Isometry3<f64>,
         stow: Isometry3<f64>,
-        here_max: Option<f64>,
         target_max: Option<f64>,
         is_move: bool,
-        sink: f64,
+        how: Prelude,
     ) -> ArmPath {
+        let stow = how
+            .turn_to
+            .map_or(stow, |r| Isometry3::from_parts(stow.translation, r));
         let mut path = ArmPath {
             start: from,
             legs: Vec::new(),
         };
         let z = from.translation.z;
         if z < stow.translation.z - LOW {
-            let up = (z + RISE).min(here_max.unwrap_or(f64::INFINITY));
+            let up = (z + RISE).min(how.here_max.unwrap_or(f64::INFINITY));
             path.go(from.rotation, [from.translation.x, from.translation.y, up]);
         }
         let s = stow.translation.vector;
         let at = path.end().translation.vector;
-        if here_max.is_some() && (at.xy() - s.xy()).norm() > 0.05 {
+        if how.here_max.is_some() && (at.xy() - s.xy()).norm() > 0.05 {
             // A hand leaning sideways (about its closing axis over flat work, see
             // `headroom::for_work`) turns a held fork's length as it straightens: under the
             // board its end strikes the shelf and the arm sticks (the Panda, dev). It
@@ -67,8 +84,8 @@ impl ArmPath {
             // and one leaning towards the board turn on the way out as before.
             let sideways = (from.rotation * Vector3::x()).y.abs() > SIDEWAYS;
             // Leaning sideways, it first sinks a little (see `headroom::sink_before_pullback`).
-            if sideways && sink > 0.0 {
-                path.go(from.rotation, [at.x, at.y, at.z - sink]);
+            if sideways && how.sink > 0.0 {
+                path.go(from.rotation, [at.x, at.y, at.z - how.sink]);
             }
             let at = path.end().translation.vector;
             path.go(
@@ -84,14 +101,11 @@ impl ArmPath {
                 path.go(at.rotation, [at.translation.x, at.translation.y, m]);
             }
         }
+        if let Some(r) = how.turn_to {
+            let p = path.end().translation.vector;
+            path.go(r, [p.x, p.y, p.z]);
+        }
         path
-    }
-
-    /// The path with a last leg that turns the tool to `rot` where it ends.
-    pub(super) fn then_turn(mut self, rot: UnitQuaternion<f64>) -> ArmPath {
-        let p = self.end().translation.vector;
-        self.go(rot, [p.x, p.y, p.z]);
-        self
     }
 
     fn end(&self) -> Isometry3<f64> {
@@ -140,7 +154,7 @@ mod tests {
     fn a_low_tool_rises_before_going_to_stow_and_ends_there() {
         let low = Isometry3::from_parts(Translation3::new(0.6, 0.0, 0.95), top_down(0.3));
         let stow = Isometry3::from_parts(Translation3::new(0.30, -0.12, 1.10), top_down(0.0));
-        let p = ArmPath::prelude(low, stow, None, None, true, 0.0);
+        let p = ArmPath::prelude(low, stow, None, true, Prelude::default());
         let mid = p.at(p.legs[0].1);
         assert!((mid.translation.z - 1.05).abs() < 1e-9 && (mid.translation.x - 0.6).abs() < 1e-9);
         assert!((p.at(p.duration() + 1.0).translation.vector - stow.translation.vector).norm() < 1e-12);
@@ -151,21 +165,25 @@ mod tests {
     fn under_a_board_the_tool_rises_only_to_the_cap_and_pulls_back_level() {
         let low = Isometry3::from_parts(Translation3::new(0.6, 0.0, 0.95), top_down(0.0));
         let stow = Isometry3::from_parts(Translation3::new(0.30, -0.12, 1.10), top_down(0.0));
-        let p = ArmPath::prelude(low, stow, Some(1.0), None, true, 0.0);
+        let under_a_board = Prelude {
+            here_max: Some(1.0),
+            ..Prelude::default()
+        };
+        let p = ArmPath::prelude(low, stow, None, true, under_a_board);
         let legs: Vec<[f64; 3]> = p.legs.iter().map(|l| l.0.translation.vector.into()).collect();
         assert_eq!(
             legs,
             vec![[0.6, 0.0, 1.0], [0.30, -0.12, 1.0], [0.30, -0.12, 1.10]]
         );
         // Reaching into a shelf from stow: straight down to the cap first.
-        let p = ArmPath::prelude(stow, stow, None, Some(1.0), false, 0.0);
+        let p = ArmPath::prelude(stow, stow, Some(1.0), false, Prelude::default());
         assert_eq!(p.end().translation.vector, Vector3::new(0.30, -0.12, 1.0));
     }
 
     #[test]
     fn a_tool_already_at_stow_needs_no_motion() {
         let stow = Isometry3::from_parts(Translation3::new(0.24, -0.12, 0.81), top_down(0.0));
-        let p = ArmPath::prelude(stow, stow, None, None, true, 0.0);
+        let p = ArmPath::prelude(stow, stow, None, true, Prelude::default());
         assert_eq!(p.duration(), 0.0);
         assert_eq!(p.at(3.0), stow);
     }

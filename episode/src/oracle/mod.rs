@@ -31,8 +31,11 @@ use kitchen_r_sim::task::TaskTarget;
 use kitchen_r_sim::{Assets, SimConfig};
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 
-use crate::policy::{ACTION_DIM, HORIZON, Policy, PolicyError, PolicyInput, PolicySpec, Privileged};
+use crate::policy::{
+    ACTION_DIM, HORIZON, Policy, PolicyError, PolicyInput, PolicySpec, Privileged, PrivilegedObject,
+};
 use crate::runner::RunOptions;
+use arm::Prelude;
 use task::{Goal, Measured, Now, TaskCtl, World};
 
 /// Name the oracle announces and `--policy builtin:oracle` selects.
@@ -228,29 +231,47 @@ impl OraclePolicy {
             TaskTarget::Pick { object } | TaskTarget::Place { object, .. } => p.objects.get(object),
             TaskTarget::Base { .. } => None,
         }
-        .and_then(|o| self.catalogue.model(&o.model))
-        .is_some_and(|m| headroom::plate_like(&m.shape));
+        .is_some_and(|o| self.plate_like(o));
         let tilt = room
             .tilt
             .filter(|t| target_max.is_some() || (plate && matches!(t, headroom::Lean::Closing(_))));
-        let ctl = TaskCtl::new(goal, tool, holding, approach, here_max, target_max, physical).with_tilt(tilt);
         // Put on a shelf, a plate picked in the open (held level by a leaning hand, then
         // straightened for the drive, so tilted in the hand) is levelled again before the hand
         // goes in under the board: tilted, it struck the shelf on the way in (the Kinova3, dev).
-        let level = match (held_plate(p, &self.catalogue), target_max, room.tilt) {
+        let turn_to = match (self.held_plate(p), target_max, room.tilt) {
             (Some(in_hand), Some(_), Some(_)) => {
                 let up = tool.rotation * in_hand.rotation * Vector3::z();
-                UnitQuaternion::rotation_between(&up, &Vector3::z())
+                UnitQuaternion::rotation_between(&up, &Vector3::z()).map(|turn| turn * tool.rotation)
             }
             _ => None,
         };
-        Ok(match level {
-            Some(turn) => ctl.turning_hand_to(here_max, turn * tool.rotation),
-            None if room.tilt.is_some() && matches!(p.target, TaskTarget::Base { .. }) => {
-                ctl.sinking_first(here_max, headroom::sink_before_pullback(scene, [t.x, t.y, t.z]))
+        let sink = match p.target {
+            TaskTarget::Base { .. } if room.tilt.is_some() => {
+                headroom::sink_before_pullback(scene, [t.x, t.y, t.z])
             }
-            None => ctl,
-        })
+            _ => 0.0,
+        };
+        let prelude = Prelude {
+            here_max,
+            sink,
+            turn_to,
+        };
+        Ok(TaskCtl::new(goal, tool, holding, approach, prelude, target_max, physical).with_tilt(tilt))
+    }
+
+    /// Whether key object `o` is plate-like ([`headroom::plate_like`]).
+    fn plate_like(&self, o: &PrivilegedObject) -> bool {
+        self.catalogue
+            .model(&o.model)
+            .is_some_and(|m| headroom::plate_like(&m.shape))
+    }
+
+    /// The held object's pose in the tool frame, if it is plate-like.
+    fn held_plate(&self, p: &Privileged) -> Option<Isometry3<f64>> {
+        let name = p.held.as_deref()?;
+        let o = p.objects.iter().find(|o| o.name == name)?;
+        let tool_world = kitchen_r_sim::oracle::manip::base_isometry(p.base_pose) * iso(&p.ee_pose);
+        self.plate_like(o).then(|| tool_world.inverse() * iso(&o.pose))
     }
 
     fn world(&self, p: &Privileged) -> World {
@@ -395,13 +416,4 @@ impl Policy for OraclePolicy {
         });
         Ok(chunk)
     }
-}
-
-/// The held object's pose in the tool frame, if it is plate-like ([`headroom::plate_like`]).
-fn held_plate(p: &Privileged, catalogue: &Catalogue) -> Option<Isometry3<f64>> {
-    let name = p.held.as_deref()?;
-    let o = p.objects.iter().find(|o| o.name == name)?;
-    let plate = headroom::plate_like(&catalogue.model(&o.model)?.shape);
-    let tool_world = kitchen_r_sim::oracle::manip::base_isometry(p.base_pose) * iso(&p.ee_pose);
-    plate.then(|| tool_world.inverse() * iso(&o.pose))
 }

@@ -19,7 +19,7 @@ use kitchen_r_sim::oracle::follow::{PathFollower, wrap};
 use kitchen_r_sim::oracle::manip::{ManipParams, Phase, PhasePlan, PickPlan, PlacePlan, base_isometry};
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 
-use super::arm::ArmPath;
+use super::arm::{ArmPath, Prelude};
 use super::headroom::Lean;
 
 /// Physical grasp mode: the grasp and lift phases' durations, s (abstract: 1 and 2).
@@ -182,14 +182,15 @@ fn tilted(pose: Isometry3<f64>, tilt: Option<Lean>, undo: bool) -> Isometry3<f64
 
 impl TaskCtl {
     /// `tool`: the current tool pose (base frame); `holding`: an object is in the gripper;
-    /// `here_max` / `target_max`: the highest the tool may be where it is and where the task
-    /// works (under a shelf board, see [`super::headroom`]).
+    /// `prelude`: where the motion before the task may go and how it departs from the plain
+    /// one; `target_max`: the highest the tool may be where the task works (under a shelf
+    /// board, see [`super::headroom`]).
     pub(super) fn new(
         goal: Goal,
         tool: Isometry3<f64>,
         holding: bool,
         approach: Option<[f64; 3]>,
-        here_max: Option<f64>,
+        prelude: Prelude,
         target_max: Option<f64>,
         physical: bool,
     ) -> TaskCtl {
@@ -202,7 +203,7 @@ impl TaskCtl {
         }
         let stow = if holding { params.carry } else { params.home };
         let is_move = matches!(goal, Goal::Move { .. });
-        let arm = ArmPath::prelude(tool, stow, here_max, target_max, is_move, 0.0);
+        let arm = ArmPath::prelude(tool, stow, target_max, is_move, prelude);
         TaskCtl {
             goal,
             stage: Stage::Arm(arm, 0.0),
@@ -220,37 +221,6 @@ impl TaskCtl {
     pub(super) fn with_tilt(mut self, tilt: Option<Lean>) -> TaskCtl {
         self.tilt = tilt;
         self
-    }
-
-    /// The prelude with the tool turned to `rotation` (base frame): its stow pose takes that
-    /// orientation, and the hand ends turned to it. A hand holding a plate tilted levels it
-    /// before it goes in under a board (see `OraclePolicy::start_task`). `here_max`: as for
-    /// [`TaskCtl::new`].
-    pub(super) fn turning_hand_to(mut self, here_max: Option<f64>, rotation: UnitQuaternion<f64>) -> TaskCtl {
-        self.replan_prelude(here_max, Some(rotation), 0.0);
-        self
-    }
-
-    /// The prelude with a hand leaning sideways under a board sinking by `sink` before it
-    /// pulls back (`headroom::sink_before_pullback`).
-    pub(super) fn sinking_first(mut self, here_max: Option<f64>, sink: f64) -> TaskCtl {
-        self.replan_prelude(here_max, None, sink);
-        self
-    }
-
-    fn replan_prelude(&mut self, here_max: Option<f64>, rotation: Option<UnitQuaternion<f64>>, sink: f64) {
-        if let Stage::Arm(..) = self.stage {
-            let holding = self.gripper == 0.0;
-            let stow = if holding {
-                self.params.carry
-            } else {
-                self.params.home
-            };
-            let stow = Isometry3::from_parts(stow.translation, rotation.unwrap_or(stow.rotation));
-            let is_move = matches!(self.goal, Goal::Move { .. });
-            let arm = ArmPath::prelude(self.tool, stow, here_max, self.ceiling, is_move, sink);
-            self.stage = Stage::Arm(rotation.map_or(arm.clone(), |r| arm.then_turn(r)), 0.0);
-        }
     }
 
     /// Whether the pick-and-place machine ran to its end.

@@ -154,7 +154,7 @@ mod tests {
     /// (`ROBOSUITE_ASSETS`, scripts/robosuite-assets.sh).
     #[test]
     fn robosuite_arms_round_trip_through_forward_kinematics() {
-        if !crate::test_support::robosuite_assets() {
+        if kitchen_r_core::assets::robosuite_assets_for_tests().is_none() {
             return;
         }
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/robots/robosuite");
