@@ -20,6 +20,8 @@ pub mod hooks;
 mod mesh_object_tests;
 pub mod offline;
 pub mod oracle;
+#[cfg(test)]
+mod physical_plate_tests;
 pub mod policy;
 #[cfg(test)]
 mod robosuite_object_tests;

@@ -82,7 +82,7 @@ impl Default for ArticulationConfig {
             finger_friction: 1.0,
             finger_mass: 0.06,
             contact_frequency: 60.0,
-            solver_iterations: 1,
+            solver_iterations: 2,
             pgs_iterations: 8,
         }
     }

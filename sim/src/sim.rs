@@ -242,10 +242,11 @@ fn build(assets: &Assets, config: &SimConfig, ep: &EpisodeConfig) -> Result<Buil
         (&ep.background, Owner::Background),
     ] {
         for (i, o) in list.iter().enumerate() {
-            let model = assets
+            let model = &assets
                 .catalogue
                 .model(&o.model)
-                .ok_or_else(|| SimError::UnknownObject(o.model.clone()))?;
+                .ok_or_else(|| SimError::UnknownObject(o.model.clone()))?
+                .in_mode(config.grasp.mode);
             let [x, y, z] = o.position;
             let pose = crate::convert::planar(x, y, z, o.yaw);
             let body = spawn_object(&mut world, &mut materials, model, o.color, pose, owner, i as u32);

@@ -3,9 +3,10 @@
 //! without turning the object only when the line through the contacts passes through the object's
 //! centre of mass, so objects are taken at their centre (the catalogue's uniform solids have it at
 //! the bounding-box centre), raised only as far as keeps the fingertips at the surface the object
-//! stands on. A bowl is pinched at its wall, which the pads straddle as deep as its floor allows.
-//! The plate (a cylinder with a horizontal `grasp_offset`) and meshes keep the catalogue's point.
-//! The abstract mode, scored by positions, keeps the catalogue's `grasp_offset`.
+//! stands on. A bowl is pinched at its wall, which the pads straddle as deep as its floor allows;
+//! so is this mode's plate, a dish (the catalogue's `[object.physical]` variant). Meshes keep the
+//! catalogue's point. The abstract mode, scored by positions, keeps the catalogue's
+//! `grasp_offset`.
 
 use kitchen_r_core::catalogue::{ObjectModel, Shape};
 
@@ -76,11 +77,21 @@ mod tests {
             (tips - floor - BOWL_FLOOR_CLEARANCE).abs() < 1e-12,
             "tips at {tips}"
         );
-        // The plate keeps the catalogue's rim point.
-        let plate = cat.model("plate").unwrap().clone();
-        assert_eq!(
-            physical_grasp(plate.clone(), reach).grasp_offset,
-            plate.grasp_offset
+        // The physical mode's plate, a dish, is pinched at its rim wall the same way.
+        let plate = cat
+            .model("plate")
+            .unwrap()
+            .in_mode(kitchen_r_core::GraspMode::Physical);
+        let Shape::Bowl {
+            radius, thickness, ..
+        } = plate.shape
+        else {
+            panic!("the physical mode's plate is a dish")
+        };
+        let g = physical_grasp(plate, reach).grasp_offset;
+        assert!(
+            (g[0].hypot(g[1]) - (radius - thickness / 2.0)).abs() < 1e-12,
+            "{g:?}"
         );
     }
 }

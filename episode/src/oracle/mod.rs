@@ -282,7 +282,7 @@ impl OraclePolicy {
         let pose = object.map(|o| iso(&o.pose));
         let tool_world = kitchen_r_sim::oracle::manip::base_isometry(p.base_pose) * iso(&p.ee_pose);
         let held = object.is_some_and(|o| p.held.as_deref() == Some(o.name.as_str()));
-        let model = object.and_then(|o| self.catalogue.model(&o.model).cloned());
+        let model = object.and_then(|o| self.catalogue.model(&o.model).map(|m| m.in_mode(self.grasp)));
         World {
             object: pose,
             held_in_tool: pose.filter(|_| held).map(|o| tool_world.inverse() * o),
