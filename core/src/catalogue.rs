@@ -216,13 +216,6 @@ impl Catalogue {
         Ok(cat)
     }
 
-    /// The catalogue as grasp mode `mode` builds its objects ([`ObjectModel::in_mode`]).
-    pub fn in_mode(&self, mode: GraspMode) -> Catalogue {
-        Catalogue {
-            objects: self.objects.iter().map(|m| m.in_mode(mode)).collect(),
-        }
-    }
-
     pub fn model(&self, id: &str) -> Option<&ObjectModel> {
         self.objects.iter().find(|m| m.id == id)
     }
@@ -270,8 +263,7 @@ grasp_offset = [0.095, 0.0, 0.0]
         let abstract_ = plate.in_mode(GraspMode::Abstract);
         assert_eq!(abstract_.shape, plate.shape);
         assert_eq!(abstract_.mass, 0.4);
-        let physical = cat.in_mode(GraspMode::Physical);
-        let p = physical.model("plate").unwrap();
+        let p = &plate.in_mode(GraspMode::Physical);
         assert!(matches!(p.shape, Shape::Bowl { thickness, .. } if thickness == 0.004));
         assert_eq!(p.mass, 0.12);
         assert_eq!(p.grasp_offset, plate.grasp_offset);
