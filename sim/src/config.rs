@@ -54,6 +54,11 @@ pub struct ArticulationConfig {
     pub finger_force: f64,
     pub finger_stiffness: f64,
     pub finger_damping: f64,
+    /// How far past the pads' meeting point each closed finger's servo target lies (m): an
+    /// object thinner than the servo needs to build its force (a plate's 4 mm rim) is squeezed
+    /// with `finger_stiffness` × (half its width + this), up to `finger_force`. The joint's
+    /// limit stays at the meeting point, so fingers closed on nothing stop there.
+    pub finger_preload: f64,
     /// Coulomb friction of the finger pads (combined with the object's by averaging).
     pub finger_friction: f64,
     /// Mass of each finger (kg): the few constraint iterations converge differently with it (a
@@ -79,6 +84,7 @@ impl Default for ArticulationConfig {
             finger_force: 15.0,
             finger_stiffness: 8000.0,
             finger_damping: 44.0,
+            finger_preload: 0.002,
             finger_friction: 1.0,
             finger_mass: 0.06,
             contact_frequency: 60.0,
@@ -266,11 +272,13 @@ impl SimConfig {
         if gains.iter().any(|v| v.is_nan() || *v <= 0.0)
             || a.finger_friction.is_nan()
             || a.finger_friction < 0.0
+            || a.finger_preload.is_nan()
+            || a.finger_preload < 0.0
             || a.solver_iterations == 0
             || a.pgs_iterations == 0
         {
             return Err(SimError::Config(
-                "articulation: gains, force, finger mass and contact frequency > 0, finger_friction >= 0, \
+                "articulation: gains, force, finger mass and contact frequency > 0, finger_friction and finger_preload >= 0, \
                  solver_iterations and pgs_iterations >= 1"
                     .into(),
             ));

@@ -8,14 +8,24 @@
 //! catalogue's point. The abstract mode, scored by positions, keeps the catalogue's
 //! `grasp_offset`.
 
+use std::f64::consts::{FRAC_PI_2, FRAC_PI_4, PI};
+
 use kitchen_r_core::catalogue::{ObjectModel, Shape};
 
 /// Fingertips this far above the surface at the grasp, m: a hand that pressed them into the
 /// counter would hold the object by the tips' edges only.
 const TIP_CLEARANCE: f64 = -0.01;
 
-/// Fingertips this far above a bowl's inside floor at the grasp, m.
-const BOWL_FLOOR_CLEARANCE: f64 = 0.005;
+/// Fingertips this far above a bowl's inside floor at the grasp, m: as deep as the hand's
+/// tracking allows, for the longest contact down the wall (the plate's 2 cm rim: with 5 mm the
+/// pads covered 1.1 cm of it, a couple no larger than the plate's own turning moment, and half
+/// the plates worked loose on the way; docs/twin/robot.md).
+const BOWL_FLOOR_CLEARANCE: f64 = 0.001;
+
+/// Room the fingers give a placed object on each side as they open, m: opened fully, the outer
+/// finger of a pinch at a bowl's wall swept 4–5 cm out and knocked a neighbouring apple off the
+/// counter (dev-0132).
+const RELEASE_ROOM: f64 = 0.015;
 
 /// `model` with the physical mode's grasp point; `finger_reach`: how far the fingertips reach
 /// below the TCP, m.
@@ -42,6 +52,85 @@ pub(super) fn physical_grasp(mut model: ObjectModel, finger_reach: f64) -> Objec
     let above_centre = finger_reach + TIP_CLEARANCE - model.shape.half_height();
     model.grasp_offset = [0.0, 0.0, above_centre.max(0.0)];
     model
+}
+
+/// Turns of a held object about its vertical axis a place may make, rad, in the order tried.
+const PLACE_TURNS: [f64; 5] = [0.0, FRAC_PI_4, -FRAC_PI_4, FRAC_PI_2, -FRAC_PI_2];
+
+/// Room the hand (its 11 cm palm and the fingers opening round a pinch) keeps from the footprint
+/// of another object when it puts a bowl down, m, measured from the tool centre.
+const HAND_ROOM: f64 = 0.075;
+
+/// How far to turn a held bowl (or the physical mode's dish plate) about its vertical axis before
+/// it is put down at `target` (world), rad: 0 unless the hand, pinching the wall at the grasp
+/// point, would come within [`HAND_ROOM`] of a neighbour (`(centre, footprint radius)`, world);
+/// then the turn of [`PLACE_TURNS`] that leaves the most room, the first of equals. A turn must
+/// keep the top-down tool within its quarter turn of straight ahead (the pick-and-place
+/// machine's rule; past it the fingers swap and the hand stays where it was). `yaw_in_base`:
+/// the held object's yaw relative to the base, whose yaw (world) is `base_yaw`. A bowl put down
+/// beside an apple with the hand on the apple's side knocked the apple off the counter
+/// (dev-0031, 0086, 0132: the next task's pick failed).
+pub(super) fn place_turn(
+    model: &ObjectModel,
+    yaw_in_base: f64,
+    base_yaw: f64,
+    target: [f64; 3],
+    neighbours: &[([f64; 2], f64)],
+) -> f64 {
+    let [gx, gy, _] = model.grasp_offset;
+    if !matches!(model.shape, Shape::Bowl { .. }) || gx.hypot(gy) <= 1e-6 || neighbours.is_empty() {
+        return 0.0;
+    }
+    // The tool's yaw in the base frame as the machine takes it, in (−π/2, π/2]: its closing
+    // axis along the grasp point's radius.
+    let tool = quarter(gy.atan2(gx) + yaw_in_base - FRAC_PI_2);
+    let room = |turn: f64| {
+        let (s, c) = (base_yaw + yaw_in_base + turn).sin_cos();
+        let hand = [target[0] + c * gx - s * gy, target[1] + s * gx + c * gy];
+        neighbours
+            .iter()
+            .map(|(n, r)| (hand[0] - n[0]).hypot(hand[1] - n[1]) - r)
+            .fold(f64::INFINITY, f64::min)
+    };
+    if room(0.0) >= HAND_ROOM {
+        return 0.0;
+    }
+    let mut best = (0.0, room(0.0));
+    for turn in PLACE_TURNS {
+        let r = room(turn);
+        // Clear of the quarter turn's ends, where round-off could swap the fingers.
+        if (tool + turn).abs() < FRAC_PI_2 - 0.05 && r > best.1 + 1e-9 {
+            best = (turn, r);
+        }
+    }
+    best.0
+}
+
+/// A top-down tool's yaw `a` taken in (−π/2, π/2], as the pick-and-place machine takes it (its
+/// two fingers are alike, so a half turn is the same grip).
+fn quarter(a: f64) -> f64 {
+    let w = a - PI * (a / PI).round();
+    if w <= -FRAC_PI_2 { w + PI } else { w }
+}
+
+/// The width the fingers close on in the physical grasp (`model` as [`physical_grasp`] left it):
+/// a bowl's wall at its rim point, across a sphere, an upright cylinder or a box's narrower
+/// side; `None` for shapes it does not know (meshes).
+fn pinch_width(model: &ObjectModel) -> Option<f64> {
+    let [x, y, _] = model.grasp_offset;
+    match model.shape {
+        Shape::Bowl { thickness, .. } if x.hypot(y) > 1e-6 => Some(thickness),
+        Shape::Sphere { radius } => Some(2.0 * radius),
+        Shape::Cylinder { radius, .. } if x.hypot(y) <= 1e-6 => Some(2.0 * radius),
+        Shape::Cuboid { size } => Some(size[0].min(size[1])),
+        _ => None,
+    }
+}
+
+/// The gripper command (0 closed, 1 open) a place opens to in the physical grasp: the pinched
+/// width and [`RELEASE_ROOM`] on each side, at most fully open.
+pub(super) fn release_gripper(model: &ObjectModel, max_opening: f64) -> f64 {
+    pinch_width(model).map_or(1.0, |w| ((w + 2.0 * RELEASE_ROOM) / max_opening).min(1.0))
 }
 
 #[cfg(test)]
@@ -93,5 +182,56 @@ mod tests {
             (g[0].hypot(g[1]) - (radius - thickness / 2.0)).abs() < 1e-12,
             "{g:?}"
         );
+    }
+
+    #[test]
+    fn a_bowl_is_put_down_with_the_hand_away_from_a_neighbour() {
+        let cat = Catalogue::load(&kitchen_r_core::assets::assets_dir().join("objects.toml")).unwrap();
+        let bowl = physical_grasp(cat.model("bowl").unwrap().clone(), 0.025);
+        let target = [1.0, 1.0, 0.8];
+        // Base facing +x, the bowl's grasp point along +x (the tool straight ahead): an apple
+        // 15 cm along +x is in the hand's way, so the bowl turns a quarter and the hand works
+        // from the side, 16 cm from the apple's centre.
+        let apple = ([1.15, 1.0], 0.04);
+        let turn = place_turn(&bowl, 0.0, 0.0, target, &[apple]);
+        assert_eq!(turn.abs(), FRAC_PI_2);
+        // The grasp point at 45° (the tool at −45°) with a neighbour beyond it: the tool has
+        // no room to turn further clockwise, so the bowl turns the other way.
+        let turned = place_turn(&bowl, FRAC_PI_4, 0.0, target, &[([1.106, 1.106], 0.04)]);
+        assert!(turned > 0.0, "{turned}");
+        // Nothing within the hand's room: no turn, so other places run as before.
+        assert_eq!(place_turn(&bowl, 0.0, 0.0, target, &[([1.5, 1.0], 0.04)]), 0.0);
+        assert_eq!(place_turn(&bowl, 0.0, 0.0, target, &[]), 0.0);
+        // Objects pinched at their centre have nothing to turn.
+        let apple_model = physical_grasp(cat.model("apple").unwrap().clone(), 0.025);
+        assert_eq!(place_turn(&apple_model, 0.0, 0.0, target, &[apple]), 0.0);
+    }
+
+    #[test]
+    fn a_place_opens_the_fingers_only_a_little_wider_than_what_they_pinched() {
+        let cat = Catalogue::load(&kitchen_r_core::assets::assets_dir().join("objects.toml")).unwrap();
+        let physical = |id: &str| {
+            let m = cat
+                .model(id)
+                .unwrap()
+                .in_mode(kitchen_r_core::GraspMode::Physical);
+            physical_grasp(m, 0.025)
+        };
+        let max = 0.2;
+        // The dish plate, pinched at its 4 mm rim: 1.5 cm of room each side.
+        let g = release_gripper(&physical("plate"), max);
+        assert!((g * max - (0.004 + 0.03)).abs() < 1e-12, "{g}");
+        // The apple, pinched across its 8 cm.
+        let g = release_gripper(&physical("apple"), max);
+        assert!((g * max - (0.08 + 0.03)).abs() < 1e-12, "{g}");
+        // Never wider than fully open, and fully open for a shape of unknown width.
+        assert_eq!(release_gripper(&physical("apple"), 0.05), 1.0);
+        let mut mesh = physical("apple");
+        mesh.shape = Shape::Mesh {
+            file: "none.obj".into(),
+            scale: 1.0,
+            size: [0.08; 3],
+        };
+        assert_eq!(release_gripper(&mesh, max), 1.0);
     }
 }

@@ -100,6 +100,8 @@ pub struct OraclePolicy {
     /// Half the fingers' length along the approach axis, m: how far the fingertips reach below
     /// the TCP (the physical grasp keeps them off the surface an object stands on).
     finger_reach: f64,
+    /// The gripper's widest gap, m (the physical grasp's release opens to a fraction of it).
+    max_opening: f64,
     /// How high the arm's wrist stands over a top-down tool, m (`headroom::headroom` reads it:
     /// how far under a shelf board the tool stays and how it leans there).
     wrist_height: Option<f64>,
@@ -123,6 +125,7 @@ impl OraclePolicy {
             grasp: SimConfig::load_default().map_or(GraspMode::Abstract, |c| c.grasp.mode),
             replans: 0,
             finger_reach: assets.robot.gripper.finger_length / 2.0,
+            max_opening: assets.robot.gripper.max_opening,
             wrist_height: kitchen_r_sim::robot::wrist::wrist_height(&assets.robot),
         }
     }
@@ -256,7 +259,38 @@ impl OraclePolicy {
             sink,
             turn_to,
         };
-        Ok(TaskCtl::new(goal, tool, holding, approach, prelude, target_max, physical).with_tilt(tilt))
+        // Opened fully, the fingers of a pinch sweep centimetres out beside a placed object and
+        // can knock a neighbour off its support (the physical grasp only: the abstract mode's
+        // fingers touch no key object).
+        let (release, neighbours) = match (physical, self.world(p).model, &p.target) {
+            (true, Some(model), &TaskTarget::Place { object, target }) => (
+                grasp::release_gripper(&model, self.max_opening),
+                self.neighbours(p, object, target),
+            ),
+            _ => (1.0, Vec::new()),
+        };
+        Ok(
+            TaskCtl::new(goal, tool, holding, approach, prelude, target_max, physical)
+                .with_tilt(tilt)
+                .with_release_gripper(release)
+                .with_neighbours(neighbours),
+        )
+    }
+
+    /// The key objects other than `object` standing within 20 cm of the height of `target`
+    /// (where it is put down), as `(centre, footprint radius)`: what the hand keeps clear of
+    /// ([`grasp::place_turn`]).
+    fn neighbours(&self, p: &Privileged, object: usize, target: [f64; 3]) -> Vec<([f64; 2], f64)> {
+        (p.objects.iter().enumerate())
+            .filter(|(i, o)| *i != object && (o.pose[2] - target[2]).abs() < 0.2)
+            .filter_map(|(_, o)| {
+                let m = self.catalogue.model(&o.model)?;
+                Some((
+                    [o.pose[0], o.pose[1]],
+                    m.in_mode(self.grasp).shape.footprint_radius(),
+                ))
+            })
+            .collect()
     }
 
     /// Whether key object `o` is plate-like ([`headroom::plate_like`]).

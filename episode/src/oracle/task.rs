@@ -20,6 +20,7 @@ use kitchen_r_sim::oracle::manip::{ManipParams, Phase, PhasePlan, PickPlan, Plac
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 
 use super::arm::{ArmPath, Prelude};
+use super::grasp::place_turn;
 use super::headroom::Lean;
 
 /// Physical grasp mode: the grasp and lift phases' durations, s (abstract: 1 and 2).
@@ -139,6 +140,12 @@ pub(super) struct TaskCtl {
     ceiling: Option<f64>,
     /// The physical grasp mode: no re-planning from the state (see [`TaskCtl::off_plan`]).
     physical: bool,
+    /// The most a place's release and retreat open the gripper (1 fully open; the physical
+    /// grasp's [`grasp::release_gripper`](super::grasp::release_gripper)).
+    release_gripper: f64,
+    /// The other key objects a place's hand keeps clear of, `(centre, footprint radius)`
+    /// (world; the physical grasp's [`grasp::place_turn`](super::grasp::place_turn)).
+    neighbours: Vec<([f64; 2], f64)>,
     /// A lean (about the tool centre point, see [`tilted`]) applied to every pose of the
     /// pick-and-place machine: an arm whose wrist stands high over a top-down tool leans its
     /// fingers away from the base so the wrist stands back and lower (`OraclePolicy`'s tilt).
@@ -213,8 +220,22 @@ impl TaskCtl {
             params,
             ceiling: target_max,
             physical,
+            release_gripper: 1.0,
+            neighbours: Vec::new(),
             tilt: None,
         }
+    }
+
+    /// Open at most to `gripper` (0 closed, 1 open) while releasing and retreating from a place.
+    pub(super) fn with_release_gripper(mut self, gripper: f64) -> TaskCtl {
+        self.release_gripper = gripper;
+        self
+    }
+
+    /// Turn the held object on the way to a place so the hand keeps clear of `neighbours`.
+    pub(super) fn with_neighbours(mut self, neighbours: Vec<([f64; 2], f64)>) -> TaskCtl {
+        self.neighbours = neighbours;
+        self
     }
 
     /// Work with the machine's poses turned by `tilt` (see [`TaskCtl::tilt`]).
@@ -411,7 +432,11 @@ impl TaskCtl {
                         let last = plan.targets().last().map_or(0.0, |p| p.duration);
                         *t = t.min(plan.duration() - last);
                     }
-                    let (tool, g, _) = plan.target_at(*t);
+                    let (tool, g, phase) = plan.target_at(*t);
+                    let g = match phase {
+                        Phase::Release | Phase::Retreat => g.min(self.release_gripper),
+                        _ => g,
+                    };
                     (self.tool, self.gripper) = (tilted(tool, self.tilt, false), g);
                     break;
                 }
@@ -466,6 +491,8 @@ impl TaskCtl {
                 let object = world.object?;
                 let base = base_isometry(now.base);
                 let yaw_in_base = yaw(&(base.inverse() * object).rotation);
+                let yaw_in_base =
+                    yaw_in_base + place_turn(model, yaw_in_base, now.base[2], target, &self.neighbours);
                 let plan_for = |c: [f64; 3]| {
                     let pose = PlacePlan::target_keeping_grip(c, yaw_in_base, now.base);
                     PlacePlan::new(&pose, model, now.base, p)

@@ -48,6 +48,14 @@ fn finger_travel(desc: &RobotDesc, opening: f64) -> f32 {
     (opening / 2.0 + margin + desc.gripper.finger_thickness / 2.0) as f32
 }
 
+/// The fingers' servo target at `opening`: the travel less `preload` in proportion as the gripper
+/// closes (none at `max_opening`, all of it closed), so an object thinner than the servo needs to
+/// build its squeeze is held as hard as a thick one ([`ArticulationConfig::finger_preload`]).
+fn finger_target(desc: &RobotDesc, opening: f64, preload: f64) -> f32 {
+    let closing = 1.0 - (opening / desc.gripper.max_opening).clamp(0.0, 1.0);
+    finger_travel(desc, opening) - (preload * closing) as f32
+}
+
 impl Robot {
     /// The robot of the physical grasp mode: the base as in [`Robot::spawn`], the arm as a
     /// motor-driven multibody at the home configuration, the fingers on prismatic joints.
@@ -226,7 +234,7 @@ impl Robot {
                 l.joint.data.set_motor(JointAxis::AngX, q, qd, k, d);
             }
         }
-        let travel = finger_travel(&self.desc, state.opening);
+        let travel = finger_target(&self.desc, state.opening, c.finger_preload);
         for h in &art.finger_joints {
             if let Some((mb, link)) = world.multibody_joints.get_mut(*h)
                 && let Some(l) = mb.link_mut(link)
