@@ -8,9 +8,10 @@
 //! catalogue's point. The abstract mode, scored by positions, keeps the catalogue's
 //! `grasp_offset`.
 
-use std::f64::consts::{FRAC_PI_2, FRAC_PI_4, PI};
+use std::f64::consts::{FRAC_PI_2, FRAC_PI_4};
 
 use kitchen_r_core::catalogue::{ObjectModel, Shape};
+use kitchen_r_sim::oracle::manip::{closing_axis, tool_yaw};
 
 /// Fingertips this far above the surface at the grasp, m: a hand that pressed them into the
 /// counter would hold the object by the tips' edges only.
@@ -77,13 +78,16 @@ pub(super) fn place_turn(
     target: [f64; 3],
     neighbours: &[([f64; 2], f64)],
 ) -> f64 {
-    let [gx, gy, _] = model.grasp_offset;
-    if !matches!(model.shape, Shape::Bowl { .. }) || gx.hypot(gy) <= 1e-6 || neighbours.is_empty() {
+    let (Shape::Bowl { .. }, Some(axis)) = (&model.shape, closing_axis(model)) else {
+        return 0.0;
+    };
+    if neighbours.is_empty() {
         return 0.0;
     }
-    // The tool's yaw in the base frame as the machine takes it, in (−π/2, π/2]: its closing
-    // axis along the grasp point's radius.
-    let tool = quarter(gy.atan2(gx) + yaw_in_base - FRAC_PI_2);
+    let [gx, gy, _] = model.grasp_offset;
+    // The tool's yaw in the base frame as the machine takes it: closing along the rim point's
+    // radius.
+    let tool = tool_yaw(axis + yaw_in_base);
     let room = |turn: f64| {
         let (s, c) = (base_yaw + yaw_in_base + turn).sin_cos();
         let hand = [target[0] + c * gx - s * gy, target[1] + s * gx + c * gy];
@@ -106,23 +110,14 @@ pub(super) fn place_turn(
     best.0
 }
 
-/// A top-down tool's yaw `a` taken in (−π/2, π/2], as the pick-and-place machine takes it (its
-/// two fingers are alike, so a half turn is the same grip).
-fn quarter(a: f64) -> f64 {
-    let w = a - PI * (a / PI).round();
-    if w <= -FRAC_PI_2 { w + PI } else { w }
-}
-
 /// The width the fingers close on in the physical grasp (`model` as [`physical_grasp`] left it):
 /// a bowl's wall at its rim point, across a sphere, an upright cylinder or a box's narrower
 /// side; `None` for shapes it does not know (meshes).
 fn pinch_width(model: &ObjectModel) -> Option<f64> {
-    let [x, y, _] = model.grasp_offset;
-    match model.shape {
-        Shape::Bowl { thickness, .. } if x.hypot(y) > 1e-6 => Some(thickness),
-        Shape::Sphere { radius } => Some(2.0 * radius),
-        Shape::Cylinder { radius, .. } if x.hypot(y) <= 1e-6 => Some(2.0 * radius),
-        Shape::Cuboid { size } => Some(size[0].min(size[1])),
+    match (&model.shape, closing_axis(model)) {
+        (Shape::Bowl { thickness, .. }, Some(_)) => Some(*thickness),
+        (Shape::Sphere { radius }, _) | (Shape::Cylinder { radius, .. }, None) => Some(2.0 * radius),
+        (Shape::Cuboid { size }, _) => Some(size[0].min(size[1])),
         _ => None,
     }
 }

@@ -262,12 +262,12 @@ impl OraclePolicy {
         // Opened fully, the fingers of a pinch sweep centimetres out beside a placed object and
         // can knock a neighbour off its support (the physical grasp only: the abstract mode's
         // fingers touch no key object).
-        let (release, neighbours) = match (physical, self.world(p).model, &p.target) {
-            (true, Some(model), &TaskTarget::Place { object, target }) => (
-                grasp::release_gripper(&model, self.max_opening),
+        let (release, neighbours) = match p.target {
+            TaskTarget::Place { object, target } if physical => (
+                (self.world(p).model).map_or(1.0, |m| grasp::release_gripper(&m, self.max_opening)),
                 self.neighbours(p, object, target),
             ),
-            _ => (1.0, Vec::new()),
+            _ => (1.0, Arc::from([])),
         };
         Ok(
             TaskCtl::new(goal, tool, holding, approach, prelude, target_max, physical)
@@ -280,7 +280,7 @@ impl OraclePolicy {
     /// The key objects other than `object` standing within 20 cm of the height of `target`
     /// (where it is put down), as `(centre, footprint radius)`: what the hand keeps clear of
     /// ([`grasp::place_turn`]).
-    fn neighbours(&self, p: &Privileged, object: usize, target: [f64; 3]) -> Vec<([f64; 2], f64)> {
+    fn neighbours(&self, p: &Privileged, object: usize, target: [f64; 3]) -> Arc<[([f64; 2], f64)]> {
         (p.objects.iter().enumerate())
             .filter(|(i, o)| *i != object && (o.pose[2] - target[2]).abs() < 0.2)
             .filter_map(|(_, o)| {

@@ -12,6 +12,7 @@
 //! trajectory to fill a whole chunk.
 
 use std::f64::consts::{FRAC_PI_2, PI};
+use std::sync::Arc;
 
 use kitchen_r_core::catalogue::ObjectModel;
 use kitchen_r_sim::oracle::action::action;
@@ -144,8 +145,9 @@ pub(super) struct TaskCtl {
     /// grasp's [`grasp::release_gripper`](super::grasp::release_gripper)).
     release_gripper: f64,
     /// The other key objects a place's hand keeps clear of, `(centre, footprint radius)`
-    /// (world; the physical grasp's [`grasp::place_turn`](super::grasp::place_turn)).
-    neighbours: Vec<([f64; 2], f64)>,
+    /// (world; the physical grasp's [`grasp::place_turn`](super::grasp::place_turn)). Shared:
+    /// the controller is cloned for every step of every chunk it predicts.
+    neighbours: Arc<[([f64; 2], f64)]>,
     /// A lean (about the tool centre point, see [`tilted`]) applied to every pose of the
     /// pick-and-place machine: an arm whose wrist stands high over a top-down tool leans its
     /// fingers away from the base so the wrist stands back and lower (`OraclePolicy`'s tilt).
@@ -221,7 +223,7 @@ impl TaskCtl {
             ceiling: target_max,
             physical,
             release_gripper: 1.0,
-            neighbours: Vec::new(),
+            neighbours: Arc::from([]),
             tilt: None,
         }
     }
@@ -233,7 +235,7 @@ impl TaskCtl {
     }
 
     /// Turn the held object on the way to a place so the hand keeps clear of `neighbours`.
-    pub(super) fn with_neighbours(mut self, neighbours: Vec<([f64; 2], f64)>) -> TaskCtl {
+    pub(super) fn with_neighbours(mut self, neighbours: Arc<[([f64; 2], f64)]>) -> TaskCtl {
         self.neighbours = neighbours;
         self
     }

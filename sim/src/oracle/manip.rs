@@ -235,13 +235,22 @@ pub fn base_isometry(base_pose_world: [f64; 3]) -> Isometry3<f64> {
 }
 
 /// Direction (radians, object frame) the fingers must close along, if it matters.
-fn closing_axis(model: &ObjectModel) -> Option<f64> {
+pub fn closing_axis(model: &ObjectModel) -> Option<f64> {
     let [ox, oy, _] = model.grasp_offset;
     match model.shape {
         Shape::Cuboid { size } => Some(if size[0] <= size[1] { 0.0 } else { FRAC_PI_2 }),
         _ if ox.hypot(oy) > 1e-6 => Some(oy.atan2(ox)),
         _ => None,
     }
+}
+
+/// The yaw (base frame) of a top-down tool whose fingers close along direction `axis` (base
+/// frame), taken in (−π/2, π/2] so the wrist never turns more than a quarter turn from straight
+/// ahead (the two fingers are alike: a half turn is the same grip).
+pub fn tool_yaw(axis: f64) -> f64 {
+    let y = axis - FRAC_PI_2;
+    let w = y - PI * (y / PI).round();
+    if w <= -FRAC_PI_2 { w + PI } else { w }
 }
 
 /// Top-down tool targets at `heights` above the grasp point of an object standing at `frame`
@@ -255,16 +264,8 @@ fn object_targets(
 ) -> Vec<PhaseTarget> {
     let frame_in_base = base.inverse() * frame;
     let frame_yaw = frame_in_base.rotation.scaled_axis().z;
-    // Tool yaw in the base frame with the closing axis (tool y) along the required direction,
-    // taken in (−π/2, π/2] so the wrist never turns more than a quarter turn from straight ahead.
-    let tool_yaw = match closing_axis(model) {
-        Some(axis) => {
-            let y = axis + frame_yaw - FRAC_PI_2;
-            let w = y - PI * (y / PI).round();
-            if w <= -FRAC_PI_2 { w + PI } else { w }
-        }
-        None => 0.0,
-    };
+    // Tool yaw in the base frame with the closing axis (tool y) along the required direction.
+    let tool_yaw = closing_axis(model).map_or(0.0, |axis| tool_yaw(axis + frame_yaw));
     let in_frame_rot =
         UnitQuaternion::from_axis_angle(&Vector3::z_axis(), tool_yaw - frame_yaw) * top_down(0.0);
     let [gx, gy, gz] = model.grasp_offset;
