@@ -12,7 +12,7 @@ const TOOL_TURN: f64 = 0.8;
 /// Shortest blend, s: even a tiny correction gets a smooth start and stop.
 const MIN_BLEND: f64 = 0.5;
 /// A tool this far below the stow height is near a work surface: it rises first.
-const LOW: f64 = 0.05;
+pub(super) const LOW: f64 = 0.05;
 /// How far a low tool rises before moving sideways, m (the machine's retreat height).
 const RISE: f64 = 0.10;
 
@@ -46,10 +46,14 @@ pub(super) struct Prelude {
     /// The orientation (base frame) the tool stows with and ends turned to, instead of the
     /// stow pose's: a hand holding a plate tilted levels it before it goes in under a board.
     pub turn_to: Option<UnitQuaternion<f64>>,
+    /// Seconds the tool stays where it is before it moves, while the fingers open: a place ends
+    /// as the object touches down, with the fingers still squeezing it (the physical grasp).
+    pub open_first: f64,
 }
 
 impl ArmPath {
-    /// The motion before a task: a low tool rises by [`RISE`] (it may be around an object it
+    /// The motion before a task: a tool stays where it is for `open_first` seconds, then a low
+    /// tool rises by [`RISE`] (it may be around an object it
     /// just released, or hold one just lifted off a surface), capped at `here_max` under a
     /// board; under a board it then pulls back horizontally to the stow position (a hand leaning
     /// sideways sinks by `sink` first); a move then goes to `stow`, a manipulation lowers the
@@ -69,6 +73,9 @@ impl ArmPath {
             start: from,
             legs: Vec::new(),
         };
+        if how.open_first > 0.0 {
+            path.legs.push((from, how.open_first));
+        }
         let z = from.translation.z;
         if z < stow.translation.z - LOW {
             let up = (z + RISE).min(how.here_max.unwrap_or(f64::INFINITY));
@@ -178,6 +185,21 @@ mod tests {
         // Reaching into a shelf from stow: straight down to the cap first.
         let p = ArmPath::prelude(stow, stow, Some(1.0), false, Prelude::default());
         assert_eq!(p.end().translation.vector, Vector3::new(0.30, -0.12, 1.0));
+    }
+
+    #[test]
+    fn fingers_still_closed_round_a_placed_object_open_before_the_tool_moves() {
+        let low = Isometry3::from_parts(Translation3::new(0.6, 0.0, 0.95), top_down(0.0));
+        let stow = Isometry3::from_parts(Translation3::new(0.30, -0.12, 1.10), top_down(0.0));
+        let how = Prelude {
+            open_first: 0.4,
+            ..Prelude::default()
+        };
+        let p = ArmPath::prelude(low, stow, None, true, how);
+        assert_eq!(p.at(0.39), low);
+        assert!(p.at(0.6).translation.z > low.translation.z);
+        let plain = ArmPath::prelude(low, stow, None, true, Prelude::default());
+        assert!((p.duration() - plain.duration() - 0.4).abs() < 1e-12);
     }
 
     #[test]

@@ -8,7 +8,7 @@
 //! catalogue's point. The abstract mode, scored by positions, keeps the catalogue's
 //! `grasp_offset`.
 
-use std::f64::consts::{FRAC_PI_2, FRAC_PI_4};
+use std::f64::consts::{FRAC_PI_2, FRAC_PI_4, FRAC_PI_8};
 
 use kitchen_r_core::catalogue::{ObjectModel, Shape};
 use kitchen_r_sim::oracle::manip::{closing_axis, tool_yaw};
@@ -17,16 +17,25 @@ use kitchen_r_sim::oracle::manip::{closing_axis, tool_yaw};
 /// counter would hold the object by the tips' edges only.
 const TIP_CLEARANCE: f64 = -0.01;
 
-/// Fingertips this far above a bowl's inside floor at the grasp, m: as deep as the hand's
+/// Fingertips this far above a dish's inside floor at the grasp, m: as deep as the hand's
 /// tracking allows, for the longest contact down the wall (the plate's 2 cm rim: with 5 mm the
 /// pads covered 1.1 cm of it, a couple no larger than the plate's own turning moment, and half
 /// the plates worked loose on the way; docs/twin/robot.md).
-const BOWL_FLOOR_CLEARANCE: f64 = 0.001;
+const DISH_FLOOR_CLEARANCE: f64 = 0.001;
+
+/// Fingertips this far above a deeper bowl's inside floor, m: its 6 cm wall gives the pads
+/// contact enough, and 1 mm let the inner fingertip catch in the floor's facets when the bowl
+/// shifted in the hand; the bowl then hung on the finger, was lifted again as the hand rose
+/// from the place and carried into the next pick (dev-0086).
+const BOWL_FLOOR_CLEARANCE: f64 = 0.005;
+
+/// Bowls no taller than this are dishes (the physical mode's plate), m.
+const DISH_HEIGHT: f64 = 0.03;
 
 /// Room the fingers give a placed object on each side as they open, m: opened fully, the outer
 /// finger of a pinch at a bowl's wall swept 4–5 cm out and knocked a neighbouring apple off the
 /// counter (dev-0132).
-const RELEASE_ROOM: f64 = 0.015;
+pub(super) const RELEASE_ROOM: f64 = 0.015;
 
 /// `model` with the physical mode's grasp point; `finger_reach`: how far the fingertips reach
 /// below the TCP, m.
@@ -43,7 +52,12 @@ pub(super) fn physical_grasp(mut model: ObjectModel, finger_reach: f64) -> Objec
             // pads' contact down the wall, the larger the couple that holds the bowl level.
             let r = (radius - thickness / 2.0) / x.hypot(y);
             let floor = -height / 2.0 + thickness;
-            model.grasp_offset = [x * r, y * r, floor + BOWL_FLOOR_CLEARANCE + finger_reach];
+            let clearance = if height > DISH_HEIGHT {
+                BOWL_FLOOR_CLEARANCE
+            } else {
+                DISH_FLOOR_CLEARANCE
+            };
+            model.grasp_offset = [x * r, y * r, floor + clearance + finger_reach];
             return model;
         }
         Shape::Sphere { .. } | Shape::Cuboid { .. } => {}
@@ -105,6 +119,73 @@ pub(super) fn place_turn(
         // Clear of the quarter turn's ends, where round-off could swap the fingers.
         if (tool + turn).abs() < FRAC_PI_2 - 0.05 && r > best.1 + 1e-9 {
             best = (turn, r);
+        }
+    }
+    best.0
+}
+
+/// Tool yaws (base frame, rad) a pick or place of an object with no closing direction of its own
+/// may take, in the order tried: straight ahead first, then turns either way up to a quarter.
+const FREE_YAWS: [f64; 8] = [
+    0.0,
+    FRAC_PI_8,
+    -FRAC_PI_8,
+    FRAC_PI_4,
+    -FRAC_PI_4,
+    3.0 * FRAC_PI_8,
+    -3.0 * FRAC_PI_8,
+    FRAC_PI_2,
+];
+
+/// Room a finger keeps from another object's footprint when it comes down beside or opens round
+/// an object, m: less, and the tool's yaw is turned.
+const FINGER_ROOM: f64 = 0.02;
+
+/// A finger's footprint seen from above, m: half its thickness along the closing axis and half
+/// its width across it (the shipped gripper's 1.2 × 2.5 cm pads, rounded up for other arms').
+const FINGER_HALF: [f64; 2] = [0.008, 0.015];
+
+/// The tool yaw (base frame, rad) over an object with no closing direction of its own (a sphere,
+/// an upright cylinder pinched at its centre; see [`closing_axis`]) standing or put down at
+/// `centre` (world), with the fingers `gap` apart: 0 (closing along the base's sideways axis)
+/// unless a finger would come within [`FINGER_ROOM`] of a neighbour (`(centre, footprint
+/// radius)`, world); then the yaw of [`FREE_YAWS`] that leaves the most room, the first of
+/// equals. `base_yaw`: the base's yaw (world). An apple picked beside a bowl just put down had a
+/// finger land on the bowl's wall, 6 mm away, and was lifted pinched against it (dev-0086).
+pub(super) fn free_yaw(
+    model: &ObjectModel,
+    base_yaw: f64,
+    centre: [f64; 2],
+    gap: f64,
+    neighbours: &[([f64; 2], f64)],
+) -> f64 {
+    if closing_axis(model).is_some() || neighbours.is_empty() {
+        return 0.0;
+    }
+    let reach = gap / 2.0 + FINGER_HALF[0];
+    let room = |yaw: f64| {
+        // The closing axis is the tool's y: a quarter turn from its yaw.
+        let (s, c) = (base_yaw + yaw + FRAC_PI_2).sin_cos();
+        let mut least = f64::INFINITY;
+        for side in [-1.0, 1.0] {
+            let finger = [centre[0] + side * reach * c, centre[1] + side * reach * s];
+            for (n, r) in neighbours {
+                let d = [n[0] - finger[0], n[1] - finger[1]];
+                let along = (d[0] * c + d[1] * s).abs() - FINGER_HALF[0];
+                let across = (-d[0] * s + d[1] * c).abs() - FINGER_HALF[1];
+                least = least.min(along.max(0.0).hypot(across.max(0.0)) - r);
+            }
+        }
+        least
+    };
+    let mut best = (0.0, room(0.0));
+    if best.1 >= FINGER_ROOM {
+        return 0.0;
+    }
+    for yaw in FREE_YAWS {
+        let r = room(yaw);
+        if r > best.1 + 1e-9 {
+            best = (yaw, r);
         }
     }
     best.0
@@ -172,11 +253,43 @@ mod tests {
         else {
             panic!("the physical mode's plate is a dish")
         };
+        let Shape::Bowl { height, .. } = plate.shape else {
+            unreachable!()
+        };
         let g = physical_grasp(plate, reach).grasp_offset;
         assert!(
             (g[0].hypot(g[1]) - (radius - thickness / 2.0)).abs() < 1e-12,
             "{g:?}"
         );
+        // Its 2 cm rim is pinched deeper than the bowl's 6 cm wall.
+        let tips = g[2] - reach;
+        assert!(
+            (tips - (-height / 2.0 + thickness) - DISH_FLOOR_CLEARANCE).abs() < 1e-12,
+            "tips at {tips}"
+        );
+    }
+
+    #[test]
+    fn the_fingers_come_down_beside_a_round_object_away_from_its_neighbour() {
+        let cat = Catalogue::load(&kitchen_r_core::assets::assets_dir().join("objects.toml")).unwrap();
+        let apple = physical_grasp(cat.model("apple").unwrap().clone(), 0.025);
+        let (gap, centre) = (0.09, [1.0, 1.0]);
+        // Base facing +x: the fingers close along world y, 5.3 cm each side of the centre. A
+        // bowl 6 mm beside the apple along y is where a finger would land: the tool turns
+        // a quarter and closes along x.
+        let bowl = ([1.0, 1.0 + 0.04 + 0.006 + 0.08], 0.08);
+        assert_eq!(free_yaw(&apple, 0.0, centre, gap, &[bowl]), FRAC_PI_2);
+        // The same bowl along x is out of the fingers' way: no turn.
+        let ahead = ([1.0 + 0.04 + 0.006 + 0.08, 1.0], 0.08);
+        assert_eq!(free_yaw(&apple, 0.0, centre, gap, &[ahead]), 0.0);
+        // With the base turned a quarter the same bowl along y is now ahead of it.
+        assert_eq!(free_yaw(&apple, FRAC_PI_2, centre, gap, &[bowl]), 0.0);
+        // Neighbours on two sides: the turn that leaves the most room, an eighth.
+        let turn = free_yaw(&apple, 0.0, centre, gap, &[bowl, ahead]);
+        assert!(turn.abs() > 0.1 && turn.abs() < FRAC_PI_2 - 0.1, "{turn}");
+        // Objects with a closing direction of their own keep it.
+        let bowl_model = physical_grasp(cat.model("bowl").unwrap().clone(), 0.025);
+        assert_eq!(free_yaw(&bowl_model, 0.0, centre, gap, &[bowl]), 0.0);
     }
 
     #[test]

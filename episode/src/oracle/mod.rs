@@ -25,6 +25,7 @@ use kitchen_r_core::catalogue::Catalogue;
 use kitchen_r_core::scene::Scene;
 use kitchen_r_sim::oracle::follow::{FollowParams, PathFollower};
 use kitchen_r_sim::oracle::grid::{GridParams, OccupancyGrid};
+use kitchen_r_sim::oracle::manip::ManipParams;
 use kitchen_r_sim::oracle::theta_star::{PlannerParams, theta_star};
 use kitchen_r_sim::robot::desc::BaseDesc;
 use kitchen_r_sim::task::TaskTarget;
@@ -45,6 +46,13 @@ pub(crate) const ORACLE_NAME: &str = "builtin:oracle";
 const CLEARANCE_MARGIN: f64 = 0.2;
 /// The base squares up on the last move's goal only when it stands this close to it, m.
 const SETTLE_RANGE: f64 = 0.5;
+
+/// An empty hand's fingers closer than this (a fraction of the widest gap) at a task's start are
+/// still round what the last place put down ([`Prelude::open_first`]).
+const OPEN_GAP: f64 = 0.95;
+
+/// Seconds the fingers are given past their opening time before the hand moves.
+const OPEN_SETTLE_S: f64 = 0.3;
 
 /// Run options for the closed-loop expert: privileged, one action per query.
 pub fn expert_options() -> RunOptions {
@@ -102,6 +110,8 @@ pub struct OraclePolicy {
     finger_reach: f64,
     /// The gripper's widest gap, m (the physical grasp's release opens to a fraction of it).
     max_opening: f64,
+    /// How fast the finger gap may change, m/s.
+    opening_speed: f64,
     /// How high the arm's wrist stands over a top-down tool, m (`headroom::headroom` reads it:
     /// how far under a shelf board the tool stays and how it leans there).
     wrist_height: Option<f64>,
@@ -126,6 +136,7 @@ impl OraclePolicy {
             replans: 0,
             finger_reach: assets.robot.gripper.finger_length / 2.0,
             max_opening: assets.robot.gripper.max_opening,
+            opening_speed: assets.robot.gripper.opening_speed,
             wrist_height: kitchen_r_sim::robot::wrist::wrist_height(&assets.robot),
         }
     }
@@ -179,7 +190,8 @@ impl OraclePolicy {
         Ok(g)
     }
 
-    fn start_task(&mut self, p: &Privileged) -> Result<TaskCtl, PolicyError> {
+    /// `gap`: the measured finger gap, a fraction of the widest.
+    fn start_task(&mut self, p: &Privileged, gap: f64) -> Result<TaskCtl, PolicyError> {
         let tool = iso(&p.ee_pose);
         let holding = p.held.is_some();
         let here = [p.base_pose[0], p.base_pose[1]];
@@ -254,10 +266,24 @@ impl OraclePolicy {
             }
             _ => 0.0,
         };
+        // A physical place ends as the object touches down, the fingers still squeezing it: an
+        // empty hand low over the work opens a little in place before it rises (rising at once,
+        // the squeeze lifted a bowl and carried it hooked on a finger into the next pick,
+        // dev-0086), and no wider than its release would (fully open, the outer finger swept a
+        // neighbour off the counter).
+        let low = tool.translation.z < ManipParams::default().home.translation.z - arm::LOW;
+        let (open_first, start_gripper) = if physical && !holding && low && gap < OPEN_GAP {
+            let to = ((gap * self.max_opening + 2.0 * grasp::RELEASE_ROOM) / self.max_opening).min(1.0);
+            let s = (to - gap) * self.max_opening / self.opening_speed.max(1e-3);
+            (s + OPEN_SETTLE_S, to)
+        } else {
+            (0.0, if holding { 0.0 } else { 1.0 })
+        };
         let prelude = Prelude {
             here_max,
             sink,
             turn_to,
+            open_first,
         };
         // Opened fully, the fingers of a pinch sweep centimetres out beside a placed object and
         // can knock a neighbour off its support (the physical grasp only: the abstract mode's
@@ -265,7 +291,14 @@ impl OraclePolicy {
         let (release, neighbours) = match p.target {
             TaskTarget::Place { object, target } if physical => (
                 (self.world(p).model).map_or(1.0, |m| grasp::release_gripper(&m, self.max_opening)),
-                self.neighbours(p, object, target),
+                self.neighbours(p, object, target[2]),
+            ),
+            // A top-down pick's fingers come down beside the object, wherever its neighbours are.
+            TaskTarget::Pick { object } if physical => (
+                1.0,
+                p.objects
+                    .get(object)
+                    .map_or(Arc::from([]), |o| self.neighbours(p, object, o.pose[2])),
             ),
             _ => (1.0, Arc::from([])),
         };
@@ -273,16 +306,17 @@ impl OraclePolicy {
             TaskCtl::new(goal, tool, holding, approach, prelude, target_max, physical)
                 .with_tilt(tilt)
                 .with_release_gripper(release)
-                .with_neighbours(neighbours),
+                .with_neighbours(neighbours, self.max_opening)
+                .with_start_gripper(start_gripper),
         )
     }
 
-    /// The key objects other than `object` standing within 20 cm of the height of `target`
-    /// (where it is put down), as `(centre, footprint radius)`: what the hand keeps clear of
-    /// ([`grasp::place_turn`]).
-    fn neighbours(&self, p: &Privileged, object: usize, target: [f64; 3]) -> Arc<[([f64; 2], f64)]> {
+    /// The key objects other than `object` standing within 20 cm of height `z` (where it is
+    /// picked or put down), as `(centre, footprint radius)`: what the hand keeps clear of
+    /// ([`grasp::place_turn`], [`grasp::free_yaw`]).
+    fn neighbours(&self, p: &Privileged, object: usize, z: f64) -> Arc<[([f64; 2], f64)]> {
         (p.objects.iter().enumerate())
-            .filter(|(i, o)| *i != object && (o.pose[2] - target[2]).abs() < 0.2)
+            .filter(|(i, o)| *i != object && (o.pose[2] - z).abs() < 0.2)
             .filter_map(|(_, o)| {
                 let m = self.catalogue.model(&o.model)?;
                 Some((
@@ -379,7 +413,7 @@ impl Policy for OraclePolicy {
         // was the world's doing, not a learner's.
         let mut own = false;
         let mut ctl = match self.active.take() {
-            None => self.start_task(p)?,
+            None => self.start_task(p, input.observation.gripper)?,
             Some(a) => {
                 let done = input.step.saturating_sub(a.queried_at) as usize;
                 own = match (done, input.previous_action) {
@@ -424,7 +458,7 @@ impl Policy for OraclePolicy {
             // than an error in a DAgger round.
             let now = *measured.now;
             if (own || !ctl.resume(&measured_tool, &now, &world))
-                && let Ok(fresh) = self.start_task(p)
+                && let Ok(fresh) = self.start_task(p, input.observation.gripper)
             {
                 ctl = fresh;
             }

@@ -21,7 +21,7 @@ use kitchen_r_sim::oracle::manip::{ManipParams, Phase, PhasePlan, PickPlan, Plac
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 
 use super::arm::{ArmPath, Prelude};
-use super::grasp::place_turn;
+use super::grasp::{free_yaw, place_turn};
 use super::headroom::Lean;
 
 /// Physical grasp mode: the grasp and lift phases' durations, s (abstract: 1 and 2).
@@ -148,6 +148,9 @@ pub(super) struct TaskCtl {
     /// (world; the physical grasp's [`grasp::place_turn`](super::grasp::place_turn)). Shared:
     /// the controller is cloned for every step of every chunk it predicts.
     neighbours: Arc<[([f64; 2], f64)]>,
+    /// The gripper's widest finger gap, m (the physical grasp's
+    /// [`grasp::free_yaw`](super::grasp::free_yaw)).
+    max_opening: f64,
     /// A lean (about the tool centre point, see [`tilted`]) applied to every pose of the
     /// pick-and-place machine: an arm whose wrist stands high over a top-down tool leans its
     /// fingers away from the base so the wrist stands back and lower (`OraclePolicy`'s tilt).
@@ -224,8 +227,15 @@ impl TaskCtl {
             physical,
             release_gripper: 1.0,
             neighbours: Arc::from([]),
+            max_opening: 0.0,
             tilt: None,
         }
+    }
+
+    /// Command `gripper` (0 closed, 1 open) until the manipulation's plan starts.
+    pub(super) fn with_start_gripper(mut self, gripper: f64) -> TaskCtl {
+        self.gripper = gripper;
+        self
     }
 
     /// Open at most to `gripper` (0 closed, 1 open) while releasing and retreating from a place.
@@ -234,9 +244,12 @@ impl TaskCtl {
         self
     }
 
-    /// Turn the held object on the way to a place so the hand keeps clear of `neighbours`.
-    pub(super) fn with_neighbours(mut self, neighbours: Arc<[([f64; 2], f64)]>) -> TaskCtl {
+    /// Keep the hand clear of `neighbours`: turn the held object on the way to a place, and
+    /// turn the tool over an object with no closing direction of its own; `max_opening`: the
+    /// gripper's widest finger gap, m.
+    pub(super) fn with_neighbours(mut self, neighbours: Arc<[([f64; 2], f64)]>, max_opening: f64) -> TaskCtl {
         self.neighbours = neighbours;
+        self.max_opening = max_opening;
         self
     }
 
@@ -467,6 +480,14 @@ impl TaskCtl {
                 // cm of the 3 a pick needs. Leaning, its wrist stands lower than the room allows.
                 params.lift_height = params.lift_height.max(FLAT_LIFT.min(open_lift));
             }
+        }
+        if let Some(object) = world.object.as_ref().filter(|_| !self.neighbours.is_empty()) {
+            // Fingers opened fully round an object to pick, or a little wider than it to let go.
+            let (centre, gap) = match self.goal {
+                Goal::Place { target } => ([target[0], target[1]], self.release_gripper * self.max_opening),
+                _ => ([object.translation.x, object.translation.y], self.max_opening),
+            };
+            params.free_yaw = free_yaw(model, now.base[2], centre, gap, &self.neighbours);
         }
         let p = &params;
         // The machine plans top-down; its start is the commanded pose with the tilt taken off,

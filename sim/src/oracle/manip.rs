@@ -103,6 +103,11 @@ pub struct ManipParams {
     pub retreat_height: f64,
     /// Seconds per phase, in [`Phase::ALL`] order.
     pub durations: [f64; 10],
+    /// Tool yaw (base frame, rad) over an object whose closing direction does not matter (no
+    /// [`closing_axis`]: a sphere, an upright cylinder taken at its centre): 0 closes the
+    /// fingers along the base's sideways axis; a caller turns it to keep the fingers off a
+    /// neighbour.
+    pub free_yaw: f64,
 }
 
 /// A top-down tool orientation turned by `yaw` about the vertical.
@@ -127,6 +132,7 @@ impl Default for ManipParams {
             release_height: 0.01,
             retreat_height: 0.12,
             durations: [3.0, 2.0, 1.0, 2.0, 3.0, 3.0, 2.0, 1.0, 2.0, 3.0],
+            free_yaw: 0.0,
         }
     }
 }
@@ -265,7 +271,7 @@ fn object_targets(
     let frame_in_base = base.inverse() * frame;
     let frame_yaw = frame_in_base.rotation.scaled_axis().z;
     // Tool yaw in the base frame with the closing axis (tool y) along the required direction.
-    let tool_yaw = closing_axis(model).map_or(0.0, |axis| tool_yaw(axis + frame_yaw));
+    let tool_yaw = closing_axis(model).map_or(params.free_yaw, |axis| tool_yaw(axis + frame_yaw));
     let in_frame_rot =
         UnitQuaternion::from_axis_angle(&Vector3::z_axis(), tool_yaw - frame_yaw) * top_down(0.0);
     let [gx, gy, gz] = model.grasp_offset;
