@@ -35,7 +35,7 @@ const DISH_HEIGHT: f64 = 0.03;
 /// Room the fingers give a placed object on each side as they open, m: opened fully, the outer
 /// finger of a pinch at a bowl's wall swept 4–5 cm out and knocked a neighbouring apple off the
 /// counter (dev-0132).
-pub(super) const RELEASE_ROOM: f64 = 0.015;
+const RELEASE_ROOM: f64 = 0.015;
 
 /// `model` with the physical mode's grasp point; `finger_reach`: how far the fingertips reach
 /// below the TCP, m.
@@ -201,7 +201,25 @@ fn pinch_width(model: &ObjectModel) -> Option<f64> {
 /// The gripper command (0 closed, 1 open) a place opens to in the physical grasp: the pinched
 /// width and [`RELEASE_ROOM`] on each side, at most fully open.
 pub(super) fn release_gripper(model: &ObjectModel, max_opening: f64) -> f64 {
-    pinch_width(model).map_or(1.0, |w| ((w + 2.0 * RELEASE_ROOM) / max_opening).min(1.0))
+    pinch_width(model).map_or(1.0, |w| opening_round(w, max_opening))
+}
+
+/// The gripper command (0 closed, 1 open) that opens the fingers to `width` m and
+/// [`RELEASE_ROOM`] on each side, at most fully open.
+fn opening_round(width: f64, max_opening: f64) -> f64 {
+    ((width + 2.0 * RELEASE_ROOM) / max_opening).min(1.0)
+}
+
+/// Seconds the fingers are given past their opening time before the hand moves.
+const OPEN_SETTLE_S: f64 = 0.3;
+
+/// How an empty hand whose fingers are still closed round what a place put down opens before it
+/// moves: `(seconds to stay, gripper command)`, opening from `gap` (a fraction of the widest,
+/// `max_opening` m) no wider than a release would, at `opening_speed` m/s.
+pub(super) fn open_in_place(gap: f64, max_opening: f64, opening_speed: f64) -> (f64, f64) {
+    let to = opening_round(gap * max_opening, max_opening);
+    let opening = (to - gap) * max_opening / opening_speed.max(1e-3);
+    (opening + OPEN_SETTLE_S, to)
 }
 
 #[cfg(test)]

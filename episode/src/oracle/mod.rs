@@ -51,9 +51,6 @@ const SETTLE_RANGE: f64 = 0.5;
 /// still round what the last place put down ([`Prelude::open_first`]).
 const OPEN_GAP: f64 = 0.95;
 
-/// Seconds the fingers are given past their opening time before the hand moves.
-const OPEN_SETTLE_S: f64 = 0.3;
-
 /// Run options for the closed-loop expert: privileged, one action per query.
 pub fn expert_options() -> RunOptions {
     RunOptions {
@@ -273,9 +270,7 @@ impl OraclePolicy {
         // neighbour off the counter).
         let low = tool.translation.z < ManipParams::default().home.translation.z - arm::LOW;
         let (open_first, start_gripper) = if physical && !holding && low && gap < OPEN_GAP {
-            let to = ((gap * self.max_opening + 2.0 * grasp::RELEASE_ROOM) / self.max_opening).min(1.0);
-            let s = (to - gap) * self.max_opening / self.opening_speed.max(1e-3);
-            (s + OPEN_SETTLE_S, to)
+            grasp::open_in_place(gap, self.max_opening, self.opening_speed)
         } else {
             (0.0, if holding { 0.0 } else { 1.0 })
         };
