@@ -206,7 +206,12 @@ async fn watched_eval(extra: &[&str]) {
     .await
     .unwrap();
     assert!(out.1.success(), "eval --foxglove failed");
-    let tail: Vec<String> = rx.try_iter().collect();
+    // The rest of stderr, up to its end: the reader thread may still be behind the exited
+    // process (reading only what had arrived lost the summary line under load).
+    let mut tail = Vec::new();
+    while let Ok(l) = rx.recv_timeout(Duration::from_secs(30)) {
+        tail.push(l);
+    }
     assert!(tail.iter().any(|l| l.contains("messages published")), "{tail:?}");
     assert_eq!(results(&out.0), results(&String::from_utf8_lossy(&plain.stdout)));
 }
