@@ -138,7 +138,7 @@ pub(crate) fn bench(args: BenchArgs) -> anyhow::Result<()> {
                     r.physics_step_us, r.physics_step_us_min
                 );
                 println!(
-                    "physics_step_us (articulated arm, physical grasp) {:.1} (fastest {:.1})",
+                    "physics_step_us (physical grasp) {:.1} (fastest {:.1})",
                     r.physics_step_us_articulated, r.physics_step_us_articulated_min
                 );
                 println!("control_step_us       {:.1}", r.control_step_us);
@@ -161,7 +161,7 @@ pub(crate) fn bench(args: BenchArgs) -> anyhow::Result<()> {
                         m.physics_step_us, m.physics_step_us_min
                     );
                     println!(
-                        "  physics_step_us (articulated arm, physical grasp) {:.1} (fastest {:.1})",
+                        "  physics_step_us (physical grasp) {:.1} (fastest {:.1})",
                         m.physics_step_us_articulated, m.physics_step_us_articulated_min
                     );
                     println!(

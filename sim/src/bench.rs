@@ -50,8 +50,8 @@ pub struct BenchReport {
     pub physics_step_us: f64,
     /// The fastest batch's physics substep (µs): the figure with the least interference.
     pub physics_step_us_min: f64,
-    /// The same substep in the physical grasp mode (the arm a motor-driven multibody, the
-    /// fingers force-limited joints), median and fastest batch (µs).
+    /// The same substep in the physical grasp mode (the fingers force-limited joints of a
+    /// multibody rooted at the hand), median and fastest batch (µs).
     pub physics_step_us_articulated: f64,
     pub physics_step_us_articulated_min: f64,
     /// One control step without rendering (µs), median batch.
@@ -89,7 +89,7 @@ pub struct MeshRobotReport {
     pub arm_colliders: usize,
     pub physics_step_us: f64,
     pub physics_step_us_min: f64,
-    /// The same substep in the physical grasp mode (the arm a motor-driven multibody).
+    /// The same substep in the physical grasp mode (force-limited fingers).
     pub physics_step_us_articulated: f64,
     pub physics_step_us_articulated_min: f64,
     /// Every configured camera, no LiDAR (ms), median and fastest of `BATCHES` batches.

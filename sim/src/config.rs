@@ -40,15 +40,11 @@ pub struct SimConfig {
     pub articulation: ArticulationConfig,
 }
 
-/// `[articulation]`: the articulated arm and force-limited fingers of the physical grasp mode
+/// `[articulation]`: the force-limited fingers of the physical grasp mode
 /// (`robot/articulated.rs`, docs/twin/robot.md); unused in the abstract mode.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ArticulationConfig {
-    /// Joint motors: stiffness (1/s², acceleration-based) and damping (1/s) of the servo to the
-    /// controller's position and velocity targets; the torque is capped by each joint's effort.
-    pub joint_stiffness: f64,
-    pub joint_damping: f64,
     /// Finger motors: the largest squeezing force of each finger (N), and the servo's stiffness
     /// (N/m) and damping (N·s/m) towards the commanded gap.
     pub finger_force: f64,
@@ -66,10 +62,10 @@ pub struct ArticulationConfig {
     pub finger_mass: f64,
     /// Natural frequency of the contact softness (Hz; rapier's default is 30): stiffer contacts
     /// keep squeezed light objects from sinking millimetres into the fingers; 120 Hz let a held
-    /// bowl rattle in the pads at the mode's single 10 ms solver substep.
+    /// bowl rattle in the pads with a single 10 ms solver substep.
     pub contact_frequency: f64,
     /// Rapier's solver in this mode: substeps per physics step (`num_solver_iterations`; each
-    /// rebuilds and factorises the arm's mass matrix, the mode's main cost) and constraint
+    /// rebuilds and factorises the fingers' mass matrix) and constraint
     /// iterations per substep (`num_internal_pgs_iterations`). The abstract mode keeps
     /// `[physics] solver_iterations` substeps of one iteration each.
     pub solver_iterations: u32,
@@ -79,8 +75,6 @@ pub struct ArticulationConfig {
 impl Default for ArticulationConfig {
     fn default() -> Self {
         ArticulationConfig {
-            joint_stiffness: 10000.0,
-            joint_damping: 400.0,
             finger_force: 15.0,
             finger_stiffness: 8000.0,
             finger_damping: 44.0,
@@ -261,8 +255,6 @@ impl SimConfig {
         }
         let a = &self.articulation;
         let gains = [
-            a.joint_stiffness,
-            a.joint_damping,
             a.finger_force,
             a.finger_stiffness,
             a.finger_damping,

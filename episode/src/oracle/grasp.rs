@@ -13,9 +13,12 @@ use std::f64::consts::{FRAC_PI_2, FRAC_PI_4, FRAC_PI_8};
 use kitchen_r_core::catalogue::{ObjectModel, Shape};
 use kitchen_r_sim::oracle::manip::{closing_axis, tool_yaw};
 
-/// Fingertips this far above the surface at the grasp, m: a hand that pressed them into the
-/// counter would hold the object by the tips' edges only.
-const TIP_CLEARANCE: f64 = -0.01;
+/// Fingertips this far above the surface at the grasp, m: at it. Until 2026-11-30 they were
+/// aimed 1 cm into it, where the arm's joint motors stopped them; the hand now follows its
+/// targets, and fingertips pressed into the counter pushed a fork 4 cm along its length as they
+/// closed, so it hung off-centre and swung into the arm (test split: 10 of 42 fork places
+/// failed, none with the tips at the surface).
+const TIP_CLEARANCE: f64 = 0.0;
 
 /// Fingertips this far above a dish's inside floor at the grasp, m: as deep as the hand's
 /// tracking allows, for the longest contact down the wall (the plate's 2 cm rim: with 5 mm the

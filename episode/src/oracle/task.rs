@@ -279,9 +279,9 @@ impl TaskCtl {
     /// the object are, not on how long ago the task started.
     pub(super) fn off_plan(&self, m: &Measured<'_>) -> Option<&'static str> {
         use tolerance as tol;
-        // The physical grasp keeps its timed plan: its articulated arm lags a blend by more than
-        // the tolerances and its "held" flickers with the finger contacts (the physical grasp,
-        // docs/twin/robot.md).
+        // The physical grasp keeps its timed plan: its "held" flickers with the finger contacts
+        // (and its arm, a motor-driven multibody until 2026-11-30, lagged a blend by more than
+        // the tolerances; the physical grasp, docs/twin/robot.md).
         if self.physical {
             return None;
         }

@@ -1,37 +1,37 @@
-//! The physical grasp mode's arm (docs/twin/robot.md): the arm as a rapier multibody whose revolute
-//! joints are driven by motors from the RMP controller's integrated targets, and a parallel gripper
-//! whose fingers are prismatic joints with force-limited motors, so only friction holds an object.
+//! The physical grasp mode's gripper (docs/twin/robot.md): a parallel gripper whose fingers are
+//! prismatic joints with force-limited motors, so only friction holds an object.
 //!
-//! Like the paper's articulation controller: RMPflow's joint accelerations are integrated into
-//! position and velocity targets (`rmp.rs`, unchanged) and each joint's motor servos to them
-//! (stiffness, damping, the description's effort limit as its maximum torque). The links carry
-//! no gravity (an ideal gravity compensation, as an articulation controller applies), so the
-//! motors' torque goes to following the targets and carrying the load.
-//!
-//! The multibody's root is a weightless mount body fixed to the base by an impulse joint: the
-//! base stays the velocity-driven body it is in the abstract mode, and the arm moves with it at
-//! the base's velocity (contacts and friction in the hand see the motion, a kinematic root would
-//! teleport the hand under a held object).
+//! The arm's links are the abstract mode's: RMPflow's joint accelerations are integrated into
+//! position targets (`rmp.rs`, unchanged) and each link's velocity is set every substep to reach
+//! its pose from them (an ideal position-controlled arm, as the paper's articulation controller
+//! gives with gravity compensation). The fingers are a small rapier multibody whose root is the
+//! hand, the last link: its six root coordinates move at the velocity the link servo gives the
+//! hand, so the fingers carry the base's and the arm's motion into their contacts (a kinematic
+//! root would teleport them under a held object), and only the two finger joints are solved
+//! for. The arm as a multibody of its own (until 2026-11-30: 14 degrees of freedom with the
+//! base's mount, the mass matrix rebuilt every solver substep) cost two thirds of the physical
+//! step; this hand carries the held object the same way (docs/twin/robot.md has both figures).
 
 use nalgebra::{Isometry3, Vector3};
 use rapier3d::prelude::*;
 
 use super::desc::RobotDesc;
-use super::{FINGERS, Robot, RobotState, collider, links};
+use super::{FINGERS, Robot, RobotState, collider};
 use crate::config::ArticulationConfig;
 use crate::convert::{iso_to_pose, pose_to_iso, vec_to_glam};
 use crate::material::{Material, Materials, Owner};
 
-/// Mass of an arm link whose description gives none (kg): a ViperX-300-class link's.
-const DEFAULT_LINK_MASS: f64 = 0.5;
-/// Mass of the mount body between the base and the waist (kg).
-const MOUNT_MASS: f32 = 0.5;
+/// Mass of the hand, the fingers' multibody root (kg). Its velocity is set every substep, so
+/// the mass only weighs what a held object's contacts do to it within one: with 100 kg the
+/// solver converged so poorly against the 0.06 kg fingers that held apples were pushed out of
+/// the grip (dev places 86/204).
+const HAND_MASS: f32 = 2.0;
 
-/// Handles of the articulated arm.
+/// Handles of the physical gripper.
 #[derive(Debug, Clone)]
 pub struct Articulation {
-    pub mount: RigidBodyHandle,
-    pub joints: Vec<MultibodyJointHandle>,
+    /// The hand: the arm's last link, the fingers' multibody root.
+    pub hand: RigidBodyHandle,
     /// Finger bodies (left, right) and their prismatic joints.
     pub finger_bodies: [RigidBodyHandle; 2],
     pub finger_joints: [MultibodyJointHandle; 2],
@@ -57,8 +57,8 @@ fn finger_target(desc: &RobotDesc, opening: f64, preload: f64) -> f32 {
 }
 
 impl Robot {
-    /// The robot of the physical grasp mode: the base as in [`Robot::spawn`], the arm as a
-    /// motor-driven multibody at the home configuration, the fingers on prismatic joints.
+    /// The robot of the physical grasp mode: the base and the arm as in [`Robot::spawn`], the
+    /// fingers on force-limited prismatic joints of a multibody rooted at the hand.
     pub fn spawn_articulated(
         world: &mut PhysicsWorld,
         mats: &mut Materials,
@@ -67,95 +67,38 @@ impl Robot {
         config: &ArticulationConfig,
     ) -> (Robot, RobotState) {
         let (mut robot, state) = Robot::spawn(world, mats, desc, start);
-        // The abstract arm's links and fingers make way for the articulated ones.
-        for h in std::mem::take(&mut robot.bodies.links) {
-            world.remove_body(h);
+        // The abstract hand's fingers make way for force-limited ones.
+        for h in robot.bodies.fingers {
+            world.remove_collider(h);
         }
+        let fingers = robot.bodies.fingers;
+        robot.bodies.arm_colliders.retain(|(h, _)| !fingers.contains(h));
         let p = &mut world.integration_parameters;
         p.contact_softness.natural_frequency = config.contact_frequency as f32;
         p.static_contact_softness.natural_frequency = 2.0 * config.contact_frequency as f32;
-        // The multibody's mass matrix is rebuilt and factorised at every solver substep (about
-        // 25 µs each for this arm), so the physical mode solves in fewer substeps with more
-        // constraint iterations each (docs/twin/robot.md has the figures).
         p.num_solver_iterations = config.solver_iterations as usize;
         p.num_internal_pgs_iterations = config.pgs_iterations as usize;
 
         let base_iso = robot.base_iso(world);
         let fk = robot.arm.forward(&state.arm.q);
-        let mount = world.insert_body(
-            RigidBodyBuilder::dynamic()
-                .pose(iso_to_pose(&base_iso))
-                .additional_mass(MOUNT_MASS)
-                .gravity_scale(0.0)
-                .can_sleep(false),
-        );
-        world.insert_impulse_joint(robot.bodies.base, mount, FixedJointBuilder::new());
-        let arm_mat = mats.add(Material::plain(desc.arm.color));
         let grip_mat = mats.add(Material::plain(desc.gripper.color));
         let g = &desc.gripper;
-        let mut arm_colliders = Vec::new();
-        let mut parent = mount;
-        let mut joints = Vec::new();
         let dof = robot.arm.dof;
-        let mut links = Vec::new();
-        for i in 0..dof {
-            let mass = desc.arm.joints[i].mass.unwrap_or(DEFAULT_LINK_MASS);
-            let link = links::link_colliders(desc, &robot.arm, i, arm_mat, mats);
-            let body = RigidBodyBuilder::dynamic()
-                .pose(iso_to_pose(&(base_iso * fk.joints[i])))
-                .gravity_scale(0.0)
-                .can_sleep(false);
-            // A link without shapes carries its mass on the body.
-            let body = if link.is_empty() {
-                body.additional_mass(mass as f32)
-            } else {
-                body
-            };
-            let h = world.insert_body(body);
-            let each = mass as f32 / link.len() as f32;
-            for co in link {
-                arm_colliders.push((world.insert_collider(co.mass(each), Some(h)), i));
+        let last = robot.bodies.links[dof - 1];
+        // The hand's mass sits at its origin, where the multibody's root velocity is taken (its
+        // colliders weigh nothing), and it keeps the default dominance: a held object pressed
+        // against the palm or the wrist meets the hand's mass, not an unstoppable link that
+        // wrenches it out of the fingers (dev places of cups: 56/93 failed with the links'
+        // dominance, 1/93 without).
+        for co in world.bodies[last].colliders().to_vec() {
+            if let Some(c) = world.colliders.get_mut(co) {
+                c.set_density(0.0);
             }
-            if i == dof - 1 {
-                let palm = links::palm(desc, &robot.arm, grip_mat).mass(0.1);
-                arm_colliders.push((world.insert_collider(palm, Some(h)), i));
-            }
-            let anchor = if i == 0 {
-                robot.arm.mount + robot.arm.origins[0]
-            } else {
-                robot.arm.origins[i]
-            };
-            let lim = [robot.arm.lower[i] as f32, robot.arm.upper[i] as f32];
-            let mut joint = RevoluteJointBuilder::new(vec_to_glam(&robot.arm.axes[i]))
-                .local_anchor1(vec_to_glam(&anchor))
-                .limits(lim)
-                .motor_position(
-                    state.arm.q[i] as f32,
-                    config.joint_stiffness as f32,
-                    config.joint_damping as f32,
-                )
-                .motor_max_force(desc.arm.joints[i].effort as f32)
-                .build();
-            let mount = if i == 0 { robot.arm.mount_rotation } else { None };
-            let fixed = match (mount, robot.arm.rotations[i]) {
-                (Some(m), Some(r)) => Some(m * r),
-                (m, r) => m.or(r),
-            };
-            if let Some(fixed) = fixed {
-                // A turned joint frame: the parent's joint frame is the child's turned by it.
-                let f2 = pose_to_iso(&joint.data.local_frame2);
-                let f1 = Isometry3::from_parts(nalgebra::Translation3::from(anchor), fixed * f2.rotation);
-                joint.data.set_local_frame1(iso_to_pose(&f1));
-            }
-            let handle = world
-                .insert_multibody_joint(parent, h, joint)
-                .expect("a chain of new bodies is a valid multibody");
-            set_coordinate(world, handle, state.arm.q[i] as f32);
-            joints.push(handle);
-            parent = h;
-            links.push(h);
         }
-        let last = links[dof - 1];
+        let hand_mass = MassProperties::new(Vector::ZERO, HAND_MASS, Vector::splat(HAND_MASS * 0.01));
+        let hand = &mut world.bodies[last];
+        hand.set_additional_mass_properties(hand_mass, true);
+        hand.set_dominance_group(0);
         let tcp = Isometry3::translation(g.tcp_offset, 0.0, 0.0);
         let travel = finger_travel(desc, state.opening);
         let lim = [finger_travel(desc, 0.0), finger_travel(desc, g.max_opening)];
@@ -209,11 +152,8 @@ impl Robot {
             finger_joints.push(handle);
         }
         couple_fingers(world, [finger_joints[0], finger_joints[1]]);
-        robot.bodies.links = links;
-        robot.bodies.arm_colliders = arm_colliders;
         robot.bodies.articulation = Some(Articulation {
-            mount,
-            joints,
+            hand: last,
             finger_bodies,
             finger_joints: finger_joints.try_into().expect("two fingers"),
             config: config.clone(),
@@ -221,17 +161,20 @@ impl Robot {
         (robot, state)
     }
 
-    /// Drive the joint motors to the controller's targets and the fingers to the commanded gap
-    /// (one substep; the motors' targets change every substep, so the multibody is woken).
-    pub(super) fn drive_joints(&self, world: &mut PhysicsWorld, art: &Articulation, state: &RobotState) {
+    /// Move the fingers' root with the hand and drive the fingers to the commanded gap (one
+    /// substep, after `place_links` has set the hand's velocity; the motors' targets change every
+    /// substep, so the multibody is woken).
+    pub(super) fn drive_fingers(&self, world: &mut PhysicsWorld, art: &Articulation, state: &RobotState) {
         let c = &art.config;
-        for (i, h) in art.joints.iter().enumerate() {
-            let (q, qd) = (state.arm.q[i] as f32, state.arm.qd[i] as f32);
-            if let Some((mb, link)) = world.multibody_joints.get_mut(*h)
-                && let Some(l) = mb.link_mut(link)
-            {
-                let (k, d) = (c.joint_stiffness as f32, c.joint_damping as f32);
-                l.joint.data.set_motor(JointAxis::AngX, q, qd, k, d);
+        // The root's generalized velocity is the multibody's state (rapier writes it over the
+        // body's): the hand's linear velocity at its origin, where its mass sits, and its angular
+        // velocity, both in the world frame.
+        let vels = *world.bodies[art.hand].vels();
+        if let Some((mb, _)) = world.multibody_joints.get_mut(art.finger_joints[0]) {
+            let mut v = mb.generalized_velocity_mut();
+            for k in 0..3 {
+                v[k] = vels.linvel[k];
+                v[3 + k] = vels.angvel[k];
             }
         }
         let travel = finger_target(&self.desc, state.opening, c.finger_preload);
@@ -243,10 +186,11 @@ impl Robot {
                 l.joint.data.set_motor(JointAxis::LinX, travel, 0.0, k, d);
             }
         }
-        world.wake_up(self.bodies.links[0], true);
+        world.wake_up(art.hand, true);
     }
 
-    /// The measured TCP in the world: the last link's pose (not the targets' forward kinematics).
+    /// The measured TCP in the world: the hand's pose (where the link servo put it, not the
+    /// targets' forward kinematics).
     pub(super) fn measured_tcp(&self, world: &PhysicsWorld) -> Isometry3<f64> {
         let last = pose_to_iso(world.bodies[self.bodies.links[self.arm.dof - 1]].position());
         let hand = match &self.arm.flange {

@@ -291,7 +291,10 @@ impl Robot {
             yaw + state.omega * dt,
         );
         match &self.bodies.articulation {
-            Some(art) => self.drive_joints(world, art, state),
+            Some(art) => {
+                self.place_links(world, &next, &state.arm.q, dt);
+                self.drive_fingers(world, art, state);
+            }
             None => {
                 self.place_links(world, &next, &state.arm.q, dt);
                 self.place_fingers(world, state.opening);
@@ -377,7 +380,7 @@ impl Robot {
     }
 
     /// TCP pose in the world: where the joint targets put it, or in the physical grasp mode
-    /// where the articulated arm really holds it.
+    /// where the hand, the fingers' multibody root, really is.
     pub fn tcp_world(&self, world: &PhysicsWorld, state: &RobotState) -> Isometry3<f64> {
         if self.bodies.articulation.is_some() {
             return self.measured_tcp(world);

@@ -1,6 +1,6 @@
-//! The physical grasp mode (docs/twin/robot.md): the articulated arm follows the controller,
-//! friction between force-limited fingers lifts an object, opening the gripper drops it, and two
-//! runs of the same commands give the same bits.
+//! The physical grasp mode (docs/twin/robot.md): the hand follows the controller, friction
+//! between force-limited fingers lifts an object and holds it while the base drives and the arm
+//! swings, opening the gripper drops it, and two runs of the same commands give the same bits.
 
 use kitchen_r_core::GraspMode;
 use kitchen_r_sim::config::SimConfig;
@@ -37,7 +37,7 @@ fn dist(a: [f64; 3], b: &[f64]) -> f64 {
 }
 
 #[test]
-fn the_articulated_arm_follows_the_controller_within_a_centimetre() {
+fn the_physical_hand_follows_the_controller_within_a_centimetre() {
     let a = assets();
     let mut s = physical(&episode(&a, [2.0, 2.7, 0.0], Vec::new()));
     let target = [0.55, 0.1, 1.0];
@@ -75,6 +75,37 @@ fn friction_lifts_a_cup_and_opening_the_gripper_drops_it() {
     assert!(info.held_object.is_none(), "still held with the gripper open");
     let cup = s.object_poses()[0].1.translation.vector;
     assert!(cup.z < 0.95 + 0.02, "the cup did not fall: centre at z {}", cup.z);
+}
+
+/// The distance from the measured TCP to the first object's centre.
+fn grip_offset(s: &Sim, info: &StepInfo) -> f64 {
+    let cup = s.object_poses()[0].1.translation.vector;
+    let tcp = &info.ee_world;
+    dist([cup.x, cup.y, cup.z], &tcp[..3])
+}
+
+#[test]
+fn a_held_cup_stays_put_in_the_fingers_while_the_base_drives_and_the_arm_swings() {
+    let mut s = physical(&cup_on_the_counter());
+    run(&mut s, hold([0.65, 0.0, 1.12], 1.0), 40);
+    run(&mut s, hold([0.65, 0.0, 0.97], 1.0), 30);
+    run(&mut s, hold([0.65, 0.0, 0.97], 0.0), 15);
+    let info = run(&mut s, hold([0.65, 0.0, 1.12], 0.0), 20);
+    assert_eq!(info.held_object.as_deref(), Some("red cup"), "not lifted");
+    let before = grip_offset(&s, &info);
+    // Back away from the counter, turn on the spot, then swing the hand sideways and up.
+    let moves = [
+        (-0.3, 0.0, [0.65, 0.0, 1.12], 20),
+        (0.0, 1.0, [0.65, 0.0, 1.12], 20),
+        (0.3, -0.5, [0.65, 0.0, 1.12], 20),
+        (0.0, 0.0, [0.45, 0.3, 1.25], 30),
+    ];
+    for (v, omega, target, n) in moves {
+        let info = run(&mut s, Action::new(v, omega, target, DOWN, 0.0), n);
+        assert_eq!(info.held_object.as_deref(), Some("red cup"), "dropped");
+        let slip = (grip_offset(&s, &info) - before).abs();
+        assert!(slip < 0.005, "the cup moved {slip} m in the fingers");
+    }
 }
 
 #[test]
