@@ -30,8 +30,6 @@ const HAND_MASS: f32 = 2.0;
 /// Handles of the physical gripper.
 #[derive(Debug, Clone)]
 pub struct Articulation {
-    /// The hand: the arm's last link, the fingers' multibody root.
-    pub hand: RigidBodyHandle,
     /// Finger bodies (left, right) and their prismatic joints.
     pub finger_bodies: [RigidBodyHandle; 2],
     pub finger_joints: [MultibodyJointHandle; 2],
@@ -83,8 +81,7 @@ impl Robot {
         let fk = robot.arm.forward(&state.arm.q);
         let grip_mat = mats.add(Material::plain(desc.gripper.color));
         let g = &desc.gripper;
-        let dof = robot.arm.dof;
-        let last = robot.bodies.links[dof - 1];
+        let last = robot.hand();
         // The hand's mass sits at its origin, where the multibody's root velocity is taken (its
         // colliders weigh nothing), and it keeps the default dominance: a held object pressed
         // against the palm or the wrist meets the hand's mass, not an unstoppable link that
@@ -153,7 +150,6 @@ impl Robot {
         }
         couple_fingers(world, [finger_joints[0], finger_joints[1]]);
         robot.bodies.articulation = Some(Articulation {
-            hand: last,
             finger_bodies,
             finger_joints: finger_joints.try_into().expect("two fingers"),
             config: config.clone(),
@@ -169,7 +165,8 @@ impl Robot {
         // The root's generalized velocity is the multibody's state (rapier writes it over the
         // body's): the hand's linear velocity at its origin, where its mass sits, and its angular
         // velocity, both in the world frame.
-        let vels = *world.bodies[art.hand].vels();
+        let hand = self.hand();
+        let vels = *world.bodies[hand].vels();
         if let Some((mb, _)) = world.multibody_joints.get_mut(art.finger_joints[0]) {
             let mut v = mb.generalized_velocity_mut();
             for k in 0..3 {
@@ -186,13 +183,18 @@ impl Robot {
                 l.joint.data.set_motor(JointAxis::LinX, travel, 0.0, k, d);
             }
         }
-        world.wake_up(art.hand, true);
+        world.wake_up(hand, true);
+    }
+
+    /// The hand: the arm's last link, the fingers' multibody root.
+    fn hand(&self) -> RigidBodyHandle {
+        self.bodies.links[self.arm.dof - 1]
     }
 
     /// The measured TCP in the world: the hand's pose (where the link servo put it, not the
     /// targets' forward kinematics).
     pub(super) fn measured_tcp(&self, world: &PhysicsWorld) -> Isometry3<f64> {
-        let last = pose_to_iso(world.bodies[self.bodies.links[self.arm.dof - 1]].position());
+        let last = pose_to_iso(world.bodies[self.hand()].position());
         let hand = match &self.arm.flange {
             Some(f) => last * f,
             None => last,

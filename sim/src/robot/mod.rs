@@ -290,15 +290,11 @@ impl Robot {
             0.0,
             yaw + state.omega * dt,
         );
+        // Both modes servo the same links; only the fingers differ.
+        self.place_links(world, &next, &state.arm.q, dt);
         match &self.bodies.articulation {
-            Some(art) => {
-                self.place_links(world, &next, &state.arm.q, dt);
-                self.drive_fingers(world, art, state);
-            }
-            None => {
-                self.place_links(world, &next, &state.arm.q, dt);
-                self.place_fingers(world, state.opening);
-            }
+            Some(art) => self.drive_fingers(world, art, state),
+            None => self.place_fingers(world, state.opening),
         }
         next
     }
