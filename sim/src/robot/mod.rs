@@ -11,6 +11,7 @@
 //! configuration, so the controller does not wind up against it.
 
 pub mod articulated;
+pub mod clearance;
 pub mod desc;
 pub mod ik;
 pub mod kinematics;
@@ -275,7 +276,13 @@ impl Robot {
         body.set_linvel(vec_to_glam(&(fwd * state.v)), true);
         body.set_angvel(vec_to_glam(&Vector3::new(0.0, 0.0, state.omega)), true);
 
-        let qdd = rmp::resolve(&self.arm, params, &state.arm, &self.home, &cmd.ee_target);
+        // The leaf keeps links off fixed geometry; it does not pull a link out of it (an arm
+        // stopped with a finger in a shelf board stays stuck if its links are pushed as well).
+        let near = match state.arm_blocked {
+            true => Vec::new(),
+            false => clearance::near_points(&self.arm, &self.bodies.arm_colliders, world, &iso, &state.arm.q),
+        };
+        let qdd = rmp::resolve(&self.arm, params, &state.arm, &self.home, &cmd.ee_target, &near);
         state.arm = rmp::integrate(&self.arm, &state.arm, &qdd, dt);
         let g = &self.desc.gripper;
         let want = cmd.opening.clamp(0.0, 1.0) * g.max_opening;

@@ -10,13 +10,16 @@
 //!
 //! A seven-joint arm takes the same 6-value pose target: the attractors fix six directions of
 //! joint space and the posture pull towards the home pose (with joint damping) settles the
-//! seventh, the arm's self-motion, so its redundancy resolves towards home. Joint-space slots
+//! seventh, the arm's self-motion, so its redundancy resolves towards home. Its links are also
+//! kept off fixed geometry by an obstacle leaf ([`clearance`]), which only that self-motion can
+//! serve without pulling the tool off its target. Joint-space slots
 //! past the arm's joints carry a unit metric and no force: they stay zero and leave the solve of
 //! the arm's own joints exactly as it is without them.
 
 use nalgebra::{Isometry3, Matrix3, SMatrix, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
+use super::clearance::{self, Near};
 use super::kinematics::{ArmModel, JointVec, MAX_DOF};
 
 /// Gains and weights; `configs/sim.toml` `[rmp]`.
@@ -83,13 +86,15 @@ pub fn orientation_error(goal: &UnitQuaternion<f64>, current: &UnitQuaternion<f6
     (goal * current.inverse()).scaled_axis()
 }
 
-/// Joint acceleration from the combined RMPs towards `target` (TCP pose, base frame).
+/// Joint acceleration from the combined RMPs towards `target` (TCP pose, base frame), a
+/// seven-joint arm's links kept off the fixed geometry they are `near` ([`clearance`]).
 pub fn resolve(
     arm: &ArmModel,
     p: &RmpParams,
     state: &ArmState,
     home: &JointVec,
     target: &Isometry3<f64>,
+    near: &[Near],
 ) -> JointVec {
     let fk = arm.forward(&state.q);
     let jac = arm.jacobian(&fk);
@@ -107,6 +112,11 @@ pub fn resolve(
 
     let mut a_mat: SMatrix<f64, MAX_DOF, MAX_DOF> = jp.transpose() * m_p * jp + jo.transpose() * m_o * jo;
     let mut b: JointVec = jp.transpose() * (m_p * a_p) + jo.transpose() * (m_o * a_o);
+    for n in near {
+        let (row, m, a) = clearance::leaf(arm, &fk, &state.qd, n);
+        a_mat += row.transpose() * m * row;
+        b += row.transpose() * (m * a);
+    }
     for i in arm.dof..MAX_DOF {
         a_mat[(i, i)] = 1.0;
     }
@@ -169,7 +179,7 @@ mod tests {
         };
         let p = RmpParams::default();
         for _ in 0..steps {
-            let qdd = resolve(&arm, &p, &s, &home, &target);
+            let qdd = resolve(&arm, &p, &s, &home, &target, &[]);
             s = integrate(&arm, &s, &qdd, 0.01);
         }
         (arm, s)

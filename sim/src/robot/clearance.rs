@@ -1,0 +1,122 @@
+//! The obstacle leaf of a seven-joint arm's controller (RMPflow's collision avoidance): the point
+//! of each link nearest fixed geometry, once within [`RANGE`] of it, is pushed straight away.
+//!
+//! Only a redundant arm gets it. Its self-motion (the elbow turning about the shoulder–wrist
+//! line) can take a link off a shelf board while the tool stays on its target: the Panda's
+//! forearm, reaching under a board for a fork at the back of a shelf, met the board's front edge
+//! and the arm stopped there (a link that digs in reverts the arm, `Robot::enforce_obstacles`).
+//! A six-joint arm has no such freedom: the leaf could only pull its tool off the target, so it
+//! is left out and a six-joint arm's control is exactly what it was. The hand (the last link,
+//! with the palm and fingers) and the wrist link before it are left out too: where they go is the
+//! target's business. The leaf keeps links off; it does not pull one out (`Robot::command` leaves
+//! it out while the arm is stopped: pushing the links of a Kinova3 stopped with a finger in a
+//! shelf board kept it there for the rest of the episode).
+
+use nalgebra::{Isometry3, SMatrix, Vector3};
+use rapier3d::prelude::*;
+
+use super::kinematics::{ArmFk, ArmModel, JointVec, MAX_DOF};
+use crate::convert::{iso_to_pose, pose_to_iso};
+use crate::material::{Owner, Tag};
+
+/// Within this distance of fixed geometry a link is pushed away, m.
+pub const RANGE: f64 = 0.05;
+/// The push at contact, m/s² (it grows linearly from zero at [`RANGE`]).
+const GAIN: f64 = 20.0;
+/// Damping of the approach speed, 1/s (a link moving away is not held back).
+const DAMPING: f64 = 10.0;
+/// The leaf's metric at contact (the tool's position attractor weighs 1); it grows
+/// quadratically from zero at [`RANGE`].
+const WEIGHT: f64 = 1.0;
+
+/// A link's point near fixed geometry, in the arm's base frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Near {
+    /// The link (0-based joint index) the point moves with.
+    pub link: usize,
+    pub point: Vector3<f64>,
+    /// Unit normal pointing away from the geometry.
+    pub away: Vector3<f64>,
+    /// Distance to the geometry, m (negative inside it).
+    pub distance: f64,
+}
+
+/// Each arm collider's nearest point within [`RANGE`] of fixed geometry, the hand's and the
+/// wrist link's before it excepted, with the links where joint values `q` put them on a base at `base`. Empty for an arm of six
+/// joints or fewer.
+pub(super) fn near_points(
+    arm: &ArmModel,
+    colliders: &[(ColliderHandle, usize)],
+    world: &PhysicsWorld,
+    base: &Isometry3<f64>,
+    q: &JointVec,
+) -> Vec<Near> {
+    if arm.dof <= 6 {
+        return Vec::new();
+    }
+    let statics = |_: ColliderHandle, c: &Collider| Tag::unpack(c.user_data).owner == Owner::Static;
+    let filter = QueryFilter::only_fixed().predicate(&statics);
+    let dispatcher = world.narrow_phase.query_dispatcher();
+    let fk = arm.forward(q);
+    let to_base = base.inverse();
+    let mut out = Vec::new();
+    for (h, link) in colliders.iter().filter(|(_, l)| *l + 2 < arm.dof) {
+        let co = &world.colliders[*h];
+        let local = co
+            .position_wrt_parent()
+            .map_or(Isometry3::identity(), pose_to_iso);
+        let iso = base * fk.joints[*link] * local;
+        let pose = iso_to_pose(&iso);
+        let aabb = co.shape().compute_aabb(&pose).loosened(RANGE as f32);
+        let mut nearest: Option<Near> = None;
+        for (_, other) in world.intersect_aabb_conservative(aabb, filter) {
+            let pos12 = pose.inv_mul(other.position());
+            let Ok(Some(c)) = dispatcher.contact(&pos12, co.shape(), other.shape(), RANGE as f32) else {
+                continue;
+            };
+            let distance = f64::from(c.dist);
+            if distance > RANGE || nearest.is_some_and(|n| n.distance <= distance) {
+                continue;
+            }
+            let p = pose_to_iso(&pose)
+                * nalgebra::Point3::new(
+                    f64::from(c.point1.x),
+                    f64::from(c.point1.y),
+                    f64::from(c.point1.z),
+                );
+            let n1 = iso.rotation
+                * Vector3::new(
+                    f64::from(c.normal1.x),
+                    f64::from(c.normal1.y),
+                    f64::from(c.normal1.z),
+                );
+            nearest = Some(Near {
+                link: *link,
+                point: (to_base * p).coords,
+                away: to_base.rotation * -n1,
+                distance,
+            });
+        }
+        out.extend(nearest);
+    }
+    out
+}
+
+/// The leaf of `near` as `(Jacobian row, metric, desired acceleration)` along its normal.
+pub(super) fn leaf(
+    arm: &ArmModel,
+    fk: &ArmFk,
+    qd: &JointVec,
+    near: &Near,
+) -> (SMatrix<f64, 1, MAX_DOF>, f64, f64) {
+    let mut row = SMatrix::<f64, 1, MAX_DOF>::zeros();
+    for i in 0..=near.link.min(arm.dof - 1) {
+        let a = fk.joints[i].rotation * arm.axes[i];
+        let o = fk.joints[i].translation.vector;
+        row[i] = near.away.dot(&a.cross(&(near.point - o)));
+    }
+    let closeness = (1.0 - near.distance / RANGE).clamp(0.0, 2.0);
+    let speed = (row * qd)[0];
+    let accel = GAIN * closeness - DAMPING * speed.min(0.0);
+    (row, WEIGHT * closeness * closeness, accel)
+}
