@@ -177,6 +177,15 @@ fn the_robosuite_arms_pull_a_fork_out_from_under_a_shelf_board() {
     robosuite_arms_complete_one("dev-0052", "pick the silver fork");
 }
 
+/// A fork at the back of kitchen_b's wall shelf, deep under the board above it (dev-0028: the
+/// silver fork, then a bowl): a seven-joint arm's self-motion keeps its links off the board
+/// (`kitchen_r_sim::robot::clearance`). Without it the Panda's forearm met the board's front
+/// edge and stopped the arm with the hand 5 cm short of the fork.
+#[test]
+fn the_robosuite_arms_reach_a_fork_at_the_back_of_a_shelf_under_its_board() {
+    robosuite_arms_complete_one("dev-0028", "pick the silver fork");
+}
+
 /// In the physical grasp mode, where only the finger pads' friction holds an object, each
 /// robosuite arm picks a cup and carries it to its place (dev-0002): the fingers slide along the
 /// mounted gripper's own closing axis from its tool centre, where its flange puts them (they

@@ -120,3 +120,54 @@ pub(super) fn leaf(
     let accel = GAIN * closeness - DAMPING * speed.min(0.0);
     (row, WEIGHT * closeness * closeness, accel)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::robot::desc::RobotDesc;
+
+    /// The leaf's row is the rate of the point's distance along its normal: finite differences of
+    /// the point carried by its link agree, and joints past the link do not move it.
+    #[test]
+    fn the_leaf_row_is_the_points_speed_along_its_normal() {
+        let desc = RobotDesc::load_default().unwrap();
+        let arm = ArmModel::new(&desc);
+        let q = arm.vec(&[0.3, -0.2, 0.8, 0.4, 0.6, -0.5]);
+        let fk = arm.forward(&q);
+        let link = 3;
+        let local = Vector3::new(0.02, -0.03, 0.05);
+        let point = (fk.joints[link] * nalgebra::Point3::from(local)).coords;
+        let away = Vector3::new(0.3, -0.5, 0.8).normalize();
+        let near = Near {
+            link,
+            point,
+            away,
+            distance: 0.01,
+        };
+        let (row, m, a) = leaf(&arm, &fk, &JointVec::zeros(), &near);
+        let h = 1e-6;
+        for i in 0..arm.dof {
+            let mut q2 = q;
+            q2[i] += h;
+            let p2 = (arm.forward(&q2).joints[link] * nalgebra::Point3::from(local)).coords;
+            let rate = away.dot(&(p2 - point)) / h;
+            assert!(
+                (rate - row[i]).abs() < 1e-4,
+                "joint {i}: {rate} against {}",
+                row[i]
+            );
+        }
+        // 1 cm inside the 5 cm range: four fifths of the push, the metric its square.
+        assert!((a - GAIN * 0.8).abs() < 1e-12 && (m - WEIGHT * 0.64).abs() < 1e-12);
+        let (_, m_far, a_far) = leaf(
+            &arm,
+            &fk,
+            &JointVec::zeros(),
+            &Near {
+                distance: RANGE,
+                ..near
+            },
+        );
+        assert_eq!((m_far, a_far), (0.0, 0.0));
+    }
+}
