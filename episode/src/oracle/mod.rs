@@ -109,6 +109,9 @@ pub struct OraclePolicy {
     max_opening: f64,
     /// How fast the finger gap may change, m/s.
     opening_speed: f64,
+    /// How far the hand's own geometry stands behind the TCP, m (the physical grasp keeps a
+    /// round object's top out of it, `grasp::under_palm`).
+    palm_reach: f64,
     /// How high the arm's wrist stands over a top-down tool, m (`headroom::headroom` reads it:
     /// how far under a shelf board the tool stays and how it leans there).
     wrist_height: Option<f64>,
@@ -134,6 +137,7 @@ impl OraclePolicy {
             finger_reach: assets.robot.gripper.finger_length / 2.0,
             max_opening: assets.robot.gripper.max_opening,
             opening_speed: assets.robot.gripper.opening_speed,
+            palm_reach: kitchen_r_sim::robot::palm::palm_reach(&assets.robot),
             wrist_height: kitchen_r_sim::robot::wrist::wrist_height(&assets.robot),
         }
     }
@@ -350,7 +354,8 @@ impl OraclePolicy {
             object: pose,
             held_in_tool: pose.filter(|_| held).map(|o| tool_world.inverse() * o),
             model: match self.grasp {
-                GraspMode::Physical => model.map(|m| grasp::physical_grasp(m, self.finger_reach)),
+                GraspMode::Physical => model
+                    .map(|m| grasp::under_palm(grasp::physical_grasp(m, self.finger_reach), self.palm_reach)),
                 GraspMode::Abstract => model,
             },
         }

@@ -15,6 +15,7 @@ pub mod clearance;
 pub mod desc;
 pub mod ik;
 pub mod kinematics;
+pub mod palm;
 pub mod rmp;
 pub mod wrist;
 
