@@ -16,7 +16,7 @@ use nalgebra::{Isometry3, SMatrix, Vector3};
 use rapier3d::prelude::*;
 
 use super::kinematics::{ArmFk, ArmModel, JointVec, MAX_DOF};
-use crate::convert::{iso_to_pose, pose_to_iso};
+use crate::convert::{iso_to_pose, pose_to_iso, vec_from_glam};
 use crate::material::{Owner, Tag};
 
 /// Within this distance of fixed geometry a link is pushed away, m.
@@ -78,18 +78,10 @@ pub(super) fn near_points(
             if distance > RANGE || nearest.is_some_and(|n| n.distance <= distance) {
                 continue;
             }
-            let p = pose_to_iso(&pose)
-                * nalgebra::Point3::new(
-                    f64::from(c.point1.x),
-                    f64::from(c.point1.y),
-                    f64::from(c.point1.z),
-                );
-            let n1 = iso.rotation
-                * Vector3::new(
-                    f64::from(c.normal1.x),
-                    f64::from(c.normal1.y),
-                    f64::from(c.normal1.z),
-                );
+            // The contact in the collider's frame as f32 placed it (`pose`), so the point lies
+            // on the shape the query saw.
+            let p = pose_to_iso(&pose) * nalgebra::Point3::from(vec_from_glam(c.point1));
+            let n1 = iso.rotation * vec_from_glam(c.normal1);
             nearest = Some(Near {
                 link: *link,
                 point: (to_base * p).coords,

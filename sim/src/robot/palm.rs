@@ -12,7 +12,7 @@ use rapier3d::prelude::*;
 use super::desc::RobotDesc;
 use super::kinematics::ArmModel;
 use super::links;
-use crate::convert::{pose_to_iso, vec_to_glam};
+use crate::convert::{iso_to_pose, pose_to_iso, vec_to_glam};
 use crate::material::Materials;
 
 /// The palm's reach: the least distance (m) from the TCP back along the approach axis to the
@@ -33,7 +33,7 @@ pub fn palm_reach(desc: &RobotDesc) -> f64 {
             let co = co.build();
             // The collider in the tool frame; its point furthest along the approach axis.
             let local = tool.inverse() * pose_to_iso(co.position());
-            let pose = crate::convert::iso_to_pose(&local);
+            let pose = iso_to_pose(&local);
             let dir = pose.rotation.inverse() * ahead;
             let tip = match co.shape().as_support_map() {
                 Some(s) => f64::from((pose * s.local_support_point(dir)).x),
