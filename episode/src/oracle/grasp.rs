@@ -79,7 +79,7 @@ const PALM_SLACK: f64 = 0.002;
 
 /// `model` (its physical grasp point) raised so that a sphere's top stays out of the hand:
 /// `palm_reach`, how far the hand's geometry stands behind the TCP
-/// (`kitchen_r_sim::robot::palm::palm_reach`). robosuite's Panda hand reaches 3.2 cm behind
+/// (`kitchen_r_sim::robot::palm::palm_reach`). robosuite's Panda hand reaches 3.1 cm behind
 /// its grip site: an apple grasped at its centre was pressed into the counter by the palm, the
 /// fingers stopped short of it and 25 of the dev split's 62 apple picks failed.
 pub(super) fn under_palm(mut model: ObjectModel, palm_reach: f64) -> ObjectModel {

@@ -16,8 +16,8 @@ use nalgebra::{Isometry3, SMatrix, Vector3};
 use rapier3d::prelude::*;
 
 use super::kinematics::{ArmFk, ArmModel, JointVec, MAX_DOF};
+use super::obstacles::{is_static, placed};
 use crate::convert::{iso_to_pose, pose_to_iso, vec_from_glam};
-use crate::material::{Owner, Tag};
 
 /// Within this distance of fixed geometry a link is pushed away, m.
 pub const RANGE: f64 = 0.05;
@@ -42,8 +42,8 @@ pub struct Near {
 }
 
 /// Each arm collider's nearest point within [`RANGE`] of fixed geometry, the hand's and the
-/// wrist link's before it excepted, with the links where joint values `q` put them on a base at `base`. Empty for an arm of six
-/// joints or fewer.
+/// wrist link's before it excepted, with the links where joint values `q` put them on a base at
+/// `base`. Empty for an arm of six joints or fewer.
 pub(super) fn near_points(
     arm: &ArmModel,
     colliders: &[(ColliderHandle, usize)],
@@ -54,18 +54,14 @@ pub(super) fn near_points(
     if arm.dof <= 6 {
         return Vec::new();
     }
-    let statics = |_: ColliderHandle, c: &Collider| Tag::unpack(c.user_data).owner == Owner::Static;
-    let filter = QueryFilter::only_fixed().predicate(&statics);
+    let filter = QueryFilter::only_fixed().predicate(&is_static);
     let dispatcher = world.narrow_phase.query_dispatcher();
     let fk = arm.forward(q);
     let to_base = base.inverse();
     let mut out = Vec::new();
     for (h, link) in colliders.iter().filter(|(_, l)| *l + 2 < arm.dof) {
         let co = &world.colliders[*h];
-        let local = co
-            .position_wrt_parent()
-            .map_or(Isometry3::identity(), pose_to_iso);
-        let iso = base * fk.joints[*link] * local;
+        let iso = placed(co, base, &fk, *link);
         let pose = iso_to_pose(&iso);
         let aabb = co.shape().compute_aabb(&pose).loosened(RANGE as f32);
         let mut nearest: Option<Near> = None;
@@ -101,12 +97,8 @@ pub(super) fn leaf(
     qd: &JointVec,
     near: &Near,
 ) -> (SMatrix<f64, 1, MAX_DOF>, f64, f64) {
-    let mut row = SMatrix::<f64, 1, MAX_DOF>::zeros();
-    for i in 0..=near.link.min(arm.dof - 1) {
-        let a = fk.joints[i].rotation * arm.axes[i];
-        let o = fk.joints[i].translation.vector;
-        row[i] = near.away.dot(&a.cross(&(near.point - o)));
-    }
+    let jac = arm.point_jacobian(fk, near.link, &near.point);
+    let row = SMatrix::<f64, 1, MAX_DOF>::from_fn(|_, i| near.away.dot(&jac.fixed_view::<3, 1>(0, i)));
     let closeness = (1.0 - near.distance / RANGE).clamp(0.0, 2.0);
     let speed = (row * qd)[0];
     let accel = GAIN * closeness - DAMPING * speed.min(0.0);

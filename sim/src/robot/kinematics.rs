@@ -113,14 +113,24 @@ impl ArmModel {
 
     /// Geometric Jacobian of the TCP: rows 0..3 linear, 3..6 angular, base frame.
     pub fn jacobian(&self, fk: &ArmFk) -> Jacobian {
-        let p = fk.tcp.translation.vector;
         let mut jac = Jacobian::zeros();
+        let lin = self.point_jacobian(fk, self.dof - 1, &fk.tcp.translation.vector);
+        jac.fixed_view_mut::<3, MAX_DOF>(0, 0).copy_from(&lin);
         for i in 0..self.dof {
+            jac.fixed_view_mut::<3, 1>(3, i)
+                .copy_from(&(fk.joints[i].rotation * self.axes[i]));
+        }
+        jac
+    }
+
+    /// Linear velocity Jacobian of `point` (base frame) carried by joint `link`'s frame: the
+    /// joints up to that one move it, the rest do not.
+    pub fn point_jacobian(&self, fk: &ArmFk, link: usize, point: &Vector3<f64>) -> SMatrix<f64, 3, MAX_DOF> {
+        let mut jac = SMatrix::<f64, 3, MAX_DOF>::zeros();
+        for i in 0..=link.min(self.dof - 1) {
             let a = fk.joints[i].rotation * self.axes[i];
             let o = fk.joints[i].translation.vector;
-            let lin = a.cross(&(p - o));
-            jac.fixed_view_mut::<3, 1>(0, i).copy_from(&lin);
-            jac.fixed_view_mut::<3, 1>(3, i).copy_from(&a);
+            jac.fixed_view_mut::<3, 1>(0, i).copy_from(&a.cross(&(point - o)));
         }
         jac
     }

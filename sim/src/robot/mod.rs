@@ -15,6 +15,7 @@ pub mod clearance;
 pub mod desc;
 pub mod ik;
 pub mod kinematics;
+mod obstacles;
 pub mod palm;
 pub mod rmp;
 pub mod wrist;
@@ -29,6 +30,8 @@ use kinematics::{ArmModel, JointVec};
 use rmp::{ArmState, RmpParams};
 
 mod links;
+
+use obstacles::{is_static, placed};
 
 /// Names of the robot parts, indexed by the collider tag's `index` (a seven-joint arm's last
 /// link is `link7`, after the gripper's parts, so the six-joint indices stay as they are).
@@ -347,8 +350,7 @@ impl Robot {
     /// A shape query rather than the narrow phase's pairs, so the depth is that of the targets just
     /// placed and a grazing touch is still reported.
     pub fn enforce_obstacles(&self, world: &PhysicsWorld, state: &mut RobotState) -> Vec<(u32, f64)> {
-        let statics = |_: ColliderHandle, c: &Collider| Tag::unpack(c.user_data).owner == Owner::Static;
-        let filter = QueryFilter::only_fixed().predicate(&statics);
+        let filter = QueryFilter::only_fixed().predicate(&is_static);
         let dispatcher = world.narrow_phase.query_dispatcher();
         let mut touches = Vec::new();
         // Check where the joint targets put each collider (the dynamic links themselves are held
@@ -357,10 +359,7 @@ impl Robot {
         let fk = self.arm.forward(&state.arm.q);
         for (h, link) in &self.bodies.arm_colliders {
             let co = &world.colliders[*h];
-            let local = co
-                .position_wrt_parent()
-                .map_or(Isometry3::identity(), pose_to_iso);
-            let pose = iso_to_pose(&(base * fk.joints[*link] * local));
+            let pose = iso_to_pose(&placed(co, &base, &fk, *link));
             let part = Tag::unpack(co.user_data).index;
             for (_, other) in world.intersect_shape(pose, co.shape(), filter) {
                 let pos12 = pose.inv_mul(other.position());

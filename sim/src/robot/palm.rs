@@ -1,10 +1,10 @@
 //! How far the hand's own geometry (the palm box and a description's hand meshes, fingers
 //! excepted) stays behind the tool centre point along the approach axis: the room a grasp has
 //! between the TCP and the palm. The oracle keeps a round object's top out of that room in the
-//! physical grasp mode (`episode/src/oracle/grasp.rs`): robosuite's Panda hand reaches 3.2 cm
-//! behind its grip site against the shipped palm's 4.5 cm, and an apple grasped at its centre
-//! was pressed into the counter by the palm, the fingers stopping short of it (the Panda lost 25
-//! of the dev split's 62 apple picks).
+//! physical grasp mode (`episode/src/oracle/grasp.rs`): robosuite's Panda hand reaches 3.1 cm
+//! behind its grip site against the shipped hand's 4.0 cm (its wrist capsule's rounded end),
+//! and an apple grasped at its centre was pressed into the counter by the palm, the fingers
+//! stopping short of it (the Panda lost 25 of the dev split's 62 apple picks).
 
 use nalgebra::{Isometry3, Translation3, Vector3};
 use rapier3d::prelude::*;
