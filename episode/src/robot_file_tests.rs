@@ -186,6 +186,31 @@ fn the_robosuite_arms_reach_a_fork_at_the_back_of_a_shelf_under_its_board() {
     robosuite_arms_complete_one("dev-0028", "pick the silver fork");
 }
 
+/// A cup put on kitchen_b's wall shelf and picked up again (dev-0138). The Kinova3's wrist leaves
+/// the cup 5 mm of lift under the board above, so its hand pulls the cup out level and lifts it
+/// in the open (it lifted 0 cm and the pick timed out). The UR5e's leaning hand keeps its lean
+/// while it pulls back after the place (straightened under the board, its wrist rose into it
+/// and the pick never began).
+#[test]
+fn the_robosuite_arms_pick_a_cup_again_where_they_put_it_under_a_board() {
+    robosuite_arms_complete_one("dev-0138", "pick the green cup");
+}
+
+/// A hand leans outside a board before it goes in under it: turned on the way in, the UR5e's
+/// half turned wrist struck the board's front edge as it put a cup on kitchen_c's shelf
+/// (dev-0049: the cup stayed in the hand 17 cm short), and a Kinova3 finger met kitchen_b's
+/// shelf under a fork at its back (dev-0150: the fork was never grasped).
+#[test]
+fn the_robosuite_arms_lean_outside_a_board_before_they_go_in_under_it() {
+    let chosen = robosuite_arms_complete_these(GraspMode::Abstract, |_, ins| {
+        ins.id == "dev-0049" || ins.id == "dev-0150"
+    });
+    let steps = ["place the white cup", "pick the silver fork"];
+    for (ins, step) in chosen.iter().zip(steps) {
+        assert!(ins.plan.iter().any(|s| s == step), "{}: {:?}", ins.id, ins.plan);
+    }
+}
+
 /// In the physical grasp mode, where only the finger pads' friction holds an object, each
 /// robosuite arm picks an apple and carries it to its place, then picks a cup (dev-0001): the
 /// fingers slide along the mounted gripper's own closing axis from its tool centre, where its

@@ -49,7 +49,25 @@ pub(super) struct Prelude {
     /// Seconds the tool stays where it is before it moves, while the fingers open: a place ends
     /// as the object touches down, with the fingers still squeezing it (the physical grasp).
     pub open_first: f64,
+    /// The fraction of the pull back from under a board for which a hand leaning towards the
+    /// board keeps its lean (0: it straightens on the whole way out), until its tool is out
+    /// ([`super::headroom::lean_outside`]): straightened under the board, the UR5e's wrist rose
+    /// into it and stopped the arm (dev-0138). A hand leaning sideways keeps its lean all the
+    /// way out anyway.
+    pub keep_lean: f64,
+    /// Where (base frame, its height ignored) and to what orientation a hand that goes in under
+    /// a board leaning turns first, outside the board's edge: the machine would turn it on the
+    /// way in, and half turned the UR5e's wrist struck the board's front edge (dev-0049) and a
+    /// Kinova3 finger met the shelf under a fork (dev-0150). A six-joint arm's hand leaning
+    /// sideways still turns on the way in (`OraclePolicy::start_task`). Leaning at the stow
+    /// position instead, close over the shoulder, the UR5e and the Panda could not hold the
+    /// lean (whole dev: 951 and 930 of 975 tasks).
+    pub lean_at: Option<LeanAt>,
 }
+
+/// Where (base frame) and to what orientation a hand turns before it goes in under a board
+/// ([`Prelude::lean_at`]).
+pub(super) type LeanAt = (Vector3<f64>, UnitQuaternion<f64>);
 
 impl ArmPath {
     /// The motion before a task: a tool stays where it is for `open_first` seconds, then a low
@@ -95,6 +113,10 @@ impl ArmPath {
                 path.go(from.rotation, [at.x, at.y, at.z - how.sink]);
             }
             let at = path.end().translation.vector;
+            if !sideways && how.keep_lean > 0.0 {
+                let out = at.lerp(&Vector3::new(s.x, s.y, at.z), how.keep_lean);
+                path.go(from.rotation, out.into());
+            }
             path.go(
                 if sideways { from.rotation } else { stow.rotation },
                 [s.x, s.y, at.z],
@@ -111,6 +133,12 @@ impl ArmPath {
         if let Some(r) = how.turn_to {
             let p = path.end().translation.vector;
             path.go(r, [p.x, p.y, p.z]);
+        }
+        if let (false, Some((at, r))) = (is_move, how.lean_at) {
+            let end = path.end();
+            let z = end.translation.z;
+            path.go(end.rotation, [at.x, at.y, z]);
+            path.go(r, [at.x, at.y, z]);
         }
         path
     }
@@ -153,7 +181,7 @@ impl ArmPath {
 #[cfg(test)]
 mod tests {
     use kitchen_r_sim::oracle::manip::top_down;
-    use nalgebra::Translation3;
+    use nalgebra::{Translation3, UnitQuaternion};
 
     use super::*;
 
@@ -185,6 +213,44 @@ mod tests {
         // Reaching into a shelf from stow: straight down to the cap first.
         let p = ArmPath::prelude(stow, stow, Some(1.0), false, Prelude::default());
         assert_eq!(p.end().translation.vector, Vector3::new(0.30, -0.12, 1.0));
+    }
+
+    #[test]
+    fn a_leaning_hand_turns_only_outside_the_boards() {
+        let stow = Isometry3::from_parts(Translation3::new(0.30, -0.12, 1.10), top_down(0.0));
+        let lean = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), -std::f64::consts::FRAC_PI_4);
+        let leaning = Isometry3::from_parts(Translation3::new(0.7, -0.12, 0.95), lean * top_down(0.0));
+        let how = Prelude {
+            here_max: Some(0.98),
+            keep_lean: 0.5,
+            lean_at: Some((Vector3::new(0.45, -0.12, 0.0), leaning.rotation)),
+            ..Prelude::default()
+        };
+        // Out from under one board and in under another (a pick after a place on a shelf).
+        let path = ArmPath::prelude(leaning, stow, Some(0.98), false, how);
+        let legs: Vec<([f64; 3], f64)> = (path.legs.iter())
+            .map(|l| {
+                (
+                    l.0.translation.vector.into(),
+                    l.0.rotation.angle_to(&leaning.rotation),
+                )
+            })
+            .collect();
+        let lean_kept = |l: &([f64; 3], f64)| l.1 < 1e-12;
+        // Up to the cap and half way back still leaning, then upright to the stow position.
+        assert_eq!(legs[0].0, [0.7, -0.12, 0.98]);
+        assert_eq!(legs[1].0, [0.5, -0.12, 0.98]);
+        assert!(legs[..2].iter().all(lean_kept), "{legs:?}");
+        assert_eq!(legs[2].0, [0.30, -0.12, 0.98]);
+        assert!(path.legs[2].0.rotation.angle_to(&stow.rotation) < 1e-12);
+        // Out to the board's edge upright, and leaning there.
+        assert_eq!(legs[3].0, [0.45, -0.12, 0.98]);
+        assert!(!lean_kept(&legs[3]));
+        assert!(lean_kept(&legs[4]) && legs[4].0 == legs[3].0, "{legs:?}");
+        assert_eq!(legs.len(), 5);
+        // A move goes to the stow pose and does not lean.
+        let path = ArmPath::prelude(leaning, stow, None, true, how);
+        assert_eq!(path.end(), stow);
     }
 
     #[test]

@@ -6,6 +6,9 @@
 
 use kitchen_r_core::catalogue::Shape;
 use kitchen_r_core::scene::Scene;
+use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
+
+use super::arm::LeanAt;
 
 /// Thickness of the twin's shelf boards (`sim/src/furniture.rs`): a surface at height `s` is a
 /// board whose underside is at `s − BOARD`.
@@ -31,6 +34,41 @@ pub(super) enum Lean {
     Reach(f64),
     /// About the tool's own closing axis, so both fingers stay level (flat work, see [`for_work`]).
     Closing(f64),
+}
+
+/// `pose` leaned by `tilt` about its own position, the fingers turned away from the base
+/// (`undo`: the lean taken off a leaned pose). [`Lean::Reach`] turns about the base's left
+/// axis; [`Lean::Closing`] about the tool's own closing axis (tool y), so both fingers stay level
+/// over flat work (`headroom::for_work`).
+pub(super) fn tilted(pose: Isometry3<f64>, tilt: Option<Lean>, undo: bool) -> Isometry3<f64> {
+    let turn = match tilt {
+        None => return pose,
+        // Negative about the base's left axis: the fingers point away from the base.
+        Some(Lean::Reach(a)) => {
+            let r = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), -a);
+            let r = if undo { r.inverse() } else { r };
+            return Isometry3::from_parts(pose.translation, r * pose.rotation);
+        }
+        Some(Lean::Closing(a)) => {
+            // Turned by θ about tool y, the approach axis (tool x) moves along −tool z: the sign
+            // that points it away from the base (base +x), or, closing along the base's forward
+            // axis, to the base's right (the side the arms are mounted on). The lean keeps the
+            // sign of tool z's components, so a leaned pose finds the same sign.
+            let z = pose.rotation * Vector3::z();
+            let s = if z.x.abs() > 1e-3 {
+                -z.x.signum()
+            } else {
+                z.y.signum()
+            };
+            UnitQuaternion::from_axis_angle(&Vector3::y_axis(), s * a)
+        }
+    };
+    let rotation = if undo {
+        pose.rotation * turn.inverse()
+    } else {
+        pose.rotation * turn
+    };
+    Isometry3::from_parts(pose.translation, rotation)
 }
 
 /// An object centre (or place target) this close over the surface it stands on is flat work
@@ -146,6 +184,71 @@ pub(super) fn headroom(wrist_height: Option<f64>, lean: bool) -> Headroom {
 /// Slack around furniture footprints, m.
 const MARGIN: f64 = 0.1;
 
+/// How far past a board's edge a straightening hand's tool is before it turns upright, m: its
+/// wrist (a UR5e's link radius, 4.5 cm) stands over the tool once upright.
+const TURN_CLEAR: f64 = 0.05;
+
+/// The fraction of the way from world `from` (a tool under a board, at height `z`) to `to`
+/// after which the tool is [`TURN_CLEAR`] out from under every board above it: where a leaning
+/// hand pulling back may straighten, or going in may lean ([`lean_outside`]). 0 with no board
+/// above, 1 if the way never leaves it.
+pub(super) fn out_from_under(scene: &Scene, from: [f64; 2], to: [f64; 2], z: f64) -> f64 {
+    let over: Vec<_> = (scene.furniture.iter())
+        .filter(|f| f.covers(from, 0.0) && f.surfaces().iter().any(|s| *s - BOARD > z))
+        .collect();
+    if over.is_empty() {
+        return 0.0;
+    }
+    const STEPS: usize = 100;
+    (0..=STEPS)
+        .map(|i| i as f64 / STEPS as f64)
+        .find(|t| {
+            let p = [from[0] + t * (to[0] - from[0]), from[1] + t * (to[1] - from[1])];
+            over.iter().all(|f| !f.covers(p, TURN_CLEAR))
+        })
+        .unwrap_or(1.0)
+}
+
+/// How a leaning hand turns only outside the boards ([`super::arm::Prelude`]'s `keep_lean` and
+/// `lean_at`), for a task that starts with the tool at `tool` and stows it at `stow` (base
+/// frame; the base at `base`, world): pulling back from under a board (`here_max` set), a
+/// leaning tool keeps its lean until it is out; going in under one to work at world `work`
+/// (`target_max` set) leaning by `lean_in`, the hand leans at the board's edge on the line from
+/// the stow position to the work. The shipped arm never leans: for it, nothing.
+pub(super) fn lean_outside(
+    scene: &Scene,
+    base: &Isometry3<f64>,
+    tool: &Isometry3<f64>,
+    stow: &Isometry3<f64>,
+    (here_max, target_max): (Option<f64>, Option<f64>),
+    work: Option<[f64; 3]>,
+    lean_in: Option<Lean>,
+) -> (f64, Option<LeanAt>) {
+    let t = (base * tool).translation;
+    let s = (base * stow).translation;
+    let leaning = (tool.rotation * Vector3::x()).xy().norm() > LEANING;
+    let keep_lean = match (leaning, here_max) {
+        (true, Some(_)) => out_from_under(scene, [t.x, t.y], [s.x, s.y], t.z),
+        _ => 0.0,
+    };
+    let lean_at = match (lean_in, work, target_max) {
+        (Some(lean), Some(w), Some(_)) => {
+            let f = out_from_under(scene, [w[0], w[1]], [s.x, s.y], w[2]);
+            let at = Point3::new(w[0] + f * (s.x - w[0]), w[1] + f * (s.y - w[1]), s.z);
+            Some((
+                (base.inverse() * at).coords,
+                tilted(*stow, Some(lean), false).rotation,
+            ))
+        }
+        _ => None,
+    };
+    (keep_lean, lean_at)
+}
+
+/// A tool whose approach axis has this large a horizontal component leans (about 11°; the
+/// oracle's leans are 45°, a top-down hand has none).
+const LEANING: f64 = 0.2;
+
 /// The highest the tool centre point may be over world `xy` when working at height `z`: `clear`
 /// under the lowest board above `z`, or `None` with nothing overhead.
 pub(super) fn max_tool_z(scene: &Scene, xy: [f64; 2], z: f64, clear: f64) -> Option<f64> {
@@ -171,6 +274,21 @@ mod tests {
         assert!((sink_before_pullback(&s, [0.2, 1.7, 0.976]) - SINK).abs() < 1e-12);
         assert!((sink_before_pullback(&s, [0.2, 1.7, 0.95]) - 0.02).abs() < 1e-9);
         assert_eq!(sink_before_pullback(&s, [0.2, 1.7, 0.92]), 0.0);
+    }
+
+    #[test]
+    fn a_tool_is_out_from_under_a_board_a_margin_past_its_edge() {
+        let s = kitchen_b();
+        // From the purple zone's 0.85 m shelf level (the wall shelf at x 0.2) out into the room.
+        let (from, to) = ([0.2, 1.7], [1.0, 1.7]);
+        let f = out_from_under(&s, from, to, 0.9);
+        let at = |t: f64| [from[0] + t * (to[0] - from[0]), 1.7];
+        let shelf = s.furniture.iter().find(|f| f.covers(from, 0.0)).unwrap();
+        assert!(!shelf.covers(at(f), TURN_CLEAR), "{f}");
+        assert!(shelf.covers(at(f - 0.01), TURN_CLEAR), "{f}");
+        // On the shelf's top (1.6 m) nothing is overhead; in the room there is no furniture.
+        assert_eq!(out_from_under(&s, from, to, 1.61), 0.0);
+        assert_eq!(out_from_under(&s, [1.0, 1.7], to, 0.9), 0.0);
     }
 
     #[test]

@@ -115,6 +115,9 @@ pub struct OraclePolicy {
     /// How high the arm's wrist stands over a top-down tool, m (`headroom::headroom` reads it:
     /// how far under a shelf board the tool stays and how it leans there).
     wrist_height: Option<f64>,
+    /// The arm has a joint to spare (seven): its hand leaning sideways leans outside a board
+    /// before it goes in (`headroom::lean_outside`).
+    spare_joint: bool,
 }
 
 impl OraclePolicy {
@@ -139,6 +142,7 @@ impl OraclePolicy {
             opening_speed: assets.robot.gripper.opening_speed,
             palm_reach: kitchen_r_sim::robot::palm::palm_reach(&assets.robot),
             wrist_height: kitchen_r_sim::robot::wrist::wrist_height(&assets.robot),
+            spare_joint: assets.robot.arm.joints.len() > 6,
         }
     }
 
@@ -278,11 +282,26 @@ impl OraclePolicy {
         } else {
             (0.0, if holding { 0.0 } else { 1.0 })
         };
+        // A leaning hand turns its lean only outside the boards (`Prelude::keep_lean`); a
+        // six-joint arm's only when it leans towards the board (leaning sideways so outside, the
+        // UR5e lost a plate place, dev-0030, and gained nothing).
+        let lean_in = tilt.filter(|t| self.spare_joint || matches!(t, headroom::Lean::Reach(_)));
+        let (keep_lean, lean_at) = headroom::lean_outside(
+            scene,
+            &kitchen_r_sim::oracle::manip::base_isometry(p.base_pose),
+            &tool,
+            &ManipParams::default().home,
+            (here_max, target_max),
+            work,
+            lean_in,
+        );
         let prelude = Prelude {
             here_max,
             sink,
             turn_to,
             open_first,
+            keep_lean,
+            lean_at,
         };
         // Opened fully, the fingers of a pinch sweep centimetres out beside a placed object and
         // can knock a neighbour off its support (the physical grasp only: the abstract mode's

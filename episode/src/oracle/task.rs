@@ -18,11 +18,11 @@ use kitchen_r_core::catalogue::ObjectModel;
 use kitchen_r_sim::oracle::action::action;
 use kitchen_r_sim::oracle::follow::{PathFollower, wrap};
 use kitchen_r_sim::oracle::manip::{ManipParams, Phase, PhasePlan, PickPlan, PlacePlan, base_isometry};
-use nalgebra::{Isometry3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Vector3};
 
 use super::arm::{ArmPath, Prelude};
 use super::grasp::{free_yaw, place_turn};
-use super::headroom::Lean;
+use super::headroom::{Lean, tilted};
 
 /// Physical grasp mode: the grasp and lift phases' durations, s (abstract: 1 and 2).
 const PHYSICAL_GRASP_S: f64 = 2.0;
@@ -30,6 +30,25 @@ const PHYSICAL_LIFT_S: f64 = 3.0;
 
 /// The least lift of a hand leaning over flat work under a board, m ([`TaskCtl::plan`]).
 const FLAT_LIFT: f64 = 0.06;
+
+/// A hand leaning under a board that can lift a picked object less than this pulls it out
+/// from under the board before lifting it further, m ([`TaskCtl::step`]): the least lift a pick
+/// needs (`configs/sim.toml`'s `lift_clearance`, 3 cm) and a margin.
+const LIFT_IN_ROOM: f64 = 0.05;
+
+/// How far a plan's lift raises the grasp, m.
+fn lift_of(plan: &PhasePlan) -> f64 {
+    let z = |phase| {
+        plan.targets()
+            .iter()
+            .find(|p| p.phase == phase)
+            .map(|p| p.ee_in_base.translation.z)
+    };
+    match (z(Phase::Grasp), z(Phase::Lift)) {
+        (Some(g), Some(l)) => l - g,
+        _ => f64::INFINITY,
+    }
+}
 
 /// Control period, s (the paper's 10 Hz).
 pub(super) const DT: f64 = 0.1;
@@ -155,41 +174,9 @@ pub(super) struct TaskCtl {
     /// pick-and-place machine: an arm whose wrist stands high over a top-down tool leans its
     /// fingers away from the base so the wrist stands back and lower (`OraclePolicy`'s tilt).
     tilt: Option<Lean>,
-}
-
-/// `pose` leaned by `tilt` about its own position, the fingers turned away from the base
-/// (`undo`: the lean taken off a leaned pose). [`Lean::Reach`] turns about the base's left
-/// axis; [`Lean::Closing`] about the tool's own closing axis (tool y), so both fingers stay level
-/// over flat work (`headroom::for_work`).
-fn tilted(pose: Isometry3<f64>, tilt: Option<Lean>, undo: bool) -> Isometry3<f64> {
-    let turn = match tilt {
-        None => return pose,
-        // Negative about the base's left axis: the fingers point away from the base.
-        Some(Lean::Reach(a)) => {
-            let r = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), -a);
-            let r = if undo { r.inverse() } else { r };
-            return Isometry3::from_parts(pose.translation, r * pose.rotation);
-        }
-        Some(Lean::Closing(a)) => {
-            // Turned by θ about tool y, the approach axis (tool x) moves along −tool z: the sign
-            // that points it away from the base (base +x), or, closing along the base's forward
-            // axis, to the base's right (the side the arms are mounted on). The lean keeps the
-            // sign of tool z's components, so a leaned pose finds the same sign.
-            let z = pose.rotation * Vector3::z();
-            let s = if z.x.abs() > 1e-3 {
-                -z.x.signum()
-            } else {
-                z.y.signum()
-            };
-            UnitQuaternion::from_axis_angle(&Vector3::y_axis(), s * a)
-        }
-    };
-    let rotation = if undo {
-        pose.rotation * turn.inverse()
-    } else {
-        pose.rotation * turn
-    };
-    Isometry3::from_parts(pose.translation, rotation)
+    /// A pick whose lift under a board was too short has pulled its object out to the carry
+    /// pose: the task's motions are over.
+    pulled_out: bool,
 }
 
 impl TaskCtl {
@@ -229,6 +216,7 @@ impl TaskCtl {
             neighbours: Arc::from([]),
             max_opening: 0.0,
             tilt: None,
+            pulled_out: false,
         }
     }
 
@@ -411,6 +399,7 @@ impl TaskCtl {
                     }
                     self.stage = match self.goal {
                         Goal::Move { .. } => Stage::Drive,
+                        _ if self.pulled_out => Stage::Done,
                         _ => Stage::Settle { positioned: false },
                     };
                     break;
@@ -445,7 +434,27 @@ impl TaskCtl {
                         // The last phase (carry or home) heads for the stow pose on a slant that
                         // would catch the board; the next task's prelude pulls back level.
                         let last = plan.targets().last().map_or(0.0, |p| p.duration);
-                        *t = t.min(plan.duration() - last);
+                        let end = plan.duration() - last;
+                        // A leaning hand whose room under the board lifts the object less than a
+                        // pick needs (the Kinova3's wrist leaves a cup on the 0.85 m shelf 5 mm,
+                        // dev) pulls it out level first, as the next task's prelude would, and
+                        // lifts it to the carry pose in the open; a hand that holds nothing stays
+                        // (the machine ended with the task undone: the oracle plans again).
+                        let short = matches!(self.goal, Goal::Pick)
+                            && world.held_in_tool.is_some()
+                            && matches!(self.tilt, Some(Lean::Reach(_)))
+                            && lift_of(plan) < LIFT_IN_ROOM;
+                        if *t >= end && short {
+                            let out = Prelude {
+                                here_max: self.ceiling,
+                                ..Prelude::default()
+                            };
+                            let path = ArmPath::prelude(self.tool, self.params.carry, None, true, out);
+                            self.stage = Stage::Arm(path, 0.0);
+                            self.pulled_out = true;
+                            continue;
+                        }
+                        *t = t.min(end);
                     }
                     let (tool, g, phase) = plan.target_at(*t);
                     let g = match phase {
