@@ -36,7 +36,8 @@ const FLAT_LIFT: f64 = 0.06;
 /// needs (`configs/sim.toml`'s `lift_clearance`, 3 cm) and a margin.
 const LIFT_IN_ROOM: f64 = 0.05;
 
-/// How far a plan's lift raises the grasp, m.
+/// How far a plan's lift raises the grasp, m (unbounded for a plan without its grasp, one
+/// resumed from its lift: it pulls nothing out).
 fn lift_of(plan: &PhasePlan) -> f64 {
     let z = |phase| {
         plan.targets()
