@@ -59,9 +59,10 @@ pub(super) struct Prelude {
     /// a board leaning turns first, outside the board's edge: the machine would turn it on the
     /// way in, and half turned the UR5e's wrist struck the board's front edge (dev-0049) and a
     /// Kinova3 finger met the shelf under a fork (dev-0150). A six-joint arm's hand leaning
-    /// sideways still turns on the way in (`OraclePolicy::start_task`). Leaning at the stow
-    /// position instead, close over the shoulder, the UR5e and the Panda could not hold the
-    /// lean (whole dev: 951 and 930 of 975 tasks).
+    /// sideways still turns on the way in, but levels a held plate here instead of at the stow
+    /// position (`OraclePolicy::start_task`). Leaning at the stow position instead, close over
+    /// the shoulder, the UR5e and the Panda could not hold the lean (whole dev: 951 and 930 of
+    /// 975 tasks).
     pub lean_at: Option<LeanAt>,
 }
 

@@ -213,8 +213,9 @@ pub(super) fn out_from_under(scene: &Scene, from: [f64; 2], to: [f64; 2], z: f64
 /// `lean_at`), for a task that starts with the tool at `tool` and stows it at `stow` (base
 /// frame; the base at `base`, world): pulling back from under a board (`here_max` set), a
 /// leaning tool keeps its lean until it is out; going in under one to work at world `work`
-/// (`target_max` set) leaning by `lean_in`, the hand leans at the board's edge on the line from
-/// the stow position to the work. The shipped arm never leans: for it, nothing.
+/// (`target_max` set), the hand turns to `turn_in` (a lean, or a held plate levelled) at the
+/// board's edge on the line from the stow position to the work. The shipped arm never leans:
+/// for it, nothing.
 pub(super) fn lean_outside(
     scene: &Scene,
     base: &Isometry3<f64>,
@@ -222,7 +223,7 @@ pub(super) fn lean_outside(
     stow: &Isometry3<f64>,
     (here_max, target_max): (Option<f64>, Option<f64>),
     work: Option<[f64; 3]>,
-    lean_in: Option<Lean>,
+    turn_in: Option<UnitQuaternion<f64>>,
 ) -> (f64, Option<LeanAt>) {
     let t = (base * tool).translation;
     let s = (base * stow).translation;
@@ -231,14 +232,11 @@ pub(super) fn lean_outside(
         (true, Some(_)) => out_from_under(scene, [t.x, t.y], [s.x, s.y], t.z),
         _ => 0.0,
     };
-    let lean_at = match (lean_in, work, target_max) {
-        (Some(lean), Some(w), Some(_)) => {
+    let lean_at = match (turn_in, work, target_max) {
+        (Some(r), Some(w), Some(_)) => {
             let f = out_from_under(scene, [w[0], w[1]], [s.x, s.y], w[2]);
             let at = Point3::new(w[0] + f * (s.x - w[0]), w[1] + f * (s.y - w[1]), s.z);
-            Some((
-                (base.inverse() * at).coords,
-                tilted(*stow, Some(lean), false).rotation,
-            ))
+            Some(((base.inverse() * at).coords, r))
         }
         _ => None,
     };

@@ -282,18 +282,29 @@ impl OraclePolicy {
         } else {
             (0.0, if holding { 0.0 } else { 1.0 })
         };
-        // A leaning hand turns its lean only outside the boards (`Prelude::keep_lean`); a
-        // six-joint arm's only when it leans towards the board (leaning sideways so outside, the
-        // UR5e lost a plate place, dev-0030, and gained nothing).
+        // A leaning hand turns its lean only outside the boards (`Prelude::keep_lean`,
+        // `Prelude::lean_at`); a six-joint arm's only when it leans towards the board (leaning
+        // sideways so outside, the UR5e lost a plate place, dev-0030, and gained nothing). A
+        // six-joint arm levels a held plate outside the board too, not at the stow position:
+        // turned there, close over its shoulder, the UR5e's arm swung to another configuration
+        // and its upper arm struck the board below the shelf level as it reached in (dev-0104).
+        let stow = ManipParams::default().home;
         let lean_in = tilt.filter(|t| self.spare_joint || matches!(t, headroom::Lean::Reach(_)));
+        let level_out = !self.spare_joint && lean_in.is_none();
+        let turn_in = match (lean_in, turn_to) {
+            (Some(lean), _) => Some(headroom::tilted(stow, Some(lean), false).rotation),
+            (None, Some(level)) if level_out => Some(level),
+            _ => None,
+        };
+        let turn_to = turn_to.filter(|_| !level_out);
         let (keep_lean, lean_at) = headroom::lean_outside(
             scene,
             &kitchen_r_sim::oracle::manip::base_isometry(p.base_pose),
             &tool,
-            &ManipParams::default().home,
+            &stow,
             (here_max, target_max),
             work,
-            lean_in,
+            turn_in,
         );
         let prelude = Prelude {
             here_max,
