@@ -116,7 +116,8 @@ pub struct OraclePolicy {
     /// how far under a shelf board the tool stays and how it leans there).
     wrist_height: Option<f64>,
     /// The arm has a joint to spare (seven): its hand leaning sideways leans outside a board
-    /// before it goes in (`headroom::lean_outside`).
+    /// before it goes in, where a six-joint arm's only levels a held plate
+    /// (`headroom::lean_outside`).
     spare_joint: bool,
 }
 
