@@ -441,11 +441,13 @@ impl TaskCtl {
                         // dev) pulls it out level first, as the next task's prelude would, and
                         // lifts it to the carry pose in the open; a hand that holds nothing stays
                         // (the machine ended with the task undone: the oracle plans again).
-                        let short = matches!(self.goal, Goal::Pick)
-                            && world.held_in_tool.is_some()
-                            && matches!(self.tilt, Some(Lean::Reach(_)))
-                            && lift_of(plan) < LIFT_IN_ROOM;
-                        if *t >= end && short {
+                        let short = || {
+                            matches!(self.goal, Goal::Pick)
+                                && world.held_in_tool.is_some()
+                                && matches!(self.tilt, Some(Lean::Reach(_)))
+                                && lift_of(plan) < LIFT_IN_ROOM
+                        };
+                        if *t >= end && short() {
                             let out = Prelude {
                                 here_max: self.ceiling,
                                 ..Prelude::default()
